@@ -1,0 +1,51 @@
+"""Hook specifications: every extension point of baseparams.
+
+Built-in joint types, solvers, mechanisms and model effects register through these same
+hooks, from modules named in the ``baseparams`` entry-point group exactly as a third
+party's distribution would (see ``pyproject.toml``).
+"""
+
+import pluggy
+
+hookspec = pluggy.HookspecMarker("baseparams")
+hookimpl = pluggy.HookimplMarker("baseparams")
+
+
+@hookspec
+def baseparams_joint_types():
+    """Return a list of :class:`baseparams.joints.JointType` this plugin provides.
+
+    A joint type supplies its coordinates (count, names, kinds), its motion (from which the
+    child-to-parent transform follows in any backend: ``JointType.transform(q, backend)``)
+    and the equations it imposes when it closes a loop.
+    """
+
+
+@hookspec(firstresult=True)
+def baseparams_transfer_rules(joint_type):
+    """Return the multipole-transfer rules of the joint type named ``joint_type``.
+
+    ``joint_type``: the type's name (``"R"``). Return a list of
+    :class:`baseparams.multipoles.TransferRule` (possibly empty: nothing may cross), or
+    None when this plugin does not know that type. The first non-None answer wins. The
+    symbolic solver calls this for every joint of a mechanism; a type with no rules makes
+    its symbolic result an upper bound on the rank, which it says.
+    """
+
+
+@hookspec
+def baseparams_mechanisms():
+    """Return a list of :class:`baseparams.registry.MechanismSource` (name + TOML file)."""
+
+
+@hookspec
+def baseparams_solvers():
+    """Return a list of solver objects: ``name``, ``description``, ``solve(mechanism, **options)``
+    returning a :class:`baseparams.result.BaseParameterResult`."""
+
+
+@hookspec
+def baseparams_effects():
+    """Return a list of model effects (friction, spring, offset ...): objects with ``name``,
+    ``description`` and ``columns(coordinate, q, qd, qdd)`` giving extra regressor columns
+    linear in the effect's coefficients."""

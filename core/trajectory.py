@@ -1,0 +1,135 @@
+"""Exciting trajectories and the observation matrix W.
+
+A trajectory gives each independent coordinate as an expression of time (a finite
+Fourier series by default); velocities and accelerations are its exact derivatives.
+Sample times are exact rationals, so at D digits every sample is computed at D digits
+from the start. Samples follow the mechanism along the constraint manifold: each one
+starts Newton-Raphson from the previous solution, and a sample that leaves the reachable
+range, passes a singular configuration or a coordinate limit stops the run with the
+time, the coordinates and the residual.
+"""
+
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+import sympy
+
+from .backends import Arb, Float64
+from .dynamics import Evaluator
+from .errors import InputError, KinematicsError
+
+T = sympy.Symbol("t")
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    expressions: dict          # independent coordinate -> sympy expression of t
+    times: tuple               # exact sample times (Fractions)
+
+    @classmethod
+    def default(cls, mechanism, samples=None, t_start=None, t_end=None):
+        spec = mechanism.trajectory
+        if spec is None:
+            raise InputError("the mechanism file has no [trajectory] section", file=mechanism.path,
+                             key="trajectory")
+        n = samples or spec.samples
+        t0 = spec.t_start if t_start is None else Fraction(t_start)
+        t1 = spec.t_end if t_end is None else Fraction(t_end)
+        times = tuple(t0 + (t1 - t0) * k / (n - 1) for k in range(n))
+        return cls(dict(spec.expressions), times)
+
+    def derivatives(self, names):
+        """For each coordinate name: (q, qd, qdd) as sympy expressions of t."""
+        out = []
+        for name in names:
+            e = self.expressions[name]
+            d1 = sympy.diff(e, T)
+            out.append((e, d1, sympy.diff(d1, T)))
+        return out
+
+    def independent_values(self, mechanism, backend, t):
+        """(z, zd, zdd) at time ``t`` (backend number or, for float64, an array of times)."""
+        names = mechanism.independent
+        exprs = self.derivatives(names)
+        env = {"t": t}
+        z = [backend.evaluate(e[0], env) for e in exprs]
+        zd = [backend.evaluate(e[1], env) for e in exprs]
+        zdd = [backend.evaluate(e[2], env) for e in exprs]
+        return z, zd, zdd
+
+
+def samples_float64(mechanism, trajectory):
+    """All samples at once, vectorised; positions followed by continuation from q = 0."""
+    backend = Float64()
+    ev = Evaluator(mechanism, backend)
+    t = np.array([float(x) for x in trajectory.times])
+    z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
+    z = [np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in z]
+    sample = ev.sample(z, zd, zdd, None, where="")
+    check_limits(mechanism, sample.q, t)
+    return sample, t
+
+
+def check_limits(mechanism, q, times):
+    for joint in mechanism.joints:
+        for name, (lo, hi) in joint.limits.items():
+            if name not in mechanism.coordinates:
+                continue
+            values = np.atleast_1d(np.asarray(q[mechanism.coordinates.index(name)], dtype=float))
+            bad = np.nonzero((values < lo) | (values > hi))[0]
+            if bad.size:
+                k = int(bad[0])
+                tk = np.atleast_1d(times)[k] if np.size(times) > 1 else times
+                raise KinematicsError(f"at t = {float(tk):.6g} s coordinate {name} = {values[k]:.6g} "
+                                      f"leaves its range [{lo:.6g}, {hi:.6g}]")
+
+
+def observation_matrix(mechanism, backend, trajectory=None, progress=None):
+    """W: the regressor stacked over the trajectory's samples (sample-major rows).
+
+    float64: a numpy array. arb: a python-flint ``arb_mat``, every entry computed at the
+    backend's digits (positions refined from the float64 solution by Newton at full
+    precision). Returns (W, info) where info has the sample count and worst closure residual.
+    """
+    trajectory = trajectory or Trajectory.default(mechanism)
+    f = len(mechanism.independent) or len(mechanism.coordinates)
+    if isinstance(backend, Float64):
+        sample, t = samples_float64(mechanism, trajectory)
+        k = sample.regressor()
+        cols = len(mechanism.parameters)
+        n = len(t)
+        W = np.empty((n * f, cols))
+        for j in range(f):
+            for p in range(cols):
+                W[j::f, p] = np.broadcast_to(k[j][p], (n,))
+        return W, {"samples": n}
+    if isinstance(backend, Arb):
+        return _observation_matrix_arb(mechanism, backend, trajectory, progress)
+    raise ValueError(f"observation matrix over a trajectory needs float64 or arb, not {backend.name}")
+
+
+def _observation_matrix_arb(mechanism, backend, trajectory, progress):
+    from flint import arb, arb_mat, fmpq
+
+    start, _ = samples_float64(mechanism, trajectory) if mechanism.loops else (None, None)
+    ev = Evaluator(mechanism, backend)
+    rows = []
+    worst = 0.0
+    with backend.activate():
+        for index, tk in enumerate(trajectory.times):
+            t = arb(fmpq(tk.numerator, tk.denominator))
+            z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
+            guess = None
+            if start is not None:
+                guess = [backend.rational(Fraction(float(np.atleast_1d(v)[index]))) for v in start.q]
+            where = f"at t = {float(tk):.6g} s: "
+            sample = ev.sample(z, zd, zdd, guess, where=where)
+            rows.extend(sample.regressor())
+            if mechanism.loops:
+                values, _, _ = ev.kin.closure(sample.states)
+                worst = max([worst] + [backend.magnitude(v) for v in values])
+            if progress:
+                progress(index + 1, len(trajectory.times))
+        W = arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
+    return W, {"samples": len(trajectory.times), "closure_residual": worst}

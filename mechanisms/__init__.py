@@ -1,0 +1,17 @@
+"""Built-in mechanism files, registered through the ``baseparams_mechanisms`` hook.
+
+Every ``*.toml`` file in this folder is a mechanism; its registry name is the
+``mechanism.name`` inside, which by convention equals the file name.
+"""
+
+from pathlib import Path
+
+from baseparams.hookspecs import hookimpl
+from baseparams.registry import MechanismSource
+
+HERE = Path(__file__).resolve().parent
+
+
+@hookimpl
+def baseparams_mechanisms():
+    return [MechanismSource(path.stem, path) for path in sorted(HERE.glob("*.toml"))]

@@ -1,0 +1,1 @@
+"""Built-in plugins of baseparams, registered through the ``baseparams`` entry points."""
