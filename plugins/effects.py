@@ -1,0 +1,1 @@
+"""Built-in effects plugin (registered through the baseparams entry points)."""

@@ -1,0 +1,1 @@
+"""Built-in solvers plugin (registered through the baseparams entry points)."""

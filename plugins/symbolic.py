@@ -1,0 +1,1 @@
+"""Built-in symbolic plugin (registered through the baseparams entry points)."""
