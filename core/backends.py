@@ -78,8 +78,12 @@ class Backend:
         return x
 
     def magnitude(self, x):
-        """An upper bound (float) of |x|, for convergence tests."""
+        """An upper bound (float) of |x|, for messages (may underflow to 0 at high precision)."""
         return float(np.max(np.abs(self.to_float(x))))
+
+    def small(self, x, exponent):
+        """Is |x| <= 10**exponent (for every sample)? ``exponent`` may be far below float range."""
+        return bool(np.all(np.abs(self.to_float(x)) <= 10.0 ** exponent))
 
     def evaluate(self, expr, env=None):
         """Evaluate a sympy expression: rationals, ``env`` symbols, + * ** and sin cos exp sqrt pi."""
@@ -219,6 +223,9 @@ class Arb(Backend):
     def magnitude(self, x):
         x = arb(x)
         return float(abs(x).upper())
+
+    def small(self, x, exponent):
+        return bool(abs(arb(x)).upper() <= arb(10) ** exponent)
 
 
 class Exact(Backend):

@@ -130,8 +130,9 @@ class Evaluator:
 
     # ----- positions ------------------------------------------------------
     def tolerance(self):
+        """Decimal exponent of the closure residual Newton must reach: 10^-(D-5) at D digits."""
         digits = getattr(self.backend, "digits", None)
-        return 1e-12 if digits is None else 10.0 ** -(digits - 5)
+        return -12 if digits is None else -(digits - 5)
 
     def assemble(self, z, guess=None, where=""):
         """Tree coordinates with independent values ``z``; dependent ones by Newton-Raphson."""
@@ -148,7 +149,7 @@ class Evaluator:
             # continuation from the reference configuration (q = 0 closes the loops)
             for step in (1, 2, 3):
                 lam = self.backend.rational(Fraction(step, 4))
-                q = self._newton(q, [lam * v for v in z], 1e-6, where + "(continuation) ")
+                q = self._newton(q, [lam * v for v in z], -6, where + "(continuation) ")
         return self._newton(q, z, self.tolerance(), where)
 
     def _newton(self, q, z, tol, where):
@@ -160,9 +161,9 @@ class Evaluator:
         for _ in range(60):
             values, rows, _ = self.kin.closure(self.kin.forward(q))
             res = [values[i] for i in st.rows]
-            residual = max(self.backend.magnitude(v) for v in res)
-            if residual < tol:
+            if all(self.backend.small(v, tol) for v in res):
                 break
+            residual = max(self.backend.magnitude(v) for v in res)
             jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
             try:
                 step = self.backend.solve(jd, [[v] for v in res])
@@ -173,17 +174,21 @@ class Evaluator:
                 q[j] = self.backend.point(q[j] - s)
         else:
             raise KinematicsError(f"{where}the loops do not close (residual {residual:.3g} after 60 "
-                                  f"Newton iterations): out of the reachable range? {self.describe(q)}")
+                                  f"Newton iterations): out of the reachable range? independent "
+                                  f"{self.describe(q, self.structure.independent)}")
         values, _, _ = self.kin.closure(self.kin.forward(q))
-        worst = max(self.backend.magnitude(v) for v in values)
-        if worst > max(tol * 1e3, 1e-9 if isinstance(self.backend, Float64) else 0):
+        if not all(self.backend.small(v, max(tol + 3, -9 if isinstance(self.backend, Float64) else tol + 3))
+                   for v in values):
+            worst = max(self.backend.magnitude(v) for v in values)
             raise KinematicsError(f"{where}a redundant closure equation is violated (residual "
                                   f"{worst:.3g}): the geometry is inconsistent; {self.describe(q)}")
         return q
 
-    def describe(self, q):
+    def describe(self, q, only=None):
         parts = []
-        for name, v in zip(self.mechanism.coordinates, q):
+        for i, (name, v) in enumerate(zip(self.mechanism.coordinates, q)):
+            if only is not None and i not in only:
+                continue
             f = np.atleast_1d(self.backend.to_float(v))
             parts.append(f"{name}={f[0]:.6g}" if f.size == 1 else f"{name}=[{f.min():.4g}..{f.max():.4g}]")
         return "coordinates: " + ", ".join(parts)

@@ -66,9 +66,23 @@ def samples_float64(mechanism, trajectory):
     t = np.array([float(x) for x in trajectory.times])
     z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
     z = [np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in z]
-    sample = ev.sample(z, zd, zdd, None, where="")
+    try:
+        sample = ev.sample(z, zd, zdd, None, where="")
+    except KinematicsError:
+        _first_failing_sample(ev, trajectory, t)
+        raise
     check_limits(mechanism, sample.q, t)
     return sample, t
+
+
+def _first_failing_sample(ev, trajectory, times):
+    """Walk the samples one by one (continuation from the previous one) to name the first bad time."""
+    backend, mechanism = ev.backend, ev.mechanism
+    guess = None
+    for tk in times:
+        z, zd, zdd = trajectory.independent_values(mechanism, backend, float(tk))
+        z, zd, zdd = ([float(v) for v in vals] for vals in (z, zd, zdd))
+        guess = ev.sample(z, zd, zdd, guess, where=f"at t = {float(tk):.6g} s: ").q
 
 
 def check_limits(mechanism, q, times):
@@ -115,8 +129,8 @@ def _observation_matrix_arb(mechanism, backend, trajectory, progress):
     start, _ = samples_float64(mechanism, trajectory) if mechanism.loops else (None, None)
     ev = Evaluator(mechanism, backend)
     rows = []
-    worst = 0.0
     with backend.activate():
+        worst = arb(0)
         for index, tk in enumerate(trajectory.times):
             t = arb(fmpq(tk.numerator, tk.denominator))
             z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
@@ -128,8 +142,12 @@ def _observation_matrix_arb(mechanism, backend, trajectory, progress):
             rows.extend(sample.regressor())
             if mechanism.loops:
                 values, _, _ = ev.kin.closure(sample.states)
-                worst = max([worst] + [backend.magnitude(v) for v in values])
+                for v in values:
+                    bound = abs(arb(v)).upper()
+                    if bound > worst:
+                        worst = bound
             if progress:
                 progress(index + 1, len(trajectory.times))
         W = arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
-    return W, {"samples": len(trajectory.times), "closure_residual": worst}
+        residual = worst.str(3, radius=False)
+    return W, {"samples": len(trajectory.times), "closure_residual": residual}

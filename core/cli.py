@@ -1,0 +1,263 @@
+"""The ``baseparams`` command line (click).
+
+One function per verb. Every verb that prints results takes ``--format text|json``; the
+JSON keys are the contracts of DESIGN.md. Errors a user can fix (a bad mechanism file, a
+trajectory leaving the reachable range) are :class:`baseparams.errors.BaseparamsError`;
+the :class:`Group` below turns them, once for every verb, into ``error: <message>`` on
+stderr and exit code 2, with no traceback. Exit code 1 is reserved for a check that
+failed (solvers disagree, a gap not closed); click's own usage errors exit 2.
+
+To add a verb: write a function decorated with ``@main.command()`` (or ``@plot.command()``
+for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
+"""
+
+import json
+import textwrap
+from fractions import Fraction
+
+import click
+
+from . import __version__, registry
+from .errors import BaseparamsError
+
+
+class UserError(click.ClickException):
+    """A message for the user, printed as ``error: ...`` on stderr; exit code 2."""
+    exit_code = 2
+
+    def show(self, file=None):
+        click.echo(f"error: {self.format_message()}", err=True, file=file)
+
+
+class Group(click.Group):
+    """A click group that reports baseparams' own errors as :class:`UserError`."""
+    group_class = type          # subgroups (``plot``) use this class too
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BaseparamsError as exc:
+            raise UserError(getattr(exc, "message", str(exc))) from None
+
+
+def format_option(function):
+    """``--format text|json`` (default text)."""
+    return click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text",
+                        show_default=True, help="Output format: readable text or one JSON object.")(function)
+
+
+def emit(fmt, data, text):
+    """Print ``data`` as JSON or ``text`` (a string or a callable returning one)."""
+    if fmt == "json":
+        click.echo(json.dumps(data, indent=2))
+    else:
+        click.echo(text() if callable(text) else text)
+
+
+def load(mech):
+    """A registered mechanism name or a path to a mechanism file -> Mechanism."""
+    from .loader import resolve
+    return resolve(mech)
+
+
+def exact_text(value):
+    """An exact rational as a decimal string when it has one, else ``p/q``."""
+    value = Fraction(value)
+    d = value.denominator
+    twos = fives = 0
+    while d % 2 == 0:
+        d //= 2
+        twos += 1
+    while d % 5 == 0:
+        d //= 5
+        fives += 1
+    if d != 1:
+        return f"{value.numerator}/{value.denominator}"
+    places = max(twos, fives)
+    if places == 0:
+        return str(value.numerator)
+    scaled = abs(value.numerator) * 10 ** places // value.denominator
+    digits = str(scaled).rjust(places + 1, "0")
+    return ("-" if value < 0 else "") + digits[:-places] + "." + digits[-places:]
+
+
+def _wrap(words, indent="  "):
+    return textwrap.fill(" ".join(words), width=88, initial_indent=indent, subsequent_indent=indent)
+
+
+def _version():
+    installed = registry.installed_version()
+    return __version__ if installed == "not installed" else installed
+
+
+@click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(version=_version(), prog_name="baseparams")
+def main():
+    """Base inertial parameters of mechanisms.
+
+    MECH is a registered mechanism name (see `baseparams list`) or a path to a
+    mechanism file (TOML, see docs/mechanism-format.md). Exit codes: 0 success,
+    1 a check failed, 2 bad input or usage (the message names the file, the key
+    and the reason).
+    """
+
+
+# ----- list ---------------------------------------------------------------------
+@main.command("list")
+@format_option
+def list_mechanisms(fmt):
+    """List the registered mechanisms: name, title and the distribution providing it."""
+    rows = []
+    for name, reg in registry.mechanisms().items():
+        row = {"name": name, "title": "", "source": reg.distribution, "path": str(reg.item.path)}
+        try:
+            row["title"] = load(name).title
+        except BaseparamsError as exc:      # one broken file must not hide the others
+            row["error"] = getattr(exc, "message", str(exc))
+        rows.append(row)
+
+    def text():
+        if not rows:
+            return "no mechanisms registered"
+        width = max(len(r["name"]) for r in rows)
+        dist = max(len(r["source"]) for r in rows)
+        return "\n".join(f"{r['name']:<{width}}  {r['source']:<{dist}}  "
+                         + (f"error: {r['error']}" if "error" in r else r["title"]) for r in rows)
+
+    emit(fmt, {"mechanisms": rows}, text)
+
+
+# ----- show ---------------------------------------------------------------------
+def describe(mech):
+    """The structure of a mechanism as the ``show`` JSON object."""
+    from .dynamics import closure_structure
+    structure = closure_structure(mech)
+    tree = {edge.joint.name for edge in mech.tree}
+    return {
+        "name": mech.name,
+        "title": mech.title,
+        "path": mech.path,
+        "bodies": mech.body_labels,
+        "body_names": [b.name for b in mech.bodies],
+        "joints": [{"name": j.name, "type": j.type.name, "parent": j.parent, "child": j.child,
+                    "role": "tree" if j.name in tree else "loop",
+                    "coordinates": list(j.coordinates) if j.name in tree else []}
+                   for j in mech.joints],
+        "coordinates": list(mech.coordinates),
+        "independent": [mech.coordinates[i] for i in structure.independent],
+        "loops": len(mech.loops),
+        "dof": structure.dof,
+        "gruebler": mech.gruebler,
+        "closure_equations": mech.closure_equation_count,
+        "redundant_closure_equations": structure.redundant,
+        "parameter_count": len(mech.parameters),
+        "parameters": list(mech.parameters),
+        "geometry": {k: exact_text(v) for k, v in mech.geometry.items()},
+    }
+
+
+def describe_text(info):
+    lines = [f"{info['name']}: {info['title']}" if info["title"] else info["name"]]
+    if info["path"]:
+        lines.append(f"  file: {info['path']}")
+    lines.append(f"bodies ({len(info['bodies'])}, ground is 0):")
+    lines += [f"  {label:>3}  {name}" for label, name in zip(info["bodies"], info["body_names"])]
+    lines.append(f"joints ({len(info['joints'])}):")
+    width = max(len(j["name"]) for j in info["joints"])
+    tw = max(len(j["type"]) for j in info["joints"])
+    for j in info["joints"]:
+        coords = " ".join(j["coordinates"]) if j["role"] == "tree" else "(closes a loop)"
+        lines.append(f"  {j['name']:<{width}}  {j['type']:<{tw}}  {j['parent']:>2} -> {j['child']:<2}  "
+                     f"{j['role']:<4}  {coords}")
+    lines.append(f"tree coordinates ({len(info['coordinates'])}):")
+    lines.append(_wrap(info["coordinates"]))
+    lines.append(f"independent coordinates ({len(info['independent'])}): {' '.join(info['independent'])}")
+    lines.append(f"loops: {info['loops']} ({info['closure_equations']} closure equations, "
+                 f"{info['redundant_closure_equations']} redundant)")
+    lines.append(f"degrees of freedom: {info['dof']} (Gruebler count {info['gruebler']})")
+    if info["geometry"]:
+        lines.append(f"geometry ({len(info['geometry'])}, exact):")
+        lines.append(_wrap(f"{k}={v}" for k, v in info["geometry"].items()))
+    lines.append(f"inertial parameters ({info['parameter_count']}):")
+    lines.append(_wrap(info["parameters"]))
+    return "\n".join(lines)
+
+
+@main.command()
+@click.argument("mech", metavar="MECH")
+@format_option
+def show(mech, fmt):
+    """Show a mechanism's structure: bodies, joints (tree or loop-closing), coordinates,
+    loops, degrees of freedom (with the Gruebler count and redundant closure equations)
+    and its inertial parameters.
+
+    MECH is a registered name or a path to a mechanism file.
+    """
+    info = describe(load(mech))
+    emit(fmt, info, lambda: describe_text(info))
+
+
+# ----- plugins ------------------------------------------------------------------
+@main.command()
+@format_option
+def plugins(fmt):
+    """List every joint type, solver, mechanism and model effect with the distribution
+    that provides it (built-ins come from `baseparams`; third parties register through
+    the `baseparams` entry-point group)."""
+    def entry(name, reg, **extra):
+        return {"name": name, "distribution": reg.distribution,
+                "description": getattr(reg.item, "description", ""), **extra}
+
+    data = {
+        "joints": [entry(n, r, coordinates=list(r.item.suffixes),
+                         transfer_rules=registry.transfer_rules(n) is not None)
+                   for n, r in registry.joint_types().items()],
+        "solvers": [entry(n, r) for n, r in registry.solvers().items()],
+        "mechanisms": [entry(n, r, path=str(r.item.path)) for n, r in registry.mechanisms().items()],
+        "effects": [entry(n, r) for n, r in registry.effects().items()],
+    }
+
+    def text():
+        lines = []
+        for kind, items in data.items():
+            lines.append(f"{kind} ({len(items)}):")
+            width = max([len(i["name"]) for i in items] + [1])
+            dist = max([len(i["distribution"]) for i in items] + [1])
+            for i in items:
+                note = i["description"] or i.get("path", "")
+                if kind == "joints" and not i["transfer_rules"]:
+                    note += " [no transfer rules]"
+                lines.append(f"  {i['name']:<{width}}  {i['distribution']:<{dist}}  {note}".rstrip())
+            if not items:
+                lines.append("  (none)")
+        return "\n".join(lines)
+
+    emit(fmt, data, text)
+
+
+# ----- plot ---------------------------------------------------------------------
+@main.group()
+def plot():
+    """Figures (matplotlib): the mechanism, and others added by each subcommand."""
+
+
+@plot.command("mechanism")
+@click.argument("mech", metavar="MECH")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="Image file to write.")
+@click.option("--instants", type=click.IntRange(1, 12), default=4, show_default=True,
+              help="Configurations of the default trajectory to draw (they span the range "
+                   "of the first independent coordinate).")
+@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
+              help="Image format [default: from the file name, else png].")
+def plot_mechanism(mech, output, instants, fmt):
+    """Draw MECH in 3D at a few instants of its default trajectory: bodies as segments
+    between their joints, ground joints as black markers, later instants darker."""
+    from .plots import plot_mechanism as draw
+    written = draw(load(mech), output, instants=instants, fmt=fmt)
+    click.echo(f"wrote {written}")
+
+
+# Keep this last: `python -m baseparams.cli` runs the command line.
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,197 @@
+"""The regressor against closed forms, energy balance, loop closure and trajectory errors."""
+
+import random
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from flint import arb, fmpq
+
+from baseparams import registry
+from baseparams.backends import Arb, Float64
+from baseparams.dynamics import Evaluator
+from baseparams.errors import KinematicsError
+from baseparams.loader import parse_mechanism, resolve
+from baseparams.trajectory import Trajectory, observation_matrix
+
+G0 = 9.81
+
+PENDULUM = """
+[mechanism]
+name = "test_pendulum"
+gravity = ["0", "0", "-9.81"]
+[[bodies]]
+label = 1
+[[joints]]
+type = "R"
+parent = 0
+child = 1
+coordinates = ["theta"]
+parent_frame = { point = ["0", "0", "0"], axis = ["0", "1", "0"], ref = ["0", "0", "1"] }
+child_frame = { point = ["0", "0", "0"], axis = ["0", "1", "0"], ref = ["0", "0", "1"] }
+[trajectory]
+q = { theta = "0.9*sin(1.3*t) + 0.3*sin(2.9*t)" }
+"""
+
+TWO_R = """
+[mechanism]
+name = "test_2r"
+gravity = ["0", "0", "-9.81"]
+[geometry]
+L1 = "0.7"
+[[bodies]]
+label = 1
+[[bodies]]
+label = 2
+[[joints]]
+type = "R"
+parent = 0
+child = 1
+coordinates = ["q1"]
+parent_frame = { point = ["0", "0", "0"], axis = ["0", "1", "0"], ref = ["1", "0", "0"] }
+child_frame = { point = ["0", "0", "0"], axis = ["0", "1", "0"], ref = ["1", "0", "0"] }
+[[joints]]
+type = "R"
+parent = 1
+child = 2
+coordinates = ["q2"]
+parent_frame = { point = ["L1", "0", "0"], axis = ["0", "1", "0"], ref = ["1", "0", "0"] }
+child_frame = { point = ["0", "0", "0"], axis = ["0", "1", "0"], ref = ["1", "0", "0"] }
+"""
+
+
+def test_pendulum_closed_form():
+    """Axis y through the origin, gravity -z: V = g (-sin q mx + cos q mz), T = Iyy qd^2 / 2,
+    so tau = Iyy qdd - g (mx cos q + mz sin q)."""
+    mech = parse_mechanism(PENDULUM)
+    rng = np.random.default_rng(3)
+    q, qd, qdd = rng.uniform(-3, 3, 50), rng.uniform(-3, 3, 50), rng.uniform(-9, 9, 50)
+    (k,) = Evaluator(mech, Float64()).sample([q], [qd], [qdd]).regressor()
+    expected = {"mx1": -G0 * np.cos(q), "mz1": -G0 * np.sin(q), "Iyy1": qdd}
+    for name, column in zip(mech.parameters, k):
+        assert np.allclose(np.broadcast_to(column, q.shape), expected.get(name, 0 * q), atol=1e-12), name
+
+
+def test_planar_2r_closed_form():
+    """Two links about parallel y axes in the vertical x-z plane, by Lagrange's equations.
+
+    Rotation about y by q maps body x to (c, 0, -s) and body z to (s, 0, c). Body 2's origin
+    is at L (c1, 0, -s1). With a = qdd, d = qd, c12 = cos(q1 + q2):
+      T1 = Iyy1 d1^2 / 2,  V1 = g (-s1 mx1 + c1 mz1)
+      T2 = m2 L^2 d1^2 / 2 + L d1 (d1 + d2)(mx2 c2 + mz2 s2) + Iyy2 (d1 + d2)^2 / 2
+      V2 = g (-m2 L s1 - mx2 s12 + mz2 c12)
+    """
+    mech = parse_mechanism(TWO_R)
+    L = 0.7
+    rng = np.random.default_rng(5)
+    q1, q2, d1, d2, a1, a2 = (rng.uniform(-2, 2, 40) for _ in range(6))
+    k1, k2 = Evaluator(mech, Float64()).sample([q1, q2], [d1, d2], [a1, a2]).regressor()
+    c1, s1, c2, s2 = np.cos(q1), np.sin(q1), np.cos(q2), np.sin(q2)
+    c12, s12 = np.cos(q1 + q2), np.sin(q1 + q2)
+    zero = 0 * q1
+    expect = {
+        "Iyy1": (a1, zero),
+        "mx1": (-G0 * c1, zero),
+        "mz1": (-G0 * s1, zero),
+        "m2": (L ** 2 * a1 - G0 * L * c1, zero),
+        "Iyy2": (a1 + a2, a1 + a2),
+        "mx2": (L * ((2 * a1 + a2) * c2 - (2 * d1 * d2 + d2 ** 2) * s2) - G0 * c12,
+                L * (a1 * c2 + d1 ** 2 * s2) - G0 * c12),
+        "mz2": (L * ((2 * a1 + a2) * s2 + (2 * d1 * d2 + d2 ** 2) * c2) - G0 * s12,
+                L * (a1 * s2 - d1 ** 2 * c2) - G0 * s12),
+    }
+    for name, col1, col2 in zip(mech.parameters, k1, k2):
+        e1, e2 = expect.get(name, (zero, zero))
+        assert np.allclose(np.broadcast_to(col1, q1.shape), e1, atol=1e-10), name
+        assert np.allclose(np.broadcast_to(col2, q1.shape), e2, atol=1e-10), name
+
+
+def _energy_and_power(ev, backend, trajectory, mech, t, phi):
+    z, zd, zdd = trajectory.independent_values(mech, backend, t)
+    s = ev.sample(z, zd, zdd)
+    t_form, v_form = s.energies()
+    energy = sum(a * b for a, b in zip(t_form, phi)) + sum(a * b for a, b in zip(v_form, phi))
+    tau = [sum(a * b for a, b in zip(row, phi)) for row in s.regressor()]
+    return energy, sum(a * b for a, b in zip(zd, tau))
+
+
+@pytest.mark.parametrize("name", sorted(registry.mechanisms()))
+def test_energy_balance(name):
+    """d/dt (T + V) = zd . (K phi) for random phi; T and V come from body velocities, not from K.
+
+    The derivative is a central difference with an exact step h = 1e-15 at 60 digits: its
+    truncation error is ~h^2, far below the 1e-20 tolerance, so any error in K shows.
+    """
+    mech = resolve(name)
+    trajectory = Trajectory.default(mech)
+    backend = Arb(60)
+    ev = Evaluator(mech, backend)
+    rng = random.Random(name)
+    span = mech.trajectory.t_end - mech.trajectory.t_start
+    with backend.activate():
+        phi = [backend.rational(Fraction(rng.randint(-999, 999), 1000)) for _ in mech.parameters]
+        h = backend.rational(Fraction(1, 10 ** 15))
+        for _ in range(2):
+            tk = mech.trajectory.t_start + span * Fraction(rng.randint(1, 999), 1000)
+            t = backend.rational(tk)
+            _, power = _energy_and_power(ev, backend, trajectory, mech, t, phi)
+            e_plus, _ = _energy_and_power(ev, backend, trajectory, mech, t + h, phi)
+            e_minus, _ = _energy_and_power(ev, backend, trajectory, mech, t - h, phi)
+            derivative = (e_plus - e_minus) / (2 * h)
+            assert abs(derivative - power) < arb(10) ** -20 * (1 + abs(power)), (name, float(tk))
+
+
+@pytest.mark.parametrize("name", sorted(registry.mechanisms()))
+def test_float64_and_arb_observation_matrices_agree(name):
+    mech = resolve(name)
+    trajectory = Trajectory.default(mech, samples=12)
+    w64, _ = observation_matrix(mech, Float64(), trajectory)
+    w_arb, _ = observation_matrix(mech, Arb(40), trajectory)
+    ref = np.array([[float(w_arb[i, j].mid()) for j in range(w_arb.ncols())] for i in range(w_arb.nrows())])
+    assert w64.shape == ref.shape == (12 * len(mech.independent), len(mech.parameters))
+    assert np.allclose(w64, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+def test_sla_loops_close_over_the_whole_trajectory_at_100_digits():
+    mech = resolve("sla_suspension")
+    _, info = observation_matrix(mech, Arb(100))
+    assert info["samples"] == 200
+    assert Fraction(info["closure_residual"]) <= Fraction(1, 10 ** 95)
+
+
+def test_leaving_the_reachable_range_is_an_error_with_time_and_coordinates():
+    mech = resolve("sla_suspension")
+    trajectory = Trajectory({"theta1": 3 * sympy_sin_t(), "theta2": 0 * sympy_sin_t()},
+                            tuple(Fraction(k, 10) for k in range(20)))
+    with pytest.raises(KinematicsError) as info:
+        observation_matrix(mech, Float64(), trajectory)
+    message = str(info.value)
+    assert "theta1=" in message and "theta_upper=" in message
+    assert "residual" in message or "singular" in message
+    with pytest.raises(KinematicsError) as info:
+        observation_matrix(mech, Arb(30), trajectory)
+    assert "at t = " in str(info.value) or "singular" in str(info.value)
+
+
+def test_coordinate_limit_is_reported_with_time():
+    text = PENDULUM.replace('coordinates = ["theta"]', 'coordinates = ["theta"]\nlimits = { theta = ["-0.5", "0.5"] }')
+    mech = parse_mechanism(text)
+    with pytest.raises(KinematicsError, match=r"at t = .* coordinate theta = .* leaves its range"):
+        observation_matrix(mech, Float64())
+
+
+def sympy_sin_t():
+    import sympy
+    return sympy.sin(sympy.Symbol("t"))
+
+
+def test_exact_rational_state_gives_exact_regressor():
+    """Pendulum at cos = 3/5, sin = 4/5: K is rational and equals the closed form exactly."""
+    from baseparams.backends import Exact, TanHalf
+    mech = parse_mechanism(PENDULUM)
+    backend = Exact()
+    (k,) = Evaluator(mech, backend).sample([TanHalf(Fraction(1, 2))], [backend.rational(Fraction(2))],
+                                           [backend.rational(Fraction(5, 3))]).regressor()
+    g = Fraction(981, 100)
+    expected = [0, -g * Fraction(3, 5), 0, -g * Fraction(4, 5), 0, 0, 0, Fraction(5, 3), 0, 0]
+    assert [Fraction(int(v.p), int(v.q)) for v in k] == expected
