@@ -146,9 +146,12 @@ class Evaluator:
             raise KinematicsError("exact and symbolic arithmetic cannot solve loop closure; "
                                   "give all tree coordinates or use float64 / arb")
         if guess is None:
-            # continuation from the reference configuration (q = 0 closes the loops)
-            for step in (1, 2, 3):
-                lam = self.backend.rational(Fraction(step, 4))
+            # continuation from the reference configuration (q = 0 closes the loops), in steps
+            # of at most 0.25 in every independent coordinate
+            reach = max(float(np.max(np.abs(self.backend.to_float(v)))) for v in z)
+            steps = max(4, int(np.ceil(reach / 0.25)))
+            for step in range(1, steps):
+                lam = self.backend.rational(Fraction(step, steps))
                 q = self._newton(q, [lam * v for v in z], -6, where + "(continuation) ")
         return self._newton(q, z, self.tolerance(), where)
 

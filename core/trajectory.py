@@ -69,20 +69,23 @@ def samples_float64(mechanism, trajectory):
     try:
         sample = ev.sample(z, zd, zdd, None, where="")
     except KinematicsError:
-        _first_failing_sample(ev, trajectory, t)
-        raise
+        # Each sample followed separately from q = 0 failed somewhere: follow the trajectory
+        # in time instead (each sample from the previous one); this names the first bad time.
+        guess = _follow_in_time(ev, trajectory, t)
+        sample = ev.sample(z, zd, zdd, guess, where="")
     check_limits(mechanism, sample.q, t)
     return sample, t
 
 
-def _first_failing_sample(ev, trajectory, times):
-    """Walk the samples one by one (continuation from the previous one) to name the first bad time."""
+def _follow_in_time(ev, trajectory, times):
+    """Positions sample after sample, each Newton started from the previous solution."""
     backend, mechanism = ev.backend, ev.mechanism
-    guess = None
+    solutions, q = [], None
     for tk in times:
-        z, zd, zdd = trajectory.independent_values(mechanism, backend, float(tk))
-        z, zd, zdd = ([float(v) for v in vals] for vals in (z, zd, zdd))
-        guess = ev.sample(z, zd, zdd, guess, where=f"at t = {float(tk):.6g} s: ").q
+        z, _, _ = trajectory.independent_values(mechanism, backend, float(tk))
+        q = ev.assemble([float(v) for v in z], q, where=f"at t = {float(tk):.6g} s: ")
+        solutions.append([float(v) for v in q])
+    return [np.array(column) for column in zip(*solutions)]
 
 
 def check_limits(mechanism, q, times):
