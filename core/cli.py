@@ -106,7 +106,12 @@ def main():
 @main.command("list")
 @format_option
 def list_mechanisms(fmt):
-    """List the registered mechanisms: name, title and the distribution providing it."""
+    """List the registered mechanisms.
+
+    One line per mechanism: its name (usable as MECH), the distribution that provides
+    it and its title. JSON: {"mechanisms": [{"name", "title", "source", "path"}]}, where
+    "source" is the providing distribution.
+    """
     rows = []
     for name, reg in registry.mechanisms().items():
         row = {"name": name, "title": "", "source": reg.distribution, "path": str(reg.item.path)}
@@ -187,11 +192,13 @@ def describe_text(info):
 @click.argument("mech", metavar="MECH")
 @format_option
 def show(mech, fmt):
-    """Show a mechanism's structure: bodies, joints (tree or loop-closing), coordinates,
-    loops, degrees of freedom (with the Gruebler count and redundant closure equations)
-    and its inertial parameters.
+    """Show a mechanism's bodies, joints, coordinates and parameters.
 
-    MECH is a registered name or a path to a mechanism file.
+    Joints are marked as spanning-tree joints (with their coordinates) or loop-closing
+    joints. The degrees of freedom are the tree coordinates minus the rank of the
+    loop-closure Jacobian; the Gruebler count and the number of redundant closure
+    equations are printed beside them. MECH is a registered name or a path to a
+    mechanism file.
     """
     info = describe(load(mech))
     emit(fmt, info, lambda: describe_text(info))
@@ -201,9 +208,13 @@ def show(mech, fmt):
 @main.command()
 @format_option
 def plugins(fmt):
-    """List every joint type, solver, mechanism and model effect with the distribution
-    that provides it (built-ins come from `baseparams`; third parties register through
-    the `baseparams` entry-point group)."""
+    """List the installed plugins and the distributions providing them.
+
+    Joint types, solvers, mechanisms and model effects. Built-ins come from the
+    `baseparams` distribution; a third party registers its own through the `baseparams`
+    entry-point group (see README.md, "Plugins"). A joint type marked [no transfer rules]
+    makes the symbolic solver's rank an upper bound.
+    """
     def entry(name, reg, **extra):
         return {"name": name, "distribution": reg.distribution,
                 "description": getattr(reg.item, "description", ""), **extra}
@@ -238,7 +249,7 @@ def plugins(fmt):
 # ----- plot ---------------------------------------------------------------------
 @main.group()
 def plot():
-    """Figures (matplotlib): the mechanism, and others added by each subcommand."""
+    """Write figures (PNG, PDF or SVG)."""
 
 
 @plot.command("mechanism")
@@ -251,8 +262,13 @@ def plot():
 @click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
               help="Image format [default: from the file name, else png].")
 def plot_mechanism(mech, output, instants, fmt):
-    """Draw MECH in 3D at a few instants of its default trajectory: bodies as segments
-    between their joints, ground joints as black markers, later instants darker."""
+    """Draw MECH in 3D at a few instants of its default trajectory.
+
+    Bodies are segments between their joints (wheels are discs), ground joints black
+    markers; the instants span the range of the first independent coordinate and the
+    larger values are drawn darker. Without a default trajectory the reference
+    configuration is drawn.
+    """
     from .plots import plot_mechanism as draw
     written = draw(load(mech), output, instants=instants, fmt=fmt)
     click.echo(f"wrote {written}")

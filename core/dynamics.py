@@ -18,7 +18,7 @@ import numpy as np
 from .backends import Float64
 from .errors import KinematicsError, InputError
 from .kinematics import TreeKinematics
-from .regressor import energy_forms, tree_regressor
+from .regressor import energy_forms, tree_regressor, tree_regressor_array
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,19 @@ class Sample:
     def regressor(self):
         """K in the independent coordinates: f rows of 10 * bodies entries."""
         k_tree = tree_regressor(self.kin, self.states, self.qdd)
+        if not self.kin.mechanism.loops:
+            return k_tree
         return project(self.projection, k_tree, self.kin.zero)
+
+    def regressor_array(self):
+        """float64 only: K as an array (samples, f, 10 * bodies), without per-entry Python work."""
+        k_tree = tree_regressor_array(self.kin, self.states, self.qdd)
+        if not self.kin.mechanism.loops:
+            return k_tree
+        shape = k_tree.shape[:-2]
+        r = np.stack([np.stack([np.broadcast_to(v, shape) for v in row], axis=-1) for row in self.projection],
+                     axis=-2)
+        return np.einsum("...kf,...kp->...fp", r, k_tree)
 
     def tree_regressor(self):
         return tree_regressor(self.kin, self.states, self.qdd)
@@ -199,32 +211,40 @@ class Evaluator:
     # ----- full state -----------------------------------------------------
     def sample(self, z, zd, zdd, guess=None, where=""):
         """The state with independent positions, velocities and accelerations z, zd, zdd."""
-        st = self.structure
         q = self.assemble(z, guess, where)
+        if self.mechanism.loops:
+            return self._closed_sample(q, zd, zdd, where)
         zero, one = self.kin.zero, self.kin.one
-        f = len(st.independent)
-        r = [[zero] * f for _ in range(self.n)]
+        st = self.structure
+        qd, qdd = [zero] * self.n, [zero] * self.n
+        r = [[zero] * len(st.independent) for _ in range(self.n)]    # a permutation
+        for j, i in enumerate(st.independent):
+            qd[i], qdd[i], r[i][j] = zd[j], zdd[j], one
+        return Sample(q, qd, qdd, self.kin.forward(q, qd), r, self.kin)
+
+    def _closed_sample(self, q, zd, zdd, where):
+        """qd = R zd with R = [I; -Phi_d^-1 Phi_z]; qdd = R zdd - [0; Phi_d^-1 gamma]."""
+        st = self.structure
+        zero, one = self.kin.zero, self.kin.one
+        _, rows, _ = self.kin.closure(self.kin.forward(q))
+        jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
+        jz = [[rows[i][j] for j in st.independent] for i in st.rows]
+        try:
+            x = self.backend.solve(jd, jz)
+        except KinematicsError as exc:
+            raise KinematicsError(f"{where}singular configuration ({exc}); {self.describe(q)}") from None
+        r = [[zero] * len(st.independent) for _ in range(self.n)]
         for j, i in enumerate(st.independent):
             r[i][j] = one
-        extra = [zero] * self.n
-        if self.mechanism.loops:
-            states = self.kin.forward(q)
-            _, rows, _ = self.kin.closure(states)
-            jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
-            jz = [[rows[i][j] for j in st.independent] for i in st.rows]
-            try:
-                x = self.backend.solve(jd, jz)
-            except KinematicsError as exc:
-                raise KinematicsError(f"{where}singular configuration ({exc}); {self.describe(q)}") from None
-            for a, i in enumerate(st.dependent):
-                r[i] = [-v for v in x[a]]
+        for a, i in enumerate(st.dependent):
+            r[i] = [-v for v in x[a]]
         qd = [_dot(r[i], zd, zero) for i in range(self.n)]
         states = self.kin.forward(q, qd)
-        if self.mechanism.loops:
-            _, _, bias = self.kin.closure(states, want_bias=True)
-            s = self.backend.solve(jd, [[bias[i]] for i in st.rows])
-            for a, i in enumerate(st.dependent):
-                extra[i] = -s[a][0]
+        _, _, bias = self.kin.closure(states, want_bias=True)
+        s = self.backend.solve(jd, [[bias[i]] for i in st.rows])
+        extra = [zero] * self.n
+        for a, i in enumerate(st.dependent):
+            extra[i] = -s[a][0]
         qdd = [_dot(r[i], zdd, zero) + extra[i] for i in range(self.n)]
         return Sample(q, qd, qdd, states, r, self.kin)
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .backends import Float64
 from .errors import InputError
 
 IMAGE_FORMATS = ("png", "pdf", "svg")
@@ -38,10 +39,13 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
     The instants are chosen to span the range of the first independent coordinate (so a
     suspension is shown from rebound to bump, not at four nearly equal positions); later
     instants (larger values) are drawn darker. A body is drawn as segments from its origin
-    to each of its joint points; a body that only spins about a revolute axis through all
-    its points (a wheel) as a disc whose radius gives its inertia about that axis (a
-    uniform disc), with a spoke so that its rotation shows. Ground joints are black
-    markers with a stub along their axis; prismatic joints show their current stroke.
+    to each of its joint points (to its centre of mass when all its joints sit at its
+    origin); a body on a revolute joint to the ground also reaches both ends of that
+    joint's axis stub, so control arms look like wishbones. A wheel (a body hanging on one
+    revolute joint with its centre of mass on the axis) is a disc whose radius gives its
+    inertia about the axis, with a spoke so that its rotation shows. Ground joints are
+    black markers with a stub along their axis; prismatic joints show their stroke.
+    Without a default trajectory the reference configuration (all coordinates 0) is drawn.
     """
     poses, labels = _poses(mech, instants)
     geometry = _body_geometry(mech)
@@ -55,7 +59,7 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
     for k, alpha in enumerate(alphas):
         for body, colour in zip(mech.bodies, colours):
             rot, pos = poses[body.label][k]
-            points = _draw_body(ax, mech, body, geometry[body.label], rot, pos, colour, alpha, size)
+            points = _draw_body(ax, body, geometry[body.label], rot, pos, colour, alpha, size)
             drawn += points
             if geometry[body.label]["rotor"] is None:
                 linkage += points
@@ -78,7 +82,6 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
 
 def _poses(mech, instants):
     """{label: [(R, p) per instant]} and a legend label per instant."""
-    from .backends import Float64
     from .kinematics import TreeKinematics
 
     if mech.trajectory is None:
@@ -115,7 +118,6 @@ def _arr(values, k, n):
 
 def _body_geometry(mech):
     """Per body: joint frames {joint name: (R, p)} in body coordinates and the points to draw."""
-    from .backends import Float64
     backend = Float64()
     out = {0: {"frames": {}}}
     out.update({b.label: {"frames": {}} for b in mech.bodies})
@@ -125,6 +127,9 @@ def _body_geometry(mech):
             out[label]["frames"][joint.name] = (np.array(rot, float), np.array(p, float))
     for label, g in out.items():
         g["points"] = [np.zeros(3)] + [p for _, p in g["frames"].values()]
+        com = _centre_of_mass(mech.body(label)) if label else None
+        if com is not None and all(np.linalg.norm(p) < 1e-12 for p in g["points"]):
+            g["points"].append(com)        # a body with all its joints at its origin: show its extent
         # revolute joints to the ground: the body reaches both ends of the axis (a wishbone)
         g["pivots"] = [(g["frames"][j.name][1], g["frames"][j.name][0][:, 2]) for j in mech.joints
                        if j.type.name == "R" and label and 0 in (j.parent, j.child)
@@ -133,16 +138,24 @@ def _body_geometry(mech):
     return out
 
 
+def _centre_of_mass(body):
+    if body.inertia is None or body.inertia[0] <= 0:
+        return None
+    return np.array([float(v) for v in body.inertia[1:4]]) / float(body.inertia[0])
+
+
 def _rotor_axis(mech, label, g):
-    """(centre, R of the joint frame) when every point of the body lies on one R joint's axis."""
-    for joint in mech.joints:
-        if joint.type.name != "R" or label not in (joint.parent, joint.child):
-            continue
-        rot, centre = g["frames"][joint.name]
-        u = rot[:, 2]
-        if all(np.linalg.norm(np.cross(p - centre, u)) < 1e-9 for p in g["points"]):
-            return centre, rot
-    return None
+    """(centre, R of the joint frame) for a wheel: a body hanging on one R joint only, with
+    its centre of mass on that joint's axis (off by less than 5 % of the disc radius)."""
+    joints = [j for j in mech.joints if label in (j.parent, j.child)]
+    body = mech.body(label)
+    com = _centre_of_mass(body)
+    if len(joints) != 1 or joints[0].type.name != "R" or com is None:
+        return None
+    rot, centre = g["frames"][joints[0].name]
+    if np.linalg.norm(np.cross(com - centre, rot[:, 2])) > 0.05 * _disc_radius(body, rot[:, 2], 0.0):
+        return None
+    return centre, rot
 
 
 def _size(mech, poses, geometry):
@@ -169,7 +182,7 @@ def _disc_radius(body, u, size):
     return float(np.sqrt(2 * inertia / m)) if inertia > 0 else 0.12 * size
 
 
-def _draw_body(ax, mech, body, g, rot, pos, colour, alpha, size):
+def _draw_body(ax, body, g, rot, pos, colour, alpha, size):
     world = [rot @ p + pos for p in g["points"]]
     if g["rotor"] is not None:
         centre, frame = g["rotor"]
@@ -202,7 +215,6 @@ def _draw_ground(ax, mech, size):
     for joint in mech.joints:
         if 0 not in (joint.parent, joint.child):
             continue
-        from .backends import Float64
         frame = joint.parent_frame if joint.parent == 0 else joint.child_frame
         rot, p = mech.numeric_frame(frame, Float64())
         p = np.array(p, float)

@@ -113,14 +113,8 @@ def observation_matrix(mechanism, backend, trajectory=None, progress=None):
     f = len(mechanism.independent) or len(mechanism.coordinates)
     if isinstance(backend, Float64):
         sample, t = samples_float64(mechanism, trajectory)
-        k = sample.regressor()
-        cols = len(mechanism.parameters)
-        n = len(t)
-        W = np.empty((n * f, cols))
-        for j in range(f):
-            for p in range(cols):
-                W[j::f, p] = np.broadcast_to(k[j][p], (n,))
-        return W, {"samples": n}
+        k = sample.regressor_array()                        # (samples, f, parameters)
+        return k.reshape(len(t) * f, len(mechanism.parameters)), {"samples": len(t)}
     if isinstance(backend, Arb):
         return _observation_matrix_arb(mechanism, backend, trajectory, progress)
     raise ValueError(f"observation matrix over a trajectory needs float64 or arb, not {backend.name}")
