@@ -1,7 +1,7 @@
 """The ``baseparams`` command line (click).
 
 One function per verb. Every verb that prints results takes ``--format text|json``; the
-JSON keys are the contracts of DESIGN.md. Errors a user can fix (a bad mechanism file, a
+JSON keys are contracts (docs/cli.md). Errors a user can fix (a bad mechanism file, a
 trajectory leaving the reachable range) are :class:`baseparams.errors.BaseparamsError`;
 the :class:`Group` below turns them, once for every verb, into ``error: <message>`` on
 stderr and exit code 2, with no traceback. Exit code 1 is reserved for a check that
@@ -216,11 +216,13 @@ def plugins(fmt):
     makes the symbolic solver's rank an upper bound.
     """
     def entry(name, reg, **extra):
-        return {"name": name, "distribution": reg.distribution,
-                "description": getattr(reg.item, "description", ""), **extra}
+        out = {"name": name, "distribution": reg.distribution}
+        if getattr(reg.item, "description", ""):
+            out["description"] = reg.item.description
+        return {**out, **extra}
 
     data = {
-        "joints": [entry(n, r, coordinates=list(r.item.suffixes),
+        "joints": [entry(n, r, dof=r.item.dof, suffixes=list(r.item.suffixes),
                          transfer_rules=registry.transfer_rules(n) is not None)
                    for n, r in registry.joint_types().items()],
         "solvers": [entry(n, r) for n, r in registry.solvers().items()],
@@ -235,7 +237,7 @@ def plugins(fmt):
             width = max([len(i["name"]) for i in items] + [1])
             dist = max([len(i["distribution"]) for i in items] + [1])
             for i in items:
-                note = i["description"] or i.get("path", "")
+                note = i.get("description") or i.get("path", "")
                 if kind == "joints" and not i["transfer_rules"]:
                     note += " [no transfer rules]"
                 lines.append(f"  {i['name']:<{width}}  {i['distribution']:<{dist}}  {note}".rstrip())

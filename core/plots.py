@@ -232,8 +232,9 @@ def _label_bodies(ax, mech, poses, geometry, k):
         rot, pos = poses[body.label][k]
         if g["rotor"] is not None:
             where = rot @ g["rotor"][0] + pos
-        else:
-            where = np.mean([rot @ p + pos for p in g["points"]], axis=0)
+        else:       # half-way to the farthest joint: on the body's longest segment
+            far = max(g["points"], key=lambda p: float(np.linalg.norm(p)))
+            where = rot @ (far / 2) + pos
         ax.text(*where, f" {body.label}", fontsize=11, fontweight="bold", zorder=10)
 
 
