@@ -110,6 +110,14 @@ def observation_matrix(mechanism, backend, trajectory=None, progress=None):
     precision). Returns (W, info) where info has the sample count and worst closure residual.
     """
     trajectory = trajectory or Trajectory.default(mechanism)
+    try:
+        return _observation_matrix(mechanism, backend, trajectory, progress)
+    except KinematicsError as exc:
+        where = f"{mechanism.path}: trajectory: " if mechanism.path else "trajectory: "
+        raise KinematicsError(where + str(exc)) from None
+
+
+def _observation_matrix(mechanism, backend, trajectory, progress):
     f = len(mechanism.independent) or len(mechanism.coordinates)
     if isinstance(backend, Float64):
         sample, t = samples_float64(mechanism, trajectory)
