@@ -15,9 +15,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from .backends import Float64
+from .backends import Arb, Float64
 from .errors import KinematicsError, InputError
 from .kinematics import TreeKinematics
+from .krawczyk import enclose
 from .regressor import energy_forms, tree_regressor, tree_regressor_array
 
 
@@ -133,9 +134,12 @@ def project(r, k_tree, zero):
 class Evaluator:
     """Evaluates a mechanism's states and regressor in one backend."""
 
-    def __init__(self, mechanism, backend, symbolic_geometry=False):
+    def __init__(self, mechanism, backend, symbolic_geometry=False, certify=False):
+        """``certify`` (arb only): replace Newton's dependent coordinates by balls proven to
+        contain the exact loop-closure solution (see :mod:`baseparams.krawczyk`)."""
         self.mechanism = mechanism
         self.backend = backend
+        self.certify = certify and isinstance(backend, Arb)
         self.kin = TreeKinematics(mechanism, backend, symbolic_geometry)
         self.structure = closure_structure(mechanism)
         self.n = self.kin.n
@@ -165,7 +169,8 @@ class Evaluator:
             for step in range(1, steps):
                 lam = self.backend.rational(Fraction(step, steps))
                 q = self._newton(q, [lam * v for v in z], -6, where + "(continuation) ")
-        return self._newton(q, z, self.tolerance(), where)
+        q = self._newton(q, z, self.tolerance(), where)
+        return enclose(self, q, where) if self.certify else q
 
     def _newton(self, q, z, tol, where):
         st = self.structure

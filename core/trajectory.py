@@ -132,7 +132,7 @@ def _observation_matrix_arb(mechanism, backend, trajectory, progress):
     from flint import arb, arb_mat, fmpq
 
     start, _ = samples_float64(mechanism, trajectory) if mechanism.loops else (None, None)
-    ev = Evaluator(mechanism, backend)
+    ev = Evaluator(mechanism, backend, certify=True)
     rows = []
     with backend.activate():
         worst = arb(0)
@@ -155,4 +155,5 @@ def _observation_matrix_arb(mechanism, backend, trajectory, progress):
                 progress(index + 1, len(trajectory.times))
         W = arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
         residual = worst.str(3, radius=False)
-    return W, {"samples": len(trajectory.times), "closure_residual": residual}
+    return W, {"samples": len(trajectory.times), "closure_residual": residual,
+               "positions_enclosed": bool(mechanism.loops)}
