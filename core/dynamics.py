@@ -261,8 +261,3 @@ def _dot(row, values, zero):
             continue
         total = total + a * b
     return total
-
-
-def as_backend_number(backend, value):
-    """A float or Fraction as an exact number of ``backend`` (floats converted exactly)."""
-    return backend.rational(value if isinstance(value, Fraction) else Fraction(value))

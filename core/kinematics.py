@@ -92,7 +92,7 @@ class TreeKinematics:
                         rate = qd[c] if sign > 0 else -qd[c]
                         st.ba = vec.add(st.ba, vec.scale(vec.cross(st.w, u), 2 * rate))
                         st.v = vec.add(st.v, vec.scale(u, rate))
-            st.rot = _mul_transpose(st.rot, nr)
+            st.rot = vec.matmul_t(st.rot, nr)
             _offset(st, vec.scale(vec.matvec(st.rot, np_), -1))
             states[new] = st
         return states
@@ -142,12 +142,6 @@ class TreeKinematics:
                     biases.append(vec.dot(u_dd, other) + 2 * vec.dot(u_dot, o_dot) + vec.dot(u, o_dd))
         return values, rows, biases
 
-    def velocities(self, states, qd):
-        """Fill each state's actual angular velocity and origin velocity from its Jacobians."""
-        for s in states.values():
-            s.w = _combine(s.jw, qd, self.zero)
-            s.v = _combine(s.jv, qd, self.zero)
-
     def accelerations(self, state, qdd):
         """(omega_dot, a) of a body (world) from its Jacobians, bias terms and ``qdd``."""
         return (vec.add(state.bw, _combine(state.jw, qdd, self.zero)),
@@ -163,10 +157,6 @@ def _offset(st, r):
         wr = vec.cross(st.w, r)
         st.ba = vec.add(st.ba, vec.add(vec.cross(st.bw, r), vec.cross(st.w, wr)))
         st.v = vec.add(st.v, wr)
-
-
-def _mul_transpose(a, b):
-    return vec.matmul_t(a, b)
 
 
 def _point_columns(state, arm, n, z):

@@ -170,7 +170,7 @@ class _Builder:
             return tuple(from_mass_properties(mass, com, tensor))
         return None
 
-    def read_frame(self, raw, key, joint_type):
+    def read_frame(self, raw, key):
         if not isinstance(raw, dict):
             raise self.error(key, "required: a table with point (and axis, ref)")
         unknown = set(raw) - {"point", "axis", "ref"}
@@ -228,7 +228,7 @@ class _Builder:
                 if c in coords or c in self.geometry or c in RESERVED:
                     raise self.error(f"{key}.coordinates", f"coordinate name {c!r} is already used")
                 coords.add(c)
-            frames = [self.read_frame(j.get(f"{end}_frame"), f"{key}.{end}_frame", jtype)
+            frames = [self.read_frame(j.get(f"{end}_frame"), f"{key}.{end}_frame")
                       for end in ("parent", "child")]
             limits = self.read_limits(j.get("limits", {}), f"{key}.limits", cnames)
             loop = j.get("loop", False)

@@ -14,6 +14,7 @@ from fractions import Fraction
 
 import numpy as np
 import sympy
+from flint import arb, arb_mat, fmpq
 
 from .backends import Arb, Float64
 from .dynamics import Evaluator
@@ -129,8 +130,6 @@ def _observation_matrix(mechanism, backend, trajectory, progress):
 
 
 def _observation_matrix_arb(mechanism, backend, trajectory, progress):
-    from flint import arb, arb_mat, fmpq
-
     start, _ = samples_float64(mechanism, trajectory) if mechanism.loops else (None, None)
     ev = Evaluator(mechanism, backend, certify=True)
     rows = []

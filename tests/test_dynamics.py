@@ -5,7 +5,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from flint import arb, fmpq
+from flint import arb
 
 from baseparams import registry
 from baseparams.backends import Arb, Float64
