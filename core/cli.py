@@ -248,6 +248,55 @@ def plugins(fmt):
     emit(fmt, data, text)
 
 
+# ----- solve --------------------------------------------------------------------
+def get_solver(name):
+    """A registered solver by name; a UserError listing the registered ones otherwise."""
+    solvers = registry.solvers()
+    if name not in solvers:
+        raise UserError(f"unknown solver {name!r}; registered solvers: {', '.join(solvers) or '(none)'} "
+                        f"(see `baseparams plugins`)")
+    return solvers[name].item
+
+
+def _progress(message):
+    click.echo(message, err=True)
+
+
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
+              help="A registered solver (`baseparams plugins` lists them; built in: dp, vp, exact).")
+@click.option("--digits", type=click.IntRange(10, 20000), default=None,
+              help="Fix the working precision of a variable-precision solver [default: automatic].")
+@click.option("--samples", type=click.IntRange(1, 1_000_000), default=None,
+              help="Samples of the exciting trajectory (or random states, for exact) "
+                   "[default: the mechanism file's].")
+@format_option
+def solve(mech, solver_name, digits, samples, fmt):
+    """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
+    base parameter expressions phi_b = phi_1 + beta phi_2.
+
+    Progress and warnings (e.g. no clear ridge in the singular values) go to stderr.
+    Numeric coefficients carry only the digits the solver trusts.
+    """
+    solver = get_solver(solver_name)
+    options = {"progress": _progress}
+    if digits is not None:
+        options["digits"] = digits
+    if samples is not None:
+        options["samples"] = samples
+    result = solver.solve(load(mech), **options)
+    for warning in result.warnings:
+        click.echo(f"warning: {warning}", err=True)
+
+    def text():
+        lines = [result.to_text()]
+        lines += [f"  {line}" for line in (result.diagnostics or {}).get("summary", [])]
+        return "\n".join(lines)
+
+    emit(fmt, result.to_json(), text)
+
+
 # ----- plot ---------------------------------------------------------------------
 @main.group()
 def plot():
@@ -274,6 +323,68 @@ def plot_mechanism(mech, output, instants, fmt):
     from .plots import plot_mechanism as draw
     written = draw(load(mech), output, instants=instants, fmt=fmt)
     click.echo(f"wrote {written}")
+
+
+@plot.command("singular-values")
+@click.argument("mech", metavar="MECH")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="Image file to write.")
+@click.option("--solver", "solvers", multiple=True, default=("dp", "vp"), show_default=True,
+              help="Solvers whose singular values to draw (repeat the option).")
+@click.option("--digits", type=click.IntRange(10, 20000), default=30, show_default=True,
+              help="Precision of variable-precision solvers (the seed paper's figure uses 30).")
+@click.option("--samples", type=click.IntRange(1, 1_000_000), default=None,
+              help="Samples of the exciting trajectory [default: the mechanism file's].")
+@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
+              help="Image format [default: from the file name, else png].")
+def plot_singular_values(mech, output, solvers, digits, samples, fmt):
+    """Singular values of the (column-scaled) observation matrix of MECH, one series per
+    solver on one log scale, with each solver's rank marked: the seed paper's figure of
+    DP (*) against VP (+)."""
+    from .plots import plot_singular_values as draw
+    mechanism = load(mech)
+    results = []
+    for name in solvers:
+        solver = get_solver(name)
+        options = {"progress": _progress, "digits": digits, "recover": False}
+        if samples is not None:
+            options["samples"] = samples
+        result = solver.solve(mechanism, **options)
+        if not result.singular_values:
+            raise UserError(f"solver {name!r} gives no singular values to plot")
+        results.append(result)
+    written = draw(results, output, fmt=fmt)
+    click.echo(f"wrote {written}")
+
+
+# ----- report (symbolic derivation) -------------------------------------------------
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "latex"]), default="text",
+              show_default=True, help="Rendering of the derivation.")
+@click.option("--keep", default="", help="Parameters never to eliminate (comma separated).")
+@click.option("--eliminate-first", "first", default="",
+              help="Parameters to eliminate whenever a transfer allows it (comma separated).")
+@click.option("--no-certify", is_flag=True, help="Skip the ball-arithmetic rank check (faster).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Write the report to this file instead of standard output.")
+def report(mech, fmt, keep, first, no_certify, output):
+    """Derive MECH's base parameters by multipole transfers and print the derivation.
+
+    Like the seed paper's Tabs. 4-5 and appendix: parameters without effect (per body and
+    condition), the transfer at each joint and the parameter it eliminates, every step's
+    values, the base parameters and how the rank was checked (docs/symbolic.md).
+    """
+    from .report import render
+    solver = registry.solvers()["symbolic"].item
+    result = solver.solve(load(mech), keep=keep, eliminate_first=first, certify=not no_certify)
+    text = render(result, fmt)
+    if output:
+        with open(output, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        click.echo(f"wrote {output}")
+    else:
+        click.echo(text, nl=False)
 
 
 # Keep this last: `python -m baseparams.cli` runs the command line.

@@ -50,7 +50,7 @@ class DPResult:
     ratios: np.ndarray           # s_i / s_{i+1} for i < rank (last one across the cut)
     largest_gap: int             # i (1-based): the largest ratio is s_i / s_{i+1}
     clear_ridge: bool
-    error_estimate: float        # first-order relative error of beta (scaled units)
+    error_estimate: float        # first-order error of beta (scaled units): s_{r+1}/s_r * cond(V22)
     v22_condition: float
     warnings: list = field(default_factory=list)
 
@@ -147,10 +147,10 @@ def dp_gautier(W, scale=True, rank=None):
         beta_s = np.zeros((r, 0))
         cond22 = 1.0
     beta = beta_s * s_col[eliminated][None, :] / s_col[kept][:, None] if eliminated else beta_s
-    noise = max(s_full[r] if r < n else 0.0, tol)
+    noise = max(s_full[r] if r < n else 0.0, floor)      # the observed noise level
     err = noise / s_full[r - 1] * cond22 if r else 0.0
     if err > 1e-6:
         warnings.append(f"beta is uncertain: estimated relative error {err:.2g} "
-                        f"(noise {noise:.3g} / s_{r} = {s_full[r - 1]:.3g}, cond(V22) = {cond22:.3g})")
+                        f"(s_{r + 1} = {noise:.3g} / s_{r} = {s_full[r - 1]:.3g} x cond(V22) = {cond22:.3g})")
     return DPResult(r, kept, eliminated, beta, s_full, tol, s_col, zero_columns, ratios, largest,
                     clear, err, cond22, warnings)

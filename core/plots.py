@@ -274,3 +274,65 @@ def _legend(fig, mech, colours, alphas, labels):
     handles += [Line2D([], [], color="0.2", alpha=a, lw=3, label=text) for a, text in zip(alphas, labels)]
     handles.append(Line2D([], [], color="black", marker="^", ls="", label="ground joint"))
     fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
+
+
+# ----- singular values of W (the seed paper's DP-versus-VP figure) -----------------
+_MARKERS = {"dp": "*", "vp": "+"}
+
+
+def _log10_text(text):
+    """log10 of a decimal string (any exponent: 1e-500 does not underflow), None for 0."""
+    import mpmath
+    value = abs(mpmath.mpf(str(text)))
+    return None if value == 0 else float(mpmath.log10(value))
+
+
+def plot_singular_values(results, path, fmt=None):
+    """One log-scale series of singular values per result (``BaseParameterResult`` with
+    ``singular_values``), each solver's rank marked; return the path written.
+
+    The axis shows log10 of the values, so that values far below double precision's
+    range (a 500-digit run's 1e-500) are drawn too. Exact zeros sit on the lower edge as
+    open triangles. Where a result's diagnostics give a rank tolerance (dp) or a proven
+    bound after the ridge (vp), it is drawn as a horizontal line in the series' colour.
+    """
+    fig = _figure(figsize=(8, 5))
+    ax = fig.add_subplot()
+    colours = _colours(len(results))
+    series = []
+    for result in results:
+        logs = [_log10_text(v) for v in result.singular_values]
+        series.append(logs)
+    finite = [v for logs in series for v in logs if v is not None]
+    if not finite:
+        raise InputError("no nonzero singular value to plot")
+    bottom = min(finite) - 2
+    for k, (result, logs, colour) in enumerate(zip(results, series, colours)):
+        marker = _MARKERS.get(result.solver, "o x s d ^".split()[k % 5])
+        label = f"{result.solver}" + (f" ({result.digits} digits)" if result.digits else "") \
+            + f": rank {result.rank}" + (" (certified)" if result.certified else "")
+        xs = [i + 1 for i, v in enumerate(logs) if v is not None]
+        ax.plot(xs, [v for v in logs if v is not None], ls="", marker=marker, ms=7, color=colour,
+                label=label, mfc="none" if marker == "o" else None)
+        zeros = [i + 1 for i, v in enumerate(logs) if v is None]
+        if zeros:
+            ax.plot(zeros, [bottom] * len(zeros), ls="", marker="v", mfc="none", color=colour,
+                    label=f"{result.solver}: exactly 0")
+        ax.axvline(result.rank + 0.5, color=colour, ls=":", lw=1)
+        diag = result.diagnostics or {}
+        if diag.get("tolerance"):
+            ax.axhline(_log10_text(diag["tolerance"]), color=colour, ls="--", lw=0.8,
+                       label=f"{result.solver}: rank tolerance")
+        if diag.get("tail_bound") not in (None, "0"):
+            level = _log10_text(diag["tail_bound"])
+            if level is not None:
+                ax.plot([result.rank + 0.5, len(logs) + 0.5], [level, level], color=colour, ls="--",
+                        lw=0.8, label=f"{result.solver}: proven bound after the ridge")
+    ax.set_xlabel("index i")
+    ax.set_ylabel("log10 s_i  (W with columns scaled by powers of two)")
+    ax.set_ylim(bottom - 1, max(finite) + 1)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{results[0].mechanism}: singular values of W", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, fmt)

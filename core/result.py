@@ -116,8 +116,10 @@ def format_number(value, max_digits=8):
 def format_expression(expression, max_digits=8):
     parts = []
     for param, coeff in expression.items():
-        value = parse_coefficient(coeff)
-        if isinstance(value, Fraction) or not isinstance(coeff, str) or _is_plain_number(coeff):
+        # symbolic coefficients (geometry symbols) are printed as they are, never evaluated
+        symbolic = isinstance(coeff, str) and not _is_plain_number(coeff)
+        value = None if symbolic else parse_coefficient(coeff)
+        if not symbolic:
             num = value
             sign = "-" if num < 0 else "+"
             mag = abs(num)

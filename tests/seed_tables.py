@@ -111,7 +111,7 @@ def symbolic_base_matrix(geometry=None):
         for p in params:
             c = sympy.cancel(expr.coeff(p))
             if geometry:
-                c = sympy.nsimplify(c.subs(subs))
+                c = sympy.simplify(c.subs(subs))
                 row.append(Fraction(int(c.p), int(c.q)))
             else:
                 row.append(c)
