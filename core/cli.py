@@ -13,12 +13,12 @@ for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
 
 import json
 import textwrap
-from fractions import Fraction
 
 import click
 
 from . import __version__, registry
 from .errors import BaseparamsError
+from .expressions import exact_text
 
 
 class UserError(click.ClickException):
@@ -58,27 +58,6 @@ def load(mech):
     """A registered mechanism name or a path to a mechanism file -> Mechanism."""
     from .loader import resolve
     return resolve(mech)
-
-
-def exact_text(value):
-    """An exact rational as a decimal string when it has one, else ``p/q``."""
-    value = Fraction(value)
-    d = value.denominator
-    twos = fives = 0
-    while d % 2 == 0:
-        d //= 2
-        twos += 1
-    while d % 5 == 0:
-        d //= 5
-        fives += 1
-    if d != 1:
-        return f"{value.numerator}/{value.denominator}"
-    places = max(twos, fives)
-    if places == 0:
-        return str(value.numerator)
-    scaled = abs(value.numerator) * 10 ** places // value.denominator
-    digits = str(scaled).rjust(places + 1, "0")
-    return ("-" if value < 0 else "") + digits[:-places] + "." + digits[-places:]
 
 
 def _wrap(words, indent="  "):

@@ -103,3 +103,24 @@ def to_fraction(expr):
     if not expr.is_Rational:
         raise ExpressionError(f"{expr} is not a rational number")
     return Fraction(int(expr.p), int(expr.q))
+
+
+def exact_text(value):
+    """An exact rational as a decimal string when it has one ("0.3196"), else "p/q".
+
+    The inverse of :func:`parse_decimal`: geometry written back (JSON, reports) stays exact.
+    """
+    value = Fraction(value)
+    d, twos, fives = value.denominator, 0, 0
+    while d % 2 == 0:
+        d, twos = d // 2, twos + 1
+    while d % 5 == 0:
+        d, fives = d // 5, fives + 1
+    if d != 1:
+        return f"{value.numerator}/{value.denominator}"
+    places = max(twos, fives)
+    if places == 0:
+        return str(value.numerator)
+    scaled = abs(value.numerator) * 10 ** places // value.denominator
+    digits = str(scaled).rjust(places + 1, "0")
+    return ("-" if value < 0 else "") + digits[:-places] + "." + digits[-places:]

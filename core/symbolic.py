@@ -49,6 +49,7 @@ from sympy import QQ
 from .backends import Arb
 from .body_conditions import analyse_bodies, sampled_joint_transfers
 from .errors import InputError
+from .expressions import exact_text
 from .params import PARAMETER_KINDS, split_name
 from .result import BaseParameterResult
 from .transfers import transfer_generators
@@ -468,7 +469,7 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
     result = BaseParameterResult(
         mechanism=mechanism.name, solver="symbolic", parameters=params, rank=rank, base=base,
         eliminated=der.eliminated, certified=certified,
-        geometry={k: _decimal(v) for k, v in mechanism.geometry.items()},
+        geometry={k: exact_text(v) for k, v in mechanism.geometry.items()},
         warnings=warnings, elapsed_s=time.perf_counter() - start, expression_values=values,
         rank_is_upper_bound=not certified, diagnostics=diagnostics)
     result.derivation = der
@@ -492,22 +493,3 @@ def _step_json(step, f):
                     "acceptor": g.acceptor})
     return out
 
-
-def _decimal(v):
-    """Exact geometry value as a decimal string when it has one, else p/q."""
-    d = v.denominator
-    k = 0
-    while d % 2 == 0:
-        d //= 2
-        k += 1
-    m = 0
-    while d % 5 == 0:
-        d //= 5
-        m += 1
-    if d != 1:
-        return f"{v.numerator}/{v.denominator}"
-    digits = max(k, m)
-    scaled = v * 10 ** digits
-    text = str(abs(scaled.numerator)).rjust(digits + 1, "0")
-    body = text[:-digits] + ("." + text[-digits:] if digits else "")
-    return ("-" if v < 0 else "") + body
