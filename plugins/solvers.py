@@ -10,8 +10,8 @@ docs/solvers.md explains the algorithms and what "certified" covers.
 
 import math
 import time
-from fractions import Fraction
 
+from baseparams.expressions import exact_text
 from baseparams.hookspecs import hookimpl
 from baseparams.result import BaseParameterResult
 
@@ -22,25 +22,7 @@ LADDER = (30, 60, 120, 240, 500)
 
 # ----- shared ---------------------------------------------------------------------
 def geometry_strings(mechanism):
-    return {k: _fraction_text(v) for k, v in mechanism.geometry.items()}
-
-
-def _fraction_text(value):
-    """A terminating decimal when the rational has one, else p/q."""
-    value = Fraction(value)
-    d, twos, fives = value.denominator, 0, 0
-    while d % 2 == 0:
-        d, twos = d // 2, twos + 1
-    while d % 5 == 0:
-        d, fives = d // 5, fives + 1
-    if d != 1:
-        return f"{value.numerator}/{value.denominator}"
-    places = max(twos, fives)
-    if places == 0:
-        return str(value.numerator)
-    scaled = abs(value.numerator) * 10 ** places // value.denominator
-    digits = str(scaled).rjust(places + 1, "0")
-    return ("-" if value < 0 else "") + digits[:-places] + "." + digits[-places:]
+    return {k: exact_text(v) for k, v in mechanism.geometry.items()}
 
 
 def base_rows(parameters, kept, eliminated, coefficient):
@@ -104,14 +86,15 @@ class DoublePrecisionSolver:
         scale_e = res.scale[res.eliminated][None, :] if res.eliminated else None
         beta_s = res.beta * scale_k / scale_e if res.kept and res.eliminated else res.beta
         noise = max(res.error_estimate, EPS)
-        dropped = 0
+        dropped, largest_dropped = 0, 0.0
 
         def coefficient(a, b):
-            nonlocal dropped
+            nonlocal dropped, largest_dropped
             value = float(res.beta[a, b])
             if abs(beta_s[a, b]) <= noise or value == 0.0:
                 if value != 0.0:
                     dropped += 1
+                    largest_dropped = max(largest_dropped, abs(float(beta_s[a, b])))
                 return None
             return np.format_float_positional(value, precision=digits, unique=False, fractional=False,
                                               trim="-") if 1e-4 <= abs(value) < 1e16 \
@@ -129,7 +112,8 @@ class DoublePrecisionSolver:
              f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
              + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
             f"beta: estimated relative error {_g(res.error_estimate, 2)} (first order), cond(V22) = "
-            f"{_g(res.v22_condition)}; coefficients below that level ({dropped}) are not shown",
+            f"{_g(res.v22_condition)}; {dropped} coefficients below that level (scaled units; largest "
+            f"{_g(largest_dropped, 2)}) are not shown",
         ]
         if res.zero_columns:
             summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
@@ -149,6 +133,7 @@ class DoublePrecisionSolver:
             "beta_error_estimate": float(res.error_estimate),
             "v22_condition": float(res.v22_condition),
             "coefficients_below_noise_dropped": dropped,
+            "largest_dropped_scaled": largest_dropped,
             "samples": info["samples"], "rows": int(W.shape[0]),
             "summary": summary,
         }
@@ -323,8 +308,6 @@ class VariablePrecisionSolver:
 
     def solve(self, mechanism, digits=None, samples=None, progress=None, ladder=LADDER,
               pivoting="natural", recover=True, kept=None, **options):
-        from baseparams import certify
-
         start = time.perf_counter()
         trajectory = _trajectory(mechanism, samples)
         params = mechanism.parameters

@@ -13,7 +13,6 @@
 """
 
 import json
-import math
 from fractions import Fraction
 from types import SimpleNamespace
 
