@@ -305,16 +305,3 @@ class Symbolic(Backend):
 
     def to_float(self, x):
         return float(sympy.N(x))
-
-
-BACKENDS = {"float64": Float64, "arb": Arb, "exact": Exact, "symbolic": Symbolic}
-
-
-def make_backend(name, digits=None):
-    """A backend by name; ``digits`` for arb."""
-    if name == "arb":
-        return Arb(digits or 50)
-    try:
-        return BACKENDS[name]()
-    except KeyError:
-        raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}") from None

@@ -247,7 +247,7 @@ def _progress(message):
               help="A registered solver (`baseparams plugins` lists them; built in: dp, vp, exact).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=None,
               help="Fix the working precision of a variable-precision solver [default: automatic].")
-@click.option("--samples", type=click.IntRange(1, 1_000_000), default=None,
+@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
               help="Samples of the exciting trajectory (or random states, for exact) "
                    "[default: the mechanism file's].")
 @format_option
@@ -312,7 +312,7 @@ def plot_mechanism(mech, output, instants, fmt):
               help="Solvers whose singular values to draw (repeat the option).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=30, show_default=True,
               help="Precision of variable-precision solvers (the seed paper's figure uses 30).")
-@click.option("--samples", type=click.IntRange(1, 1_000_000), default=None,
+@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
               help="Samples of the exciting trajectory [default: the mechanism file's].")
 @click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
               help="Image format [default: from the file name, else png].")
@@ -359,7 +359,11 @@ def report(mech, fmt, keep, first, no_certify, output):
     result = solver.solve(load(mech), keep=keep, eliminate_first=first, certify=not no_certify)
     text = render(result, fmt)
     if output:
-        with open(output, "w", encoding="utf-8") as fh:
+        try:
+            fh = open(output, "w", encoding="utf-8")
+        except OSError as exc:
+            raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
+        with fh:
             fh.write(text)
         click.echo(f"wrote {output}")
     else:

@@ -41,8 +41,12 @@ def closure_structure(mechanism):
     n = len(mechanism.coordinates)
     names = list(mechanism.coordinates)
     if not mechanism.loops:
+        if mechanism.independent and sorted(mechanism.independent) != sorted(names):
+            raise InputError(f"a mechanism without loops has {n} degrees of freedom: every tree coordinate "
+                             f"is independent ({', '.join(names)}); omit coordinates.independent or list "
+                             f"them all", file=mechanism.path, key="coordinates.independent")
         indep = tuple(names.index(c) for c in mechanism.independent) if mechanism.independent else tuple(range(n))
-        return ClosureStructure((), indep, tuple(i for i in range(n) if i not in indep), 0, 0)
+        return ClosureStructure((), indep, (), 0, 0)
     kin = TreeKinematics(mechanism, Float64())
     _, rows, _ = kin.closure(kin.forward([0.0] * n))
     jac = np.array([[float(v) for v in row] for row in rows])
@@ -105,9 +109,6 @@ class Sample:
         r = np.stack([np.stack([np.broadcast_to(v, shape) for v in row], axis=-1) for row in self.projection],
                      axis=-2)
         return np.einsum("...kf,...kp->...fp", r, k_tree)
-
-    def tree_regressor(self):
-        return tree_regressor(self.kin, self.states, self.qdd)
 
     def energies(self):
         return energy_forms(self.kin, self.states)
@@ -196,9 +197,11 @@ class Evaluator:
             raise KinematicsError(f"{where}the loops do not close (residual {residual:.3g} after 60 "
                                   f"Newton iterations): out of the reachable range? independent "
                                   f"{self.describe(q, self.structure.independent)}")
+        # every equation, the redundant ones included, must now hold (to a looser bound: the
+        # redundant ones were not solved for, they follow)
+        slack = -9 if isinstance(self.backend, Float64) else tol + 3
         values, _, _ = self.kin.closure(self.kin.forward(q))
-        if not all(self.backend.small(v, max(tol + 3, -9 if isinstance(self.backend, Float64) else tol + 3))
-                   for v in values):
+        if not all(self.backend.small(v, slack) for v in values):
             worst = max(self.backend.magnitude(v) for v in values)
             raise KinematicsError(f"{where}a redundant closure equation is violated (residual "
                                   f"{worst:.3g}): the geometry is inconsistent; {self.describe(q)}")

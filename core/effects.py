@@ -2,8 +2,9 @@
 
 An effect adds columns to the regressor: the generalized force it needs on its
 coordinate is ``sum(coefficient * column(q, qd, qdd))``. On a dependent coordinate of a
-closed loop the columns are mapped to the independent coordinates by R^T, like K (the
-diagnosis workflow does that; see baseparams.dynamics.Sample.projection).
+closed loop the columns map to the independent coordinates by R^T, like K
+(``baseparams.dynamics.Sample.projection`` is R); identification and diagnosis, which
+add effects to a model, build on this.
 """
 
 from dataclasses import dataclass

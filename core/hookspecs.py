@@ -46,6 +46,7 @@ def baseparams_solvers():
 
 @hookspec
 def baseparams_effects():
-    """Return a list of model effects (friction, spring, offset ...): objects with ``name``,
-    ``description`` and ``columns(coordinate, q, qd, qdd)`` giving extra regressor columns
-    linear in the effect's coefficients."""
+    """Return a list of :class:`baseparams.effects.Effect` (friction, spring, offset ...):
+    ``name``, ``description``, ``coefficients`` and ``columns(q, qd, qdd, **options)``, the
+    extra regressor columns (one per coefficient) of a force linear in its coefficients,
+    evaluated on one joint coordinate's samples."""

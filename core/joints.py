@@ -12,8 +12,9 @@ is ``u_parent . w_child``, for axis names u, w in "x", "y", "z". When all coordi
 zero the two frames coincide, so every equation is zero there.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from . import vec
 from .multipoles import TransferRule
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -27,7 +28,6 @@ class JointType:
     suffixes: tuple = ()           # coordinate name suffixes, one per motion
     closure: tuple = ()            # (("gap", u) | ("dot", u, w), ...)
     uses_axis: bool = True         # whether the frames' axes matter to this joint
-    transfer_rules: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         if len(self.suffixes) != len(self.motions):
@@ -61,7 +61,7 @@ class JointType:
             if kind == "P":
                 pos = [pos[i] + column[i] * value for i in range(3)]
             else:
-                rot = matmul(rot, elementary_rotation(k, *backend.cos_sin(value), one, zero))
+                rot = vec.matmul(rot, elementary_rotation(k, *backend.cos_sin(value), one, zero))
         return rot, pos
 
 
@@ -74,9 +74,4 @@ def elementary_rotation(axis, c, s, one, zero):
     return [[c, -s, zero], [s, c, zero], [zero, zero, one]]
 
 
-def matmul(a, b):
-    return [[a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)]
-            for i in range(3)]
-
-
-__all__ = ["JointType", "TransferRule", "AXES", "elementary_rotation", "matmul"]
+__all__ = ["JointType", "TransferRule", "AXES", "elementary_rotation"]

@@ -117,8 +117,8 @@ class TreeKinematics:
                 u_cols = {c: vec.cross(w, u) for c, w in sa.jw.items()}
                 if eq[0] == "gap":
                     other = vec.sub(vec.add(sb.pos, arm_b), vec.add(sa.pos, arm_a))
-                    o_cols = _point_columns(sb, arm_b, n, z)
-                    for c, col in _point_columns(sa, arm_a, n, z).items():
+                    o_cols = _point_columns(sb, arm_b)
+                    for c, col in _point_columns(sa, arm_a).items():
                         o_cols[c] = vec.sub(o_cols.get(c, [z, z, z]), col)
                 else:
                     other = vec.column(axes_b, AXES[eq[2]])
@@ -159,7 +159,7 @@ def _offset(st, r):
         st.v = vec.add(st.v, wr)
 
 
-def _point_columns(state, arm, n, z):
+def _point_columns(state, arm):
     return {c: vec.add(state.jv[c], vec.cross(w, arm)) for c, w in state.jw.items()}
 
 

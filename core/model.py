@@ -39,7 +39,7 @@ class Joint:
     parent_frame: Frame
     child_frame: Frame
     coordinates: tuple                # coordinate names, one per motion
-    limits: dict = field(default_factory=dict, compare=False)  # name -> (lo, hi) Fractions
+    limits: dict = field(default_factory=dict, compare=False)  # name -> (lo, hi) floats
     loop: bool = False                # requested as loop-closing
 
 
@@ -110,14 +110,10 @@ class Mechanism:
                 return b
         raise KeyError(label)
 
-    def inertial_values(self):
-        """The full parameter vector from the file's inertial data (Fractions), or None."""
-        values = []
-        for b in self.bodies:
-            if b.inertia is None:
-                return None
-            values.extend(b.inertia)
-        return values
+    @property
+    def geometry_subs(self):
+        """{sympy symbol: exact sympy rational}: substitutes the geometry into expressions."""
+        return {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in self.geometry.items()}
 
     # ----- numbers in a backend --------------------------------------------
     def geometry_env(self, backend, symbolic=False):
@@ -134,7 +130,7 @@ class Mechanism:
         if frame.ref is not None:
             x_raw = [backend.evaluate(c, env) for c in frame.ref]
         else:
-            x_raw = _default_ref(frame.axis, self.geometry, backend)
+            x_raw = _default_ref(frame.axis, self.geometry_subs, backend)
         d = x_raw[0] * z[0] + x_raw[1] * z[1] + x_raw[2] * z[2]
         x = _normalize(backend, [x_raw[i] - d * z[i] for i in range(3)])
         y = [z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]]
@@ -153,9 +149,8 @@ def _normalize(backend, v):
     return [v[0] * inv, v[1] * inv, v[2] * inv]
 
 
-def _default_ref(axis, geometry, backend):
+def _default_ref(axis, subs, backend):
     """The body axis least aligned with ``axis`` (first in x, y, z order on ties)."""
-    subs = {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in geometry.items()}
     values = [abs(sympy.sympify(c).subs(subs)) for c in axis]
     k = min(range(3), key=lambda i: (values[i], i))
     e = [backend.rational(Fraction(int(i == k))) for i in range(3)]

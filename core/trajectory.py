@@ -35,6 +35,9 @@ class Trajectory:
             raise InputError("the mechanism file has no [trajectory] section", file=mechanism.path,
                              key="trajectory")
         n = samples or spec.samples
+        if n < 2:
+            raise InputError(f"a trajectory needs at least 2 samples, not {n}", file=mechanism.path,
+                             key="trajectory.samples")
         t0 = spec.t_start if t_start is None else Fraction(t_start)
         t1 = spec.t_end if t_end is None else Fraction(t_end)
         times = tuple(t0 + (t1 - t0) * k / (n - 1) for k in range(n))
@@ -130,7 +133,7 @@ def _observation_matrix(mechanism, backend, trajectory, progress):
 
 
 def _observation_matrix_arb(mechanism, backend, trajectory, progress):
-    start, _ = samples_float64(mechanism, trajectory) if mechanism.loops else (None, None)
+    start, _ = samples_float64(mechanism, trajectory)    # also checks the coordinate limits
     ev = Evaluator(mechanism, backend, certify=True)
     rows = []
     with backend.activate():
@@ -139,7 +142,7 @@ def _observation_matrix_arb(mechanism, backend, trajectory, progress):
             t = arb(fmpq(tk.numerator, tk.denominator))
             z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
             guess = None
-            if start is not None:
+            if mechanism.loops:
                 guess = [backend.rational(Fraction(float(np.atleast_1d(v)[index]))) for v in start.q]
             where = f"at t = {float(tk):.6g} s: "
             sample = ev.sample(z, zd, zdd, guess, where=where)

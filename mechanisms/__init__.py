@@ -1,7 +1,7 @@
 """Built-in mechanism files, registered through the ``baseparams_mechanisms`` hook.
 
-Every ``*.toml`` file in this folder is a mechanism; its registry name is the
-``mechanism.name`` inside, which by convention equals the file name.
+Every ``*.toml`` file in this folder is a mechanism; its registry name is the file name
+without ``.toml``, which equals the ``mechanism.name`` inside (a test checks it).
 """
 
 from pathlib import Path

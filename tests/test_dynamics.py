@@ -195,3 +195,57 @@ def test_exact_rational_state_gives_exact_regressor():
     g = Fraction(981, 100)
     expected = [0, -g * Fraction(3, 5), 0, -g * Fraction(4, 5), 0, 0, 0, Fraction(5, 3), 0, 0]
     assert [Fraction(int(v.p), int(v.q)) for v in k] == expected
+
+
+def test_every_builtin_file_is_registered_under_its_own_name():
+    for name, registered in registry.mechanisms().items():
+        assert resolve(name).name == name == registered.item.path.stem
+
+
+def test_open_chain_with_a_subset_of_independent_coordinates_is_rejected():
+    from baseparams.errors import InputError
+    with pytest.raises(InputError, match="every tree coordinate is independent") as info:
+        parse_mechanism(TWO_R + '\n[coordinates]\nindependent = ["q1"]\n', "two_r.toml")
+    assert info.value.file == "two_r.toml" and info.value.key == "coordinates.independent"
+
+
+def test_a_trajectory_needs_two_samples():
+    from baseparams.errors import InputError
+    with pytest.raises(InputError, match="at least 2 samples"):
+        Trajectory.default(parse_mechanism(PENDULUM), samples=1)
+
+
+def test_coordinate_limits_hold_in_arbitrary_precision_too():
+    text = PENDULUM.replace('coordinates = ["theta"]', 'coordinates = ["theta"]\nlimits = { theta = ["-0.5", "0.5"] }')
+    with pytest.raises(KinematicsError, match="leaves its range"):
+        observation_matrix(parse_mechanism(text), Arb(30))
+
+
+def test_product_of_inertia_sign_against_a_point_mass_by_hand():
+    """A point mass m at (1, 1, 0) spinning about x at rate w, held by a U joint (z, then x) at
+    the origin. Newton: the centripetal force m w^2 (0, -1, 0) at r = (1, 1, 0) needs the torque
+    r x F = (0, 0, -m w^2) about z. Tensor-entry convention: Ixy = -m x y = -m, so the regressor's
+    tau_1 = Ixy w^2 must equal -m w^2."""
+    from baseparams.params import from_mass_properties
+    text = """
+[mechanism]
+name = "spinning_mass"
+gravity = ["0", "0", "0"]
+[[bodies]]
+label = 1
+[[joints]]
+type = "U"
+parent = 0
+child = 1
+coordinates = ["about_z", "about_x"]
+parent_frame = { point = ["0", "0", "0"], axis = ["0", "0", "1"], ref = ["1", "0", "0"] }
+child_frame = { point = ["0", "0", "0"], axis = ["0", "0", "1"], ref = ["1", "0", "0"] }
+"""
+    mech = parse_mechanism(text)
+    m, w = 2.0, 3.0
+    phi = [float(v) for v in from_mass_properties(Fraction(2), [Fraction(1), Fraction(1), Fraction(0)], [0] * 6)]
+    assert phi[mech.parameters.index("Ixy1")] == -m
+    k = Evaluator(mech, Float64()).sample([0.0, 0.0], [0.0, w], [0.0, 0.0]).regressor()
+    tau_z = sum(a * b for a, b in zip(k[0], phi))
+    assert tau_z == pytest.approx(-m * w ** 2)
+    assert k[0][mech.parameters.index("Ixy1")] == pytest.approx(w ** 2)
