@@ -51,7 +51,7 @@ def closure_structure(mechanism):
     _, rows, _ = kin.closure(kin.forward([0.0] * n))
     jac = np.array([[float(v) for v in row] for row in rows])
     tol = 1e-9 * max(1.0, np.abs(jac).max())
-    chosen = _independent_rows(jac, tol)
+    chosen = independent_rows(jac, tol)
     rank = len(chosen)
     if mechanism.independent:
         indep = [names.index(c) for c in mechanism.independent]
@@ -64,12 +64,12 @@ def closure_structure(mechanism):
                 f"{n - rank} independent coordinates are needed and the others must be solvable",
                 file=mechanism.path, key="coordinates.independent")
     else:
-        dep = _independent_rows(jac[chosen].T, tol)
+        dep = independent_rows(jac[chosen].T, tol)
         indep = [i for i in range(n) if i not in dep]
     return ClosureStructure(tuple(chosen), tuple(indep), tuple(dep), rank, len(rows) - rank)
 
 
-def _independent_rows(matrix, tol):
+def independent_rows(matrix, tol):
     """Greedy Gram-Schmidt: indices of rows independent of the earlier ones."""
     chosen, basis = [], []
     for i, row in enumerate(matrix):
@@ -197,9 +197,9 @@ class Evaluator:
             raise KinematicsError(f"{where}the loops do not close (residual {residual:.3g} after 60 "
                                   f"Newton iterations): out of the reachable range? independent "
                                   f"{self.describe(q, self.structure.independent)}")
-        # every equation, the redundant ones included, must now hold (to a looser bound: the
-        # redundant ones were not solved for, they follow)
-        slack = -9 if isinstance(self.backend, Float64) else tol + 3
+        # every equation, the redundant ones included, must now hold, to 1000 times the Newton
+        # tolerance: the redundant ones were not solved for, they follow
+        slack = tol + 3
         values, _, _ = self.kin.closure(self.kin.forward(q))
         if not all(self.backend.small(v, slack) for v in values):
             worst = max(self.backend.magnitude(v) for v in values)

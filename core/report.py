@@ -9,7 +9,9 @@ One report, three renderings (``text``, ``markdown``, ``latex``):
 3. the derivation step by step (the appendix): for each transfer, the multipole's amount
    (chosen so that the eliminated parameter becomes zero) and the parameters it changes,
    as linear forms in the original parameters;
-4. the base parameters, and how the rank was checked.
+4. the base parameters, and how the rank was checked: what ball arithmetic proves
+   (rank >= r) and what is numerical evidence (every generator n gives balls W n that
+   contain 0 on the sampled states, hence rank <= the count, not proven).
 
 Condition numbers are the paper's: section 3.2 (one body) and section 3.3 (a joint);
 0 marks a transfer found by sampling the kinematics that no joint-type rule states.
@@ -148,7 +150,7 @@ class _Writer:
         nt = len(der.transfers)
         self.para(f"{n} inertial parameters; {nc} without effect on the dynamics, {nt} eliminated by "
                   f"multipole transfers: {n} - {nc} - {nt} = {res.rank} base parameters"
-                  + (" (certified)." if res.certified else " (an upper bound: not certified)."))
+                  + f" ({status(res)}).")
         self.no_effect()
         self.transfers()
         self.steps()
@@ -274,17 +276,60 @@ class _Writer:
     def check(self):
         self.heading("5. Rank check")
         res = self.result
-        cert = res.diagnostics.get("certificate")
-        if cert:
-            text = (f"The generators are null vectors of W (relative residual {cert['generator_residual']} "
-                    f"at {cert['digits']} digits, {cert['samples']} samples), so rank <= {res.rank}; "
-                    f"ball arithmetic proves rank >= {cert['rank_lower_bound']}.")
-            text += " The rank is certified." if res.certified else " The symbolic rank is only an upper bound."
-        else:
-            text = "No numeric check was made: the symbolic rank is an upper bound."
-        self.para(_tex_escape(text) if self.fmt == "latex" else text)
+        self.para(_tex_escape(check_text(res)) if self.fmt == "latex" else check_text(res))
         for w in res.warnings:
             self.para(("Warning: " + _tex_escape(w)) if self.fmt == "latex" else f"Warning: {w}")
+
+
+def status(result):
+    """How the count stands, in a few words (the report's first paragraph)."""
+    cert = result.diagnostics.get("certificate")
+    if result.certified:
+        return "certified"
+    if result.rank_is_upper_bound:
+        return "an upper bound: not certified"
+    if not cert:
+        return "not checked"
+    if cert.get("generators_failed"):
+        return "not certified: a generator failed its null-vector check"
+    if cert.get("generators_untested"):
+        return "not certified: some generators were not tested"
+    return "not certified"
+
+
+def check_text(result):
+    """What the rank check proved, and what it only gives evidence for (section 5)."""
+    cert = result.diagnostics.get("certificate")
+    n = len(result.parameters)
+    if not cert:
+        return ("No numeric check was made. The count rests on the generators alone (joint-type rules, "
+                "and body conditions accepted on sampled numerical evidence); nothing bounds the rank "
+                "from below.")
+    text = (f"W was computed in ball arithmetic at {cert['digits']} digits on {cert['samples']} states "
+            f"({cert['rows']} rows). Proven: rank >= {cert['rank_lower_bound']}")
+    text += (" (the kept columns are independent). " if cert["kept_columns_proven"] else
+             " (the shared ball analysis's rank; the kept columns themselves are not proven independent). ")
+    total, passed = cert["generators"], cert["generators_passed"]
+    if total and passed == total:
+        text += (f"Each of the {total} generators n gives balls W n that all contain 0 (|W n| <= "
+                 f"{cert['generator_residual']} max|W| max|n|): numerical evidence, not a proof, that "
+                 f"rank <= {n} - {total} = {n - total} (a proof would need the generators verified "
+                 f"symbolically).")
+    elif total:
+        text += f"{passed} of the {total} generators give balls W n that all contain 0"
+        if cert["generators_failed"]:
+            text += "; failed: " + "; ".join(f"{g['source']} (relative residual {g['residual']})"
+                                              for g in cert["generators_failed"])
+        if cert["generators_untested"]:
+            text += "; not tested: " + "; ".join(g["source"] for g in cert["generators_untested"])
+        text += "."
+    if result.certified:
+        text += " The proven lower bound meets the count: the rank is certified."
+    elif result.rank_is_upper_bound:
+        text += " The count is only an upper bound: the rules and conditions miss a dependency."
+    else:
+        text += " The rank is not certified."
+    return text
 
 
 def _acceptor_amount(step):

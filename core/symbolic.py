@@ -15,9 +15,13 @@ and appendix). Here it runs on any mechanism:
 3. *Base parameters*: applying the transfers in that order leaves every kept parameter
    as ``phi_k + sum beta_ke phi_e``; the coefficients come out as simplified expressions in
    the geometry symbols and as exact rationals for the mechanism's geometry.
-4. *Completeness is checked, not assumed*: the generators prove rank <= 70 - (pivots);
-   a ball-arithmetic computation of W proves rank >= the number of kept columns (their Gram
-   block is shown nonsingular). Only when both agree is the result ``certified``.
+4. *The count is checked, not assumed* (:func:`certify`), on W computed in ball
+   arithmetic at D digits on N states: ``baseparams.certify.analyse`` proves rank >= the
+   number of kept columns (they are shown independent); every generator n, evaluated in
+   balls at the geometry, gives W n whose entries all contain 0. The latter is evidence,
+   not proof, that rank <= 70 - (pivots) (a proof would need the generators verified
+   symbolically). Only when the bound and the count meet, with every generator tested, is
+   the result ``certified``.
 
 Default order of generators and pivots (reproduces the paper's choice on the SLA):
 
@@ -47,11 +51,12 @@ import sympy
 from sympy import QQ
 
 from .backends import Arb
-from .body_conditions import analyse_bodies, sampled_joint_transfers
+from .body_conditions import analyse_bodies
 from .errors import InputError
 from .expressions import exact_text
 from .params import PARAMETER_KINDS, split_name
 from .result import BaseParameterResult
+from .sampled_transfers import sampled_joint_transfers
 from .transfers import transfer_generators
 
 DIAGONAL = ("Ixx", "Iyy", "Izz")
@@ -78,8 +83,7 @@ class ExactField:
         self.symbols = symbols
         self.K = QQ.frac_field(*symbols)
         ring = self.K.field.ring
-        values = {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator)
-                  for k, v in mechanism.geometry.items()}
+        values = mechanism.geometry_subs
         self.values = values
         self.exact = True
         pairs = []
@@ -352,64 +356,95 @@ def describe(gen):
 
 
 # ----- certification ----------------------------------------------------------------------
-def certify(mechanism, derivation, digits=40, trajectory=None):
-    """Ball-arithmetic check of the symbolic rank: (lower bound, generator residual, info).
+@dataclass
+class Certificate:
+    """What :func:`certify` established on W (``rows`` x parameters, ``samples`` states,
+    ball arithmetic at ``digits``).
 
-    The kept columns of W (computed at ``digits``) are proven independent when their Gram
-    block, with columns scaled by exact powers of two, has a verified inverse; then
-    rank(W) >= len(kept). Every accepted generator is also checked as a null vector.
+    Proven: ``rank(W) >= lower`` (``kept_proven``: the solver's kept columns themselves are
+    proven independent; otherwise ``lower`` is the shared ball analysis's own rank).
+    Evidence: each tested generator n gave balls ``W n`` that all contain 0 (``failed``:
+    those that did not); ``residual`` is the largest ``max|W n| / (max|W| max|n|)``
+    (upper bounds) over the tested generators, None when none was tested.
     """
-    import math
+    digits: int
+    samples: int
+    rows: int
+    lower: int
+    kept_proven: bool
+    generators: int = 0
+    tested: int = 0
+    residual: float | None = None
+    failed: list = field(default_factory=list)      # (description, relative residual)
+    untested: list = field(default_factory=list)    # (description, reason)
 
+    @property
+    def passed(self):
+        return self.tested - len(self.failed)
+
+    def info(self):
+        """The ``diagnostics.certificate`` entry of the result (JSON-ready)."""
+        return {"digits": self.digits, "samples": self.samples, "rows": self.rows,
+                "rank_lower_bound": self.lower, "kept_columns_proven": self.kept_proven,
+                "generators": self.generators, "generators_tested": self.tested,
+                "generators_passed": self.passed,
+                "generator_residual": None if self.residual is None else f"{self.residual:.2e}",
+                "generators_failed": [{"source": s, "residual": f"{r:.2e}"} for s, r in self.failed],
+                "generators_untested": [{"source": s, "reason": r} for s, r in self.untested]}
+
+
+def certify(mechanism, derivation, digits=40, trajectory=None):
+    """Check the symbolic count on W computed in ball arithmetic at ``digits`` (a
+    :class:`Certificate`).
+
+    - Lower bound (a proof): ``baseparams.certify.analyse`` with the kept columns imposed
+      proves them independent, so rank(W) >= their number; if it cannot, its own
+      analysis gives the rank it can prove.
+    - Generators (evidence): every accepted generator, reduced as in the elimination, is
+      evaluated at the geometry in balls (exact rationals, or balls around square roots
+      of non-squares) and passes when every entry of W n contains 0 and
+      |W n| <= 10^-(digits/2) max|W| max|n|. W's balls enclose the exact W at the states,
+      so a true null vector always passes; passing on N states is not a proof that n is one.
+    """
     from flint import arb, arb_mat, fmpq
 
+    from .certify import analyse
     from .trajectory import observation_matrix
 
     backend = Arb(digits)
     W, info = observation_matrix(mechanism, backend, trajectory)
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
+    index = {p: i for i, p in enumerate(params)}
     with backend.activate():
-        rows = W.nrows()
-        norms = []
-        for j in range(W.ncols()):
-            total = sum(float(W[i, j].mid()) ** 2 for i in range(rows))
-            norms.append(0 if total == 0 else round(math.log2(math.sqrt(total))))
-        two = arb(2)
-        Wk = arb_mat(rows, len(kept), [W[i, j] * two ** (-norms[j]) for i in range(rows) for j in kept])
-        G = Wk.transpose() * Wk
         try:
-            G.inv()
-            lower = len(kept)
-        except ZeroDivisionError:
-            lower = _rank_lower_bound(W, digits)
-        worst = 0.0
-        wmax = max((abs(float(W[i, j].mid())) for i in range(rows) for j in range(W.ncols())), default=1.0)
+            lower, kept_proven = analyse(W, digits, kept=kept, approximate_spectrum=False).rank, True
+        except ValueError:          # not proven independent: what can be proven instead
+            lower, kept_proven = analyse(W, digits, approximate_spectrum=False).rank, False
+        cert = Certificate(digits, info.get("samples"), W.nrows(), lower, kept_proven,
+                           generators=len(derivation.steps))
+        rows = W.nrows()
+        wmax = max((abs(float(W[i, j].mid())) for i in range(rows) for j in range(W.ncols())),
+                   default=0.0) or 1.0
+        tolerance = 10.0 ** (-(digits // 2))
         for step in derivation.steps:
-            n = [Fraction(0)] * len(params)
-            for p, v in step.vector.items():
-                n[params.index(p)] = derivation.field.value(v)
-            if any(not isinstance(x, Fraction) for x in n):
+            n = arb_mat(len(params), 1)
+            try:
+                for p, v in step.vector.items():
+                    x = derivation.field.value(v)
+                    n[index[p], 0] = arb(fmpq(x.numerator, x.denominator)) if isinstance(x, Fraction) \
+                        else backend.evaluate(x)
+            except ValueError as exc:       # a radical the backend cannot evaluate
+                cert.untested.append((describe(step.generator), str(exc)))
                 continue
-            vec = arb_mat(len(params), 1, [arb(fmpq(x.numerator, x.denominator)) for x in n])
-            res = W * vec
-            nn = math.sqrt(sum(float(x) ** 2 for x in n)) or 1.0
-            r = max(float(abs(res[i, 0]).upper()) for i in range(rows)) / (wmax * nn)
-            worst = max(worst, r)
-    return lower, worst, {"digits": digits, "samples": info.get("samples"), "rows": W.nrows()}
-
-
-def _rank_lower_bound(W, digits):
-    """Fallback when the chosen kept columns are not proven independent: the shared ball
-    analysis (``baseparams.certify``) if present, else 0 (no claim)."""
-    try:
-        from .certify import analyse
-    except ImportError:
-        return 0
-    try:
-        return analyse(W, digits, approximate_spectrum=False).rank
-    except Exception:       # noqa: BLE001 - a lower bound of 0 claims nothing
-        return 0
+            res = W * n
+            nmax = max(abs(float(n[i, 0].mid())) for i in range(len(params))) or 1.0
+            r = max((float(abs(res[i, 0]).upper()) for i in range(rows)), default=0.0) / (wmax * nmax)
+            cert.tested += 1
+            cert.residual = max(cert.residual or 0.0, r)
+            if r > tolerance or not all(res[i, 0].contains(0) for i in range(rows)):
+                cert.failed.append((describe(step.generator), r))
+    return cert
 
 
 # ----- result -------------------------------------------------------------------------------
@@ -441,27 +476,23 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
                    "transfers": [_step_json(s, f) for s in der.transfers],
                    "redundant": [{"source": describe(g), "reason": r} for g, r in der.redundant],
                    "root": der.root}
-    certified = False
+    certified = upper_bound = False
     if certify_rank:
-        lower, residual, info = certify(mechanism, der, digits=digits, trajectory=trajectory)
-        info.update({"rank_lower_bound": lower, "generator_residual": f"{residual:.2e}"})
-        diagnostics["certificate"] = info
-        if residual > 10.0 ** (-(digits // 2)):
-            warnings.append(f"a generator is not a null vector of W (relative residual {residual:.2e})")
-        elif lower == rank:
-            certified = True
-        else:
-            warnings.append(f"the numeric rank is only proven >= {lower}; the symbolic count {rank} "
-                            f"is an upper bound (a dependency the rules do not know?)")
-    if not certified:
-        warnings = warnings or ["rank not certified (no numeric check requested)"]
+        cert = certify(mechanism, der, digits=digits, trajectory=trajectory)
+        diagnostics["certificate"] = cert.info()
+        warnings += _certificate_warnings(cert, rank)
+        upper_bound = not cert.failed and cert.lower < rank
+        certified = not cert.failed and not cert.untested and cert.lower == rank
+    else:
+        warnings.append("rank not checked (certify off): the count rests on the generators alone, "
+                        "body conditions among them accepted on sampled numerical evidence")
     summary = [f"{len(der.conditions)} parameters without effect (body conditions), "
                f"{len(der.transfers)} eliminated by multipole transfers, "
                f"{len(der.redundant)} redundant generators"]
-    cert = diagnostics.get("certificate")
-    if cert:
-        summary.append(f"ball arithmetic at {cert['digits']} digits proves rank >= {cert['rank_lower_bound']}"
-                       f"; generators null to {cert['generator_residual']}")
+    if certify_rank:
+        summary.append(f"ball arithmetic at {cert.digits} digits on {cert.samples} states proves "
+                       f"rank >= {cert.lower}; {cert.passed} of {cert.generators} generators n give "
+                       f"balls W n that contain 0 (evidence for rank <= {len(params) - cert.passed})")
     summary.append("derivation: `baseparams report MECH` (text, markdown or latex)")
     diagnostics["summary"] = summary
     if any(not _is_fraction_text(t) for row in values for t in row.values()):
@@ -471,9 +502,33 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
         eliminated=der.eliminated, certified=certified,
         geometry={k: exact_text(v) for k, v in mechanism.geometry.items()},
         warnings=warnings, elapsed_s=time.perf_counter() - start, expression_values=values,
-        rank_is_upper_bound=not certified, diagnostics=diagnostics)
+        rank_is_upper_bound=upper_bound, diagnostics=diagnostics)
     result.derivation = der
     return result
+
+
+def _certificate_warnings(cert, rank):
+    """Why a checked result is not certified (nothing when it is)."""
+    out = []
+    if cert.failed:
+        names = "; ".join(f"{s} (relative residual {r:.2e})" for s, r in cert.failed)
+        out.append(f"{len(cert.failed)} generator(s) failed the null-vector check at {cert.digits} digits "
+                   f"(a ball of W n excludes 0, or is too wide to tell): {names}. The symbolic count "
+                   f"{rank} may be too low: not certified")
+    if cert.untested:
+        names = "; ".join(f"{s} ({why})" for s, why in cert.untested)
+        out.append(f"{len(cert.untested)} generator(s) could not be evaluated in ball arithmetic and "
+                   f"were not tested: {names}. Not certified")
+    if not cert.failed and cert.lower < rank:
+        out.append(f"the rank is only proven >= {cert.lower}; the symbolic count {rank} is an upper bound "
+                   f"(a dependency the rules and conditions do not know?)")
+    if not cert.failed and cert.lower > rank:
+        out.append(f"ball arithmetic proves rank >= {cert.lower}, above the symbolic count {rank}: some "
+                   f"generator is not a null vector although it passed at {cert.digits} digits. "
+                   f"Not certified")
+    if not cert.kept_proven and cert.lower == rank and not cert.failed:
+        out.append("the kept columns are not proven independent (another set of that size is)")
+    return out
 
 
 def _is_fraction_text(text):

@@ -137,12 +137,14 @@ def joint_frames(mechanism, joint):
     return {joint.parent: parent, joint.child: child}
 
 
-def _map_point(frame, x):
+def map_point(frame, x):
+    """Joint-frame point x in body axes: p + R x (exact)."""
     r, p = frame
     return [sympy.sympify(p[i]) + sum(r[i][k] * x[k] for k in range(3)) for i in range(3)]
 
 
-def _map_direction(frame, u):
+def map_direction(frame, u):
+    """Joint-frame direction u in body axes: R u (exact)."""
     r, _ = frame
     return [sum(r[i][k] * u[k] for k in range(3)) for i in range(3)]
 
@@ -164,18 +166,18 @@ def rule_generators(mechanism, joint, rule):
         variants = [(k, lambda fr, k=k: quadrupole_params(rotate_tensor(fr[0], basis_tensor(k))))
                     for k in range(6)]
     elif rule.multipole == "quadrupole":
-        variants = [(None, lambda fr: quadrupole_params(axisymmetric(_map_direction(fr, u))))]
+        variants = [(None, lambda fr: quadrupole_params(axisymmetric(map_direction(fr, u))))]
     elif rule.multipole == "dipole":
-        variants = [(None, lambda fr: dipole_params(_map_point(fr, x), _map_direction(fr, u)))]
+        variants = [(None, lambda fr: dipole_params(map_point(fr, x), map_direction(fr, u)))]
     else:
-        variants = [(None, lambda fr: monopole_params(_map_point(fr, x)))]
+        variants = [(None, lambda fr: monopole_params(map_point(fr, x)))]
     for k, make in variants:
         vector = {}
         sides = {}
         for body, sign in ((joint.parent, 1), (joint.child, -1)):
             fr = frames[body]
-            sides[body] = {"point": _map_point(fr, x),
-                           "direction": None if u is None else _map_direction(fr, u)}
+            sides[body] = {"point": map_point(fr, x),
+                           "direction": None if u is None else map_direction(fr, u)}
             if body == 0:
                 continue
             vector = add_vectors(vector, as_vector(body, make(fr), sign))
@@ -204,8 +206,8 @@ def numeric_vector(generator, mechanism, values=None):
     sympy numbers when a square root of a non-square remains)."""
     from fractions import Fraction
 
-    subs = {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator)
-            for k, v in (values or mechanism.geometry).items()}
+    subs = mechanism.geometry_subs if values is None else \
+        {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in values.items()}
     out = []
     for name in mechanism.parameters:
         v = generator.vector.get(name)

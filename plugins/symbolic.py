@@ -2,8 +2,9 @@
 transfers, automated (:mod:`baseparams.symbolic`), registered like any third party's solver.
 
 The result's coefficients are sympy-parsable expressions in the geometry symbols, with
-their exact values under ``expression_values``; ``certified`` is true only when a
-ball-arithmetic rank of W confirms the symbolic count. ``result.derivation`` holds the
+their exact values under ``expression_values``; ``certified`` is true only when ball
+arithmetic proves rank(W) >= the symbolic count and every generator passes its null-vector
+check on that W (evidence for rank <= the count). ``result.derivation`` holds the
 derivation that :func:`baseparams.report.render` prints (text, Markdown, LaTeX).
 """
 
@@ -23,7 +24,7 @@ class SymbolicSolver:
 
     name = "symbolic"
     description = ("Ros et al.'s multipole transfers, automated: exact expressions in the geometry "
-                   "symbols, rank checked against a ball-arithmetic rank of W")
+                   "symbols, rank checked on W in ball arithmetic")
 
     def solve(self, mechanism, keep=None, eliminate_first=None, certify=True, digits=None,
               samples=None, seed=1, **options):

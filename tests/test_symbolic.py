@@ -8,6 +8,8 @@
   W annihilates the exact null space of the result's coefficient matrix (40 digits) and
   the shared ball analysis (baseparams.certify) proves the same rank.
 - Options, the upper-bound path (rules removed), JSON consistency, reports and the CLI.
+- The rank check: generators with square roots (a non-unit axis) are tested too, and a
+  generator that is not a null vector fails the check without being called an upper bound.
 """
 
 from fractions import Fraction
@@ -17,7 +19,7 @@ import sympy
 from click.testing import CliRunner
 from flint import arb_mat, fmpq, fmpq_mat
 
-from baseparams import registry
+from baseparams import certify, registry
 from baseparams.backends import Arb
 from baseparams.cli import main
 from baseparams.loader import resolve
@@ -164,7 +166,6 @@ def test_symbolic_matches_the_ball_arithmetic_rank(name):
             nmax = max(abs(float(x)) for x in null[j])
             worst = max(float(abs(R[i, j]).upper()) for i in range(R.nrows()))
             assert worst < 1e-30 * wmax * nmax, (name, j)     # row(W) within our row space
-        certify = pytest.importorskip("baseparams.certify")
         proven = certify.analyse(W, digits, approximate_spectrum=False).rank
     assert proven == r.rank, (name, proven, r.rank)              # and of the same dimension
 
@@ -195,9 +196,77 @@ def test_missing_rules_make_the_rank_an_upper_bound(monkeypatch):
                         lambda name: None if name == "S" else original(name))
     r = solve(resolve("sla_suspension"), trajectory=Trajectory.default(resolve("sla_suspension"), samples=40))
     assert r.rank > 41 and not r.certified and r.rank_is_upper_bound
-    assert r.diagnostics["certificate"]["rank_lower_bound"] == 41
+    cert = r.diagnostics["certificate"]
+    assert cert["rank_lower_bound"] == 41 and not cert["generators_failed"]
+    assert cert["generators_passed"] == cert["generators"] == 70 - r.rank
     assert any("no plugin gives transfer rules" in w for w in r.warnings)
     assert any("upper bound" in w for w in r.warnings)
+    assert f"= {r.rank} base parameters (an upper bound: not certified)." in render(r)
+
+
+# ----- the rank check: irrational generators, and a generator that is wrong ----------------------
+def _tilted_pendulum():
+    """The pendulum with its axis along (0, 1, 1) in the rod's axes: the dipole along the
+    axis is (0, 1, 1)/sqrt(2), so generators carry square roots of non-squares."""
+    from pathlib import Path
+
+    from baseparams.loader import parse_mechanism
+    text = Path(registry.mechanisms()["pendulum"].item.path).read_text()
+    old = 'child_frame = { point = ["0", "0", "0"], axis = ["0", "0", "1"], ref = ["1", "0", "0"] }'
+    assert text.count(old) == 1
+    return parse_mechanism(text.replace(old, old.replace('axis = ["0", "0", "1"]', 'axis = ["0", "1", "1"]')),
+                           "tilted_pendulum.toml")
+
+
+def test_irrational_generators_are_tested():
+    mech = _tilted_pendulum()
+    r = solve(mech)
+    der = r.derivation
+    irrational = [s for s in der.steps
+                  if any(not sympy.sympify(der.field.value(v)).is_Rational for v in s.vector.values())]
+    assert [s.generator.multipole for s in irrational] == ["dipole"]     # (my1 + mz1)/sqrt(2)
+    cert = r.diagnostics["certificate"]
+    assert cert["generators"] == cert["generators_tested"] == cert["generators_passed"] == 7
+    assert not cert["generators_untested"] and float(cert["generator_residual"]) < 1e-30
+    # a rotation about one fixed axis: the pendulum's 3 base parameters, proven
+    assert r.rank == 3 and cert["rank_lower_bound"] == 3 and r.certified and not r.rank_is_upper_bound
+
+
+def _corrupt(monkeypatch, pivot, change):
+    """Make ``solve`` check a wrong generator: ``change(vector, field)`` edits the reduced
+    vector of the step eliminating ``pivot``, after the elimination."""
+    import baseparams.symbolic as symbolic
+    original = symbolic.eliminate
+
+    def eliminate(*args, **kwargs):
+        der = original(*args, **kwargs)
+        step = next(s for s in der.steps if s.pivot == pivot)
+        change(step.vector, der.field)
+        return der
+
+    monkeypatch.setattr(symbolic, "eliminate", eliminate)
+
+
+@pytest.mark.parametrize("tilted", [False, True])
+def test_a_generator_that_is_not_null_fails_the_check(monkeypatch, tilted):
+    """The count is then possibly too LOW: not certified, and not called an upper bound."""
+    if tilted:      # the dipole along the axis turned to (0, 1, -1)/sqrt(2): a first moment off the axis
+        mech, pivot = _tilted_pendulum(), "my1"
+        change = lambda v, f: v.__setitem__("mz1", -v["mz1"])  # noqa: E731
+    else:           # the monopole at the pivot plus a first moment along the rod
+        mech, pivot = resolve("pendulum"), "m1"
+        change = lambda v, f: v.__setitem__("mx1", f.convert(1))  # noqa: E731
+    _corrupt(monkeypatch, pivot, change)
+    r = solve(mech)
+    cert = r.diagnostics["certificate"]
+    assert [g["source"].split(" condition")[0] for g in cert["generators_failed"]] == ["body 1"]
+    assert float(cert["generators_failed"][0]["residual"]) > 1e-3
+    assert cert["generators_tested"] == 7 and cert["generators_passed"] == 6
+    assert not r.certified and not r.rank_is_upper_bound and "rank_is_upper_bound" not in r.to_json()
+    assert any("failed the null-vector check" in w for w in r.warnings)
+    text = render(r)
+    assert "(not certified: a generator failed its null-vector check)." in text
+    assert "6 of the 7 generators" in text and "upper bound" not in text
 
 
 def test_scara_quill_dipoles_are_found_by_sampling():
@@ -248,8 +317,6 @@ def test_cli_report_verb(tmp_path):
 def test_cli_solve_json_has_the_papers_row_space():
     """`baseparams solve sla_suspension --solver symbolic --format json`: 41 expressions whose
     exact values span the paper's rows."""
-    if "solve" not in main.commands:
-        pytest.skip("the solve verb is not there yet")
     import json
     mech = resolve("sla_suspension")
     out = CliRunner().invoke(main, ["solve", "sla_suspension", "--solver", "symbolic", "--samples", "60",

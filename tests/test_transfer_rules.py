@@ -190,7 +190,7 @@ def test_condition_3_dipole_along_a_prismatic_axis_is_not_null():
         for k, v in enumerate(values):
             n_sym[mech.parameters[10 * i + k]] = sign * v
     import sympy
-    subs = {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in mech.geometry.items()}
+    subs = mech.geometry_subs
     n = []
     for p in mech.parameters:
         v = sympy.simplify(sympy.sympify(n_sym.get(p, 0)).subs(subs))
