@@ -93,8 +93,9 @@ def column_exponents(W):
     Zero columns are eliminated with zero coefficients; if one is in fact tiny and
     nonzero, a higher precision shows it (and the ``vp`` solver's ranks then differ).
     """
+    from .gautier import power_of_two_exponents
     rows, cols = W.nrows(), W.ncols()
-    out, zero = [], []
+    log2_norms, zero = [], []
     for j in range(cols):
         total = arb(0)
         all_contain_zero = True
@@ -105,10 +106,10 @@ def column_exponents(W):
             total += x.mid() * x.mid()
         if all_contain_zero:
             zero.append(j)
-            out.append(0)
+            log2_norms.append(None)
         else:
-            out.append(round(float(log10(total)) / 2 / math.log10(2)))
-    return out, zero
+            log2_norms.append(log10(total) / 2 / math.log10(2))
+    return power_of_two_exponents(log2_norms), zero
 
 
 def approximate_pivots(G, threshold, skip=()):
@@ -350,6 +351,41 @@ def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True)
     svals = approximate_singular_values(G) if approximate_spectrum else []
     return BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
                         exponents, zero, tail, sigma_lower, svals, B, notes)
+
+
+def excitation_check(Wc, a):
+    """An independent batch of rows ``Wc`` (W at other states) against the analysis ``a``
+    of W: ``(bound, proven_nonzero, ridge_decades)``.
+
+    - ``bound``: a rigorous upper bound of ``||Wcs_E - Wcs_K B||_F`` (B = ``a.refined``,
+      exact; Wcs scaled with W's exponents). As for the tail bound, Weyl gives
+      ``s_(r+1)([Ws; Wcs]) <= sqrt(tail_bound^2 + bound^2)``, and adding rows never lowers
+      ``s_r``: ``ridge_decades`` is the ridge proven on W and the batch together.
+    - ``proven_nonzero``: entries of ``Wcs_E - Wcs_K beta_s`` whose ball excludes 0. Each
+      proves ``rank([W; Wc]) > r``: if rank W = r, beta_s encloses W's exact null space and
+      the batch leaves it; if rank W > r, r was already only a lower bound.
+
+    A trajectory that does not excite the mechanism gives W a clean ridge at too low a
+    rank (all the missing directions are exact zeros of W); only other states show it.
+    """
+    if not a.eliminated:
+        return arb(0), 0, math.inf
+    We = _columns(Wc, a.eliminated, a.exponents)
+    if a.kept:
+        Wk = _columns(Wc, a.kept, a.exponents)
+        bound = _frobenius_upper(We - Wk * a.refined)
+        E = We - Wk * a.beta_s
+    else:
+        bound, E = _frobenius_upper(We), We
+    nonzero = sum(1 for i in range(E.nrows()) for j in range(E.ncols()) if not E[i, j].contains(0))
+    combined = arb((a.tail_bound ** 2 + bound ** 2).sqrt().upper())
+    if a.rank == 0 or not a.sigma_r_lower > 0:
+        decades = math.inf if combined == 0 else -math.inf
+    elif combined == 0:
+        decades = math.inf
+    else:
+        decades = log10(a.sigma_r_lower) - log10(combined)
+    return bound, nonzero, decades
 
 
 def tail_singular_values(W, a):

@@ -102,12 +102,18 @@ def rref_base(W):
     """
     R, rank = W.rref()
     n = W.ncols()
-    kept = []
-    row = 0
-    for j in range(n):
-        if row < rank and R[row, j] != 0:
-            kept.append(j)
-            row += 1
+    kept = rref_pivots(R, rank)
     eliminated = [j for j in range(n) if j not in set(kept)]
     beta = [[Fraction(int(R[i, j].p), int(R[i, j].q)) for j in eliminated] for i in range(rank)]
     return rank, kept, eliminated, beta
+
+
+def rref_pivots(R, rank):
+    """Pivot columns of a reduced row echelon form ``R`` of rank ``rank``: the leading
+    nonzero of each of its first ``rank`` rows."""
+    pivots, row = [], 0
+    for j in range(R.ncols()):
+        if row < rank and R[row, j] != 0:
+            pivots.append(j)
+            row += 1
+    return pivots

@@ -29,6 +29,7 @@ Choices made here, all reported in the result's diagnostics:
   makes ``V22`` as well conditioned as a greedy choice can.
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +44,7 @@ class DPResult:
     kept: list                   # column indices of phi_1 (base parameters' leading terms)
     eliminated: list             # column indices of phi_2
     beta: np.ndarray             # rank x len(eliminated), unscaled: phi_b = phi_1 + beta phi_2
+    beta_s: np.ndarray           # the same in the scaled units of Ws (where its error is estimated)
     singular_values: np.ndarray  # of the scaled W, largest first
     tolerance: float
     scale: np.ndarray            # column scale factors (powers of two; 1 for zero columns)
@@ -55,12 +57,11 @@ class DPResult:
     warnings: list = field(default_factory=list)
 
 
-def power_of_two_scale(norms):
-    """2^round(log2(norm)) per column; 1 for zero columns."""
-    out = np.ones_like(norms)
-    nz = norms > 0
-    out[nz] = np.exp2(np.round(np.log2(norms[nz])))
-    return out
+def power_of_two_exponents(log2_norms):
+    """The column scaling rule of both dp and vp: column j is divided by 2^e_j with
+    ``e_j = round(log2 ||W_j||)`` (0 for a zero column, given as -inf or None). Dividing
+    by a power of two is exact in binary, so the scaling itself adds no rounding."""
+    return [0 if x is None or not math.isfinite(x) else int(round(x)) for x in log2_norms]
 
 
 def pivoted_qr_columns(a, count):
@@ -101,7 +102,8 @@ def dp_gautier(W, scale=True, rank=None):
     W = W.copy()
     W[:, zero_columns] = 0.0
     norms[zero_columns] = 0.0
-    s_col = power_of_two_scale(norms) if scale else np.ones(n)
+    with np.errstate(divide="ignore"):
+        s_col = np.exp2(power_of_two_exponents(np.log2(norms))) if scale else np.ones(n)
     Ws = W / s_col
 
     _, s, vt = np.linalg.svd(Ws, full_matrices=True)
@@ -152,5 +154,5 @@ def dp_gautier(W, scale=True, rank=None):
     if err > 1e-6:
         warnings.append(f"beta is uncertain: estimated relative error {err:.2g} "
                         f"(s_{r + 1} = {noise:.3g} / s_{r} = {s_full[r - 1]:.3g} x cond(V22) = {cond22:.3g})")
-    return DPResult(r, kept, eliminated, beta, s_full, tol, s_col, zero_columns, ratios, largest,
+    return DPResult(r, kept, eliminated, beta, beta_s, s_full, tol, s_col, zero_columns, ratios, largest,
                     clear, err, cond22, warnings)

@@ -8,7 +8,7 @@ solvers), an exact rational ("625/251"), or a sympy expression in the geometry s
 
 Two results describe the same base parameters exactly when their coefficient matrices
 (rank x parameters) have the same row space; :func:`same_row_space` checks that exactly
-for rational coefficients and to a tolerance for decimals.
+for rational coefficients and by numerical ranks, to a tolerance, for decimals.
 """
 
 from dataclasses import dataclass, field
@@ -101,7 +101,8 @@ def parse_coefficient(text, geometry=None):
     expr = sympy.nsimplify(expr) if not expr.is_Rational else expr
     if expr.is_Rational:
         return Fraction(int(expr.p), int(expr.q))
-    return mpmath.mpf(str(sympy.N(expr, 50)))
+    with mpmath.workdps(60):            # keep the 50 digits (mpf rounds to the working precision)
+        return mpmath.mpf(str(sympy.N(expr, 50)))
 
 
 def format_number(value, max_digits=8):
@@ -145,16 +146,25 @@ def _is_plain_number(text):
 
 
 def same_row_space(a, b, tol=None):
-    """Do coefficient matrices ``a`` and ``b`` (lists of rows) span the same row space?
+    """Do the base parameter coefficient matrices ``a`` and ``b`` (lists of rows) describe
+    the same base parameters: independent rows spanning the same row space?
 
-    Exact (rational rank) when every entry is a Fraction and ``tol`` is None; otherwise
-    numeric: every row of each lies in the other's span to ``tol`` (relative residual).
+    span(a) and span(b) both lie in span(a + b) (the rows of both), so they are equal
+    exactly when the three have the same dimension. The rows of each must also be
+    independent: a result whose rows are dependent (``[[1, 0, 0], [2, 0, 0]]``) lists more
+    base parameters than it describes, and is not the same as one listing them once.
+    Exact (rational ranks) when every entry is a Fraction and ``tol`` is None; otherwise
+    numerical ranks (:func:`numerical_rank`) with the relative tolerance ``tol`` (default 1e-10).
     """
     if tol is None and all(isinstance(v, Fraction) for row in a + b for v in row):
-        ra, rb = _rank_exact(a), _rank_exact(b)
-        return ra == rb == _rank_exact(a + b)
-    tol = tol or mpmath.mpf(10) ** (-10)
-    return _in_span(a, b, tol) and _in_span(b, a, tol)
+        rank = _rank_exact
+    else:
+        tol = tol or Fraction(1, 10 ** 10)
+
+        def rank(rows):
+            return numerical_rank(rows, tol)
+    ra, rb = rank(a), rank(b)
+    return ra == len(a) and rb == len(b) and ra == rb == rank(a + b)
 
 
 def _rank_exact(rows):
@@ -164,21 +174,46 @@ def _rank_exact(rows):
     return m.rank()
 
 
-def _in_span(rows, basis, tol):
-    """Max relative residual of projecting ``rows`` on span(basis) below ``tol``."""
-    with mpmath.workdps(60):
-        B = mpmath.matrix([[mpmath.mpf(_to_mpf(v)) for v in row] for row in basis]).T
-        Q, _ = mpmath.qr(B)
-        k = len(basis)
-        for row in rows:
-            r = mpmath.matrix([_to_mpf(v) for v in row])
-            proj = Q[:, :k] * (Q[:, :k].T * r)
-            if mpmath.norm(r - proj) > tol * max(mpmath.norm(r), 1):
-                return False
-    return True
+def numerical_rank(rows, tol):
+    """Singular values above ``tol`` times the largest, of the rows scaled to unit length
+    (so that a row's size does not decide whether it counts).
+
+    The squared singular values are the eigenvalues of the Gram matrix, computed from the
+    exact entries in python-flint at ``2 * log10(1/tol) + 30`` digits (at least 60), far
+    below ``tol^2``: approximate eigenvalues (``acb_mat.eig``) serve, as only which side of
+    ``tol^2`` each falls on matters.
+    """
+    import math
+    from flint import acb_mat, arb, arb_mat
+    from .backends import Arb
+    exact = [[_to_fraction(v) for v in row] for row in rows]
+    exact = [row for row in exact if any(v != 0 for v in row)]
+    if not exact:
+        return 0
+    tol = Fraction(tol)
+    digits = max(60, 2 * math.ceil(-math.log10(tol)) + 30) if tol < 1 else 60
+    m, n = len(exact), len(exact[0])
+    with Arb(digits).activate():
+        entries = []
+        for row in exact:
+            values = [arb(fmpq(v.numerator, v.denominator)) for v in row]
+            norm = sum((v * v for v in values), arb(0)).sqrt()
+            entries += [v / norm for v in values]
+        A = arb_mat(m, n, entries)
+        G = A * A.transpose() if m <= n else A.transpose() * A
+        squares = [abs(e.real.mid()) for e in acb_mat(G).eig(algorithm="approx")]
+        largest = max(squares)
+        cut = largest * arb(fmpq(tol.numerator, tol.denominator)) ** 2
+        return sum(1 for x in squares if x > cut)
 
 
-def _to_mpf(v):
-    if isinstance(v, Fraction):
-        return mpmath.mpf(v.numerator) / v.denominator
-    return mpmath.mpf(v)
+def _to_fraction(v):
+    """An exact Fraction of a coefficient value (Fraction, int, float, mpmath mpf)."""
+    if isinstance(v, (Fraction, int)):
+        return Fraction(v)
+    if isinstance(v, float):
+        return Fraction(v)
+    if isinstance(v, mpmath.mpf):
+        man, exp = v.man_exp
+        return Fraction(man) * Fraction(2) ** exp
+    return Fraction(str(v))

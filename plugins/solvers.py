@@ -9,7 +9,10 @@ docs/solvers.md explains the algorithms and what "certified" covers.
 """
 
 import math
+import random
 import time
+from dataclasses import dataclass
+from fractions import Fraction
 
 from baseparams.expressions import exact_text
 from baseparams.hookspecs import hookimpl
@@ -18,6 +21,9 @@ from baseparams.result import BaseParameterResult
 RIDGE_DECADES = 3          # vp: a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
 MIN_DIGITS = 10            # vp: coefficients must agree to 10 digits between two precisions
 LADDER = (30, 60, 120, 240, 500)
+CHECK_SEED = 7919          # dp, vp: seed of the first independent excitation batch (then +1, +2)
+CHECK_ROUNDS = 2           # vp: independent batches that may be added to W before giving up
+EXACT_ROUNDS = 6           # exact: independent batches before the rank is declared unsettled
 
 
 # ----- shared ---------------------------------------------------------------------
@@ -57,6 +63,123 @@ def _g(x, digits=3):
     return f"{x:.{digits}g}"
 
 
+def stack_rows(*mats):
+    """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
+    0.9 has no concatenation."""
+    cols = mats[0].ncols()
+    entries = [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)]
+    return type(mats[0])(sum(m.nrows() for m in mats), cols, entries)
+
+
+def untrusted_warning(items):
+    return (f"{len(items)} nonzero coefficients have no trusted digit: omitted from the base "
+            f"parameter expressions and listed in diagnostics.untrusted")
+
+
+# ----- independent excitation batches (dp, vp) --------------------------------------
+@dataclass(frozen=True)
+class RandomBatch:
+    """States independent of the trajectory's samples, for the excitation check.
+
+    Positions are the trajectory's own at random rational times (along the trajectory
+    the loops close and Newton has a start); velocities and accelerations are random
+    rationals of the trajectory's scale, independent of it. A trajectory that does not
+    excite the mechanism (too few samples, a coordinate that never accelerates...) gives
+    W a clean ridge at too low a rank: every missing direction is an exact zero of W, so
+    no precision shows it; rows at states like these do.
+    """
+    seed: int
+    times: tuple               # Fractions, increasing
+    zd: tuple                  # per state: one Fraction per independent coordinate
+    zdd: tuple
+
+    @property
+    def states(self):
+        return len(self.times)
+
+
+def random_batch(mechanism, trajectory, seed):
+    """At least as many rows as parameters (ceil(n / f) states)."""
+    import numpy as np
+    from baseparams.backends import Float64
+    f = max(1, len(mechanism.independent))
+    count = max(2, math.ceil(len(mechanism.parameters) / f))
+    t0, t1 = min(trajectory.times), max(trajectory.times)
+    grid = np.linspace(float(t0), float(t1), 101)
+    _, zd, zdd = trajectory.independent_values(mechanism, Float64(), grid)
+    rng = random.Random(seed)
+    times = tuple(sorted(t0 + (t1 - t0) * Fraction(rng.randint(1, 9999), 10000) for _ in range(count)))
+
+    def draw(scales):
+        return tuple(s * Fraction(rng.randint(-1000, 1000), 1000) for s in scales)
+
+    vel, acc = _scales(zd), _scales(zdd)
+    return RandomBatch(seed, times, tuple(draw(vel) for _ in times), tuple(draw(acc) for _ in times))
+
+
+def _scales(values):
+    """Per coordinate: the largest |value| on the grid to 2 digits (else the largest of the
+    others, else 1), as an exact rational."""
+    import numpy as np
+    peaks = [float(np.max(np.abs(np.asarray(v, dtype=float)))) for v in values]
+    fallback = max(peaks, default=0.0) or 1.0
+    return [Fraction(f"{p or fallback:.2g}") for p in peaks]
+
+
+def batch_matrix(mechanism, backend, trajectory, batch):
+    """The batch's rows of W: a numpy array for Float64; for Arb an ``arb_mat`` whose balls
+    enclose the exact values (Krawczyk-enclosed positions, as for the trajectory's W)."""
+    import numpy as np
+    from flint import arb, arb_mat, fmpq
+    from baseparams.backends import Float64
+    from baseparams.dynamics import Evaluator
+    from baseparams.trajectory import Trajectory
+
+    along = Trajectory(trajectory.expressions, batch.times)
+    f = len(mechanism.independent)
+    t = np.array([float(x) for x in batch.times])
+    start = _positions(mechanism, trajectory, batch) if mechanism.loops else None
+    if isinstance(backend, Float64):
+        z, _, _ = along.independent_values(mechanism, backend, t)
+        z = [np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in z]
+        zd = [np.array([float(s[k]) for s in batch.zd]) for k in range(f)]
+        zdd = [np.array([float(s[k]) for s in batch.zdd]) for k in range(f)]
+        sample = Evaluator(mechanism, backend).sample(z, zd, zdd, start, where="check batch: ")
+        return sample.regressor_array().reshape(len(t) * f, len(mechanism.parameters))
+    ev = Evaluator(mechanism, backend, certify=True)
+    rows = []
+    with backend.activate():
+        for index, tk in enumerate(batch.times):
+            z, _, _ = along.independent_values(mechanism, backend, arb(fmpq(tk.numerator, tk.denominator)))
+            guess = None
+            if start is not None:
+                guess = [backend.rational(Fraction(float(v[index]))) for v in start]
+            sample = ev.sample(z, [backend.rational(v) for v in batch.zd[index]],
+                               [backend.rational(v) for v in batch.zdd[index]], guess,
+                               where=f"check state at t = {float(tk):.6g} s: ")
+            rows.extend(sample.regressor())
+        return arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
+
+
+def _positions(mechanism, trajectory, batch, grid=200):
+    """float64 tree coordinates at the batch's times (a closed loop's start for Newton):
+    followed along the trajectory on a uniform grid of its time span that includes them,
+    since a closure solved from far away may not converge or find another branch."""
+    import numpy as np
+    from baseparams.trajectory import Trajectory, samples_float64
+    t0, t1 = min(trajectory.times), max(trajectory.times)
+    times = sorted({t0 + (t1 - t0) * Fraction(k, grid - 1) for k in range(grid)} | set(batch.times))
+    sample, t = samples_float64(mechanism, Trajectory(trajectory.expressions, tuple(times)))
+    where = [times.index(tk) for tk in batch.times]
+    return [np.broadcast_to(np.asarray(q, float), t.shape)[where].copy() for q in sample.q]
+
+
+def raised_warning(mechanism, before, after, states):
+    return (f"the trajectory does not excite {mechanism.name}: rank raised from {before} to {after} "
+            f"by an independent random batch ({states} states at other times, velocities and "
+            f"accelerations), analysed together with W; use more samples or a richer trajectory")
+
+
 # ----- dp -------------------------------------------------------------------------
 class DoublePrecisionSolver:
     """Gautier's SVD method in numpy float64 (the seed paper's DP)."""
@@ -65,9 +188,11 @@ class DoublePrecisionSolver:
     description = ("Gautier's SVD method in double precision (numpy): rank by tolerance, "
                    "with ridge diagnostics and warnings")
 
-    def solve(self, mechanism, samples=None, scale=True, rank=None, progress=None, **options):
-        import numpy as np
+    def solve(self, mechanism, samples=None, scale=True, rank=None, progress=None, seed=CHECK_SEED,
+              **options):
+        from flint import arb
         from baseparams.backends import Float64
+        from baseparams.certify import decimal_string
         from baseparams.gautier import EPS, dp_gautier
         from baseparams.trajectory import observation_matrix
 
@@ -75,45 +200,58 @@ class DoublePrecisionSolver:
         warnings = []
         if options.get("digits"):
             warnings.append("dp ignores --digits: it always works in double precision")
-        W, info = observation_matrix(mechanism, Float64(), _trajectory(mechanism, samples))
+        trajectory = _trajectory(mechanism, samples)
+        W, info = observation_matrix(mechanism, Float64(), trajectory)
         _say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
         res = dp_gautier(W, scale=scale, rank=rank)
+        check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
+        if check.get("raised"):
+            warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"]))
+            W, res = stacked, both
+        elif check.get("error"):
+            warnings.append(f"no excitation check: {check['error']}")
         warnings += res.warnings
         params = mechanism.parameters
-        # digits DP can claim: from its own first-order error estimate
-        digits = int(max(2, min(16, math.floor(-math.log10(max(res.error_estimate, EPS))))))
-        scale_k = res.scale[res.kept][:, None] if res.kept else None
-        scale_e = res.scale[res.eliminated][None, :] if res.eliminated else None
-        beta_s = res.beta * scale_k / scale_e if res.kept and res.eliminated else res.beta
-        noise = max(res.error_estimate, EPS)
-        dropped, largest_dropped = 0, 0.0
+        noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)
+        most = int(min(16, math.floor(-math.log10(noise))))
+        dropped, largest_dropped, untrusted = 0, 0.0, []
 
         def coefficient(a, b):
             nonlocal dropped, largest_dropped
-            value = float(res.beta[a, b])
-            if abs(beta_s[a, b]) <= noise or value == 0.0:
-                if value != 0.0:
-                    dropped += 1
-                    largest_dropped = max(largest_dropped, abs(float(beta_s[a, b])))
+            value, scaled = float(res.beta[a, b]), abs(float(res.beta_s[a, b]))
+            if value == 0.0:
                 return None
-            return np.format_float_positional(value, precision=digits, unique=False, fractional=False,
-                                              trim="-") if 1e-4 <= abs(value) < 1e16 \
-                else np.format_float_scientific(value, precision=digits - 1, trim="-")
+            if scaled <= noise:
+                dropped += 1
+                largest_dropped = max(largest_dropped, scaled)
+                return None
+            digits = min(most, math.floor(math.log10(scaled / noise)))
+            if digits < 1:
+                untrusted.append({"base": a, "parameter": params[res.eliminated[b]], "value": repr(value),
+                                  "estimated_error": repr(noise / scaled * abs(value))})
+                return None
+            return decimal_string(arb(value), digits)
 
         base = base_rows(params, res.kept, res.eliminated, coefficient)
+        for item in untrusted:
+            item["base"] = base[item["base"]]["name"]
+        if untrusted:
+            warnings.append(untrusted_warning(untrusted))
         s = res.singular_values
         r = res.rank
         gap_ratio = float(res.ratios.max()) if res.ratios.size else None
         summary = [
-            f"W: {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); columns "
+            f"W: {W.shape[0]} x {W.shape[1]} ({info['samples']} samples"
+            + (f" + {check['states']} random states" if check.get("raised") else "") + "); columns "
             + ("scaled by powers of two near their norms" if scale else "not scaled"),
             f"rank {r} by the tolerance max(shape)*eps*s_max = {_g(res.tolerance)}",
             (f"s_{r} = {_g(s[r - 1])}, s_{r + 1} = {_g(s[r]) if r < len(s) else '-'}; largest gap "
              f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
              + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
-            f"beta: estimated relative error {_g(res.error_estimate, 2)} (first order), cond(V22) = "
-            f"{_g(res.v22_condition)}; {dropped} coefficients below that level (scaled units; largest "
-            f"{_g(largest_dropped, 2)}) are not shown",
+            f"beta: estimated error {_g(res.error_estimate, 2)} (first order, scaled units), cond(V22) = "
+            f"{_g(res.v22_condition)}; coefficients printed with the digits above it; {dropped} below it "
+            f"(largest {_g(largest_dropped, 2)}) are not shown",
+            _dp_check_line(check),
         ]
         if res.zero_columns:
             summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
@@ -134,6 +272,8 @@ class DoublePrecisionSolver:
             "v22_condition": float(res.v22_condition),
             "coefficients_below_noise_dropped": dropped,
             "largest_dropped_scaled": largest_dropped,
+            "untrusted": untrusted,
+            "excitation_check": check,
             "samples": info["samples"], "rows": int(W.shape[0]),
             "summary": summary,
         }
@@ -143,12 +283,42 @@ class DoublePrecisionSolver:
             singular_values=[repr(float(v)) for v in s], geometry=geometry_strings(mechanism),
             warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
 
+    @staticmethod
+    def _excitation_check(mechanism, trajectory, W, res, scale, rank, seed):
+        """dp on W stacked with an independent random batch: (diagnostics, stacked W, its DPResult)."""
+        import numpy as np
+        from baseparams.backends import Float64
+        from baseparams.errors import KinematicsError
+        from baseparams.gautier import dp_gautier
+        if rank is not None:
+            return {"skipped": "rank forced"}, None, None
+        batch = random_batch(mechanism, trajectory, seed)
+        try:
+            rows = batch_matrix(mechanism, Float64(), trajectory, batch)
+        except KinematicsError as exc:
+            return {"seed": seed, "states": batch.states, "error": str(exc)}, None, None
+        stacked = np.vstack([W, rows])
+        both = dp_gautier(stacked, scale=scale)
+        return ({"seed": seed, "states": batch.states, "rows": int(rows.shape[0]), "rank": res.rank,
+                 "rank_with_batch": both.rank, "raised": both.rank > res.rank}, stacked, both)
+
+
+def _dp_check_line(check):
+    if check.get("skipped") or check.get("error"):
+        return f"excitation check: not done ({check.get('skipped') or check.get('error')})"
+    if check["raised"]:
+        return (f"excitation check: {check['states']} independent random states raised the rank from "
+                f"{check['rank']} to {check['rank_with_batch']}: W above includes them")
+    return (f"excitation check: {check['states']} independent random states ({check['rows']} rows) "
+            f"added to W give rank {check['rank_with_batch']}")
+
 
 # ----- vp -------------------------------------------------------------------------
 class BallRun:
     """One precision: W at D digits and its certified analysis."""
 
-    def __init__(self, mechanism, digits, trajectory, kept=None, pivoting="natural", progress=None):
+    def __init__(self, mechanism, digits, trajectory, kept=None, pivoting="natural", progress=None,
+                 batches=()):
         from baseparams import certify
         from baseparams.backends import Arb
         from baseparams.trajectory import observation_matrix
@@ -164,6 +334,9 @@ class BallRun:
                 _say(progress, f"vp: {digits} digits: sample {done}/{count}")
 
         self.W, self.info = observation_matrix(mechanism, backend, trajectory, progress=tick)
+        if batches:             # independent random states added after a failed excitation check
+            self.W = stack_rows(self.W, *(batch_matrix(mechanism, backend, trajectory, b) for b in batches))
+        self.info["random_states"] = sum(b.states for b in batches)
         with backend.activate():
             self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting)
             self.tail_values = certify.tail_singular_values(self.W, self.analysis)
@@ -208,26 +381,22 @@ class BallRun:
                 "closure_residual": self.info.get("closure_residual"), "seconds": round(self.seconds, 3)}
 
 
-def _closure_guard(run):
-    """Digits the Newton positions may hide: W is evaluated at positions that close the loops
-    only to the closure residual, which the balls do not include (docs/solvers.md)."""
-    from flint import arb
-    from baseparams import certify
-    residual = run.info.get("closure_residual")
-    if run.info.get("positions_enclosed") or not residual:
-        return 0                 # Krawczyk enclosures: the balls contain the exact positions
-    exponent = certify.log10(arb(str(residual)))
-    if exponent == -math.inf:
-        return 0
-    return max(0, math.ceil(exponent + run.digits)) + 2
-
-
 def _finite(x):
     if x == math.inf:
         return "inf"
     if x == -math.inf:
         return "-inf"
     return round(x, 2) if isinstance(x, float) else x
+
+
+def _vp_check_line(check):
+    if "error" in check:
+        return f"the random states could not be evaluated ({check['error']})"
+    verdict = ("obey the base parameters" if check["passed"] else
+               f"do NOT obey the base parameters ({check['proven_nonzero']} entries of W_batch N proven "
+               f"nonzero)" if check["proven_nonzero"] else "do not keep the ridge")
+    return (f"{check['states']} independent random states ({check['rows']} rows) at {check['digits']} digits "
+            f"{verdict}: a ridge of {check['ridge_decades_with_batch']} decades on W and the batch together")
 
 
 def compare_runs(prev, cur):
@@ -267,36 +436,35 @@ def compare_runs(prev, cur):
 
 def _vp_coefficients(final, prev, params):
     """Base rows with each coefficient printed to the digits trusted: its ball's own, capped
-    by the agreement with the previous precision; with a single precision, less what the
-    loop-closure residual may hide. Returns (rows, trusted digits of the nonzero ones,
-    count of coefficients with no trusted digit)."""
+    by the agreement with the previous precision. Returns (rows, trusted digits of the
+    printed ones, untrusted): a nonzero coefficient with no trusted digit is left out of
+    its expression and listed in ``untrusted`` with its ball."""
     from baseparams import certify
     a = final.analysis
-    guard = _closure_guard(final) if prev is None else 0
     same = prev is not None and prev.analysis.kept == a.kept and prev.rank == a.rank
-    trusted = {}
+    trusted, untrusted = {}, []
     for i in range(a.beta.nrows()):
         for j in range(a.beta.ncols()):
             d = final.digits_of[i][j]
             if same:
                 d = min(d, certify.agreement_digits(prev.analysis.beta[i, j], a.beta[i, j]))
-            trusted[i, j] = max(0, min(d, final.digits) - guard)
-    untrusted = 0
+            trusted[i, j] = max(0, min(d, final.digits))
 
     def coefficient(i, j):
-        nonlocal untrusted
         x = a.beta[i, j]
         if x.contains(0):
             return None
         if trusted[i, j] < 1:
-            untrusted += 1
-            return certify.decimal_string(x, 3)
+            untrusted.append({"base": i, "parameter": params[a.eliminated[j]], "ball": x.str(5)})
+            return None
         return certify.decimal_string(x, trusted[i, j])
 
     rows = base_rows(params, a.kept, a.eliminated, coefficient)
-    nonzero = [trusted[i, j] for i in range(a.beta.nrows()) for j in range(a.beta.ncols())
-               if not a.beta[i, j].contains(0)]
-    return rows, nonzero, untrusted
+    for item in untrusted:
+        item["base"] = rows[item["base"]]["name"]
+    printed = [trusted[i, j] for i in range(a.beta.nrows()) for j in range(a.beta.ncols())
+               if not a.beta[i, j].contains(0) and trusted[i, j] >= 1]
+    return rows, printed, untrusted
 
 
 class VariablePrecisionSolver:
@@ -307,17 +475,122 @@ class VariablePrecisionSolver:
                    "raised until the ridge is evident and beta agrees at two precisions")
 
     def solve(self, mechanism, digits=None, samples=None, progress=None, ladder=LADDER,
-              pivoting="natural", recover=True, kept=None, **options):
+              pivoting="natural", recover=True, kept=None, seed=CHECK_SEED, **options):
         start = time.perf_counter()
         trajectory = _trajectory(mechanism, samples)
         params = mechanism.parameters
         warnings, notes = [], []
-        runs = []
-        accepted, agreement, reasons = False, None, []
         steps = [int(digits)] if digits else [int(d) for d in ladder]
+        batches, checks = [], []
+        for round_ in range(CHECK_ROUNDS + 1):
+            runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
+                                                                kept, pivoting, progress)
+            check, batch = self._excitation_check(mechanism, trajectory, runs[-1], seed + round_, progress)
+            checks.append(check)
+            if check["passed"] or "error" in check or round_ == CHECK_ROUNDS:
+                break
+            _say(progress, f"vp: the excitation check failed (rank {check['rank']}): W and the batch "
+                           f"analysed together")
+            batches.append(batch)
+        final = runs[-1]
+        a = final.analysis
+        prev = runs[-2] if len(runs) >= 2 else None
+        excited = checks[-1]["passed"]
+        if batches:
+            before = checks[0]["rank"]
+            warnings.append(raised_warning(mechanism, before, a.rank, sum(b.states for b in batches))
+                            if a.rank > before else
+                            f"an independent random batch did not fit the base parameters of the "
+                            f"trajectory's W (rank {before}): W and the batch analysed together")
+        if not excited:
+            warnings.append("excitation check failed: " + _vp_check_line(checks[-1])
+                            + "; the rank is not certified")
+
+        from baseparams.backends import Arb
+        with Arb(final.digits).activate():
+            base, printed, untrusted = _vp_coefficients(final, prev, params)
+        ridge_ok = a.ridge_log10 >= RIDGE_DECADES
+        if digits:
+            certified = ridge_ok and excited
+            if not ridge_ok:
+                warnings.append(f"no evident ridge at {final.digits} digits: proven ridge "
+                                f"{_finite(a.ridge_log10)} decades < {RIDGE_DECADES}; raise --digits")
+            notes.append("--digits fixes the precision: not confirmed at a second precision")
+        else:
+            certified = accepted and excited
+            if not accepted:
+                warnings.append("no agreement between two precisions up to "
+                                f"{final.digits} digits: " + "; ".join(reasons))
+        if untrusted:
+            warnings.append(untrusted_warning(untrusted))
+        warnings += [n for n in a.notes if "lowered" in n]
+
+        recovery = {"attempted": False}
+        if recover:
+            recovery = self._recover(mechanism, final, trajectory, batches, params, progress)
+
+        sv = a.singular_values[:a.rank] + final.tail_values
+        extra = final.info["random_states"]
+        summary = [
+            f"W: {final.W.nrows()} x {final.W.ncols()} ({final.info['samples']} samples"
+            + (f" + {extra} random states" if extra else "") + ") at "
+            f"{', '.join(str(r.digits) for r in runs)} digits; columns scaled by powers of two",
+            f"rank >= {a.rank} proven (a {a.rank} x {a.rank} block of W is nonsingular in ball arithmetic); "
+            f"s_{a.rank} >= {a.sigma_r_lower.str(3, radius=False)}, every later singular value <= "
+            f"{a.tail_bound.str(3, radius=False)}: a ridge of {_finite(a.ridge_log10)} decades",
+            (f"agreement with {prev.digits} digits: rank, kept parameters and beta to >= {agreement} digits"
+             if prev is not None and accepted else "not confirmed at a second precision"),
+            "excitation check: " + _vp_check_line(checks[-1]),
+            (f"coefficients printed with {min(printed)} to {max(printed)} trusted digits "
+             f"(kept parameters: {a.pivoting} order)" if printed else
+             f"no coefficient of beta printed (kept parameters: {a.pivoting} order)"),
+        ]
+        if recovery.get("attempted"):
+            summary.append("exact rationals: " + (
+                f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
+                f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
+                else f"not recovered ({recovery['reason']})"))
+        diagnostics = {
+            "certificate": ("rank >= r: an r x r block of the column-scaled W proven nonsingular; "
+                            "s_(r+1) <= tail_bound (Weyl); s_r >= sigma_r_lower (interlacing); "
+                            "certified when the ridge is >= 3 decades, rank, kept parameters and "
+                            "beta (>= 10 digits) agree at two precisions, and an independent random "
+                            "batch keeps a ridge of >= 3 decades with no entry of W_batch N proven nonzero"),
+            "runs": [r.summary() for r in runs],
+            "pivoting": a.pivoting,
+            "ridge_decades": _finite(a.ridge_log10),
+            "sigma_r_lower": a.sigma_r_lower.str(6, radius=False),
+            "tail_bound": a.tail_bound.str(6, radius=False),
+            "agreement_digits": _finite(agreement) if agreement is not None else None,
+            "excitation_checks": checks,
+            "random_states_in_W": extra,
+            "trusted_digits": {"min": min(printed, default=None), "max": max(printed, default=None)},
+            "untrusted": untrusted,
+            "column_scaling": "each column divided by the power of two nearest its norm (exact)",
+            "singular_values_note": (f"the first {a.rank}: sqrt of approximate eigenvalues of the scaled "
+                                     f"Gram matrix; the rest: singular values of the residual "
+                                     f"W_E - W_K beta, which bound them (Weyl)"),
+            "zero_columns": [params[j] for j in a.zero_columns],
+            "rational_recovery": recovery,
+            "notes": notes + a.notes,
+            "summary": summary,
+        }
+        return BaseParameterResult(
+            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
+            eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
+            singular_values=sv, geometry=geometry_strings(mechanism), warnings=warnings,
+            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
+
+    @staticmethod
+    def _escalate(mechanism, trajectory, batches, steps, kept, pivoting, progress):
+        """W at each precision of ``steps`` until two consecutive ones agree:
+        (runs, accepted, agreement digits, reasons)."""
+        runs, accepted, agreement, reasons = [], False, None, []
         for D in steps:
-            _say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples)")
-            run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress)
+            _say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples"
+                           + (f" + {sum(b.states for b in batches)} random states" if batches else "") + ")")
+            run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress,
+                          batches=batches)
             runs.append(run)
             a = run.analysis
             _say(progress, f"vp: {D} digits: rank {a.rank} ({a.pivoting} order), proven ridge "
@@ -335,92 +608,44 @@ class VariablePrecisionSolver:
                 if accepted:
                     break
                 _say(progress, "vp: not yet: " + "; ".join(reasons))
-        final = runs[-1]
-        a = final.analysis
-        prev = runs[-2] if len(runs) >= 2 else None
+        return runs, accepted, agreement, reasons
 
+    @staticmethod
+    def _excitation_check(mechanism, trajectory, final, seed, progress):
+        """An independent random batch at the final precision against the null space of the
+        final analysis (:func:`baseparams.certify.excitation_check`): (diagnostics, batch)."""
+        from baseparams import certify
         from baseparams.backends import Arb
-        with Arb(final.digits).activate():
-            base, nonzero, untrusted = _vp_coefficients(final, prev, params)
-        ridge_ok = a.ridge_log10 >= RIDGE_DECADES
-        if digits:
-            certified = ridge_ok
-            if not ridge_ok:
-                warnings.append(f"no evident ridge at {final.digits} digits: proven ridge "
-                                f"{_finite(a.ridge_log10)} decades < {RIDGE_DECADES}; raise --digits")
-            notes.append("--digits fixes the precision: not confirmed at a second precision")
-        else:
-            certified = accepted
-            if not accepted:
-                warnings.append("no agreement between two precisions up to "
-                                f"{final.digits} digits: " + "; ".join(reasons))
-        if untrusted:
-            warnings.append(f"{untrusted} coefficients have no trusted digit (shown with 3 digits)")
-        warnings += [n for n in a.notes if "lowered" in n]
+        from baseparams.errors import KinematicsError
+        a = final.analysis
+        batch = random_batch(mechanism, trajectory, seed)
+        _say(progress, f"vp: excitation check: {batch.states} random states at {final.digits} digits")
+        out = {"seed": seed, "states": batch.states, "digits": final.digits, "rank": a.rank}
+        backend = Arb(final.digits)
+        try:
+            Wc = batch_matrix(mechanism, backend, trajectory, batch)
+        except KinematicsError as exc:
+            return {**out, "passed": False, "error": str(exc)}, batch
+        with backend.activate():
+            bound, nonzero, decades = certify.excitation_check(Wc, a)
+            bound = bound.str(3, radius=False)
+        passed = nonzero == 0 and decades >= RIDGE_DECADES
+        return {**out, "rows": Wc.nrows(), "residual_bound": bound, "proven_nonzero": nonzero,
+                "ridge_decades_with_batch": _finite(decades), "passed": passed}, batch
 
-        recovery = {"attempted": False}
-        if recover:
-            recovery = self._recover(mechanism, final, trajectory, params, progress)
-
-        sv = a.singular_values[:a.rank] + final.tail_values
-        summary = [
-            f"W: {final.W.nrows()} x {final.W.ncols()} ({final.info['samples']} samples) at "
-            f"{', '.join(str(r.digits) for r in runs)} digits; columns scaled by powers of two",
-            f"rank {a.rank} proven (a {a.rank} x {a.rank} block of W is nonsingular in ball arithmetic); "
-            f"s_{a.rank} >= {a.sigma_r_lower.str(3, radius=False)}, every later singular value <= "
-            f"{a.tail_bound.str(3, radius=False)}: a ridge of {_finite(a.ridge_log10)} decades",
-            (f"agreement with {prev.digits} digits: rank, kept parameters and beta to >= {agreement} digits"
-             if prev is not None and accepted else "not confirmed at a second precision"),
-            (f"coefficients printed with {min(nonzero)} to {max(nonzero)} trusted digits "
-             f"(kept parameters: {a.pivoting} order)" if nonzero else
-             f"beta has no nonzero coefficient (kept parameters: {a.pivoting} order)"),
-        ]
-        if recovery.get("attempted"):
-            summary.append("exact rationals: " + (
-                f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
-                f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
-                else f"not recovered ({recovery['reason']})"))
-        diagnostics = {
-            "certificate": ("rank >= r: an r x r block of the column-scaled W proven nonsingular; "
-                            "s_(r+1) <= tail_bound (Weyl); s_r >= sigma_r_lower (interlacing); "
-                            "certified when the ridge is >= 3 decades and rank, kept parameters and "
-                            "beta (>= 10 digits) agree at two precisions"),
-            "runs": [r.summary() for r in runs],
-            "pivoting": a.pivoting,
-            "ridge_decades": _finite(a.ridge_log10),
-            "sigma_r_lower": a.sigma_r_lower.str(6, radius=False),
-            "tail_bound": a.tail_bound.str(6, radius=False),
-            "agreement_digits": _finite(agreement) if agreement is not None else None,
-            "trusted_digits": {"min": min(nonzero, default=None), "max": max(nonzero, default=None)},
-            "column_scaling": "each column divided by the power of two nearest its norm (exact)",
-            "singular_values_note": (f"the first {a.rank}: sqrt of approximate eigenvalues of the scaled "
-                                     f"Gram matrix; the rest: singular values of the residual "
-                                     f"W_E - W_K beta, which bound them (Weyl)"),
-            "zero_columns": [params[j] for j in a.zero_columns],
-            "rational_recovery": recovery,
-            "notes": notes + a.notes,
-            "summary": summary,
-        }
-        return BaseParameterResult(
-            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
-            eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
-            singular_values=sv, geometry=geometry_strings(mechanism), warnings=warnings,
-            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
-
-    def _recover(self, mechanism, final, trajectory, params, progress):
-        """Exact rationals for beta from the digits its balls prove (less the loop-closure
-        guard), then confirmed: each must lie inside its ball at twice the digits."""
+    def _recover(self, mechanism, final, trajectory, batches, params, progress):
+        """Exact rationals for beta from the digits its balls prove, then confirmed: each
+        must lie inside its ball at twice the digits."""
         from baseparams import certify
         from baseparams.backends import Arb
         a = final.analysis
-        guard = _closure_guard(final)
         values = {}
         for i in range(a.beta.nrows()):
             for j in range(a.beta.ncols()):
                 x = a.beta[i, j]
                 if x.contains(0):
                     continue
-                digits = min(final.digits_of[i][j], final.digits) - guard
+                digits = min(final.digits_of[i][j], final.digits)
                 if digits < 8:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"a coefficient has only {digits} proven digits"}
@@ -433,7 +658,7 @@ class VariablePrecisionSolver:
         D2 = 2 * final.digits
         _say(progress, f"vp: confirming {len(values)} recovered rationals at {D2} digits")
         try:
-            check = BallRun(mechanism, D2, trajectory, kept=a.kept, progress=progress)
+            check = BallRun(mechanism, D2, trajectory, kept=a.kept, progress=progress, batches=batches)
         except ValueError as exc:
             return {"attempted": True, "succeeded": False, "reason": str(exc)}
         b = check.analysis.beta
@@ -453,7 +678,7 @@ class VariablePrecisionSolver:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"{q} is outside the ball at {D2} digits"}
         rows = base_rows(params, a.kept, a.eliminated,
-                         lambda i, j: str(values[i, j]) if (i, j) in values else None)
+                         lambda i, j: exact_text(values[i, j]) if (i, j) in values else None)
         return {"attempted": True, "succeeded": True, "confirmed_at_digits": D2,
                 "largest_denominator": max((q.denominator for q in values.values()), default=1),
                 "base": rows}
@@ -471,48 +696,55 @@ class ExactSolver:
         from baseparams.exact_samples import check_exact_possible, exact_observation_matrix, rref_base
 
         start = time.perf_counter()
+        warnings = []
+        if options.get("digits"):
+            warnings.append("exact ignores --digits: its arithmetic is exact (rationals)")
         check_exact_possible(mechanism)
         params = mechanism.parameters
         f = max(1, len(mechanism.independent or mechanism.coordinates))
         n = len(params)
         count = samples or max(4, math.ceil(1.5 * n / f))
+        per_batch = max(2, math.ceil(n / f))          # each check batch: at least n rows
         _say(progress, f"exact: W at {count} random rational states")
         W = exact_observation_matrix(mechanism, count, seed=seed)
-        rank = W.rank()
-        batches = 1
-        while True:                              # more samples must not raise the rank
-            extra = exact_observation_matrix(mechanism, max(2, count // 2), seed=seed + 1000 * batches)
-            W = W.concat_vertical(extra) if hasattr(W, "concat_vertical") else _stack(W, extra)
+        first = rank = W.rank()
+        batches, settled = 0, False
+        while batches < EXACT_ROUNDS:                # an independent batch must not raise the rank
             batches += 1
+            W = stack_rows(W, exact_observation_matrix(mechanism, per_batch, seed=seed + 1000 * batches))
             new = W.rank()
-            if new == rank or batches > 6:
+            if new == rank:
+                settled = True
                 break
             rank = new
+        if rank > first:
+            warnings.append(f"the {count} random states do not excite {mechanism.name}: rank raised from "
+                            f"{first} to {rank} by independent random batches ({per_batch} states each)")
+        if not settled:
+            warnings.append(f"the rank still rose with the last of {EXACT_ROUNDS} independent random "
+                            f"batches: {rank} is only a lower bound, not certified")
         rank, kept, eliminated, beta = rref_base(W)
         base = base_rows(params, kept, eliminated,
-                         lambda a, b: str(beta[a][b]) if beta[a][b] != 0 else None)
+                         lambda a, b: exact_text(beta[a][b]) if beta[a][b] != 0 else None)
         summary = [f"W over the rationals: {W.nrows()} x {W.ncols()} at random rational states "
-                   f"(angles at rational points of the unit circle), in {batches} batches",
-                   f"exact rank {rank}; the last batch did not raise it",
+                   f"(angles at rational points of the unit circle): {count} states, then {batches} "
+                   f"independent check batches of {per_batch}",
+                   (f"exact rank {rank}; the last batch did not raise it" if settled else
+                    f"exact rank {rank} at these states; it still rose with the last batch (not certified)"),
                    "beta from the exact rref: kept parameters are the leftmost basis"]
         diagnostics = {
             "rank_meaning": ("exact rank of W at random rational states: the number of base parameters "
                              "unless every sample lies on one algebraic hypersurface (probability zero); "
-                             "an extra independent batch did not raise it"),
-            "rows": W.nrows(), "batches": batches, "seed": seed, "summary": summary,
+                             "an extra independent batch (at least as many rows as parameters) did not "
+                             "raise it"),
+            "rows": W.nrows(), "batches": batches, "states_per_batch": per_batch,
+            "rank_first_states": first, "settled": settled, "seed": seed, "summary": summary,
         }
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=rank, base=base,
-            eliminated=[params[j] for j in eliminated], certified=True, digits=None, singular_values=None,
-            geometry=geometry_strings(mechanism), warnings=[], elapsed_s=time.perf_counter() - start,
+            eliminated=[params[j] for j in eliminated], certified=settled, digits=None, singular_values=None,
+            geometry=geometry_strings(mechanism), warnings=warnings, elapsed_s=time.perf_counter() - start,
             diagnostics=diagnostics)
-
-
-def _stack(a, b):
-    from flint import fmpq_mat
-    rows = [[a[i, j] for j in range(a.ncols())] for i in range(a.nrows())]
-    rows += [[b[i, j] for j in range(b.ncols())] for i in range(b.nrows())]
-    return fmpq_mat(len(rows), a.ncols(), [v for row in rows for v in row])
 
 
 @hookimpl

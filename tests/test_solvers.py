@@ -10,6 +10,9 @@
 - The SLA: vp's rank 41 and its expressions against the seed paper's symbolic table
   (tests/seed_tables.py, evaluated exactly with the geometry).
 - The numeric cores on synthetic matrices whose rank and beta are known exactly.
+- Trajectories that do not excite the mechanism (2 or 4 samples): the independent random
+  batch must raise the rank to the closed form's (pendulum 3, planar 2R 6, four-bar 8),
+  with a warning, in every solver.
 """
 
 import json
@@ -26,7 +29,9 @@ from baseparams.backends import Arb, Float64
 from baseparams.cli import main
 from baseparams.errors import InputError
 from baseparams.gautier import dp_gautier
+from baseparams.exact_samples import rref_pivots as pivots_of
 from baseparams.loader import parse_mechanism, resolve
+from baseparams.plugins import solvers as builtin
 from baseparams.plugins.solvers import compare_runs
 from baseparams.result import same_row_space
 from baseparams.trajectory import Trajectory, observation_matrix
@@ -49,32 +54,26 @@ def exact_rref(rows):
     return R, rank
 
 
-def pivots_of(R, rank):
-    pivots, row = [], 0
-    for j in range(R.ncols()):
-        if row < rank and R[row, j] != 0:
-            pivots.append(j)
-            row += 1
-    return pivots
-
-
 def printed_digits(text):
     mantissa = text.lower().split("e")[0].lstrip("-").replace(".", "").lstrip("0")
     return len(mantissa)
 
 
-def assert_digits_match(result, R, rank):
+def assert_digits_match(result, R, rank, pivots=None):
     """Every coefficient of ``result`` equals the exact rref value to the digits it prints,
-    and every coefficient it omits is exactly zero."""
+    and every coefficient it omits is exactly zero (or below the solver's noise, if it
+    says so). ``pivots``: R's identity columns when R is not in echelon form."""
     params = result.parameters
-    pivots = pivots_of(R, rank)
+    pivots = pivots_of(R, rank) if pivots is None else pivots
+    dropped = result.diagnostics.get("coefficients_below_noise_dropped", 0) + len(
+        result.diagnostics.get("untrusted", []))
     assert result.kept == [params[j] for j in pivots]
     for i, row in enumerate(result.base):
         expr = row["expression"]
         for j, p in enumerate(params):
             exact = Fraction(int(R[i, j].p), int(R[i, j].q))
             if p not in expr:
-                assert exact == 0, (row["name"], p)
+                assert exact == 0 or dropped, (row["name"], p)
                 continue
             text = expr[p]
             value = Fraction(text)
@@ -117,6 +116,106 @@ def test_planar_2r_closed_form(name):
         assert same_row_space(res.coefficient_matrix(), expected)      # exact rank test
     else:
         assert same_row_space(res.coefficient_matrix(), expected, tol=1e-9 if name == "dp" else 1e-25)
+
+
+# ----- trajectories that do not excite the mechanism ---------------------------------
+UNDER_EXCITED = [("pendulum", 2, 3), ("planar_2r", 2, 6), ("four_bar", 4, 8)]
+
+
+@pytest.mark.parametrize("mech_name,samples,true_rank", UNDER_EXCITED)
+def test_vp_under_excited_trajectory_is_caught(mech_name, samples, true_rank):
+    """With 2 or 4 samples W has a clean ridge at a lower rank (its missing directions are
+    exact zeros): only the independent random batch shows it, and the rank it gives must be
+    the closed form's, with a warning."""
+    mech = resolve(mech_name)
+    W, _ = observation_matrix(mech, Float64(), Trajectory.default(mech, samples=samples))
+    assert np.linalg.matrix_rank(W) < true_rank            # the trajectory alone is deficient
+    res = solver("vp").solve(mech, samples=samples, recover=False)
+    assert res.rank == true_rank
+    assert any("does not excite" in w and "raised from" in w and f"to {true_rank}" in w
+               for w in res.warnings), res.warnings
+    checks = res.diagnostics["excitation_checks"]
+    assert not checks[0]["passed"] and checks[0]["rank"] < true_rank
+    assert checks[-1]["passed"] and res.diagnostics["random_states_in_W"] > 0
+    if mech_name == "planar_2r":                            # and the closed form's row space
+        expected = rows_of(mech.parameters, planar_2r_rows(mech))
+        assert same_row_space(res.coefficient_matrix(), expected, tol=1e-25)
+
+
+def test_vp_excitation_check_cannot_be_passed_is_not_certified(monkeypatch):
+    """No batch may be added to W: the first rank (2) stays, uncertified, with a warning."""
+    monkeypatch.setattr(builtin, "CHECK_ROUNDS", 0)
+    res = solver("vp").solve(resolve("pendulum"), samples=2, recover=False)
+    assert res.rank == 2 and not res.certified
+    assert any(w.startswith("excitation check failed") for w in res.warnings), res.warnings
+
+
+@pytest.mark.parametrize("name,mech_name,samples,true_rank",
+                         [("dp", *case) for case in UNDER_EXCITED] + [("exact", *case) for case in UNDER_EXCITED[:2]])
+def test_dp_and_exact_under_excited_warn(name, mech_name, samples, true_rank):
+    res = solver(name).solve(resolve(mech_name), samples=samples)
+    assert res.rank == true_rank
+    assert any("raised from" in w and f"to {true_rank}" in w for w in res.warnings), res.warnings
+
+
+def test_exact_unsettled_rank_is_not_certified(monkeypatch):
+    """The rank still rising at the last allowed batch: a lower bound only."""
+    monkeypatch.setattr(builtin, "EXACT_ROUNDS", 1)
+    res = solver("exact").solve(resolve("puma560"), samples=2)
+    assert not res.certified
+    assert any("still rose" in w for w in res.warnings), res.warnings
+    assert "not certified" in res.diagnostics["summary"][1]
+
+
+def test_normal_runs_pass_the_excitation_check():
+    mech = resolve("planar_2r")
+    res = solver("vp").solve(mech, recover=False)
+    assert res.certified and res.warnings == [] and res.rank == 6
+    (check,) = res.diagnostics["excitation_checks"]
+    assert check["passed"] and check["proven_nonzero"] == 0 and check["rows"] >= len(mech.parameters)
+    assert res.diagnostics["random_states_in_W"] == 0
+    assert any(line.startswith("rank >= 6 proven") for line in res.diagnostics["summary"])
+    dp = solver("dp").solve(mech)
+    assert dp.diagnostics["excitation_check"]["rank_with_batch"] == dp.rank == 6
+    assert not any("does not excite" in w for w in dp.warnings)
+
+
+def test_certify_excitation_check_on_synthetic_rows():
+    """W spans 2 of the 3 directions of a rank-3 space: its analysis (rank 2, clean ridge)
+    is refuted by rows from the whole space, and not by rows from W's own span."""
+    rng = np.random.default_rng(5)
+    basis = rng.integers(-9, 10, size=(3, 7))
+    W = rng.integers(-9, 10, size=(12, 2)) @ basis[:2]
+    inside = rng.integers(-9, 10, size=(8, 2)) @ basis[:2]
+    whole = rng.integers(-9, 10, size=(8, 3)) @ basis
+    with Arb(30).activate():
+        a = certify.analyse(_arb_matrix(W, 30), 30)
+        assert a.rank == 2 and a.ridge_log10 > 10
+        _, nonzero, decades = certify.excitation_check(_arb_matrix(inside, 30), a)
+        assert nonzero == 0 and decades > 10
+        _, nonzero, decades = certify.excitation_check(_arb_matrix(whole, 30), a)
+        assert nonzero > 0 and decades < 3
+
+
+def test_exact_and_dp_warn_about_digits():
+    for name in ("dp", "exact"):
+        res = solver(name).solve(resolve("pendulum"), digits=40)
+        assert any("ignores --digits" in w for w in res.warnings), name
+
+
+def test_vp_untrusted_coefficients_are_listed_not_printed():
+    """A ball with no trusted digit is left out of its expression and listed; the others
+    carry exactly their trusted digits."""
+    with Arb(30).activate():
+        beta = arb_mat(1, 3, [arb("1.25", "0.5"), arb(1) / 3, arb("0", "1e-40")])
+        analysis = SimpleNamespace(beta=beta, kept=[0], eliminated=[1, 2, 3])
+        final = SimpleNamespace(analysis=analysis, digits=30,
+                                digits_of=[[certify.radius_digits(beta[0, j]) for j in range(3)]])
+        rows, printed, untrusted = builtin._vp_coefficients(final, None, ["a", "b", "c", "d"])
+    assert rows == [{"name": "phi_b01", "expression": {"a": "1", "c": "0." + "3" * 30}}]
+    assert printed == [30]
+    assert untrusted == [{"base": "phi_b01", "parameter": "b", "ball": untrusted[0]["ball"]}]
+    assert "+/-" in untrusted[0]["ball"]
 
 
 # ----- open chains: exact against vp, digit by digit -------------------------------
@@ -167,6 +266,7 @@ def test_vp_base_parameters_explain_another_trajectory(mech_name):
                                t_end=spec.t_start + (spec.t_end - spec.t_start) * Fraction(3, 4))
     W, _ = observation_matrix(mech, Float64(), other)
     assert dp_gautier(W).rank == vp.rank
+    assert vp.diagnostics["excitation_checks"][-1]["passed"]
     # every null vector of the base coefficient matrix must be a null vector of W
     C = np.array([[float(v) for v in row] for row in vp.coefficient_matrix()])
     null = np.linalg.svd(C)[2][vp.rank:].T
@@ -228,13 +328,23 @@ def test_sla_json_follows_design(sla_vp):
 @pytest.mark.parametrize("samples,scale", [(200, True), (200, False), (50, True), (1000, False)])
 def test_sla_dp_never_silently_wrong(samples, scale):
     """Whatever DP's verdict, a rank other than the certified 41, or a tolerance cut away
-    from a clear ridge, must come with a warning."""
+    from a clear ridge, must come with a warning; at rank 41 every printed coefficient
+    equals the paper's table (exact, for dp's own kept parameters) to its printed digits,
+    and coefficients with no trusted digit are listed with a warning, never printed."""
     mech = resolve("sla_suspension")
     res = solver("dp").solve(mech, samples=samples, scale=scale)
     ridge = res.diagnostics["ridge"]
     if res.rank != 41 or not ridge["clear"]:
         assert any("ridge" in w for w in res.warnings), res.warnings
     assert res.diagnostics["column_scaling"] != "none" if scale else res.diagnostics["column_scaling"] == "none"
+    if res.diagnostics["untrusted"]:
+        assert any("no trusted digit" in w for w in res.warnings)
+    if res.rank == 41:
+        table = symbolic_base_matrix(mech.geometry)
+        kept = [mech.parameters.index(p) for p in res.kept]
+        T = fmpq_mat(41, 70, [fmpq(v.numerator, v.denominator) for row in table for v in row])
+        TK = fmpq_mat(41, 41, [T[i, j] for i in range(41) for j in kept])
+        assert_digits_match(res, TK.solve(T), 41, pivots=kept)
 
 
 # ----- numeric cores on matrices with known rank ---------------------------------------
@@ -326,8 +436,8 @@ def test_cli_solve_json():
     data = json.loads(run("solve", "planar_2r", "--solver", "exact", "--format", "json").stdout)
     assert data["solver"] == "exact" and data["rank"] == 6 and data["certified"] is True
     # the closed form through the CLI: mass m2 moved to joint 2 at x1 = L1 = 3/5
-    assert data["base"][0] == {"name": "phi_b01", "expression": {"mx1": "1", "m2": "3/5"}}
-    assert data["base"][2] == {"name": "phi_b03", "expression": {"Izz1": "1", "m2": "9/25"}}
+    assert data["base"][0] == {"name": "phi_b01", "expression": {"mx1": "1", "m2": "0.6"}}
+    assert data["base"][2] == {"name": "phi_b03", "expression": {"Izz1": "1", "m2": "0.36"}}
     text = run("solve", "pendulum", "--solver", "vp", "--digits", "30").stdout
     assert "rank 3 (certified)" in text and "phi_b03 = Izz1" in text
 
