@@ -18,7 +18,6 @@ import click
 
 from . import __version__, registry
 from .errors import BaseparamsError
-from .expressions import exact_text
 
 
 class UserError(click.ClickException):
@@ -136,7 +135,7 @@ def describe(mech):
         "redundant_closure_equations": structure.redundant,
         "parameter_count": len(mech.parameters),
         "parameters": list(mech.parameters),
-        "geometry": {k: exact_text(v) for k, v in mech.geometry.items()},
+        "geometry": mech.geometry_text,
     }
 
 

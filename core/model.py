@@ -11,6 +11,7 @@ from fractions import Fraction
 
 import sympy
 
+from .expressions import exact_text
 from .joints import JointType
 from .params import parameter_names
 
@@ -109,6 +110,11 @@ class Mechanism:
             if b.label == label:
                 return b
         raise KeyError(label)
+
+    @property
+    def geometry_text(self):
+        """{name: exact decimal string}: the geometry as results and reports print it."""
+        return {name: exact_text(value) for name, value in self.geometry.items()}
 
     @property
     def geometry_subs(self):

@@ -53,7 +53,6 @@ from sympy import QQ
 from .backends import Arb
 from .body_conditions import analyse_bodies
 from .errors import InputError
-from .expressions import exact_text
 from .params import PARAMETER_KINDS, split_name
 from .result import BaseParameterResult
 from .sampled_transfers import sampled_joint_transfers
@@ -500,7 +499,7 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
     result = BaseParameterResult(
         mechanism=mechanism.name, solver="symbolic", parameters=params, rank=rank, base=base,
         eliminated=der.eliminated, certified=certified,
-        geometry={k: exact_text(v) for k, v in mechanism.geometry.items()},
+        geometry=mechanism.geometry_text,
         warnings=warnings, elapsed_s=time.perf_counter() - start, expression_values=values,
         rank_is_upper_bound=upper_bound, diagnostics=diagnostics)
     result.derivation = der

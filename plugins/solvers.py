@@ -25,10 +25,6 @@ EXACT_ROUNDS = 6           # exact: independent batches before the rank is decla
 
 
 # ----- shared ---------------------------------------------------------------------
-def geometry_strings(mechanism):
-    return {k: exact_text(v) for k, v in mechanism.geometry.items()}
-
-
 def base_rows(parameters, kept, eliminated, coefficient):
     """[{"name": "phi_b01", "expression": {kept: "1", eliminated: coeff, ...}}] in kept order.
 
@@ -180,7 +176,7 @@ class DoublePrecisionSolver:
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=r, base=base,
             eliminated=[params[j] for j in res.eliminated], certified=False, digits=None,
-            singular_values=[repr(float(v)) for v in s], geometry=geometry_strings(mechanism),
+            singular_values=[repr(float(v)) for v in s], geometry=mechanism.geometry_text,
             warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
 
     @staticmethod
@@ -478,7 +474,7 @@ class VariablePrecisionSolver:
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
             eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
-            singular_values=sv, geometry=geometry_strings(mechanism), warnings=warnings,
+            singular_values=sv, geometry=mechanism.geometry_text, warnings=warnings,
             elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
 
     @staticmethod
@@ -643,7 +639,7 @@ class ExactSolver:
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=rank, base=base,
             eliminated=[params[j] for j in eliminated], certified=settled, digits=None, singular_values=None,
-            geometry=geometry_strings(mechanism), warnings=warnings, elapsed_s=time.perf_counter() - start,
+            geometry=mechanism.geometry_text, warnings=warnings, elapsed_s=time.perf_counter() - start,
             diagnostics=diagnostics)
 
 

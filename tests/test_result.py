@@ -9,7 +9,7 @@ from fractions import Fraction
 import mpmath
 import pytest
 
-from baseparams.result import numerical_rank, same_row_space
+from baseparams.compare import numerical_rank, same_row_space
 
 
 def exact(rows):

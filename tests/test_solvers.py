@@ -33,7 +33,7 @@ from baseparams.exact_samples import rref_pivots as pivots_of
 from baseparams.loader import parse_mechanism, resolve
 from baseparams.plugins import solvers as builtin
 from baseparams.plugins.solvers import compare_runs
-from baseparams.result import same_row_space
+from baseparams.compare import same_row_space
 from baseparams.trajectory import Trajectory, observation_matrix
 
 from seed_tables import symbolic_base_matrix

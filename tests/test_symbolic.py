@@ -24,7 +24,8 @@ from baseparams.backends import Arb
 from baseparams.cli import main
 from baseparams.loader import resolve
 from baseparams.report import render
-from baseparams.result import parse_coefficient, same_row_space
+from baseparams.compare import same_row_space
+from baseparams.result import parse_coefficient
 from baseparams.symbolic import solve
 from baseparams.trajectory import Trajectory, observation_matrix
 
