@@ -115,16 +115,16 @@ def _evaluate(backend, expr, env):
     if expr.is_Pow:
         base, exponent = expr.args
         b = _evaluate(backend, base, env)
-        if exponent.is_Integer:
-            n = int(exponent)
+        if exponent.is_Integer or (exponent.is_Rational and exponent.q == 2):
+            # integer and half-integer powers (derivatives of sqrt give b**(-3/2) ...)
+            doubled = int(exponent * 2)
+            n = doubled // 2 if doubled % 2 == 0 else (doubled - 1) // 2
             result = backend.rational(Fraction(1))
             for _ in range(abs(n)):
                 result = result * b
-            return result if n >= 0 else backend.rational(Fraction(1)) / result
-        if exponent == sympy.Rational(1, 2):
-            return backend.sqrt(b)
-        if exponent == sympy.Rational(-1, 2):
-            return backend.rational(Fraction(1)) / backend.sqrt(b)
+            if n < 0:
+                result = backend.rational(Fraction(1)) / result
+            return result * backend.sqrt(b) if doubled % 2 else result
         raise ValueError(f"power {exponent} is not supported in backend evaluation")
     if isinstance(expr, sympy.sin):
         return backend.cos_sin(args[0])[1]

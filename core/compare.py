@@ -29,7 +29,7 @@ def same_row_space(a, b, tol=None):
     if tol is None and all(isinstance(v, Fraction) for row in a + b for v in row):
         rank = _rank_exact
     else:
-        tol = tol or Fraction(1, 10 ** 10)
+        tol = Fraction(1, 10 ** 10) if tol is None else tol
 
         def rank(rows):
             return numerical_rank(rows, tol)

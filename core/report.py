@@ -326,7 +326,9 @@ def check_text(result):
     if result.certified:
         text += " The proven lower bound meets the count: the rank is certified."
     elif result.rank_is_upper_bound:
-        text += " The count is only an upper bound: the rules and conditions miss a dependency."
+        text += (" The count is only an upper bound: either the rules and conditions miss a dependency,"
+                 " or the ball arithmetic could not prove that many independent columns (more digits"
+                 " may).")
     else:
         text += " The rank is not certified."
     return text

@@ -396,6 +396,8 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     """Check the symbolic count on W computed in ball arithmetic at ``digits`` (a
     :class:`Certificate`).
 
+    W is the trajectory's observation matrix stacked with rows at independent random states.
+
     - Lower bound (a proof): ``baseparams.certify.analyse`` with the kept columns imposed
       proves them independent, so rank(W) >= their number; if it cannot, its own
       analysis gives the rank it can prove.
@@ -408,10 +410,15 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     from flint import arb, arb_mat, fmpq
 
     from .certify import analyse
-    from .trajectory import observation_matrix
+    from .excitation import batch_matrix, random_batch, stack_rows
+    from .trajectory import Trajectory, observation_matrix
 
     backend = Arb(digits)
+    trajectory = trajectory or Trajectory.default(mechanism)
     W, info = observation_matrix(mechanism, backend, trajectory)
+    # rows at random states independent of the trajectory, so that a trajectory which does
+    # not excite the mechanism cannot lower the proven rank (core/excitation.py)
+    W = stack_rows(W, batch_matrix(mechanism, backend, trajectory, random_batch(mechanism, trajectory, seed=7919)))
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}

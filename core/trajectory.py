@@ -55,11 +55,20 @@ class Trajectory:
     def independent_values(self, mechanism, backend, t):
         """(z, zd, zdd) at time ``t`` (backend number or, for float64, an array of times)."""
         names = mechanism.independent
-        exprs = self.derivatives(names)
         env = {"t": t}
-        z = [backend.evaluate(e[0], env) for e in exprs]
-        zd = [backend.evaluate(e[1], env) for e in exprs]
-        zdd = [backend.evaluate(e[2], env) for e in exprs]
+        values = []
+        for name, derivatives in zip(names, self.derivatives(names)):
+            try:
+                with np.errstate(all="ignore"):          # non-finite values are reported below
+                    values.append([backend.evaluate(e, env) for e in derivatives])
+            except (ValueError, ZeroDivisionError) as exc:
+                raise InputError(f"cannot evaluate {derivatives[0]} or its derivatives: {exc}",
+                                 file=mechanism.path, key=f"trajectory.q.{name}") from None
+            if isinstance(backend, Float64) and not all(np.all(np.isfinite(v)) for v in values[-1]):
+                bad = np.atleast_1d(t)[~np.all([np.isfinite(np.broadcast_to(v, np.shape(t)))
+                                                 for v in values[-1]], axis=0)]
+                raise KinematicsError(f"{name} or its derivatives are not finite at t = {float(bad[0]):.6g} s")
+        z, zd, zdd = ([v[k] for v in values] for k in range(3))
         return z, zd, zdd
 
 
@@ -69,7 +78,8 @@ def samples_float64(mechanism, trajectory):
     ev = Evaluator(mechanism, backend)
     t = np.array([float(x) for x in trajectory.times])
     z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
-    z = [np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in z]
+    # a constant expression evaluates to one number: give every coordinate a value per sample
+    z, zd, zdd = ([np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in vals] for vals in (z, zd, zdd))
     try:
         sample = ev.sample(z, zd, zdd, None, where="")
     except KinematicsError:

@@ -11,7 +11,8 @@ docs/solvers.md explains the algorithms and what "certified" covers.
 import math
 import time
 
-from baseparams.excitation import batch_matrix, random_batch
+from baseparams.errors import KinematicsError
+from baseparams.excitation import batch_matrix, random_batch, stack_rows
 from baseparams.expressions import exact_text
 from baseparams.hookspecs import hookimpl
 from baseparams.result import BaseParameterResult
@@ -57,14 +58,6 @@ def _g(x, digits=3):
     return f"{x:.{digits}g}"
 
 
-def stack_rows(*mats):
-    """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
-    0.9 has no concatenation."""
-    cols = mats[0].ncols()
-    entries = [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)]
-    return type(mats[0])(sum(m.nrows() for m in mats), cols, entries)
-
-
 def untrusted_warning(items):
     return (f"{len(items)} nonzero coefficients have no trusted digit: omitted from the base "
             f"parameter expressions and listed in diagnostics.untrusted")
@@ -72,7 +65,7 @@ def untrusted_warning(items):
 
 def raised_warning(mechanism, before, after, states):
     return (f"the trajectory does not excite {mechanism.name}: rank raised from {before} to {after} "
-            f"by an independent random batch ({states} states at other times, velocities and "
+            f"by an independent random batch ({states} random positions, velocities and "
             f"accelerations), analysed together with W; use more samples or a richer trajectory")
 
 
@@ -184,7 +177,6 @@ class DoublePrecisionSolver:
         """dp on W stacked with an independent random batch: (diagnostics, stacked W, its DPResult)."""
         import numpy as np
         from baseparams.backends import Float64
-        from baseparams.errors import KinematicsError
         from baseparams.gautier import dp_gautier
         if rank is not None:
             return {"skipped": "rank forced"}, None, None
@@ -512,7 +504,6 @@ class VariablePrecisionSolver:
         final analysis (:func:`baseparams.certify.excitation_check`): (diagnostics, batch)."""
         from baseparams import certify
         from baseparams.backends import Arb
-        from baseparams.errors import KinematicsError
         a = final.analysis
         batch = random_batch(mechanism, trajectory, seed)
         _say(progress, f"vp: excitation check: {batch.states} random states at {final.digits} digits")
@@ -555,7 +546,7 @@ class VariablePrecisionSolver:
         _say(progress, f"vp: confirming {len(values)} recovered rationals at {D2} digits")
         try:
             check = BallRun(mechanism, D2, trajectory, kept=a.kept, progress=progress, batches=batches)
-        except ValueError as exc:
+        except (ValueError, KinematicsError) as exc:     # the result stands; only the recovery fails
             return {"attempted": True, "succeeded": False, "reason": str(exc)}
         b = check.analysis.beta
         with Arb(D2).activate():            # the rationals as balls at least as tight as b's

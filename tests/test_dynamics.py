@@ -249,3 +249,16 @@ child_frame = { point = ["0", "0", "0"], axis = ["0", "0", "1"], ref = ["1", "0"
     tau_z = sum(a * b for a, b in zip(k[0], phi))
     assert tau_z == pytest.approx(-m * w ** 2)
     assert k[0][mech.parameters.index("Ixy1")] == pytest.approx(w ** 2)
+
+
+def test_half_integer_powers_evaluate_in_every_backend():
+    """Derivatives of sqrt in a trajectory give powers like -3/2 (float64 vs arb vs sympy)."""
+    import sympy
+    x = sympy.Symbol("x")
+    expr = x ** sympy.Rational(-3, 2) + x ** sympy.Rational(3, 2) - x ** sympy.Rational(-1, 2)
+    value = float(expr.subs(x, sympy.Rational(7, 3)))
+    assert Float64().evaluate(expr, {"x": 7 / 3}) == pytest.approx(value, rel=1e-14)
+    backend = Arb(40)
+    with backend.activate():
+        got = backend.evaluate(expr, {"x": backend.rational(Fraction(7, 3))})
+        assert abs(got - arb(str(sympy.N(expr.subs(x, sympy.Rational(7, 3)), 45)))) < arb(10) ** -35
