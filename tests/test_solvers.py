@@ -454,3 +454,13 @@ def test_cli_plot_singular_values(tmp_path):
     out = tmp_path / "sv.png"
     run("plot", "singular-values", "pendulum", "-o", str(out))
     assert out.stat().st_size > 1000
+
+
+def test_dp_warns_when_an_independent_batch_lowers_its_rank(monkeypatch):
+    """More rows can only raise the true rank: a lower count exposes a fragile tolerance cut."""
+    dp = solver("dp")
+    monkeypatch.setattr(type(dp), "_excitation_check",
+                        lambda self, *args: ({"seed": 1, "states": 5, "rank": 2}, None, None))
+    res = dp.solve(resolve("pendulum"))
+    assert res.rank == 3
+    assert any(w.startswith("the rank cut is fragile") and "rank 2" in w for w in res.warnings), res.warnings
