@@ -99,12 +99,12 @@ class DoublePrecisionSolver:
             W, res = stacked, both
         elif check.get("error"):
             warnings.append(f"no excitation check: {check['error']}")
-        elif check.get("rank") is not None and check["rank"] < res.rank:
+        elif check.get("rank_with_batch", res.rank) < res.rank:
             # more rows can only raise the true rank: a lower count means the tolerance cut is
             # fragile (singular values near it move with the row count)
             warnings.append(f"the rank cut is fragile: W with an independent random batch of "
-                            f"{check['states']} states gives rank {check['rank']} at the same tolerance "
-                            f"rule, not {res.rank}")
+                            f"{check['states']} states gives rank {check['rank_with_batch']} at the same "
+                            f"tolerance rule, not {res.rank}")
         warnings += res.warnings
         params = mechanism.parameters
         noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)

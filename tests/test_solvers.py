@@ -459,8 +459,8 @@ def test_cli_plot_singular_values(tmp_path):
 def test_dp_warns_when_an_independent_batch_lowers_its_rank(monkeypatch):
     """More rows can only raise the true rank: a lower count exposes a fragile tolerance cut."""
     dp = solver("dp")
-    monkeypatch.setattr(type(dp), "_excitation_check",
-                        lambda self, *args: ({"seed": 1, "states": 5, "rank": 2}, None, None))
+    fake = {"seed": 1, "states": 5, "rows": 5, "rank": 3, "rank_with_batch": 2, "raised": False}
+    monkeypatch.setattr(type(dp), "_excitation_check", staticmethod(lambda *args: (fake, None, None)))
     res = dp.solve(resolve("pendulum"))
     assert res.rank == 3
     assert any(w.startswith("the rank cut is fragile") and "rank 2" in w for w in res.warnings), res.warnings
