@@ -63,10 +63,12 @@ def untrusted_warning(items):
             f"parameter expressions and listed in diagnostics.untrusted")
 
 
-def raised_warning(mechanism, before, after, states):
-    return (f"the trajectory does not excite {mechanism.name}: rank raised from {before} to {after} "
-            f"by an independent random batch ({states} random positions, velocities and "
-            f"accelerations), analysed together with W; use more samples or a richer trajectory")
+def raised_warning(mechanism, before, after, states, double_precision=False):
+    cause = (f"the trajectory does not excite {mechanism.name}, or double precision lost a small "
+             f"singular value of W" if double_precision else f"the trajectory does not excite {mechanism.name}")
+    return (f"{cause}: rank raised from {before} to {after} by an independent random batch ({states} "
+            f"random positions, velocities and accelerations), analysed together with W; use more "
+            f"samples or a richer trajectory" + (", or vp" if double_precision else ""))
 
 
 # ----- dp -------------------------------------------------------------------------
@@ -95,7 +97,7 @@ class DoublePrecisionSolver:
         res = dp_gautier(W, scale=scale, rank=rank)
         check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
         if check.get("raised"):
-            warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"]))
+            warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
             W, res = stacked, both
         elif check.get("error"):
             warnings.append(f"no excitation check: {check['error']}")
