@@ -3,10 +3,12 @@
 A trajectory gives each independent coordinate as an expression of time (a finite
 Fourier series by default); velocities and accelerations are its exact derivatives.
 Sample times are exact rationals, so at D digits every sample is computed at D digits
-from the start. Samples follow the mechanism along the constraint manifold: each one
-starts Newton-Raphson from the previous solution, and a sample that leaves the reachable
-range, passes a singular configuration or a coordinate limit stops the run with the
-time, the coordinates and the residual.
+from the start. Positions on the constraint manifold: in float64 all samples at once, by
+continuation from the reference configuration (or, if that fails, sample after sample
+along the trajectory); at D digits each sample's Newton starts from its float64 solution
+and ends in a Krawczyk enclosure. A sample that leaves the reachable range, passes a
+singular configuration or a coordinate limit stops the run with the time, the
+coordinates and the residual.
 """
 
 from dataclasses import dataclass
