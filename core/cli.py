@@ -119,6 +119,7 @@ def describe(mech):
     return {
         "name": mech.name,
         "title": mech.title,
+        "citation": mech.source,
         "path": mech.path,
         "bodies": mech.body_labels,
         "body_names": [b.name for b in mech.bodies],
@@ -143,6 +144,8 @@ def describe_text(info):
     lines = [f"{info['name']}: {info['title']}" if info["title"] else info["name"]]
     if info["path"]:
         lines.append(f"  file: {info['path']}")
+    if info["citation"]:
+        lines.extend(_wrap(f"source: {info['citation']}".split(), indent="  ").splitlines())
     lines.append(f"bodies ({len(info['bodies'])}, ground is 0):")
     lines += [f"  {label:>3}  {name}" for label, name in zip(info["bodies"], info["body_names"])]
     lines.append(f"joints ({len(info['joints'])}):")

@@ -182,3 +182,9 @@ def test_kinematics_error_exits_2(tmp_path):
     assert result.stderr.startswith("error: at t = ") and "coordinate theta" in result.stderr
     assert "leaves its range [-0.5, 0.5]" in result.stderr and "Traceback" not in result.output
     assert isinstance(result.exception, SystemExit)
+
+
+def test_show_gives_the_files_citation():
+    from baseparams.loader import resolve
+    info = json.loads(CliRunner().invoke(main, ["show", "puma560", "--format", "json"]).stdout)
+    assert info["citation"] == resolve("puma560").source and "Armstrong" in info["citation"]
