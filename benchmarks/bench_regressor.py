@@ -15,9 +15,9 @@ import tracemalloc
 
 import numpy as np
 
-from baseparams.backends import Arb, Float64
-from baseparams.loader import resolve
-from baseparams.trajectory import Trajectory, observation_matrix
+from baseparams.numeric.backends import Arb, Float64
+from baseparams.io.loader import resolve
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 
 def best_of(repeat, fn):

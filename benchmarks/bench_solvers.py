@@ -29,7 +29,7 @@ import time
 def one(kind, mech_name, digits, samples, scale):
     """Run one configuration in this process; print a JSON line."""
     from baseparams import registry
-    from baseparams.loader import resolve
+    from baseparams.io.loader import resolve
     mech = resolve(mech_name)
     options = {"samples": samples}
     if kind == "vp":
@@ -58,7 +58,7 @@ def one(kind, mech_name, digits, samples, scale):
 def whatif(mech, d22):
     """dp and vp on the SLA with D22 replaced (towards the parallelogram D22 = D12 + D13)."""
     from baseparams import registry
-    from baseparams.loader import parse_mechanism
+    from baseparams.io.loader import parse_mechanism
     text = open(mech.path).read()
     changed = text.replace('D22 = "0.2501"', f'D22 = "{d22}"')
     assert d22 == "0.2501" or changed != text, "the SLA file no longer has D22 = 0.2501"
@@ -75,10 +75,10 @@ def whatif(mech, d22):
 def dp_error(mech, samples, scale):
     """Largest |beta_dp - beta| in scaled units (dp's unrounded beta), beta from vp at 60
     digits for dp's kept set; None when dp's rank is wrong (no beta to compare)."""
-    from baseparams import certify
-    from baseparams.backends import Arb, Float64
-    from baseparams.gautier import dp_gautier
-    from baseparams.trajectory import Trajectory, observation_matrix
+    from baseparams.numeric import certify
+    from baseparams.numeric.backends import Arb, Float64
+    from baseparams.plugins.solvers.dp.gautier import dp_gautier
+    from baseparams.dynamics.trajectory import Trajectory, observation_matrix
     Wf, _ = observation_matrix(mech, Float64(), Trajectory.default(mech, samples=samples))
     res = dp_gautier(Wf, scale=scale)
     backend = Arb(60)

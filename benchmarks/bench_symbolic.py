@@ -14,10 +14,10 @@ import platform
 import time
 
 from baseparams import registry
-from baseparams.body_conditions import analyse_bodies, random_states
-from baseparams.loader import resolve
-from baseparams.report import render
-from baseparams.symbolic import solve
+from baseparams.plugins.solvers.symbolic.body_conditions import analyse_bodies, random_states
+from baseparams.io.loader import resolve
+from baseparams.cli.report import render
+from baseparams.plugins.solvers.symbolic.elimination import solve
 
 
 def best_of(repeat, fn):

@@ -13,7 +13,7 @@ hookimpl = pluggy.HookimplMarker("baseparams")
 
 @hookspec
 def baseparams_joint_types():
-    """Return a list of :class:`baseparams.joints.JointType` this plugin provides.
+    """Return a list of :class:`baseparams.model.joints.JointType` this plugin provides.
 
     A joint type supplies its coordinates (count, names, kinds), its motion (from which the
     child-to-parent transform follows in any backend: ``JointType.transform(q, backend)``)
@@ -26,7 +26,7 @@ def baseparams_transfer_rules(joint_type):
     """Return the multipole-transfer rules of the joint type named ``joint_type``.
 
     ``joint_type``: the type's name (``"R"``). Return a list of
-    :class:`baseparams.multipoles.TransferRule` (possibly empty: nothing may cross), or
+    :class:`baseparams.model.multipoles.TransferRule` (possibly empty: nothing may cross), or
     None when this plugin does not know that type. The first non-None answer wins. The
     symbolic solver calls this for every joint of a mechanism; a type with no rules makes
     its symbolic result an upper bound on the rank, which it says.
@@ -41,12 +41,12 @@ def baseparams_mechanisms():
 @hookspec
 def baseparams_solvers():
     """Return a list of solver objects: ``name``, ``description``, ``solve(mechanism, **options)``
-    returning a :class:`baseparams.result.BaseParameterResult`."""
+    returning a :class:`baseparams.solvers.result.BaseParameterResult`."""
 
 
 @hookspec
 def baseparams_effects():
-    """Return a list of :class:`baseparams.effects.Effect` (friction, spring, offset ...):
+    """Return a list of :class:`baseparams.dynamics.effects.Effect` (friction, spring, offset ...):
     ``name``, ``description``, ``coefficients`` and ``columns(q, qd, qdd, **options)``, the
     extra regressor columns (one per coefficient) of a force linear in its coefficients,
     evaluated on one joint coordinate's samples."""

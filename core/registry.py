@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pluggy
 
-from . import hookspecs
-from .errors import InputError
+from baseparams import hookspecs
+from baseparams.errors import InputError
 
 
 @dataclass(frozen=True)

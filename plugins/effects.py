@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from baseparams.effects import Effect
+from baseparams.dynamics.effects import Effect
 from baseparams.hookspecs import hookimpl
 
 

@@ -7,8 +7,8 @@ by the test suite as a null vector of the observation matrix.
 """
 
 from baseparams.hookspecs import hookimpl
-from baseparams.joints import JointType
-from baseparams.multipoles import TransferRule
+from baseparams.model.joints import JointType
+from baseparams.model.multipoles import TransferRule
 
 POINT = ("gap", "x"), ("gap", "y"), ("gap", "z")
 

@@ -14,7 +14,7 @@ tab::transferred_parameters): the conditions and transfers the paper applied by 
 
 import sympy
 
-from baseparams.params import parameter_names
+from baseparams.model.params import parameter_names
 
 GEOMETRY_SYMBOLS = ("D12", "D13", "D22", "D31", "L7", "L10", "DKx", "DKy", "DKz")
 

@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams import registry
-from baseparams.cli import main
-from baseparams.loader import resolve
+from baseparams.cli.commands import main
+from baseparams.io.loader import resolve
 
 
 def run(*args, code=0):
@@ -185,6 +185,6 @@ def test_kinematics_error_exits_2(tmp_path):
 
 
 def test_show_gives_the_files_citation():
-    from baseparams.loader import resolve
+    from baseparams.io.loader import resolve
     info = json.loads(CliRunner().invoke(main, ["show", "puma560", "--format", "json"]).stdout)
     assert info["citation"] == resolve("puma560").source and "Armstrong" in info["citation"]

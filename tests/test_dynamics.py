@@ -8,11 +8,11 @@ import pytest
 from flint import arb
 
 from baseparams import registry
-from baseparams.backends import Arb, Float64
-from baseparams.dynamics import Evaluator
+from baseparams.numeric.backends import Arb, Float64
+from baseparams.dynamics.evaluator import Evaluator
 from baseparams.errors import KinematicsError
-from baseparams.loader import parse_mechanism, resolve
-from baseparams.trajectory import Trajectory, observation_matrix
+from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 G0 = 9.81
 
@@ -187,7 +187,7 @@ def sympy_sin_t():
 
 def test_exact_rational_state_gives_exact_regressor():
     """Pendulum at cos = 3/5, sin = 4/5: K is rational and equals the closed form exactly."""
-    from baseparams.backends import Exact, TanHalf
+    from baseparams.numeric.backends import Exact, TanHalf
     mech = parse_mechanism(PENDULUM)
     backend = Exact()
     (k,) = Evaluator(mech, backend).sample([TanHalf(Fraction(1, 2))], [backend.rational(Fraction(2))],
@@ -226,7 +226,7 @@ def test_product_of_inertia_sign_against_a_point_mass_by_hand():
     the origin. Newton: the centripetal force m w^2 (0, -1, 0) at r = (1, 1, 0) needs the torque
     r x F = (0, 0, -m w^2) about z. Tensor-entry convention: Ixy = -m x y = -m, so the regressor's
     tau_1 = Ixy w^2 must equal -m w^2."""
-    from baseparams.params import from_mass_properties
+    from baseparams.model.params import from_mass_properties
     text = """
 [mechanism]
 name = "spinning_mass"

@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams import registry
-from baseparams.cli import main
-from baseparams.loader import parse_mechanism, resolve
+from baseparams.cli.commands import main
+from baseparams.io.loader import parse_mechanism, resolve
 
 
 def with_trajectory(name, replacements):

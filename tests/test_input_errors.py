@@ -7,7 +7,7 @@ import sys
 import pytest
 from click.testing import CliRunner
 
-from baseparams.cli import main
+from baseparams.cli.commands import main
 
 # A valid one-body mechanism; each case below breaks one thing in it.
 GOOD = """\

@@ -10,9 +10,9 @@ import sympy
 from flint import arb, fmpq
 
 from baseparams import registry
-from baseparams.backends import Arb, Exact, Float64, Symbolic, TanHalf
-from baseparams.dynamics import Evaluator
-from baseparams.loader import resolve
+from baseparams.numeric.backends import Arb, Exact, Float64, Symbolic, TanHalf
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.io.loader import resolve
 
 F = Fraction
 JOINTS = registry.joint_types()

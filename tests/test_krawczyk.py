@@ -5,10 +5,10 @@ from fractions import Fraction
 import pytest
 from flint import arb, fmpq
 
-from baseparams.backends import Arb
-from baseparams.dynamics import Evaluator
-from baseparams.loader import resolve
-from baseparams.trajectory import Trajectory
+from baseparams.numeric.backends import Arb
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.io.loader import resolve
+from baseparams.dynamics.trajectory import Trajectory
 
 
 @pytest.mark.parametrize("name", ["sla_suspension", "four_bar", "stewart_platform"])

@@ -9,7 +9,7 @@ from fractions import Fraction
 import mpmath
 import pytest
 
-from baseparams.compare import numerical_rank, same_row_space
+from baseparams.solvers.compare import numerical_rank, same_row_space
 
 
 def exact(rows):

@@ -8,8 +8,8 @@ fails to close shows up here.
 import numpy as np
 import pytest
 
-from baseparams.loader import resolve
-from baseparams.trajectory import Trajectory, samples_float64
+from baseparams.io.loader import resolve
+from baseparams.dynamics.trajectory import Trajectory, samples_float64
 
 
 @pytest.fixture(scope="module")

@@ -24,17 +24,19 @@ import pytest
 from click.testing import CliRunner
 from flint import arb, arb_mat, fmpq, fmpq_mat
 
-from baseparams import certify, registry
-from baseparams.backends import Arb, Float64
-from baseparams.cli import main
+from baseparams.numeric import certify
+from baseparams import registry
+from baseparams.numeric.backends import Arb, Float64
+from baseparams.cli.commands import main
 from baseparams.errors import InputError
-from baseparams.gautier import dp_gautier
-from baseparams.exact_samples import rref_pivots as pivots_of
-from baseparams.loader import parse_mechanism, resolve
-from baseparams.plugins import solvers as builtin
-from baseparams.plugins.solvers import compare_runs
-from baseparams.compare import same_row_space
-from baseparams.trajectory import Trajectory, observation_matrix
+from baseparams.plugins.solvers.dp.gautier import dp_gautier
+from baseparams.dynamics.exact_states import rref_pivots as pivots_of
+from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.plugins.solvers.exact import solver as exact_solver
+from baseparams.plugins.solvers.vp import solver as vp_solver
+from baseparams.plugins.solvers.vp.solver import compare_runs
+from baseparams.solvers.compare import same_row_space
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 from seed_tables import symbolic_base_matrix
 
@@ -144,7 +146,7 @@ def test_vp_under_excited_trajectory_is_caught(mech_name, samples, true_rank):
 
 def test_vp_excitation_check_cannot_be_passed_is_not_certified(monkeypatch):
     """No batch may be added to W: the first rank (2) stays, uncertified, with a warning."""
-    monkeypatch.setattr(builtin, "CHECK_ROUNDS", 0)
+    monkeypatch.setattr(vp_solver, "CHECK_ROUNDS", 0)
     res = solver("vp").solve(resolve("pendulum"), samples=2, recover=False)
     assert res.rank == 2 and not res.certified
     assert any(w.startswith("excitation check failed") for w in res.warnings), res.warnings
@@ -160,7 +162,7 @@ def test_dp_and_exact_under_excited_warn(name, mech_name, samples, true_rank):
 
 def test_exact_unsettled_rank_is_not_certified(monkeypatch):
     """The rank still rising at the last allowed batch: a lower bound only."""
-    monkeypatch.setattr(builtin, "EXACT_ROUNDS", 1)
+    monkeypatch.setattr(exact_solver, "EXACT_ROUNDS", 1)
     res = solver("exact").solve(resolve("puma560"), samples=2)
     assert not res.certified
     assert any("still rose" in w for w in res.warnings), res.warnings
@@ -211,7 +213,7 @@ def test_vp_untrusted_coefficients_are_listed_not_printed():
         analysis = SimpleNamespace(beta=beta, kept=[0], eliminated=[1, 2, 3])
         final = SimpleNamespace(analysis=analysis, digits=30,
                                 digits_of=[[certify.radius_digits(beta[0, j]) for j in range(3)]])
-        rows, printed, untrusted = builtin._vp_coefficients(final, None, ["a", "b", "c", "d"])
+        rows, printed, untrusted = vp_solver._vp_coefficients(final, None, ["a", "b", "c", "d"])
     assert rows == [{"name": "phi_b01", "expression": {"a": "1", "c": "0." + "3" * 30}}]
     assert printed == [30]
     assert untrusted == [{"base": "phi_b01", "parameter": "b", "ball": untrusted[0]["ball"]}]

@@ -6,7 +6,7 @@
   transfers reproduced.
 - Every built-in mechanism: the result's row space is that of W, checked independently:
   W annihilates the exact null space of the result's coefficient matrix (40 digits) and
-  the shared ball analysis (baseparams.certify) proves the same rank.
+  the shared ball analysis (baseparams.numeric.certify) proves the same rank.
 - Options, the upper-bound path (rules removed), JSON consistency, reports and the CLI.
 - The rank check: generators with square roots (a non-unit axis) are tested too, and a
   generator that is not a null vector fails the check without being called an upper bound.
@@ -19,15 +19,16 @@ import sympy
 from click.testing import CliRunner
 from flint import arb_mat, fmpq, fmpq_mat
 
-from baseparams import certify, registry
-from baseparams.backends import Arb
-from baseparams.cli import main
-from baseparams.loader import resolve
-from baseparams.report import render
-from baseparams.compare import same_row_space
-from baseparams.result import parse_coefficient
-from baseparams.symbolic import solve
-from baseparams.trajectory import Trajectory, observation_matrix
+from baseparams.numeric import certify
+from baseparams import registry
+from baseparams.numeric.backends import Arb
+from baseparams.cli.commands import main
+from baseparams.io.loader import resolve
+from baseparams.cli.report import render
+from baseparams.solvers.compare import same_row_space
+from baseparams.solvers.result import parse_coefficient
+from baseparams.plugins.solvers.symbolic.elimination import solve
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 from seed_tables import NO_EFFECT, TRANSFERS, symbolic_base_matrix
 
@@ -191,7 +192,7 @@ def test_bad_option_names_are_input_errors():
 
 def test_missing_rules_make_the_rank_an_upper_bound(monkeypatch):
     """Without the S-joint rules the symbolic count is too high; the numeric check says so."""
-    import baseparams.transfers as transfers
+    import baseparams.dynamics.transfers as transfers
     original = registry.transfer_rules
     monkeypatch.setattr(transfers.registry, "transfer_rules",
                         lambda name: None if name == "S" else original(name))
@@ -211,7 +212,7 @@ def _tilted_pendulum():
     axis is (0, 1, 1)/sqrt(2), so generators carry square roots of non-squares."""
     from pathlib import Path
 
-    from baseparams.loader import parse_mechanism
+    from baseparams.io.loader import parse_mechanism
     text = Path(registry.mechanisms()["pendulum"].item.path).read_text()
     old = 'child_frame = { point = ["0", "0", "0"], axis = ["0", "0", "1"], ref = ["1", "0", "0"] }'
     assert text.count(old) == 1
@@ -236,7 +237,7 @@ def test_irrational_generators_are_tested():
 def _corrupt(monkeypatch, pivot, change):
     """Make ``solve`` check a wrong generator: ``change(vector, field)`` edits the reduced
     vector of the step eliminating ``pivot``, after the elimination."""
-    import baseparams.symbolic as symbolic
+    import baseparams.plugins.solvers.symbolic.elimination as symbolic
     original = symbolic.eliminate
 
     def eliminate(*args, **kwargs):
@@ -335,7 +336,7 @@ def _sla_with_special_geometry():
     the damper mount C in the plane where H moves, and a vertical first axis at J."""
     from pathlib import Path
 
-    from baseparams.loader import parse_mechanism
+    from baseparams.io.loader import parse_mechanism
     path = registry.mechanisms()["sla_suspension"].item.path
     text = Path(path).read_text()
     swaps = [

@@ -37,8 +37,8 @@ PLUGIN = '''\
 """A cylindrical joint: slides along and turns about the frames' common z axis."""
 
 from baseparams.hookspecs import hookimpl
-from baseparams.joints import JointType
-from baseparams.multipoles import TransferRule
+from baseparams.model.joints import JointType
+from baseparams.model.multipoles import TransferRule
 
 CYLINDRICAL = JointType(
     name="C", description="cylindrical: translation along z, then rotation about z",

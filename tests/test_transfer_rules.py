@@ -1,7 +1,7 @@
 """Every multipole-transfer rule of every joint type, as a null vector of the regressor.
 
 For each built-in mechanism and each joint (tree or loop-closing) whose type has rules,
-the rule is mapped into both bodies' frames (baseparams.transfers), the geometry
+the rule is mapped into both bodies' frames (baseparams.dynamics.transfers), the geometry
 substituted exactly, and K n is evaluated at 60 digits on random states: a rule is a
 null direction when |K n| / (|K| |n|) < 1e-40. The seed's condition 3 (a dipole along a
 prismatic joint's sliding axis) is shown NOT to be one, with the Lagrangian change
@@ -16,11 +16,11 @@ import pytest
 from flint import arb, fmpq
 
 from baseparams import registry
-from baseparams.backends import Arb, Float64
-from baseparams.dynamics import Evaluator
-from baseparams.loader import parse_mechanism, resolve
-from baseparams.trajectory import Trajectory
-from baseparams.transfers import dipole_params, joint_frames, numeric_vector, rule_generators
+from baseparams.numeric.backends import Arb, Float64
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.dynamics.transfers import dipole_params, joint_frames, numeric_vector, rule_generators
 
 DIGITS = 60
 STATES = 3

@@ -1,0 +1,5 @@
+"""``python -m baseparams.cli``: the same as the ``baseparams`` command."""
+
+from .commands import main
+
+main()

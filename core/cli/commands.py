@@ -1,0 +1,378 @@
+"""The ``baseparams`` command line (click).
+
+One function per verb. Every verb that prints results takes ``--format text|json``; the
+JSON keys are contracts (docs/cli.md). Errors a user can fix (a bad mechanism file, a
+trajectory leaving the reachable range) are :class:`baseparams.errors.BaseparamsError`;
+the :class:`Group` below turns them, once for every verb, into ``error: <message>`` on
+stderr and exit code 2, with no traceback. Exit code 1 is reserved for a check that
+failed (solvers disagree, a gap not closed); click's own usage errors exit 2.
+
+To add a verb: write a function decorated with ``@main.command()`` (or ``@plot.command()``
+for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
+"""
+
+import json
+import textwrap
+
+import click
+
+from baseparams import __version__
+from baseparams import registry
+from baseparams.errors import BaseparamsError
+
+
+class UserError(click.ClickException):
+    """A message for the user, printed as ``error: ...`` on stderr; exit code 2."""
+    exit_code = 2
+
+    def show(self, file=None):
+        click.echo(f"error: {self.format_message()}", err=True, file=file)
+
+
+class Group(click.Group):
+    """A click group that reports baseparams' own errors as :class:`UserError`."""
+    group_class = type          # subgroups (``plot``) use this class too
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BaseparamsError as exc:
+            raise UserError(getattr(exc, "message", str(exc))) from None
+
+
+def format_option(function):
+    """``--format text|json`` (default text)."""
+    return click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text",
+                        show_default=True, help="Output format: readable text or one JSON object.")(function)
+
+
+def emit(fmt, data, text):
+    """Print ``data`` as JSON or ``text`` (a string or a callable returning one)."""
+    if fmt == "json":
+        click.echo(json.dumps(data, indent=2))
+    else:
+        click.echo(text() if callable(text) else text)
+
+
+def load(mech):
+    """A registered mechanism name or a path to a mechanism file -> Mechanism."""
+    from baseparams.io.loader import resolve
+    return resolve(mech)
+
+
+def _wrap(words, indent="  "):
+    return textwrap.fill(" ".join(words), width=88, initial_indent=indent, subsequent_indent=indent)
+
+
+def _version():
+    installed = registry.installed_version()
+    return __version__ if installed == "not installed" else installed
+
+
+@click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(version=_version(), prog_name="baseparams")
+def main():
+    """Base inertial parameters of mechanisms.
+
+    MECH is a registered mechanism name (see `baseparams list`) or a path to a
+    mechanism file (TOML, see docs/mechanism-format.md). Exit codes: 0 success,
+    1 a check failed, 2 bad input or usage (the message names the file, the key
+    and the reason).
+    """
+
+
+# ----- list ---------------------------------------------------------------------
+@main.command("list")
+@format_option
+def list_mechanisms(fmt):
+    """List the registered mechanisms.
+
+    One line per mechanism: its name (usable as MECH), the distribution that provides
+    it and its title. JSON: {"mechanisms": [{"name", "title", "source", "path"}]}, where
+    "source" is the providing distribution.
+    """
+    rows = []
+    for name, reg in registry.mechanisms().items():
+        row = {"name": name, "title": "", "source": reg.distribution, "path": str(reg.item.path)}
+        try:
+            row["title"] = load(name).title
+        except BaseparamsError as exc:      # one broken file must not hide the others
+            row["error"] = getattr(exc, "message", str(exc))
+        rows.append(row)
+
+    def text():
+        if not rows:
+            return "no mechanisms registered"
+        width = max(len(r["name"]) for r in rows)
+        dist = max(len(r["source"]) for r in rows)
+        return "\n".join(f"{r['name']:<{width}}  {r['source']:<{dist}}  "
+                         + (f"error: {r['error']}" if "error" in r else r["title"]) for r in rows)
+
+    emit(fmt, {"mechanisms": rows}, text)
+
+
+# ----- show ---------------------------------------------------------------------
+def describe(mech):
+    """The structure of a mechanism as the ``show`` JSON object."""
+    from baseparams.dynamics.evaluator import closure_structure
+    structure = closure_structure(mech)
+    tree = {edge.joint.name for edge in mech.tree}
+    return {
+        "name": mech.name,
+        "title": mech.title,
+        "citation": mech.source,
+        "path": mech.path,
+        "bodies": mech.body_labels,
+        "body_names": [b.name for b in mech.bodies],
+        "joints": [{"name": j.name, "type": j.type.name, "parent": j.parent, "child": j.child,
+                    "role": "tree" if j.name in tree else "loop",
+                    "coordinates": list(j.coordinates) if j.name in tree else []}
+                   for j in mech.joints],
+        "coordinates": list(mech.coordinates),
+        "independent": [mech.coordinates[i] for i in structure.independent],
+        "loops": len(mech.loops),
+        "dof": structure.dof,
+        "gruebler": mech.gruebler,
+        "closure_equations": mech.closure_equation_count,
+        "redundant_closure_equations": structure.redundant,
+        "parameter_count": len(mech.parameters),
+        "parameters": list(mech.parameters),
+        "geometry": mech.geometry_text,
+    }
+
+
+def describe_text(info):
+    lines = [f"{info['name']}: {info['title']}" if info["title"] else info["name"]]
+    if info["path"]:
+        lines.append(f"  file: {info['path']}")
+    if info["citation"]:
+        lines.extend(_wrap(f"source: {info['citation']}".split(), indent="  ").splitlines())
+    lines.append(f"bodies ({len(info['bodies'])}, ground is 0):")
+    lines += [f"  {label:>3}  {name}" for label, name in zip(info["bodies"], info["body_names"])]
+    lines.append(f"joints ({len(info['joints'])}):")
+    width = max(len(j["name"]) for j in info["joints"])
+    tw = max(len(j["type"]) for j in info["joints"])
+    for j in info["joints"]:
+        coords = " ".join(j["coordinates"]) if j["role"] == "tree" else "(closes a loop)"
+        lines.append(f"  {j['name']:<{width}}  {j['type']:<{tw}}  {j['parent']:>2} -> {j['child']:<2}  "
+                     f"{j['role']:<4}  {coords}")
+    lines.append(f"tree coordinates ({len(info['coordinates'])}):")
+    lines.append(_wrap(info["coordinates"]))
+    lines.append(f"independent coordinates ({len(info['independent'])}): {' '.join(info['independent'])}")
+    lines.append(f"loops: {info['loops']} ({info['closure_equations']} closure equations, "
+                 f"{info['redundant_closure_equations']} redundant)")
+    lines.append(f"degrees of freedom: {info['dof']} (Gruebler count {info['gruebler']})")
+    if info["geometry"]:
+        lines.append(f"geometry ({len(info['geometry'])}, exact):")
+        lines.append(_wrap(f"{k}={v}" for k, v in info["geometry"].items()))
+    lines.append(f"inertial parameters ({info['parameter_count']}):")
+    lines.append(_wrap(info["parameters"]))
+    return "\n".join(lines)
+
+
+@main.command()
+@click.argument("mech", metavar="MECH")
+@format_option
+def show(mech, fmt):
+    """Show a mechanism's bodies, joints, coordinates and parameters.
+
+    Joints are marked as spanning-tree joints (with their coordinates) or loop-closing
+    joints. The degrees of freedom are the tree coordinates minus the rank of the
+    loop-closure Jacobian; the Gruebler count and the number of redundant closure
+    equations are printed beside them. MECH is a registered name or a path to a
+    mechanism file.
+    """
+    info = describe(load(mech))
+    emit(fmt, info, lambda: describe_text(info))
+
+
+# ----- plugins ------------------------------------------------------------------
+@main.command()
+@format_option
+def plugins(fmt):
+    """List the installed plugins and the distributions providing them.
+
+    Joint types, solvers, mechanisms and model effects. Built-ins come from the
+    `baseparams` distribution; a third party registers its own through the `baseparams`
+    entry-point group (see README.md, "Plugins"). A joint type marked [no transfer rules]
+    makes the symbolic solver's rank an upper bound.
+    """
+    def entry(name, reg, **extra):
+        out = {"name": name, "distribution": reg.distribution}
+        if getattr(reg.item, "description", ""):
+            out["description"] = reg.item.description
+        return {**out, **extra}
+
+    data = {
+        "joints": [entry(n, r, dof=r.item.dof, suffixes=list(r.item.suffixes),
+                         transfer_rules=registry.transfer_rules(n) is not None)
+                   for n, r in registry.joint_types().items()],
+        "solvers": [entry(n, r) for n, r in registry.solvers().items()],
+        "mechanisms": [entry(n, r, path=str(r.item.path)) for n, r in registry.mechanisms().items()],
+        "effects": [entry(n, r) for n, r in registry.effects().items()],
+    }
+
+    def text():
+        lines = []
+        for kind, items in data.items():
+            lines.append(f"{kind} ({len(items)}):")
+            width = max([len(i["name"]) for i in items] + [1])
+            dist = max([len(i["distribution"]) for i in items] + [1])
+            for i in items:
+                note = i.get("description") or i.get("path", "")
+                if kind == "joints" and not i["transfer_rules"]:
+                    note += " [no transfer rules]"
+                lines.append(f"  {i['name']:<{width}}  {i['distribution']:<{dist}}  {note}".rstrip())
+            if not items:
+                lines.append("  (none)")
+        return "\n".join(lines)
+
+    emit(fmt, data, text)
+
+
+# ----- solve --------------------------------------------------------------------
+def get_solver(name):
+    """A registered solver by name; a UserError listing the registered ones otherwise."""
+    solvers = registry.solvers()
+    if name not in solvers:
+        raise UserError(f"unknown solver {name!r}; registered solvers: {', '.join(solvers) or '(none)'} "
+                        f"(see `baseparams plugins`)")
+    return solvers[name].item
+
+
+def _progress(message):
+    click.echo(message, err=True)
+
+
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
+              help="A registered solver (`baseparams plugins` lists them; built in: dp, vp, exact).")
+@click.option("--digits", type=click.IntRange(10, 20000), default=None,
+              help="Fix the working precision of a variable-precision solver [default: automatic].")
+@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
+              help="Samples of the exciting trajectory (or random states, for exact) "
+                   "[default: the mechanism file's].")
+@format_option
+def solve(mech, solver_name, digits, samples, fmt):
+    """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
+    base parameter expressions phi_b = phi_1 + beta phi_2.
+
+    Progress and warnings (e.g. no clear ridge in the singular values) go to stderr.
+    Numeric coefficients carry only the digits the solver trusts.
+    """
+    solver = get_solver(solver_name)
+    options = {"progress": _progress}
+    if digits is not None:
+        options["digits"] = digits
+    if samples is not None:
+        options["samples"] = samples
+    result = solver.solve(load(mech), **options)
+    for warning in result.warnings:
+        click.echo(f"warning: {warning}", err=True)
+
+    def text():
+        lines = [result.to_text()]
+        lines += [f"  {line}" for line in (result.diagnostics or {}).get("summary", [])]
+        return "\n".join(lines)
+
+    emit(fmt, result.to_json(), text)
+
+
+# ----- plot ---------------------------------------------------------------------
+@main.group()
+def plot():
+    """Write figures (PNG, PDF or SVG)."""
+
+
+@plot.command("mechanism")
+@click.argument("mech", metavar="MECH")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="Image file to write.")
+@click.option("--instants", type=click.IntRange(1, 12), default=4, show_default=True,
+              help="Configurations of the default trajectory to draw (they span the range "
+                   "of the first independent coordinate).")
+@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
+              help="Image format [default: from the file name, else png].")
+def plot_mechanism(mech, output, instants, fmt):
+    """Draw MECH in 3D at a few instants of its default trajectory.
+
+    Bodies are segments between their joints (wheels are discs), ground joints black
+    markers; the instants span the range of the first independent coordinate and the
+    larger values are drawn darker. Without a default trajectory the reference
+    configuration is drawn.
+    """
+    from baseparams.cli.plots import plot_mechanism as draw
+    written = draw(load(mech), output, instants=instants, fmt=fmt)
+    click.echo(f"wrote {written}")
+
+
+@plot.command("singular-values")
+@click.argument("mech", metavar="MECH")
+@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+              help="Image file to write.")
+@click.option("--solver", "solvers", multiple=True, default=("dp", "vp"), show_default=True,
+              help="Solvers whose singular values to draw (repeat the option).")
+@click.option("--digits", type=click.IntRange(10, 20000), default=30, show_default=True,
+              help="Precision of variable-precision solvers (the seed paper's figure uses 30).")
+@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
+              help="Samples of the exciting trajectory [default: the mechanism file's].")
+@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
+              help="Image format [default: from the file name, else png].")
+def plot_singular_values(mech, output, solvers, digits, samples, fmt):
+    """Singular values of the (column-scaled) observation matrix of MECH, one series per
+    solver on one log scale, with each solver's rank marked: the seed paper's figure of
+    DP (*) against VP (+)."""
+    from baseparams.cli.plots import plot_singular_values as draw
+    mechanism = load(mech)
+    results = []
+    for name in solvers:
+        solver = get_solver(name)
+        options = {"progress": _progress, "digits": digits, "recover": False}
+        if samples is not None:
+            options["samples"] = samples
+        result = solver.solve(mechanism, **options)
+        if not result.singular_values:
+            raise UserError(f"solver {name!r} gives no singular values to plot")
+        results.append(result)
+    written = draw(results, output, fmt=fmt)
+    click.echo(f"wrote {written}")
+
+
+# ----- report (symbolic derivation) -------------------------------------------------
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "latex"]), default="text",
+              show_default=True, help="Rendering of the derivation.")
+@click.option("--keep", default="", help="Parameters never to eliminate (comma separated).")
+@click.option("--eliminate-first", "first", default="",
+              help="Parameters to eliminate whenever a transfer allows it (comma separated).")
+@click.option("--no-certify", is_flag=True, help="Skip the ball-arithmetic rank check (faster).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Write the report to this file instead of standard output.")
+def report(mech, fmt, keep, first, no_certify, output):
+    """Derive MECH's base parameters by multipole transfers and print the derivation.
+
+    Like the seed paper's Tabs. 4-5 and appendix: parameters without effect (per body and
+    condition), the transfer at each joint and the parameter it eliminates, every step's
+    values, the base parameters and how the rank was checked (docs/symbolic.md).
+    """
+    from baseparams.cli.report import render
+    solver = registry.solvers()["symbolic"].item
+    result = solver.solve(load(mech), keep=keep, eliminate_first=first, certify=not no_certify)
+    text = render(result, fmt)
+    if output:
+        try:
+            fh = open(output, "w", encoding="utf-8")
+        except OSError as exc:
+            raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
+        with fh:
+            fh.write(text)
+        click.echo(f"wrote {output}")
+    else:
+        click.echo(text, nl=False)
+
+
+# Keep this last: `python -m baseparams.cli.commands` runs the command line.
+if __name__ == "__main__":
+    main()

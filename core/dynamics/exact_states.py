@@ -1,0 +1,119 @@
+"""The observation matrix over the rationals, and base parameters from its exact rref.
+
+For an open chain with rational geometry, the kinematics is rational at rational points
+of the unit circle: an angle given by ``t = tan(theta/2)`` has ``cos = (1 - t^2)/(1 + t^2)``
+and ``sin = 2t/(1 + t^2)`` (:class:`baseparams.numeric.backends.TanHalf`). With random rational
+angles, lengths, velocities and accelerations, every regressor entry is an exact
+rational (python-flint ``fmpq``), W is exact, and so are its rank and its reduced row
+echelon form, from which the base parameters follow with no tolerance at all.
+
+What "exact" means here: the rank of W at the sampled states, a lower bound of the number
+of base parameters. It equals that number unless every sample falls on the zero set of
+some nonzero polynomial (a minor of W): random samples make that a probability-zero
+event (Schwartz-Zippel); a second independent batch is added and must not raise the rank.
+
+Closed loops are refused: loop closure makes the dependent coordinates algebraic, not
+rational, functions of the independent ones.
+"""
+
+import random
+from fractions import Fraction
+
+from flint import fmpq, fmpq_mat
+
+from baseparams.numeric.backends import Exact, TanHalf
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.errors import InputError, KinematicsError
+
+
+def coordinate_kinds(mechanism):
+    """'angle' or 'length' for each independent coordinate."""
+    names = mechanism.independent or mechanism.coordinates
+    kinds = []
+    for name in names:
+        joint = mechanism.joint_of_coordinate(name)
+        kinds.append(joint.type.coordinate_kinds[list(joint.coordinates).index(name)])
+    return list(names), kinds
+
+
+def check_exact_possible(mechanism):
+    """InputError unless the mechanism is an open chain (exact kinematics exists)."""
+    if mechanism.loops:
+        raise InputError(
+            f"the exact solver needs an open kinematic chain, and {mechanism.name} has "
+            f"{len(mechanism.loops)} closed loop(s): loop closure makes the dependent coordinates "
+            f"irrational; use --solver vp (certified ball arithmetic) instead",
+            file=mechanism.path)
+
+
+def _random_state(rng, mechanism, names, kinds):
+    z, zd, zdd = [], [], []
+    for name, kind in zip(names, kinds):
+        if kind == "angle":
+            z.append(TanHalf(Fraction(rng.randint(-97, 97), rng.randint(37, 101))))
+        else:
+            lo, hi = mechanism.joint_of_coordinate(name).limits.get(name, (Fraction(-1), Fraction(1)))
+            z.append(fmpq(1) * _fmpq(lo + (hi - lo) * Fraction(rng.randint(1, 99), 100)))
+        zd.append(fmpq(rng.randint(-50, 50), rng.randint(7, 31)))
+        zdd.append(fmpq(rng.randint(-50, 50), rng.randint(7, 31)))
+    return z, zd, zdd
+
+
+def _fmpq(value):
+    value = Fraction(value)
+    return fmpq(value.numerator, value.denominator)
+
+
+def exact_observation_matrix(mechanism, samples, seed=0):
+    """W over the rationals at ``samples`` random states: an ``fmpq_mat``.
+
+    Raises InputError for closed loops or geometry that is not rational here (an axis of
+    irrational length, say).
+    """
+    check_exact_possible(mechanism)
+    names, kinds = coordinate_kinds(mechanism)
+    rng = random.Random(seed)
+    try:
+        ev = Evaluator(mechanism, Exact())
+        rows = []
+        for _ in range(samples):
+            rows.extend(ev.sample(*_random_state(rng, mechanism, names, kinds)).regressor())
+    except KinematicsError as exc:
+        raise InputError(f"the exact solver cannot evaluate {mechanism.name} in rational arithmetic "
+                         f"({exc}); use --solver vp", file=mechanism.path) from None
+    cols = len(mechanism.parameters)
+    return fmpq_mat(len(rows), cols, [_as_fmpq(v) for row in rows for v in row])
+
+
+def _as_fmpq(v):
+    if isinstance(v, fmpq):
+        return v
+    if isinstance(v, Fraction):
+        return fmpq(v.numerator, v.denominator)
+    return fmpq(v)
+
+
+def rref_base(W):
+    """(rank, kept columns, eliminated columns, beta as Fractions) from the exact rref of W.
+
+    The pivot columns of the rref are kept (the leftmost basis); a non-pivot column j is
+    the combination ``W_j = sum_i R[i, j] W_{p_i}`` of them, so
+    ``phi_b,i = phi_{p_i} + sum_j R[i, j] phi_j``: beta is R's non-pivot columns.
+    """
+    R, rank = W.rref()
+    n = W.ncols()
+    kept = rref_pivots(R, rank)
+    eliminated = [j for j in range(n) if j not in set(kept)]
+    beta = [[Fraction(int(R[i, j].p), int(R[i, j].q)) for j in eliminated] for i in range(rank)]
+    return rank, kept, eliminated, beta
+
+
+def rref_pivots(R, rank):
+    """Pivot columns of a reduced row echelon form ``R`` of rank ``rank``: the leading
+    nonzero of each of its first ``rank`` rows."""
+    pivots, row = [], 0
+    for j in range(R.ncols()):
+        if row < rank and R[row, j] != 0:
+            pivots.append(j)
+            row += 1
+    return pivots

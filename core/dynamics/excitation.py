@@ -1,0 +1,141 @@
+"""Independent random batches that check whether a trajectory excites a mechanism.
+
+A trajectory that does not excite every base parameter (too few samples, a coordinate
+that never moves or never accelerates ...) gives W a clean ridge at too low a rank:
+every missing direction is an exact zero of W, so no precision shows it. Rows of W at
+states drawn independently of the trajectory do. The numeric solvers analyse W together
+with such a batch before they trust (or certify) a rank.
+
+Positions, velocities and accelerations of the batch are all random: each independent
+coordinate is drawn in a box around the trajectory's range (widened, so a coordinate the
+trajectory holds still moves here too, and kept inside the joint's limits). Closed
+loops are assembled by continuation from the reference configuration, on the same
+branch as the trajectory; a draw that cannot be assembled is redrawn closer to the
+trajectory's range.
+"""
+
+import math
+import random
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+from flint import arb, arb_mat
+
+from baseparams.numeric.backends import Float64
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.errors import KinematicsError
+
+WIDEN_ANGLE = 0.3          # rad added on each side of an angle's range on the trajectory
+WIDEN_LENGTH = 0.02        # m added on each side of a length's range
+REDRAWS = 8                # attempts per state before it is drawn inside the trajectory's range
+
+
+@dataclass(frozen=True)
+class RandomBatch:
+    """States independent of the trajectory: one tuple of Fractions per state for each of
+    the independent positions, velocities and accelerations, and the float64 tree
+    coordinates of each state (a closed loop's start for Newton at higher precision)."""
+    seed: int
+    z: tuple
+    zd: tuple
+    zdd: tuple
+    start: tuple              # per state: list of float tree coordinates
+
+    @property
+    def states(self):
+        return len(self.z)
+
+
+def random_batch(mechanism, trajectory, seed):
+    """At least as many rows as parameters (ceil(n / f) states)."""
+    f = max(1, len(mechanism.independent))
+    count = max(2, math.ceil(len(mechanism.parameters) / f))
+    t0, t1 = min(trajectory.times), max(trajectory.times)
+    grid = np.linspace(float(t0), float(t1), 201)
+    z, zd, zdd = trajectory.independent_values(mechanism, Float64(), grid)
+    boxes = _boxes(mechanism, z)
+    vel, acc = _scales(zd), _scales(zdd)
+    rng = random.Random(seed)
+    ev = Evaluator(mechanism, Float64())
+    states = []
+    for _ in range(count):
+        position, start = _assembled_draw(ev, boxes, rng)
+        states.append((position, tuple(_draw(rng, vel)), tuple(_draw(rng, acc)), start))
+    return RandomBatch(seed, *(tuple(column) for column in zip(*states)))
+
+
+def _boxes(mechanism, values):
+    """Per independent coordinate: (low, high, trajectory low, trajectory high) as floats."""
+    boxes = []
+    for name, v in zip(mechanism.independent, values):
+        v = np.asarray(v, dtype=float)
+        lo, hi = float(v.min()), float(v.max())
+        joint = mechanism.joint_of_coordinate(name)
+        kind = joint.type.coordinate_kinds[joint.coordinates.index(name)]
+        widen = WIDEN_ANGLE if kind == "angle" else WIDEN_LENGTH
+        low, high = lo - widen, hi + widen
+        if name in joint.limits:
+            limit_lo, limit_hi = joint.limits[name]
+            low, high = max(low, limit_lo), min(high, limit_hi)
+        boxes.append((low, high, lo, hi))
+    return boxes
+
+
+def _assembled_draw(ev, boxes, rng):
+    """A random position (Fractions) the mechanism can take, with its float tree coordinates."""
+    for attempt in range(REDRAWS + 1):
+        shrink = Fraction(attempt, REDRAWS)        # 0: the widened box ... 1: the trajectory's range
+        position = []
+        for low, high, lo, hi in boxes:
+            a = Fraction(low) + (Fraction(lo) - Fraction(low)) * shrink
+            b = Fraction(high) + (Fraction(hi) - Fraction(high)) * shrink
+            position.append(a + (b - a) * Fraction(rng.randint(0, 10000), 10000))
+        try:
+            q = ev.assemble([float(v) for v in position])
+        except KinematicsError:
+            continue
+        return tuple(position), [float(np.asarray(v)) for v in q]
+    raise KinematicsError("no random state of the excitation check could be assembled, even "
+                          "inside the trajectory's range of independent coordinates")
+
+
+def _draw(rng, scales):
+    return [s * Fraction(rng.randint(-1000, 1000), 1000) for s in scales]
+
+
+def _scales(values):
+    """Per coordinate: the largest |value| on the grid to 2 digits (else the largest of the
+    others, else 1), as an exact rational."""
+    peaks = [float(np.max(np.abs(np.asarray(v, dtype=float)))) for v in values]
+    fallback = max(peaks, default=0.0) or 1.0
+    return [Fraction(f"{p or fallback:.2g}") for p in peaks]
+
+
+def batch_matrix(mechanism, backend, trajectory, batch):
+    """The batch's rows of W: a numpy array for Float64; for Arb an ``arb_mat`` whose balls
+    enclose the exact values (Krawczyk-enclosed positions, as for the trajectory's W)."""
+    f = len(mechanism.independent)
+    columns = lambda rows: [np.array([float(s[k]) for s in rows]) for k in range(f)]  # noqa: E731
+    if isinstance(backend, Float64):
+        start = [np.array(column) for column in zip(*batch.start)] if mechanism.loops else None
+        sample = Evaluator(mechanism, backend).sample(columns(batch.z), columns(batch.zd), columns(batch.zdd),
+                                                      start, where="check batch: ")
+        return sample.regressor_array().reshape(batch.states * f, len(mechanism.parameters))
+    ev = Evaluator(mechanism, backend, certify=True)
+    rows = []
+    with backend.activate():
+        for z, zd, zdd, start in zip(batch.z, batch.zd, batch.zdd, batch.start):
+            guess = [backend.rational(Fraction(v)) for v in start] if mechanism.loops else None
+            number = lambda values: [backend.rational(v) for v in values]  # noqa: E731
+            sample = ev.sample(number(z), number(zd), number(zdd), guess, where="check state: ")
+            rows.extend(sample.regressor())
+        return arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
+
+
+def stack_rows(*mats):
+    """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
+    0.9 has no concatenation."""
+    cols = mats[0].ncols()
+    entries = [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)]
+    return type(mats[0])(sum(m.nrows() for m in mats), cols, entries)

@@ -1,0 +1,109 @@
+"""The dynamic regressor K(q, qd, qdd): tau = K phi, ten inertial parameters per body.
+
+For one body with parameters (m, c = (mx, my, mz), I about the origin), in body axes, the
+Newton-Euler wrench about the origin is linear in them:
+
+    f = m a + omega_dot x c + omega x (omega x c)          (a: origin acceleration - g)
+    n = I omega_dot + omega x (I omega) + c x a
+
+and its contribution to the generalized forces of the tree coordinates is
+``tau_k = Jv_k . f + Jw_k . n``. The energies T and V are linear forms in phi too; they
+are computed separately (not from K), so the energy balance is an independent check.
+"""
+
+import numpy as np
+
+from baseparams.numeric import vec
+from baseparams.numeric.backends import Float64
+
+# d(I w)/d(I entry): which (row, col) pairs each of Ixx Ixy Ixz Iyy Iyz Izz fills.
+_INERTIA_ENTRIES = (((0, 0),), ((0, 1), (1, 0)), ((0, 2), (2, 0)), ((1, 1),), ((1, 2), (2, 1)), ((2, 2),))
+
+
+def _inertia_times(entry, w, zero):
+    out = [zero, zero, zero]
+    for i, j in _INERTIA_ENTRIES[entry]:
+        out[i] = out[i] + w[j]
+    return out
+
+
+def body_wrench_columns(w, dw, a, zero):
+    """The ten (f, n) pairs (body axes) for unit values of each parameter."""
+    cols = [(a, [zero, zero, zero])]
+    for k in range(3):
+        e = [zero, zero, zero]
+        e[k] = e[k] + 1
+        f = vec.add(vec.cross(dw, e), vec.cross(w, vec.cross(w, e)))
+        cols.append((f, vec.cross(e, a)))
+    for entry in range(6):
+        n = vec.add(_inertia_times(entry, dw, zero), vec.cross(w, _inertia_times(entry, w, zero)))
+        cols.append(([zero, zero, zero], n))
+    return cols
+
+
+def tree_regressor(kin, states, qdd):
+    """K for the tree coordinates: a list of n rows, each 10 * bodies entries."""
+    if isinstance(kin.backend, Float64):
+        full = tree_regressor_array(kin, states, qdd)
+        return [[full[..., k, p] for p in range(full.shape[-1])] for k in range(kin.n)]
+    zero = kin.zero
+    rows = [[] for _ in range(kin.n)]
+    for body in kin.mechanism.body_labels:
+        jw, jv, cols = _body_terms(kin, states[body], qdd)
+        for k in range(kin.n):
+            if k not in jw:
+                rows[k].extend([zero] * 10)
+                continue
+            rows[k].extend(vec.dot(jv[k], f) + vec.dot(jw[k], n) for f, n in cols)
+    return rows
+
+
+def _body_terms(kin, s, qdd):
+    """Body-axes Jacobian columns and the ten wrench columns of one body."""
+    dw, acc = kin.accelerations(s, qdd)
+    acc = vec.sub(acc, kin.gravity)
+    wb, dwb, ab = vec.tmatvec(s.rot, s.w), vec.tmatvec(s.rot, dw), vec.tmatvec(s.rot, acc)
+    cols = body_wrench_columns(wb, dwb, ab, kin.zero)
+    jw = {c: vec.tmatvec(s.rot, col) for c, col in s.jw.items()}
+    jv = {c: vec.tmatvec(s.rot, col) for c, col in s.jv.items()}
+    return jw, jv, cols
+
+
+def tree_regressor_array(kin, states, qdd):
+    """float64 only: K_tree as an array (..., n, 10 * bodies). Same as the generic path, with the Jacobian-transpose products as one einsum per body:
+    over a batch of samples this replaces thousands of small array operations."""
+    size = np.broadcast_shapes(*(np.shape(v) for v in qdd))
+    blocks = []
+    for body in kin.mechanism.body_labels:
+        jw, jv, cols = _body_terms(kin, states[body], qdd)
+        coords = sorted(jw)
+        wrench = _stack([[f[0], f[1], f[2], n[0], n[1], n[2]] for f, n in cols], size)   # (..., 10, 6)
+        jac = _stack([jv[c] + jw[c] for c in coords], size)                              # (..., k, 6)
+        block = np.zeros(size + (kin.n, 10))
+        block[..., coords, :] = np.einsum("...kr,...pr->...kp", jac, wrench)
+        blocks.append(block)
+    return np.concatenate(blocks, axis=-1)
+
+
+def _stack(rows, size):
+    return np.stack([np.stack([np.broadcast_to(v, size) for v in row], axis=-1) for row in rows], axis=-2)
+
+
+def energy_forms(kin, states):
+    """(T, V): kinetic and potential energy as lists of coefficients of phi.
+
+    T = 1/2 m v.v + c.(v x w) + 1/2 w.I w, V = -g.(m p + R c), velocities of the origin.
+    """
+    zero = kin.zero
+    half = kin.backend.rational(1) / kin.backend.rational(2)
+    t_form, v_form = [], []
+    for body in kin.mechanism.body_labels:
+        s = states[body]
+        wb, vb = vec.tmatvec(s.rot, s.w), vec.tmatvec(s.rot, s.v)
+        gb = vec.tmatvec(s.rot, kin.gravity)
+        vxw = vec.cross(vb, wb)
+        t_form.extend([half * vec.dot(vb, vb), vxw[0], vxw[1], vxw[2],
+                       half * wb[0] * wb[0], wb[0] * wb[1], wb[0] * wb[2],
+                       half * wb[1] * wb[1], wb[1] * wb[2], half * wb[2] * wb[2]])
+        v_form.extend([-vec.dot(kin.gravity, s.pos), -gb[0], -gb[1], -gb[2]] + [zero] * 6)
+    return t_form, v_form

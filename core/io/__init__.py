@@ -1,0 +1,1 @@
+"""Readers and writers: mechanism files in, results out."""

@@ -1,0 +1,179 @@
+"""Tree kinematics and loop-closure equations, in any arithmetic backend.
+
+One forward pass over the spanning tree gives, for every body, its pose, its Jacobians
+(angular velocity and origin velocity per tree coordinate, world axes) and, when the
+velocities are given, the acceleration terms that do not depend on the accelerations
+("bias": angular and linear acceleration with qdd = 0). Then for any qdd:
+``omega_dot = Jw qdd + bias_w`` and ``a = Jv qdd + bias_a``.
+"""
+
+from dataclasses import dataclass
+
+from baseparams.numeric import vec
+from baseparams.model.joints import AXES, elementary_rotation
+
+
+@dataclass
+class BodyState:
+    rot: list          # body axes in world (rows); columns are the body's x, y, z
+    pos: list          # origin, world
+    jw: dict           # coordinate index -> angular velocity column (world)
+    jv: dict           # coordinate index -> origin velocity column (world)
+    w: list = None     # angular velocity (world), when qd is given
+    v: list = None     # origin velocity (world)
+    bw: list = None    # bias angular acceleration (qdd = 0)
+    ba: list = None    # bias origin acceleration (qdd = 0)
+
+
+class TreeKinematics:
+    """Precomputed numeric frames of a mechanism in one backend; evaluates states."""
+
+    def __init__(self, mechanism, backend, symbolic_geometry=False):
+        self.mechanism = mechanism
+        self.backend = backend
+        self.n = len(mechanism.coordinates)
+        index = {name: i for i, name in enumerate(mechanism.coordinates)}
+        self.index = index
+        with backend.activate():
+            self._prepare(mechanism, backend, symbolic_geometry, index)
+
+    def _prepare(self, mechanism, backend, symbolic_geometry, index):
+        frame = lambda f: mechanism.numeric_frame(f, backend, symbolic_geometry)  # noqa: E731
+        self.edges = []
+        for edge in mechanism.tree:
+            joint = edge.joint
+            fp, fc = frame(joint.parent_frame), frame(joint.child_frame)
+            motions = [(kind, AXES[axis], index[name], 1)
+                       for (kind, axis), name in zip(joint.type.motions, joint.coordinates)]
+            if edge.reversed:
+                known_frame, new_frame = fc, fp
+                motions = [(kind, axis, c, -1) for kind, axis, c, _ in reversed(motions)]
+            else:
+                known_frame, new_frame = fp, fc
+            self.edges.append((edge.known, edge.new, known_frame, motions, new_frame))
+        self.loops = [(j, frame(j.parent_frame), frame(j.child_frame)) for j in mechanism.loops]
+        self.gravity = mechanism.numeric_gravity(backend, symbolic_geometry)
+        self.zero = backend.rational(0)
+        self.one = backend.rational(1)
+
+    # ------------------------------------------------------------------
+    def forward(self, q, qd=None):
+        """Body states for tree coordinates ``q`` (and velocities ``qd``, optional)."""
+        z, one = self.zero, self.one
+        ground = BodyState([[one, z, z], [z, one, z], [z, z, one]], [z, z, z], {}, {})
+        if qd is not None:
+            ground.w, ground.v, ground.bw, ground.ba = [z] * 3, [z] * 3, [z] * 3, [z] * 3
+        states = {0: ground}
+        for known, new, (fr, fp), motions, (nr, np_) in self.edges:
+            s = states[known]
+            st = BodyState(vec.matmul(s.rot, fr), s.pos, dict(s.jw), dict(s.jv), s.w, s.v, s.bw, s.ba)
+            _offset(st, vec.matvec(s.rot, fp))
+            for kind, axis, c, sign in motions:
+                u = vec.column(st.rot, axis)
+                if kind == "R":
+                    angle = q[c] if sign > 0 else -q[c]
+                    cos, sin = self.backend.cos_sin(angle)
+                    st.rot = vec.matmul(st.rot, elementary_rotation(axis, cos, sin, one, z))
+                    su = u if sign > 0 else vec.scale(u, -1)
+                    st.jw[c] = vec.add(st.jw[c], su) if c in st.jw else su
+                    st.jv.setdefault(c, [z, z, z])
+                    if qd is not None:
+                        rate = qd[c] if sign > 0 else -qd[c]
+                        st.bw = vec.add(st.bw, vec.scale(vec.cross(st.w, u), rate))
+                        st.w = vec.add(st.w, vec.scale(u, rate))
+                else:
+                    d = q[c] if sign > 0 else -q[c]
+                    r = vec.scale(u, d)
+                    _offset(st, r)
+                    su = u if sign > 0 else vec.scale(u, -1)
+                    st.jv[c] = vec.add(st.jv[c], su) if c in st.jv else su
+                    st.jw.setdefault(c, [z, z, z])
+                    if qd is not None:
+                        rate = qd[c] if sign > 0 else -qd[c]
+                        st.ba = vec.add(st.ba, vec.scale(vec.cross(st.w, u), 2 * rate))
+                        st.v = vec.add(st.v, vec.scale(u, rate))
+            st.rot = vec.matmul_t(st.rot, nr)
+            _offset(st, vec.scale(vec.matvec(st.rot, np_), -1))
+            states[new] = st
+        return states
+
+    # ------------------------------------------------------------------
+    def closure(self, states, want_bias=False):
+        """Loop-closure equations: values, Jacobian rows (length n) and, optionally, bias terms.
+
+        The bias gamma is the second time derivative of the equations with qdd = 0, so that
+        ``Phi_q qdd + gamma = 0`` on the constraint manifold. Needs ``forward(q, qd)``.
+        """
+        values, rows, biases = [], [], []
+        n, z = self.n, self.zero
+        for joint, (ra, pa), (rb, pb) in self.loops:
+            sa, sb = states[joint.parent], states[joint.child]
+            axes_a = vec.matmul(sa.rot, ra)
+            axes_b = vec.matmul(sb.rot, rb)
+            arm_a = vec.matvec(sa.rot, pa)
+            arm_b = vec.matvec(sb.rot, pb)
+            for eq in joint.type.closure:
+                u = vec.column(axes_a, AXES[eq[1]])
+                u_cols = {c: vec.cross(w, u) for c, w in sa.jw.items()}
+                if eq[0] == "gap":
+                    other = vec.sub(vec.add(sb.pos, arm_b), vec.add(sa.pos, arm_a))
+                    o_cols = _point_columns(sb, arm_b)
+                    for c, col in _point_columns(sa, arm_a).items():
+                        o_cols[c] = vec.sub(o_cols.get(c, [z, z, z]), col)
+                else:
+                    other = vec.column(axes_b, AXES[eq[2]])
+                    o_cols = {c: vec.cross(w, other) for c, w in sb.jw.items()}
+                values.append(vec.dot(u, other))
+                row = [z] * n
+                for c, col in u_cols.items():
+                    row[c] = row[c] + vec.dot(col, other)
+                for c, col in o_cols.items():
+                    row[c] = row[c] + vec.dot(u, col)
+                rows.append(row)
+                if want_bias:
+                    u_dot = vec.cross(sa.w, u)
+                    u_dd = vec.add(vec.cross(sa.bw, u), vec.cross(sa.w, u_dot))
+                    if eq[0] == "gap":
+                        o_dot = vec.sub(_point_velocity(sb, arm_b), _point_velocity(sa, arm_a))
+                        o_dd = vec.sub(_point_bias(sb, arm_b), _point_bias(sa, arm_a))
+                    else:
+                        o_dot = vec.cross(sb.w, other)
+                        o_dd = vec.add(vec.cross(sb.bw, other), vec.cross(sb.w, o_dot))
+                    biases.append(vec.dot(u_dd, other) + 2 * vec.dot(u_dot, o_dot) + vec.dot(u, o_dd))
+        return values, rows, biases
+
+    def accelerations(self, state, qdd):
+        """(omega_dot, a) of a body (world) from its Jacobians, bias terms and ``qdd``."""
+        return (vec.add(state.bw, _combine(state.jw, qdd, self.zero)),
+                vec.add(state.ba, _combine(state.jv, qdd, self.zero)))
+
+
+def _offset(st, r):
+    """Move the state's reference point by the world vector ``r`` fixed in the moving frame."""
+    st.pos = vec.add(st.pos, r)
+    for c, w in st.jw.items():
+        st.jv[c] = vec.add(st.jv[c], vec.cross(w, r))
+    if st.w is not None:
+        wr = vec.cross(st.w, r)
+        st.ba = vec.add(st.ba, vec.add(vec.cross(st.bw, r), vec.cross(st.w, wr)))
+        st.v = vec.add(st.v, wr)
+
+
+def _point_columns(state, arm):
+    return {c: vec.add(state.jv[c], vec.cross(w, arm)) for c, w in state.jw.items()}
+
+
+def _point_velocity(state, arm):
+    return vec.add(state.v, vec.cross(state.w, arm))
+
+
+def _point_bias(state, arm):
+    return vec.add(state.ba, vec.add(vec.cross(state.bw, arm),
+                                     vec.cross(state.w, vec.cross(state.w, arm))))
+
+
+def _combine(columns, rates, zero):
+    total = [zero, zero, zero]
+    for c, col in columns.items():
+        total = vec.add(total, vec.scale(col, rates[c]))
+    return total

@@ -1,0 +1,163 @@
+"""The mechanism model: bodies, joints, kinematic graph, spanning tree, loops, coordinates.
+
+The model is immutable and exact: geometry is held as sympy expressions in named
+geometry symbols whose values are exact rationals. Numbers in a given arithmetic are made
+on demand by :meth:`Mechanism.numeric_frame` (and cached per backend), in the spirit of
+Pinocchio's split between an immutable ``Model`` and per-evaluation ``Data``.
+"""
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import sympy
+
+from baseparams.model.expressions import exact_text
+from baseparams.model.joints import JointType
+from baseparams.model.params import parameter_names
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A joint frame on one body: origin, z axis, x axis (None: default), as sympy exprs."""
+    point: tuple
+    axis: tuple = (sympy.Integer(0), sympy.Integer(0), sympy.Integer(1))
+    ref: tuple | None = None
+
+
+@dataclass(frozen=True)
+class Body:
+    label: int
+    name: str = ""
+    inertia: tuple | None = None      # ten exact parameters about the origin, or None
+
+
+@dataclass(frozen=True)
+class Joint:
+    name: str
+    type: JointType
+    parent: int
+    child: int
+    parent_frame: Frame
+    child_frame: Frame
+    coordinates: tuple                # coordinate names, one per motion
+    limits: dict = field(default_factory=dict, compare=False)  # name -> (lo, hi) floats
+    loop: bool = False                # requested as loop-closing
+
+
+@dataclass(frozen=True)
+class TreeEdge:
+    """A tree joint as traversed from the body already placed (``known``) to ``new``."""
+    joint: Joint
+    reversed: bool
+
+    @property
+    def known(self):
+        return self.joint.child if self.reversed else self.joint.parent
+
+    @property
+    def new(self):
+        return self.joint.parent if self.reversed else self.joint.child
+
+
+@dataclass(frozen=True)
+class TrajectorySpec:
+    """Default exciting trajectory: one expression of t per independent coordinate."""
+    expressions: dict                 # name -> sympy expression in t
+    t_start: Fraction = Fraction(0)
+    t_end: Fraction = Fraction(10)
+    samples: int = 200
+
+
+@dataclass(frozen=True, eq=False)
+class Mechanism:
+    name: str
+    bodies: tuple                     # Body, ordered by label
+    joints: tuple                     # Joint, file order
+    tree: tuple                       # TreeEdge, traversal order
+    loops: tuple                      # Joint, loop-closing
+    coordinates: tuple                # tree coordinate names, traversal order
+    independent: tuple                # chosen independent coordinates
+    geometry: dict                    # name -> Fraction
+    gravity: tuple                    # sympy exprs, ground axes
+    trajectory: TrajectorySpec | None = None
+    title: str = ""
+    description: str = ""
+    source: str = ""
+    path: str | None = None
+    gruebler: int = 0
+
+    # ----- names and counts -------------------------------------------------
+    @property
+    def body_labels(self):
+        return [b.label for b in self.bodies]
+
+    @property
+    def parameters(self):
+        return parameter_names(self.body_labels)
+
+    @property
+    def closure_equation_count(self):
+        return sum(len(j.type.closure) for j in self.loops)
+
+    def joint_of_coordinate(self, name):
+        for joint in self.joints:
+            if name in joint.coordinates:
+                return joint
+        raise KeyError(name)
+
+    def body(self, label):
+        for b in self.bodies:
+            if b.label == label:
+                return b
+        raise KeyError(label)
+
+    @property
+    def geometry_text(self):
+        """{name: exact decimal string}: the geometry as results and reports print it."""
+        return {name: exact_text(value) for name, value in self.geometry.items()}
+
+    @property
+    def geometry_subs(self):
+        """{sympy symbol: exact sympy rational}: substitutes the geometry into expressions."""
+        return {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in self.geometry.items()}
+
+    # ----- numbers in a backend --------------------------------------------
+    def geometry_env(self, backend, symbolic=False):
+        """Geometry values in ``backend`` (or sympy symbols when ``symbolic``)."""
+        if symbolic:
+            return {name: sympy.Symbol(name) for name in self.geometry}
+        return {name: backend.rational(value) for name, value in self.geometry.items()}
+
+    def numeric_frame(self, frame, backend, symbolic=False):
+        """(R, p): rotation (rows; columns are the frame's x, y, z) and origin in ``backend``."""
+        env = self.geometry_env(backend, symbolic)
+        p = [backend.evaluate(c, env) for c in frame.point]
+        z = _normalize(backend, [backend.evaluate(c, env) for c in frame.axis])
+        if frame.ref is not None:
+            x_raw = [backend.evaluate(c, env) for c in frame.ref]
+        else:
+            x_raw = _default_ref(frame.axis, self.geometry_subs, backend)
+        d = x_raw[0] * z[0] + x_raw[1] * z[1] + x_raw[2] * z[2]
+        x = _normalize(backend, [x_raw[i] - d * z[i] for i in range(3)])
+        y = [z[1] * x[2] - z[2] * x[1], z[2] * x[0] - z[0] * x[2], z[0] * x[1] - z[1] * x[0]]
+        rot = [[x[i], y[i], z[i]] for i in range(3)]
+        return rot, p
+
+    def numeric_gravity(self, backend, symbolic=False):
+        env = self.geometry_env(backend, symbolic)
+        return [backend.evaluate(c, env) for c in self.gravity]
+
+
+def _normalize(backend, v):
+    n2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    one = backend.rational(Fraction(1))
+    inv = one / backend.sqrt(n2)
+    return [v[0] * inv, v[1] * inv, v[2] * inv]
+
+
+def _default_ref(axis, subs, backend):
+    """The body axis least aligned with ``axis`` (first in x, y, z order on ties)."""
+    values = [abs(sympy.sympify(c).subs(subs)) for c in axis]
+    k = min(range(3), key=lambda i: (values[i], i))
+    e = [backend.rational(Fraction(int(i == k))) for i in range(3)]
+    return e

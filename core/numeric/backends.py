@@ -1,0 +1,307 @@
+"""Arithmetic backends behind one small interface, so kinematics and dynamics are written once.
+
+A backend turns exact rationals into its own numbers and supplies the few functions the
+kinematics needs (``cos_sin``, ``sqrt``, a dense linear ``solve``). Numbers themselves
+are the backend's native type and use Python operators:
+
+- :class:`Float64`: numpy float64; a scalar may be an array of N samples, so one pass of
+  the kinematics evaluates a whole trajectory (vectorised).
+- :class:`Arb`: python-flint ``arb`` balls at a chosen number of decimal digits; every
+  result carries a rigorous error bound. Use ``with backend.activate():`` around work,
+  since flint's precision is a process-wide setting.
+- :class:`Exact`: python-flint ``fmpq`` rationals. Angles are given as
+  :class:`TanHalf` (the rational point of the unit circle ``t = tan(theta/2)``).
+- :class:`Symbolic`: sympy expressions, for small mechanisms and for geometry symbols.
+"""
+
+import contextlib
+import math
+from fractions import Fraction
+
+import numpy as np
+import sympy
+from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
+
+from baseparams.errors import KinematicsError
+
+
+class TanHalf:
+    """An angle given exactly by ``t = tan(theta/2)``: cos and sin are then rational."""
+
+    __slots__ = ("t",)
+
+    def __init__(self, t):
+        self.t = fmpq(t.numerator, t.denominator) if isinstance(t, Fraction) else fmpq(t)
+
+    def cos_sin(self):
+        t2 = self.t * self.t
+        return (1 - t2) / (1 + t2), 2 * self.t / (1 + t2)
+
+    def __repr__(self):
+        return f"TanHalf({self.t})"
+
+
+class Backend:
+    """The interface. Subclasses override the number-making and the functions."""
+
+    name = "abstract"
+    exact = False
+
+    def activate(self):
+        """Context in which this backend's numbers are computed (precision settings)."""
+        return contextlib.nullcontext()
+
+    def rational(self, value: Fraction):
+        raise NotImplementedError
+
+    def cos_sin(self, x):
+        raise NotImplementedError
+
+    def sqrt(self, x):
+        raise NotImplementedError
+
+    def exp(self, x):
+        raise NotImplementedError
+
+    def pi(self):
+        raise NotImplementedError
+
+    def solve(self, a, b):
+        """Solve ``a x = b`` for x; ``a`` is a list of n rows, ``b`` a list of n rows."""
+        raise NotImplementedError
+
+    def to_float(self, x):
+        raise NotImplementedError
+
+    def point(self, x):
+        """``x`` without its error bound (ball midpoint); iterates of Newton's method use it."""
+        return x
+
+    def magnitude(self, x):
+        """An upper bound (float) of |x|, for messages (may underflow to 0 at high precision)."""
+        return float(np.max(np.abs(self.to_float(x))))
+
+    def small(self, x, exponent):
+        """Is |x| <= 10**exponent (for every sample)? ``exponent`` may be far below float range."""
+        return bool(np.all(np.abs(self.to_float(x)) <= 10.0 ** exponent))
+
+    def evaluate(self, expr, env=None):
+        """Evaluate a sympy expression: rationals, ``env`` symbols, + * ** and sin cos exp sqrt pi."""
+        env = env or {}
+        return _evaluate(self, sympy.sympify(expr), env)
+
+
+def _evaluate(backend, expr, env):
+    if expr.is_Rational:
+        return backend.rational(Fraction(int(expr.p), int(expr.q)))
+    if expr.is_Symbol:
+        try:
+            return env[expr.name]
+        except KeyError:
+            raise KeyError(f"no value for symbol {expr.name}") from None
+    if expr is sympy.pi:
+        return backend.pi()
+    args = [_evaluate(backend, a, env) for a in expr.args] if not expr.is_Pow else None
+    if expr.is_Add:
+        total = args[0]
+        for a in args[1:]:
+            total = total + a
+        return total
+    if expr.is_Mul:
+        total = args[0]
+        for a in args[1:]:
+            total = total * a
+        return total
+    if expr.is_Pow:
+        base, exponent = expr.args
+        b = _evaluate(backend, base, env)
+        if exponent.is_Integer or (exponent.is_Rational and exponent.q == 2):
+            # integer and half-integer powers (derivatives of sqrt give b**(-3/2) ...)
+            doubled = int(exponent * 2)
+            n = doubled // 2 if doubled % 2 == 0 else (doubled - 1) // 2
+            result = backend.rational(Fraction(1))
+            for _ in range(abs(n)):
+                result = result * b
+            if n < 0:
+                result = backend.rational(Fraction(1)) / result
+            return result * backend.sqrt(b) if doubled % 2 else result
+        raise ValueError(f"power {exponent} is not supported in backend evaluation")
+    if isinstance(expr, sympy.sin):
+        return backend.cos_sin(args[0])[1]
+    if isinstance(expr, sympy.cos):
+        return backend.cos_sin(args[0])[0]
+    if isinstance(expr, sympy.exp):
+        return backend.exp(args[0])
+    raise ValueError(f"cannot evaluate {expr} in backend {backend.name}")
+
+
+class Float64(Backend):
+    """numpy float64; scalars may be arrays over samples (vectorised evaluation)."""
+
+    name = "float64"
+
+    def rational(self, value):
+        return float(value)
+
+    def cos_sin(self, x):
+        return np.cos(x), np.sin(x)
+
+    def sqrt(self, x):
+        return np.sqrt(x)
+
+    def exp(self, x):
+        return np.exp(x)
+
+    def pi(self):
+        return math.pi
+
+    def solve(self, a, b):
+        n = len(a)
+        k = len(b[0])
+        A = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in a], axis=-2)
+        B = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in b], axis=-2)
+        shape = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+        A = np.broadcast_to(A, shape + (n, n))
+        B = np.broadcast_to(B, shape + (n, k))
+        cond = np.linalg.cond(A)
+        if np.any(~np.isfinite(cond)) or np.any(cond > 1e13):
+            raise KinematicsError(f"singular linear system (condition number {np.max(cond):.3g})")
+        X = np.linalg.solve(A, B)
+        return [[X[..., i, j] for j in range(k)] for i in range(n)]
+
+    def to_float(self, x):
+        return np.asarray(x, dtype=float)
+
+
+class Arb(Backend):
+    """python-flint ball arithmetic at ``digits`` decimal digits."""
+
+    name = "arb"
+
+    def __init__(self, digits=50):
+        self.digits = int(digits)
+
+    @contextlib.contextmanager
+    def activate(self):
+        saved = ctx.dps
+        ctx.dps = self.digits
+        try:
+            yield self
+        finally:
+            ctx.dps = saved
+
+    def rational(self, value):
+        return arb(fmpq(value.numerator, value.denominator))
+
+    def cos_sin(self, x):
+        return x.cos(), x.sin()
+
+    def sqrt(self, x):
+        return x.sqrt()
+
+    def exp(self, x):
+        return x.exp()
+
+    def pi(self):
+        return arb.pi()
+
+    def solve(self, a, b):
+        A = arb_mat(len(a), len(a[0]), [arb(v) for row in a for v in row])
+        B = arb_mat(len(b), len(b[0]), [arb(v) for row in b for v in row])
+        try:
+            X = A.solve(B)
+        except ZeroDivisionError:
+            raise KinematicsError("singular linear system (no pivot excludes zero)") from None
+        return [[X[i, j] for j in range(X.ncols())] for i in range(X.nrows())]
+
+    def to_float(self, x):
+        return float(arb(x).mid())
+
+    def point(self, x):
+        return arb(x).mid()
+
+    def magnitude(self, x):
+        x = arb(x)
+        return float(abs(x).upper())
+
+    def small(self, x, exponent):
+        return bool(abs(arb(x)).upper() <= arb(10) ** exponent)
+
+
+class Exact(Backend):
+    """Exact rationals (python-flint ``fmpq``); angles as :class:`TanHalf`."""
+
+    name = "exact"
+    exact = True
+
+    def rational(self, value):
+        return fmpq(value.numerator, value.denominator)
+
+    def cos_sin(self, x):
+        if isinstance(x, TanHalf):
+            return x.cos_sin()
+        if x == 0:
+            return fmpq(1), fmpq(0)
+        raise KinematicsError("exact arithmetic needs angles as TanHalf (rational cos and sin)")
+
+    def sqrt(self, x):
+        x = fmpq(x)
+        p, q = int(x.p), int(x.q)
+        rp, rq = math.isqrt(p) if p >= 0 else -1, math.isqrt(q)
+        if p < 0 or rp * rp != p or rq * rq != q:
+            raise KinematicsError(f"sqrt({x}) is not rational: exact arithmetic is not available here")
+        return fmpq(rp, rq)
+
+    def exp(self, x):
+        if x == 0:
+            return fmpq(1)
+        raise KinematicsError("exp of a nonzero rational is not rational")
+
+    def pi(self):
+        raise KinematicsError("pi is not rational")
+
+    def solve(self, a, b):
+        A = fmpq_mat(len(a), len(a[0]), [fmpq(v) for row in a for v in row])
+        B = fmpq_mat(len(b), len(b[0]), [fmpq(v) for row in b for v in row])
+        try:
+            X = A.solve(B)
+        except ZeroDivisionError:
+            raise KinematicsError("singular linear system") from None
+        return [[X[i, j] for j in range(X.ncols())] for i in range(X.nrows())]
+
+    def to_float(self, x):
+        return float(int(x.p)) / float(int(x.q)) if isinstance(x, fmpq) else float(x)
+
+
+class Symbolic(Backend):
+    """sympy expressions; angles are sympy expressions (symbols or numbers)."""
+
+    name = "symbolic"
+    exact = True
+
+    def rational(self, value):
+        return sympy.Rational(value.numerator, value.denominator)
+
+    def cos_sin(self, x):
+        if isinstance(x, TanHalf):
+            c, s = x.cos_sin()
+            return sympy.Rational(int(c.p), int(c.q)), sympy.Rational(int(s.p), int(s.q))
+        return sympy.cos(x), sympy.sin(x)
+
+    def sqrt(self, x):
+        return sympy.sqrt(x)
+
+    def exp(self, x):
+        return sympy.exp(x)
+
+    def pi(self):
+        return sympy.pi
+
+    def solve(self, a, b):
+        A = sympy.Matrix(a)
+        B = sympy.Matrix(b)
+        X = A.LUsolve(B)
+        return [[sympy.simplify(X[i, j]) for j in range(X.cols)] for i in range(X.rows)]
+
+    def to_float(self, x):
+        return float(sympy.N(x))

@@ -1,0 +1,37 @@
+"""Float64 linear-algebra helpers shared by the numeric solvers and the certified analysis:
+the exact power-of-two column scaling rule and a greedy column choice."""
+
+import math
+
+import numpy as np
+
+
+def power_of_two_exponents(log2_norms):
+    """The column scaling rule of both dp and vp: column j is divided by 2^e_j with
+    ``e_j = round(log2 ||W_j||)`` (0 for a zero column, given as -inf or None). Dividing
+    by a power of two is exact in binary, so the scaling itself adds no rounding."""
+    return [0 if x is None or not math.isfinite(x) else int(round(x)) for x in log2_norms]
+
+
+def pivoted_qr_columns(a, count):
+    """Indices of ``count`` columns of ``a`` chosen by Householder QR with column pivoting."""
+    a = np.array(a, dtype=float, copy=True)
+    m, n = a.shape
+    perm = list(range(n))
+    norms = np.sum(a * a, axis=0)
+    for k in range(min(count, m)):
+        j = k + int(np.argmax(norms[k:]))
+        if j != k:
+            a[:, [k, j]] = a[:, [j, k]]
+            norms[[k, j]] = norms[[j, k]]
+            perm[k], perm[j] = perm[j], perm[k]
+        x = a[k:, k]
+        alpha = -np.copysign(np.linalg.norm(x), x[0]) if x[0] != 0 else -np.linalg.norm(x)
+        v = x.copy()
+        v[0] -= alpha
+        vn = np.linalg.norm(v)
+        if vn > 0:
+            v /= vn
+            a[k:, k:] -= 2.0 * np.outer(v, v @ a[k:, k:])
+        norms[k + 1:] = np.sum(a[k + 1:, k + 1:] ** 2, axis=0)
+    return perm[:count]

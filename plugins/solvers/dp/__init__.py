@@ -1,0 +1,13 @@
+"""Built-in solver ``dp``: Gautier's SVD method in double precision (the seed paper's DP).
+
+Registered through the ``baseparams_solvers`` hook by the entry point ``builtin_dp``.
+"""
+
+from baseparams.hookspecs import hookimpl
+
+from .solver import DoublePrecisionSolver
+
+
+@hookimpl
+def baseparams_solvers():
+    return [DoublePrecisionSolver()]

@@ -1,0 +1,154 @@
+"""The ``dp`` solver: Gautier's SVD method in double precision (:mod:`.gautier`), checked
+against an independent random batch, every coefficient printed with the digits its
+first-order error estimate trusts."""
+
+import math
+import time
+
+import numpy as np
+from flint import arb
+
+from baseparams.dynamics.excitation import batch_matrix, random_batch
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+from baseparams.errors import KinematicsError
+from baseparams.numeric.backends import Float64
+from baseparams.numeric.certify import decimal_string
+from baseparams.solvers.result import BaseParameterResult
+from baseparams.solvers.support import base_rows, raised_warning, say, untrusted_warning
+
+from .gautier import EPS, dp_gautier
+
+CHECK_SEED = 7919          # seed of the independent excitation batch
+
+
+def _g(x, digits=3):
+    return f"{x:.{digits}g}"
+
+
+class DoublePrecisionSolver:
+    """Gautier's SVD method in numpy float64 (the seed paper's DP)."""
+
+    name = "dp"
+    description = ("Gautier's SVD method in double precision (numpy): rank by tolerance, "
+                   "with ridge diagnostics and warnings")
+
+    def solve(self, mechanism, samples=None, scale=True, rank=None, progress=None, seed=CHECK_SEED,
+              **options):
+
+        start = time.perf_counter()
+        warnings = []
+        if options.get("digits"):
+            warnings.append("dp ignores --digits: it always works in double precision")
+        trajectory = Trajectory.default(mechanism, samples=samples)
+        W, info = observation_matrix(mechanism, Float64(), trajectory)
+        say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
+        res = dp_gautier(W, scale=scale, rank=rank)
+        check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
+        if check.get("raised"):
+            warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
+            W, res = stacked, both
+        elif check.get("error"):
+            warnings.append(f"no excitation check: {check['error']}")
+        elif check.get("rank_with_batch", res.rank) < res.rank:
+            # more rows can only raise the true rank: a lower count means the tolerance cut is
+            # fragile (singular values near it move with the row count)
+            warnings.append(f"the rank cut is fragile: W with an independent random batch of "
+                            f"{check['states']} states gives rank {check['rank_with_batch']} at the same "
+                            f"tolerance rule, not {res.rank}")
+        warnings += res.warnings
+        params = mechanism.parameters
+        noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)
+        most = int(min(16, math.floor(-math.log10(noise))))
+        dropped, largest_dropped, untrusted = 0, 0.0, []
+
+        def coefficient(a, b):
+            nonlocal dropped, largest_dropped
+            value, scaled = float(res.beta[a, b]), abs(float(res.beta_s[a, b]))
+            if value == 0.0:
+                return None
+            if scaled <= noise:
+                dropped += 1
+                largest_dropped = max(largest_dropped, scaled)
+                return None
+            digits = min(most, math.floor(math.log10(scaled / noise)))
+            if digits < 1:
+                untrusted.append({"base": a, "parameter": params[res.eliminated[b]], "value": repr(value),
+                                  "estimated_error": repr(noise / scaled * abs(value))})
+                return None
+            return decimal_string(arb(value), digits)
+
+        base = base_rows(params, res.kept, res.eliminated, coefficient)
+        for item in untrusted:
+            item["base"] = base[item["base"]]["name"]
+        if untrusted:
+            warnings.append(untrusted_warning(untrusted))
+        s = res.singular_values
+        r = res.rank
+        gap_ratio = float(res.ratios.max()) if res.ratios.size else None
+        summary = [
+            f"W: {W.shape[0]} x {W.shape[1]} ({info['samples']} samples"
+            + (f" + {check['states']} random states" if check.get("raised") else "") + "); columns "
+            + ("scaled by powers of two near their norms" if scale else "not scaled"),
+            f"rank {r} by the tolerance max(shape)*eps*s_max = {_g(res.tolerance)}",
+            (f"s_{r} = {_g(s[r - 1])}, s_{r + 1} = {_g(s[r]) if r < len(s) else '-'}; largest gap "
+             f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
+             + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
+            f"beta: estimated error {_g(res.error_estimate, 2)} (first order, scaled units), cond(V22) = "
+            f"{_g(res.v22_condition)}; coefficients printed with the digits above it; {dropped} below it "
+            f"(largest {_g(largest_dropped, 2)}) are not shown",
+            _dp_check_line(check),
+        ]
+        if res.zero_columns:
+            summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
+                           + " ".join(params[j] for j in res.zero_columns))
+        diagnostics = {
+            "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
+                               "(exact in binary); beta scaled back") if scale else "none",
+            "numerically_zero_columns": [params[j] for j in res.zero_columns],
+            "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
+            "tolerance": float(res.tolerance),
+            "ridge": {"clear": bool(res.clear_ridge), "criterion":
+                      f"largest ratio s_i/s_(i+1) among values above the tolerance (the value below the "
+                      f"cut floored at eps*s_max) is >= {1e3:g} and falls at the tolerance cut",
+                      "largest_gap_after": int(res.largest_gap), "largest_ratio": gap_ratio,
+                      "ratio_at_cut": float(res.ratios[r - 1]) if 0 < r <= res.ratios.size else None},
+            "permutation": "QR with column pivoting on V2^T chooses the eliminated parameters",
+            "beta_error_estimate": float(res.error_estimate),
+            "v22_condition": float(res.v22_condition),
+            "coefficients_below_noise_dropped": dropped,
+            "largest_dropped_scaled": largest_dropped,
+            "untrusted": untrusted,
+            "excitation_check": check,
+            "samples": info["samples"], "rows": int(W.shape[0]),
+            "summary": summary,
+        }
+        return BaseParameterResult(
+            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=r, base=base,
+            eliminated=[params[j] for j in res.eliminated], certified=False, digits=None,
+            singular_values=[repr(float(v)) for v in s], geometry=mechanism.geometry_text,
+            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
+
+    @staticmethod
+    def _excitation_check(mechanism, trajectory, W, res, scale, rank, seed):
+        """dp on W stacked with an independent random batch: (diagnostics, stacked W, its DPResult)."""
+        if rank is not None:
+            return {"skipped": "rank forced"}, None, None
+        batch = random_batch(mechanism, trajectory, seed)
+        try:
+            rows = batch_matrix(mechanism, Float64(), trajectory, batch)
+        except KinematicsError as exc:
+            return {"seed": seed, "states": batch.states, "error": str(exc)}, None, None
+        stacked = np.vstack([W, rows])
+        both = dp_gautier(stacked, scale=scale)
+        return ({"seed": seed, "states": batch.states, "rows": int(rows.shape[0]), "rank": res.rank,
+                 "rank_with_batch": both.rank, "raised": both.rank > res.rank}, stacked, both)
+
+
+def _dp_check_line(check):
+    if check.get("skipped") or check.get("error"):
+        return f"excitation check: not done ({check.get('skipped') or check.get('error')})"
+    if check["raised"]:
+        return (f"excitation check: {check['states']} independent random states raised the rank from "
+                f"{check['rank']} to {check['rank_with_batch']}: W above includes them")
+    return (f"excitation check: {check['states']} independent random states ({check['rows']} rows) "
+            f"added to W give rank {check['rank_with_batch']}")

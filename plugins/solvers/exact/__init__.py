@@ -1,0 +1,13 @@
+"""Built-in solver ``exact``: Gautier's method over the rationals, for open chains.
+
+Registered through the ``baseparams_solvers`` hook by the entry point ``builtin_exact``.
+"""
+
+from baseparams.hookspecs import hookimpl
+
+from .solver import ExactSolver
+
+
+@hookimpl
+def baseparams_solvers():
+    return [ExactSolver()]

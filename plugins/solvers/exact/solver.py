@@ -1,0 +1,74 @@
+"""The ``exact`` solver: W over the rationals at random rational states of an open chain,
+its exact rank and rref (:mod:`baseparams.dynamics.exact_states`)."""
+
+import math
+import time
+
+from baseparams.dynamics.exact_states import check_exact_possible, exact_observation_matrix, rref_base
+from baseparams.dynamics.excitation import stack_rows
+from baseparams.model.expressions import exact_text
+from baseparams.solvers.result import BaseParameterResult
+from baseparams.solvers.support import base_rows, say
+
+EXACT_ROUNDS = 6           # independent batches before the rank is declared unsettled
+
+
+class ExactSolver:
+    """Exact rank and beta over the rationals (open chains with rational geometry)."""
+
+    name = "exact"
+    description = ("exact rational arithmetic (fmpq) at random rational states: exact rank and "
+                   "beta by rref; open chains with rational geometry only")
+
+    def solve(self, mechanism, samples=None, seed=2024, progress=None, **options):
+
+        start = time.perf_counter()
+        warnings = []
+        if options.get("digits"):
+            warnings.append("exact ignores --digits: its arithmetic is exact (rationals)")
+        check_exact_possible(mechanism)
+        params = mechanism.parameters
+        f = max(1, len(mechanism.independent or mechanism.coordinates))
+        n = len(params)
+        count = samples or max(4, math.ceil(1.5 * n / f))
+        per_batch = max(2, math.ceil(n / f))          # each check batch: at least n rows
+        say(progress, f"exact: W at {count} random rational states")
+        W = exact_observation_matrix(mechanism, count, seed=seed)
+        first = rank = W.rank()
+        batches, settled = 0, False
+        while batches < EXACT_ROUNDS:                # an independent batch must not raise the rank
+            batches += 1
+            W = stack_rows(W, exact_observation_matrix(mechanism, per_batch, seed=seed + 1000 * batches))
+            new = W.rank()
+            if new == rank:
+                settled = True
+                break
+            rank = new
+        if rank > first:
+            warnings.append(f"the {count} random states do not excite {mechanism.name}: rank raised from "
+                            f"{first} to {rank} by independent random batches ({per_batch} states each)")
+        if not settled:
+            warnings.append(f"the rank still rose with the last of {EXACT_ROUNDS} independent random "
+                            f"batches: {rank} is only a lower bound, not certified")
+        rank, kept, eliminated, beta = rref_base(W)
+        base = base_rows(params, kept, eliminated,
+                         lambda a, b: exact_text(beta[a][b]) if beta[a][b] != 0 else None)
+        summary = [f"W over the rationals: {W.nrows()} x {W.ncols()} at random rational states "
+                   f"(angles at rational points of the unit circle): {count} states, then {batches} "
+                   f"independent check batches of {per_batch}",
+                   (f"exact rank {rank}; the last batch did not raise it" if settled else
+                    f"exact rank {rank} at these states; it still rose with the last batch (not certified)"),
+                   "beta from the exact rref: kept parameters are the leftmost basis"]
+        diagnostics = {
+            "rank_meaning": ("exact rank of W at random rational states: the number of base parameters "
+                             "unless every sample lies on one algebraic hypersurface (probability zero); "
+                             "an extra independent batch (at least as many rows as parameters) did not "
+                             "raise it"),
+            "rows": W.nrows(), "batches": batches, "states_per_batch": per_batch,
+            "rank_first_states": first, "settled": settled, "seed": seed, "summary": summary,
+        }
+        return BaseParameterResult(
+            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=rank, base=base,
+            eliminated=[params[j] for j in eliminated], certified=settled, digits=None, singular_values=None,
+            geometry=mechanism.geometry_text, warnings=warnings, elapsed_s=time.perf_counter() - start,
+            diagnostics=diagnostics)

@@ -1,0 +1,375 @@
+"""Parameters without effect, found from each body's motion (seed paper, section 3.2, Tab. 4).
+
+A direction n in one body's ten parameters has no effect on the dynamics exactly when the
+body's Lagrangian contribution along n is a constant: its kinetic part ``T_i . n`` (a
+quadratic form in the velocities) vanishes in every state and its potential part
+``V_i . n`` is the same in every configuration. The paper's six conditions are the cases of
+this (a point at rest, an angular velocity of constant direction, a translating body,
+``g . d`` constant ...). Rather than asking the user which case applies, each body's motion
+is sampled at random states in ball arithmetic:
+
+1. the numeric null space of the stacked rows ``T_i(s)`` and ``V_i(s) - V_i(s_0)`` gives
+   how many such directions the body has;
+2. exact candidates are built from the mechanism's own exact data: the angular velocity's
+   span (0: translating; 1: a constant direction u, taken from a body axis or a joint axis
+   parallel to it; 2: a constant plane) gives the quadrupoles Q with ``w^T Q w = 0``;
+   dipoles along body and joint axes placed at the origin or at a joint point, and
+   monopoles at the origin or at a joint point, are kept when their numeric residual
+   vanishes (a point at rest, ``g . d`` constant ...);
+3. a maximal independent set of the valid candidates is returned as exact generators.
+
+A candidate is accepted here on numerical evidence only (relative residual below 1e-14 on
+12 states at 28 digits); the solver re-checks every accepted generator in ball arithmetic
+on the observation matrix (:func:`baseparams.plugins.solvers.symbolic.elimination.certify`). If fewer exact
+generators are found than numeric null directions exist, the body is reported (the
+symbolic count then misses dependencies; the rank check shows it). Sampled transfers
+across joints use the same states: :mod:`baseparams.plugins.solvers.symbolic.sampled_transfers`.
+"""
+
+import random
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import mpmath
+import numpy as np
+import sympy
+
+from baseparams.numeric.backends import Arb, Float64, Symbolic
+from baseparams.dynamics.evaluator import Evaluator, independent_rows
+from baseparams.errors import InputError
+from baseparams.model.params import body_parameter_names
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.dynamics.transfers import (INERTIA_KINDS, TENSOR_INDEX, Generator, as_vector, dipole_params,
+                        monopole_params, quadrupole_params)
+
+NULL_TOL = mpmath.mpf(10) ** -14      # relative size of a null singular value / residual
+INDEPENDENCE_TOL = 1e-10              # relative norm left after projecting out a basis
+
+
+@dataclass
+class BodyMotion:
+    """What sampling says about one body's motion, and the exact generators found."""
+    label: int
+    omega_rank: int                       # dimension of the angular velocity's span in body axes
+    null_dimension: int                   # numeric count of directions without effect
+    axis: list | None = None              # exact constant direction of omega (omega_rank 1)
+    rest_points: list = field(default_factory=list)   # exact candidate points at rest
+    generators: list = field(default_factory=list)
+
+    @property
+    def motion(self):
+        if self.omega_rank == 0:
+            return "translation" if not self.rest_points else "at rest"
+        if self.omega_rank == 1:
+            return "rotation about a fixed axis" if self.rest_points else "planar (constant rotation axis direction)"
+        if self.omega_rank == 2:
+            return "rotation axis in a constant plane"
+        return "general"
+
+    @property
+    def missing(self):
+        return self.null_dimension - len(self.generators)
+
+
+# ----- random states ---------------------------------------------------------------------
+def random_states(mechanism, count=12, digits=30, seed=1):
+    """``count`` random states (Arb samples) on the constraint manifold.
+
+    Positions: the default trajectory's positions at random times (so closed loops close
+    on the assembly branch the trajectory follows); without a trajectory (open chains
+    only) random angles in [-1, 1]. Velocities and accelerations: random rationals.
+    """
+    rng = random.Random(seed)
+    names = mechanism.independent or mechanism.coordinates
+    f = len(names)
+    if mechanism.trajectory is not None:
+        traj = Trajectory.default(mechanism)
+        t0, t1 = float(traj.times[0]), float(traj.times[-1])
+        times = np.array([t0 + (t1 - t0) * rng.random() for _ in range(count)])
+        z_float, _, _ = traj.independent_values(mechanism, Float64(), times)
+        z_float = [np.broadcast_to(np.asarray(v, float), times.shape) for v in z_float]
+        zs = [[Fraction(float(z_float[j][k])).limit_denominator(10 ** 9) for j in range(f)]
+              for k in range(count)]
+    elif mechanism.loops:
+        raise InputError("the mechanism has closed loops but no [trajectory]: random states "
+                         "need a trajectory to stay on the assembly branch",
+                         file=mechanism.path, key="trajectory")
+    else:
+        zs = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
+    zds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
+    zdds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
+    guesses = [None] * count
+    if mechanism.loops:
+        fl = Evaluator(mechanism, Float64())
+        zarr = [np.array([float(zs[k][j]) for k in range(count)]) for j in range(f)]
+        q = fl.assemble(zarr, where="random states: ")
+        guesses = [[Fraction(float(np.atleast_1d(v)[k])) for v in q] for k in range(count)]
+    backend = Arb(digits)
+    ev = Evaluator(mechanism, backend)
+    out = []
+    with backend.activate():
+        for k in range(count):
+            r = backend.rational
+            guess = None if guesses[k] is None else [r(v) for v in guesses[k]]
+            out.append(ev.sample([r(v) for v in zs[k]], [r(v) for v in zds[k]],
+                                 [r(v) for v in zdds[k]], guess, where="random state: "))
+    return out, backend
+
+
+def to_mpf(x):
+    """An arb ball's midpoint (or any real number) as an mpmath number."""
+    if hasattr(x, "mid"):
+        return mpmath.mpf(x.mid().str(mpmath.mp.dps + 5, radius=False))
+    return mpmath.mpf(x)
+
+
+# ----- numeric helpers -------------------------------------------------------------------
+def _normalized_rows(rows):
+    """Rows scaled to unit max-norm; rows that are zero to working precision are dropped."""
+    scale = max((abs(v) for row in rows for v in row), default=mpmath.mpf(0))
+    if scale == 0:
+        return []
+    out = []
+    for row in rows:
+        m = max(abs(v) for v in row)
+        if m > scale * mpmath.mpf(10) ** (-(mpmath.mp.dps - 8)):
+            out.append([v / m for v in row])
+    return out
+
+
+def numeric_rank(rows, tol=NULL_TOL):
+    if not rows:
+        return 0
+    s = mpmath.svd_r(mpmath.matrix(rows), compute_uv=False)
+    s = [abs(x) for x in s]
+    top = max(s)
+    return sum(1 for x in s if x > tol * top) if top > 0 else 0
+
+
+def null_basis(rows, ncols, tol=NULL_TOL):
+    """Orthonormal basis (list of vectors) of the numeric null space of ``rows``."""
+    if not rows:
+        return [[mpmath.mpf(int(i == j)) for i in range(ncols)] for j in range(ncols)]
+    a = mpmath.matrix(rows)
+    if a.rows < ncols:
+        a = mpmath.matrix(rows + [[0] * ncols] * (ncols - a.rows))
+    _, s, v = mpmath.svd_r(a)
+    top = max(abs(x) for x in s) or 1
+    return [[v[k, i] for i in range(ncols)] for k in range(ncols)
+            if k >= len(s) or abs(s[k]) <= tol * top]
+
+
+def residual(rows, n):
+    """max |row . n| / |n| over ``rows`` (each scaled to unit max-norm): how far n is from null."""
+    norm = mpmath.sqrt(sum(x * x for x in n))
+    if norm == 0:
+        return mpmath.mpf(0)
+    return max((abs(mpmath.fsum(a * b for a, b in zip(row, n))) for row in rows),
+               default=mpmath.mpf(0)) / norm
+
+
+def independent(vectors):
+    """Indices of the vectors independent of the earlier ones, in order (greedy
+    Gram-Schmidt on unit vectors, so the tolerance is relative: a candidate is dependent
+    when less than ``INDEPENDENCE_TOL`` of it is left). Float64 is enough: the vectors
+    are exact data of moderate size, only their independence is decided."""
+    rows = []
+    for v in vectors:
+        a = np.array([float(x) for x in v])
+        n = np.linalg.norm(a)
+        rows.append(a / n if n > 0 else a)
+    return independent_rows(np.array(rows), INDEPENDENCE_TOL) if rows else []
+
+
+# ----- exact candidates ------------------------------------------------------------------
+def to_number(expr, subs):
+    """An exact expression at the geometry ``subs``, as an mpmath number (working precision)."""
+    return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), mpmath.mp.dps + 5))
+
+
+def body_candidates(mechanism, label):
+    """Exact candidate points and unit directions of a body, from its joints (body axes)."""
+    zero, one = sympy.Integer(0), sympy.Integer(1)
+    points = [("origin", [zero, zero, zero])]
+    dirs = [(f"{a}{label}", [one if i == k else zero for i in range(3)]) for k, a in enumerate("xyz")]
+    backend = Symbolic()
+    for joint in mechanism.joints:
+        for side, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
+            if side != label:
+                continue
+            r, p = mechanism.numeric_frame(frame, backend, symbolic=True)
+            points.append((f"{joint.name} point", [sympy.sympify(c) for c in p]))
+            for k, a in enumerate("xyz"):
+                dirs.append((f"{joint.name} {a} axis", [r[i][k] for i in range(3)]))
+    return points, dirs
+
+
+def _dedupe(items, subs, directions=False):
+    out, seen = [], []
+    for name, vec in items:
+        num = [to_number(c, subs) for c in vec]
+        key = num
+        if directions:
+            norm = mpmath.sqrt(sum(x * x for x in num))
+            if norm == 0:
+                continue
+            key = [x / norm for x in num]
+        dup = False
+        for other in seen:
+            if directions:
+                dot = mpmath.fsum(a * b for a, b in zip(key, other))
+                dup = abs(abs(dot) - 1) < mpmath.mpf(10) ** -20
+            else:
+                dup = max(abs(a - b) for a, b in zip(key, other)) < mpmath.mpf(10) ** -20
+            if dup:
+                break
+        if not dup:
+            seen.append(key)
+            out.append((name, vec, num))
+    return out
+
+
+def _quadrupole_family(span, span_num):
+    """Exact symmetric tensors Q (six entries) with s_a^T Q s_b = 0 for a basis s of the span,
+    and for each the entry it is designated to eliminate (a free variable)."""
+    def coeffs(a, b):
+        row = []
+        for i, j in TENSOR_INDEX:
+            row.append(a[i] * b[i] if i == j else a[i] * b[j] + a[j] * b[i])
+        return row
+
+    pairs = [(a, b) for a in range(len(span)) for b in range(a, len(span))]
+    rows = [coeffs(span[a], span[b]) for a, b in pairs]
+    rows_num = [coeffs(span_num[a], span_num[b]) for a, b in pairs]
+    # dependent variables: the entries the span sees most (largest coefficients) go first
+    weight = [max((abs(r[c]) for r in rows_num), default=0) for c in range(6)]
+    order = sorted(range(6), key=lambda c: (-weight[c], c))
+    if not rows:
+        return [([int(i == c) for i in range(6)], c) for c in range(6)]
+    m = sympy.Matrix([[r[c] for c in order] for r in rows])
+    rref, pivots = m.rref(simplify=sympy.cancel)
+    free = [k for k in range(6) if k not in pivots]
+    out = []
+    for f in free:
+        q = [sympy.Integer(0)] * 6
+        q[order[f]] = sympy.Integer(1)
+        for r, p in enumerate(pivots):
+            q[order[p]] = sympy.cancel(-rref[r, f])
+        out.append((q, order[f]))
+    return out
+
+
+def lagrangian_forms(states):
+    """Per state: (T form, V form, {body: rotation rows}, {body: omega}) as mpmath numbers."""
+    out = []
+    for sample in states:
+        t_form, v_form = sample.energies()
+        rots = {b: [[to_mpf(x) for x in row] for row in st.rot] for b, st in sample.states.items() if b}
+        omegas = {b: [to_mpf(x) for x in st.w] for b, st in sample.states.items() if b}
+        out.append(([to_mpf(x) for x in t_form], [to_mpf(x) for x in v_form], rots, omegas))
+    return out
+
+
+def lagrangian_rows(mechanism, labels, forms):
+    """Rows whose common null space holds the parameter directions of ``labels`` without
+    effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized."""
+    cols = []
+    for label in labels:
+        i = mechanism.body_labels.index(label)
+        cols.extend(range(10 * i, 10 * i + 10))
+    t_rows = [[t[c] for c in cols] for t, _, _, _ in forms]
+    v_rows = [[v[c] for c in cols] for _, v, _, _ in forms]
+    rows = t_rows + [[a - b for a, b in zip(r, v_rows[0])] for r in v_rows[1:]]
+    return _normalized_rows(rows)
+
+
+def analyse_body(mechanism, label, forms):
+    """Classify one body's motion from sampled states and build its exact generators."""
+    rows = lagrangian_rows(mechanism, [label], forms)
+    omegas = []
+    for _, _, rots, ws in forms:
+        rot, w = rots[label], ws[label]
+        omegas.append([mpmath.fsum(rot[k][i] * w[k] for k in range(3)) for i in range(3)])
+    null_dim = 10 - numeric_rank(rows)
+    omega_rows = _normalized_rows(omegas)
+    omega_rank = numeric_rank(omega_rows) if omega_rows else 0
+
+    subs = mechanism.geometry_subs
+    points, dirs = body_candidates(mechanism, label)
+    points = _dedupe(points, subs)
+    dirs = _dedupe(dirs, subs, directions=True)
+    motion = BodyMotion(label, omega_rank, null_dim)
+    names = body_parameter_names(label)
+
+    def norm(v):
+        n = mpmath.sqrt(sum(x * x for x in v))
+        return [x / n for x in v]
+
+    # directions of the angular velocity's span (exact, from the candidates)
+    span, span_num = [], []
+    if 0 < omega_rank < 3:
+        complement = null_basis(omega_rows, 3)
+        # u is in the span if it is orthogonal to the numeric complement of the span
+        inside = [(vec, num) for _, vec, num in dirs
+                  if all(abs(mpmath.fsum(a * b for a, b in zip(norm(num), c))) < NULL_TOL for c in complement)]
+        for k in independent([num for _, num in inside])[:omega_rank]:
+            span.append(inside[k][0])
+            span_num.append(inside[k][1])
+        if omega_rank == 1 and span:
+            motion.axis = span[0]
+
+    candidates = []
+    if omega_rank == 0 or len(span) == omega_rank < 3:
+        cond = 6 if omega_rank == 0 else 5
+        for q, pivot in _quadrupole_family(span, span_num):
+            tensor = [[0] * 3 for _ in range(3)]
+            for k, (i, j) in enumerate(TENSOR_INDEX):
+                tensor[i][j] = tensor[j][i] = q[k]
+            candidates.append(("quadrupole", cond, quadrupole_params(tensor), [names[4 + pivot]],
+                               {"tensor": q}, f"quadrupole {INERTIA_KINDS[pivot]}"))
+    rest = []
+    for pname, b, bnum in points:
+        vec = monopole_params(bnum)
+        if residual(rows, vec) < NULL_TOL:
+            rest.append((pname, b, bnum))
+    motion.rest_points = [b for _, b, _ in rest]
+    for pname, b, bnum in points:
+        for dname, d, dnum in dirs:
+            n = dipole_params(bnum, norm(dnum))
+            if residual(rows, n) >= NULL_TOL:
+                continue
+            dn = norm(dnum)
+            along_axis = omega_rank == 1 and span_num and abs(abs(mpmath.fsum(
+                a * c for a, c in zip(dn, norm(span_num[0])))) - 1) < NULL_TOL
+            at_rest = any(b is rb for _, rb, _ in rest)
+            cond = 2 if along_axis else (4 if omega_rank == 0 or at_rest else 3)
+            best = max(range(3), key=lambda k: (abs(dnum[k]), -k))
+            candidates.append(("dipole", cond, dipole_params(b, d), [names[1 + best]],
+                               {"point": b, "direction": d, "where": pname, "along": dname},
+                               f"dipole along {dname} at {pname}"))
+    for pname, b, bnum in rest:
+        pref = [names[0]] if pname == "origin" else []
+        candidates.append(("monopole", 1, monopole_params(b), pref, {"point": b, "where": pname},
+                           f"monopole at {pname}"))
+    valid = []
+    for multipole, cond, values, pref, side, text in candidates:
+        vector = as_vector(label, values)
+        num = [to_number(vector.get(n, 0), subs) for n in names]
+        if residual(rows, num) >= NULL_TOL * 100:
+            continue           # a quadrupole of a wrongly identified span: never trust it
+        valid.append((num, vector, multipole, cond, pref, side, text))
+    for k in independent([v[0] for v in valid]):
+        _, vector, multipole, cond, pref, side, text = valid[k]
+        motion.generators.append(Generator(
+            vector=vector, kind="condition", multipole=multipole, condition=cond,
+            bodies=(label,), sides={label: side}, label=text, preference=list(pref)))
+    return motion
+
+
+def analyse_bodies(mechanism, states=None, count=12, digits=30, seed=1):
+    """(BodyMotion for every moving body, the sampled Lagrangian forms for reuse)."""
+    if states is None:
+        states, _ = random_states(mechanism, count=count, digits=digits, seed=seed)
+    with mpmath.workdps(digits - 2):
+        forms = lagrangian_forms(states)
+        return [analyse_body(mechanism, label, forms) for label in mechanism.body_labels], forms

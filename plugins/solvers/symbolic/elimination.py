@@ -1,0 +1,556 @@
+"""Symbolic base parameters by multipole transfers (Ros et al. 2012), automated.
+
+The seed paper applies the method by hand to the SLA suspension (its section 3, Tabs. 4-5
+and appendix). Here it runs on any mechanism:
+
+1. *Generators* (exact null vectors n of the observation matrix, W n = 0, entries in the
+   geometry symbols): per body, the directions without effect found from its motion
+   (:mod:`baseparams.plugins.solvers.symbolic.body_conditions`, the paper's conditions 1-6 of section 3.2); per
+   joint, every multipole-transfer rule its joint type declares (:mod:`baseparams.dynamics.transfers`).
+2. *Elimination*: the generators are taken one at a time in a documented order; each is
+   reduced by the earlier ones (exact arithmetic in the field of rational functions of the
+   geometry symbols) and, if something is left, one of its parameters (its *pivot*) is
+   eliminated: the transferred multipole is chosen so that this parameter becomes zero, as
+   in the paper. A generator with nothing left is redundant (another rule already gave it).
+3. *Base parameters*: applying the transfers in that order leaves every kept parameter
+   as ``phi_k + sum beta_ke phi_e``; the coefficients come out as simplified expressions in
+   the geometry symbols and as exact rationals for the mechanism's geometry.
+4. *The count is checked, not assumed* (:func:`certify`), on W computed in ball
+   arithmetic at D digits on N states: ``baseparams.numeric.certify.analyse`` proves rank >= the
+   number of kept columns (they are shown independent); every generator n, evaluated in
+   balls at the geometry, gives W n whose entries all contain 0. The latter is evidence,
+   not proof, that rank <= 70 - (pivots) (a proof would need the generators verified
+   symbolically). Only when the bound and the count meet, with every generator tested, is
+   the result ``certified``.
+
+Default order of generators and pivots (reproduces the paper's choice on the SLA):
+
+- body conditions first (quadrupoles, dipoles, a monopole at the body origin), each
+  eliminating the parameter it acts on (Tab. 4);
+- then transfers, joints whose donor is farthest from the *root* first. The root is the
+  moving body with the most joints (ties: lowest label); distances count joints from
+  ground or the root. Across a joint the donor is the body farther from them (ties: the
+  higher label): masses move toward the root (the hub of the SLA), inertia toward ground.
+  Pivots: a monopole between moving bodies removes the donor's mass; a monopole at a
+  ground joint removes the first diagonal inertia entry (Ixx, Iyy, Izz) it changes (the
+  mass is kept for its transfer toward the root: the paper's Iyy1, Iyy2, Iyy4); a dipole
+  removes the donor's first moment along its direction; an axisymmetric quadrupole the
+  last diagonal entry of the donor it touches (the paper's Izz5); "any quadrupole" the
+  donor's matching entry;
+- then the remaining body conditions (monopoles at other points at rest), usually redundant.
+
+``keep=[...]`` never eliminates the named parameters when another choice exists;
+``eliminate_first=[...]`` eliminates the named parameters whenever a generator allows it.
+"""
+
+import time
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import sympy
+from sympy import QQ
+
+from baseparams.numeric.backends import Arb
+from baseparams.plugins.solvers.symbolic.body_conditions import analyse_bodies
+from baseparams.errors import InputError
+from baseparams.model.params import PARAMETER_KINDS, split_name
+from baseparams.solvers.result import BaseParameterResult
+from baseparams.plugins.solvers.symbolic.sampled_transfers import sampled_joint_transfers
+from baseparams.dynamics.transfers import transfer_generators
+
+DIAGONAL = ("Ixx", "Iyy", "Izz")
+FIRST_MOMENTS = ("mx", "my", "mz")
+
+
+# ----- exact field ------------------------------------------------------------------------
+class ExactField:
+    """Rational functions of the geometry symbols (sympy's sparse polys), with the mechanism's
+    exact geometry for evaluation. Square roots left by non-unit axes become extra symbols
+    (their squares are not reduced, so zero tests are always made at the actual geometry)."""
+
+    def __init__(self, mechanism, expressions):
+        self.mechanism = mechanism
+        self.radicals = {}          # sympy Pow (b**(1/q)) -> Symbol
+        atoms = set()
+        converted = [self._replace(sympy.sympify(e)) for e in expressions]
+        for e in converted:
+            atoms |= e.free_symbols
+        names = sorted(mechanism.geometry)
+        symbols = [sympy.Symbol(n) for n in names if sympy.Symbol(n) in atoms]
+        symbols += sorted(set(self.radicals.values()), key=lambda s: s.name)
+        symbols = symbols or [sympy.Symbol(names[0]) if names else sympy.Symbol("_unit")]
+        self.symbols = symbols
+        self.K = QQ.frac_field(*symbols)
+        ring = self.K.field.ring
+        values = mechanism.geometry_subs
+        self.values = values
+        self.exact = True
+        pairs = []
+        for gen, sym in zip(ring.gens, symbols):
+            if sym in values:
+                pairs.append((gen, QQ(values[sym].p, values[sym].q)))
+            else:
+                base = self._radical_of(sym)
+                v = sympy.simplify(base.subs(values))
+                if not v.is_Rational:
+                    self.exact = False
+                    v = sympy.Rational(0)
+                pairs.append((gen, QQ(v.p, v.q)))
+        self.pairs = pairs
+
+    def _radical_of(self, sym):
+        for k, v in self.radicals.items():
+            if v == sym:
+                return k
+        raise KeyError(sym)
+
+    def _replace(self, e):
+        def repl(p):
+            b, x = p.as_base_exp()
+            if x.is_Rational and not x.is_Integer:
+                root = b ** sympy.Rational(1, x.q)
+                if root not in self.radicals:
+                    self.radicals[root] = sympy.Symbol(f"_r{len(self.radicals)}")
+                return self.radicals[root] ** x.p
+            return p
+        return e.replace(lambda p: p.is_Pow, repl) if e.has(sympy.Pow) else e
+
+    def convert(self, expr):
+        return self.K.from_sympy(self._replace(sympy.sympify(expr)))
+
+    def to_sympy(self, elem):
+        expr = self.K.to_sympy(elem)
+        if self.radicals:
+            expr = expr.subs({v: k for k, v in self.radicals.items()})
+        return expr
+
+    def value(self, elem):
+        """Exact value at the mechanism's geometry: Fraction (or sympy number with radicals)."""
+        if self.exact:
+            num = elem.numer.evaluate(self.pairs) if self.pairs else elem.numer
+            den = elem.denom.evaluate(self.pairs) if self.pairs else elem.denom
+            q = QQ.to_sympy(QQ.convert(num) / QQ.convert(den))
+            return Fraction(int(q.p), int(q.q))
+        return sympy.simplify(self.to_sympy(elem).subs(self.values))
+
+    def nonzero_at_geometry(self, elem):
+        return bool(elem) and self.value(elem) != 0
+
+
+# ----- the mechanism's graph: root, distances, donors -------------------------------------
+def body_distances(mechanism):
+    """(root, {body: distance}) with distances counted in joints from ground or the root."""
+    degree = {b: 0 for b in mechanism.body_labels}
+    neighbours = {0: set(), **{b: set() for b in mechanism.body_labels}}
+    for j in mechanism.joints:
+        for b in (j.parent, j.child):
+            if b != 0:
+                degree[b] += 1
+        neighbours[j.parent].add(j.child)
+        neighbours[j.child].add(j.parent)
+    root = min(mechanism.body_labels, key=lambda b: (-degree[b], b)) if degree else None
+    dist = {0: 0}
+    if root is not None:
+        dist[root] = 0
+    frontier = list(dist)
+    while frontier:
+        nxt = []
+        for b in frontier:
+            for n in neighbours[b]:
+                if n not in dist:
+                    dist[n] = dist[b] + 1
+                    nxt.append(n)
+        frontier = nxt
+    for b in mechanism.body_labels:
+        dist.setdefault(b, len(mechanism.body_labels) + 1)
+    return root, dist
+
+
+def donor_acceptor(joint, dist):
+    a, b = joint.parent, joint.child
+    if a == 0 or b == 0:
+        return 0, (b if a == 0 else a)            # ground gives: the body is the acceptor
+    if (dist[a], a) > (dist[b], b):
+        return a, b
+    return b, a
+
+
+# ----- pivot preferences ------------------------------------------------------------------
+def _largest_component(direction, field):
+    values = [abs(float(sympy.N(sympy.sympify(c).subs(field.values)))) for c in direction]
+    return max(range(3), key=lambda k: (round(values[k], 12), -k))
+
+
+def transfer_preference(gen, mechanism, field):
+    """Parameters a transfer generator should eliminate, most wanted first (see module doc)."""
+    body = gen.acceptor if gen.donor == 0 else gen.donor
+    side = gen.sides.get(body, {})
+    names = lambda kinds: [f"{k}{body}" for k in kinds]  # noqa: E731
+    if gen.multipole == "monopole":
+        if gen.donor != 0:
+            return names(["m"]) + names(DIAGONAL) + names(FIRST_MOMENTS)
+        return names(DIAGONAL) + names(FIRST_MOMENTS) + names(["m"])
+    if gen.multipole == "dipole":
+        k = _largest_component(side["direction"], field)
+        return names([FIRST_MOMENTS[k]]) + names(FIRST_MOMENTS) + names(reversed(DIAGONAL))
+    if gen.label.startswith("quadrupole ") and gen.label.split()[-1] in PARAMETER_KINDS:
+        own = gen.label.split()[-1]
+        return names([own]) + names(["Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz"])
+    return names(reversed(DIAGONAL)) + names(["Ixy", "Ixz", "Iyz"])
+
+
+# ----- elimination ------------------------------------------------------------------------
+@dataclass
+class Step:
+    """An accepted generator: its reduced vector, the parameter it eliminates, and (after
+    :func:`apply_steps`) the multipole amount and the parameters it changed."""
+    generator: object
+    vector: dict                   # parameter -> field element (reduced)
+    pivot: str
+    amount: dict = field(default_factory=dict)       # linear form: parameter -> field element
+    changes: dict = field(default_factory=dict)      # parameter -> new linear form
+
+
+@dataclass
+class Derivation:
+    mechanism: object
+    field: object
+    bodies: list                   # BodyMotion per body
+    steps: list                    # Step, in order
+    redundant: list                # (Generator, reason)
+    missing_rules: list            # joints whose type has no rules
+    base: dict                     # kept parameter -> linear form (parameter -> field element)
+    eliminated: list
+    warnings: list
+
+    @property
+    def conditions(self):
+        return [s for s in self.steps if s.generator.kind == "condition"]
+
+    @property
+    def transfers(self):
+        return [s for s in self.steps if s.generator.kind == "transfer"]
+
+
+def _reduce(vector, steps):
+    g = dict(vector)
+    for step in steps:
+        c = g.get(step.pivot)
+        if not c:
+            continue
+        f = c / step.vector[step.pivot]
+        for p, v in step.vector.items():
+            s = g.get(p, 0) - f * v
+            if s:
+                g[p] = s
+            else:
+                g.pop(p, None)
+    return g
+
+
+def _order_generators(mechanism, bodies, transfers):
+    root, dist = body_distances(mechanism)
+    phase_a, phase_c = [], []
+    for motion in bodies:
+        for g in motion.generators:
+            late = g.multipole == "monopole" and g.sides[g.bodies[0]].get("where") != "origin"
+            (phase_c if late else phase_a).append(g)
+    joint_index = {j.name: i for i, j in enumerate(mechanism.joints)}
+    for g in transfers:
+        g.donor, g.acceptor = donor_acceptor(g.joint, dist)
+    transfers = sorted(transfers, key=lambda g: (g.condition == 0,
+                                                 -(dist[g.donor] if g.donor else dist[g.acceptor]),
+                                                 joint_index[g.joint.name]))
+    return phase_a + transfers + phase_c, root, dist
+
+
+def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
+    """Run the whole derivation (generators, elimination, base expressions)."""
+    params = list(mechanism.parameters)
+    for name, opt in [(n, "keep") for n in keep] + [(n, "eliminate_first") for n in eliminate_first]:
+        if name not in params:
+            raise InputError(f"{name!r} is not a parameter of {mechanism.name} "
+                             f"({params[0]} ... {params[-1]})", key=opt)
+    bodies, forms = analyse_bodies(mechanism, states=states, seed=seed)
+    transfers, missing = transfer_generators(mechanism)
+    for joint in mechanism.joints:
+        if joint in missing:
+            continue
+        known = {g.multipole for g in transfers if g.joint is joint and g.multipole != "quadrupole"}
+        transfers += sampled_joint_transfers(mechanism, joint, forms, known)
+    ordered, root, dist = _order_generators(mechanism, bodies, transfers)
+    field_ = ExactField(mechanism, [v for g in ordered for v in g.vector.values()])
+    warnings = []
+    for motion in bodies:
+        if motion.missing > 0:
+            warnings.append(f"body {motion.label}: sampling finds {motion.null_dimension} parameter "
+                            f"directions without effect but exact data (body or joint axes and "
+                            f"points) for only {len(motion.generators)}")
+    for joint in missing:
+        warnings.append(f"joint {joint.name}: no plugin gives transfer rules for joint type "
+                        f"{joint.type.name!r}; multipoles across it are not used")
+    keep_set = set(keep)
+    first = list(eliminate_first)
+    order = {p: i for i, p in enumerate(params)}
+    steps, redundant = [], []
+    for gen in ordered:
+        vector = {p: field_.convert(v) for p, v in gen.vector.items()}
+        vector = {p: v for p, v in vector.items() if v}
+        g = _reduce(vector, steps)
+        live = [p for p in sorted(g, key=order.get) if field_.nonzero_at_geometry(g[p])]
+        if not live:
+            reason = "implied by the generators before it" if not g else \
+                "vanishes at this geometry (special values of the geometry symbols)"
+            redundant.append((gen, reason))
+            continue
+        if gen.kind == "transfer":
+            gen.preference = transfer_preference(gen, mechanism, field_)
+        donor = gen.donor if gen.kind == "transfer" and gen.donor else None
+        fallback = sorted(live, key=lambda p: (split_name(p)[1] != donor, order[p]))
+        ranked = [p for p in first if p in live] + [p for p in gen.preference if p in live] + fallback
+        choice = next((p for p in ranked if p not in keep_set), None)
+        if choice is None:
+            choice = ranked[0]
+            warnings.append(f"{describe(gen)} can only eliminate kept parameters; {choice} eliminated")
+        steps.append(Step(gen, g, choice))
+    base = apply_steps(steps, params, field_.K.one)
+    eliminated = [s.pivot for s in steps]
+    derivation = Derivation(mechanism, field_, bodies, steps, redundant, missing,
+                            {p: base[p] for p in params if p not in set(eliminated)},
+                            eliminated, warnings)
+    derivation.root, derivation.distances = root, dist
+    return derivation
+
+
+def apply_steps(steps, params, one=1):
+    """Apply the transfers in order; returns every parameter's final value as a linear form
+    in the original parameters (eliminated ones end at zero). Fills ``amount``/``changes``."""
+    current = {}
+
+    def value(p):
+        return current.get(p, {p: one})
+
+    for step in steps:
+        pv = value(step.pivot)
+        scale = -1 / step.vector[step.pivot]
+        amount = {q: c * scale for q, c in pv.items()}
+        step.amount = amount
+        for p, coeff in step.vector.items():
+            new = dict(value(p))
+            for q, c in amount.items():
+                s = new.get(q, 0) + c * coeff
+                if s:
+                    new[q] = s
+                else:
+                    new.pop(q, None)
+            current[p] = new
+            step.changes[p] = new
+    return {p: value(p) for p in params}
+
+
+def describe(gen):
+    if gen.kind == "condition":
+        return f"body {gen.bodies[0]} condition {gen.condition} ({gen.label})"
+    return f"joint {gen.joint_name} ({gen.joint_type}) {gen.label}"
+
+
+# ----- certification ----------------------------------------------------------------------
+@dataclass
+class Certificate:
+    """What :func:`certify` established on W (``rows`` x parameters, ``samples`` states,
+    ball arithmetic at ``digits``).
+
+    Proven: ``rank(W) >= lower`` (``kept_proven``: the solver's kept columns themselves are
+    proven independent; otherwise ``lower`` is the shared ball analysis's own rank).
+    Evidence: each tested generator n gave balls ``W n`` that all contain 0 (``failed``:
+    those that did not); ``residual`` is the largest ``max|W n| / (max|W| max|n|)``
+    (upper bounds) over the tested generators, None when none was tested.
+    """
+    digits: int
+    samples: int
+    rows: int
+    lower: int
+    kept_proven: bool
+    generators: int = 0
+    tested: int = 0
+    residual: float | None = None
+    failed: list = field(default_factory=list)      # (description, relative residual)
+    untested: list = field(default_factory=list)    # (description, reason)
+
+    @property
+    def passed(self):
+        return self.tested - len(self.failed)
+
+    def info(self):
+        """The ``diagnostics.certificate`` entry of the result (JSON-ready)."""
+        return {"digits": self.digits, "samples": self.samples, "rows": self.rows,
+                "rank_lower_bound": self.lower, "kept_columns_proven": self.kept_proven,
+                "generators": self.generators, "generators_tested": self.tested,
+                "generators_passed": self.passed,
+                "generator_residual": None if self.residual is None else f"{self.residual:.2e}",
+                "generators_failed": [{"source": s, "residual": f"{r:.2e}"} for s, r in self.failed],
+                "generators_untested": [{"source": s, "reason": r} for s, r in self.untested]}
+
+
+def certify(mechanism, derivation, digits=40, trajectory=None):
+    """Check the symbolic count on W computed in ball arithmetic at ``digits`` (a
+    :class:`Certificate`).
+
+    W is the trajectory's observation matrix stacked with rows at independent random states.
+
+    - Lower bound (a proof): ``baseparams.numeric.certify.analyse`` with the kept columns imposed
+      proves them independent, so rank(W) >= their number; if it cannot, its own
+      analysis gives the rank it can prove.
+    - Generators (evidence): every accepted generator, reduced as in the elimination, is
+      evaluated at the geometry in balls (exact rationals, or balls around square roots
+      of non-squares) and passes when every entry of W n contains 0 and
+      |W n| <= 10^-(digits/2) max|W| max|n|. W's balls enclose the exact W at the states,
+      so a true null vector always passes; passing on N states is not a proof that n is one.
+    """
+    from flint import arb, arb_mat, fmpq
+
+    from baseparams.numeric.certify import analyse
+    from baseparams.dynamics.excitation import batch_matrix, random_batch, stack_rows
+    from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+
+    backend = Arb(digits)
+    trajectory = trajectory or Trajectory.default(mechanism)
+    W, info = observation_matrix(mechanism, backend, trajectory)
+    # rows at random states independent of the trajectory, so that a trajectory which does
+    # not excite the mechanism cannot lower the proven rank (core/excitation.py)
+    W = stack_rows(W, batch_matrix(mechanism, backend, trajectory, random_batch(mechanism, trajectory, seed=7919)))
+    params = list(mechanism.parameters)
+    kept = [params.index(p) for p in derivation.base]
+    index = {p: i for i, p in enumerate(params)}
+    with backend.activate():
+        try:
+            lower, kept_proven = analyse(W, digits, kept=kept, approximate_spectrum=False).rank, True
+        except ValueError:          # not proven independent: what can be proven instead
+            lower, kept_proven = analyse(W, digits, approximate_spectrum=False).rank, False
+        cert = Certificate(digits, info.get("samples"), W.nrows(), lower, kept_proven,
+                           generators=len(derivation.steps))
+        rows = W.nrows()
+        wmax = max((abs(float(W[i, j].mid())) for i in range(rows) for j in range(W.ncols())),
+                   default=0.0) or 1.0
+        tolerance = 10.0 ** (-(digits // 2))
+        for step in derivation.steps:
+            n = arb_mat(len(params), 1)
+            try:
+                for p, v in step.vector.items():
+                    x = derivation.field.value(v)
+                    n[index[p], 0] = arb(fmpq(x.numerator, x.denominator)) if isinstance(x, Fraction) \
+                        else backend.evaluate(x)
+            except ValueError as exc:       # a radical the backend cannot evaluate
+                cert.untested.append((describe(step.generator), str(exc)))
+                continue
+            res = W * n
+            nmax = max(abs(float(n[i, 0].mid())) for i in range(len(params))) or 1.0
+            r = max((float(abs(res[i, 0]).upper()) for i in range(rows)), default=0.0) / (wmax * nmax)
+            cert.tested += 1
+            cert.residual = max(cert.residual or 0.0, r)
+            if r > tolerance or not all(res[i, 0].contains(0) for i in range(rows)):
+                cert.failed.append((describe(step.generator), r))
+    return cert
+
+
+# ----- result -------------------------------------------------------------------------------
+def coefficient_text(field_, elem):
+    return str(sympy.factor(field_.to_sympy(elem)))
+
+
+def value_text(field_, elem):
+    v = field_.value(elem)
+    return str(v)
+
+
+def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, seed=1,
+          trajectory=None):
+    """The symbolic solver: a :class:`BaseParameterResult` plus the derivation (``.derivation``)."""
+    start = time.perf_counter()
+    der = eliminate(mechanism, keep=keep, eliminate_first=eliminate_first, seed=seed)
+    f = der.field
+    params = list(mechanism.parameters)
+    order = {p: i for i, p in enumerate(params)}
+    base, values = [], []
+    for k, (kept, form) in enumerate(der.base.items(), start=1):
+        terms = sorted(form.items(), key=lambda t: (t[0] != kept, order[t[0]]))
+        base.append({"name": f"phi_b{k:02d}", "expression": {p: coefficient_text(f, c) for p, c in terms}})
+        values.append({p: value_text(f, c) for p, c in terms})
+    rank = len(der.base)
+    warnings = list(der.warnings)
+    diagnostics = {"conditions": [_step_json(s, f) for s in der.conditions],
+                   "transfers": [_step_json(s, f) for s in der.transfers],
+                   "redundant": [{"source": describe(g), "reason": r} for g, r in der.redundant],
+                   "root": der.root}
+    certified = upper_bound = False
+    if certify_rank:
+        cert = certify(mechanism, der, digits=digits, trajectory=trajectory)
+        diagnostics["certificate"] = cert.info()
+        warnings += _certificate_warnings(cert, rank)
+        upper_bound = not cert.failed and cert.lower < rank
+        certified = not cert.failed and not cert.untested and cert.lower == rank
+    else:
+        warnings.append("rank not checked (certify off): the count rests on the generators alone, "
+                        "body conditions among them accepted on sampled numerical evidence")
+    summary = [f"{len(der.conditions)} parameters without effect (body conditions), "
+               f"{len(der.transfers)} eliminated by multipole transfers, "
+               f"{len(der.redundant)} redundant generators"]
+    if certify_rank:
+        summary.append(f"ball arithmetic at {cert.digits} digits on {cert.samples} states proves "
+                       f"rank >= {cert.lower}; {cert.passed} of {cert.generators} generators n give "
+                       f"balls W n that contain 0 (evidence for rank <= {len(params) - cert.passed})")
+    summary.append("derivation: `baseparams report MECH` (text, markdown or latex)")
+    diagnostics["summary"] = summary
+    if any(not _is_fraction_text(t) for row in values for t in row.values()):
+        warnings.append("square roots of non-squares in the geometry: some expression values are algebraic")
+    result = BaseParameterResult(
+        mechanism=mechanism.name, solver="symbolic", parameters=params, rank=rank, base=base,
+        eliminated=der.eliminated, certified=certified,
+        geometry=mechanism.geometry_text,
+        warnings=warnings, elapsed_s=time.perf_counter() - start, expression_values=values,
+        rank_is_upper_bound=upper_bound, diagnostics=diagnostics)
+    result.derivation = der
+    return result
+
+
+def _certificate_warnings(cert, rank):
+    """Why a checked result is not certified (nothing when it is)."""
+    out = []
+    if cert.failed:
+        names = "; ".join(f"{s} (relative residual {r:.2e})" for s, r in cert.failed)
+        out.append(f"{len(cert.failed)} generator(s) failed the null-vector check at {cert.digits} digits "
+                   f"(a ball of W n excludes 0, or is too wide to tell): {names}. The symbolic count "
+                   f"{rank} may be too low: not certified")
+    if cert.untested:
+        names = "; ".join(f"{s} ({why})" for s, why in cert.untested)
+        out.append(f"{len(cert.untested)} generator(s) could not be evaluated in ball arithmetic and "
+                   f"were not tested: {names}. Not certified")
+    if not cert.failed and cert.lower < rank:
+        out.append(f"the rank is only proven >= {cert.lower}; the symbolic count {rank} is an upper bound "
+                   f"(a dependency the rules and conditions do not know?)")
+    if not cert.failed and cert.lower > rank:
+        out.append(f"ball arithmetic proves rank >= {cert.lower}, above the symbolic count {rank}: some "
+                   f"generator is not a null vector although it passed at {cert.digits} digits. "
+                   f"Not certified")
+    if not cert.kept_proven and cert.lower == rank and not cert.failed:
+        out.append("the kept columns are not proven independent (another set of that size is)")
+    return out
+
+
+def _is_fraction_text(text):
+    try:
+        Fraction(text)
+        return True
+    except (ValueError, ZeroDivisionError):
+        return False
+
+
+def _step_json(step, f):
+    g = step.generator
+    out = {"kind": g.kind, "condition": g.condition, "multipole": g.multipole, "label": g.label,
+           "bodies": list(g.bodies), "eliminated": step.pivot}
+    if g.kind == "transfer":
+        out.update({"joint": g.joint_name, "joint_type": g.joint_type, "donor": g.donor,
+                    "acceptor": g.acceptor})
+    return out
+

@@ -1,0 +1,58 @@
+"""Multipole transfers across a joint found by sampling, beyond the joint type's rules.
+
+A joint type's rules (:mod:`baseparams.dynamics.transfers`) state what may cross it whatever the
+mechanism. Some mechanisms allow more: across a prismatic joint whose sliding axis stays
+parallel to the common angular velocity (a SCARA quill) dipoles cross in every direction,
+which no general rule for P joints can say. So across each joint between two moving
+bodies, a monopole at the joint centre and dipoles along the joint axes there are tried
+on the two bodies' sampled Lagrangian rows (:func:`baseparams.plugins.solvers.symbolic.body_conditions.lagrangian_rows`).
+Those that pass (relative residual below 1e-14 on the sampled states) are generators of
+condition 0, accepted on numerical evidence like the body conditions and re-checked in
+ball arithmetic by the solver.
+"""
+
+import mpmath
+
+from baseparams.plugins.solvers.symbolic.body_conditions import NULL_TOL, lagrangian_rows, residual, to_number
+from baseparams.model.params import body_parameter_names
+from baseparams.dynamics.transfers import (Generator, as_vector, dipole_params, joint_frames, map_direction, map_point,
+                        monopole_params)
+
+
+def sampled_joint_transfers(mechanism, joint, forms, known, digits=30):
+    """Generators (condition 0) of the transfers across ``joint`` that leave the Lagrangian
+    unchanged on every sampled state ``forms`` (from
+    :func:`baseparams.plugins.solvers.symbolic.body_conditions.analyse_bodies`), except the multipoles ``known``
+    (names) the joint type's rules already give. Nothing across a joint with ground: a
+    transfer there changes one body only, which the body conditions cover."""
+    if joint.parent == 0 or joint.child == 0:
+        return []
+    with mpmath.workdps(digits - 2):
+        rows = lagrangian_rows(mechanism, [joint.parent, joint.child], forms)
+        frames = joint_frames(mechanism, joint)
+        subs = mechanism.geometry_subs
+        zero = [0, 0, 0]
+        tries = []
+        if "monopole" not in known:
+            tries.append(("monopole", None, lambda fr: monopole_params(map_point(fr, zero))))
+        for k, a in enumerate("xyz"):
+            u = [int(i == k) for i in range(3)]
+            tries.append(("dipole", a, lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u))))
+        names = body_parameter_names(joint.parent) + body_parameter_names(joint.child)
+        out = []
+        for multipole, axis, make in tries:
+            vector = {}
+            for body, sign in ((joint.parent, 1), (joint.child, -1)):
+                for name, v in as_vector(body, make(frames[body]), sign).items():
+                    vector[name] = vector.get(name, 0) + v
+            num = [to_number(vector.get(n, 0), subs) for n in names]
+            if residual(rows, num) >= NULL_TOL:
+                continue
+            sides = {b: {"point": map_point(frames[b], zero),
+                         "direction": None if axis is None else map_direction(frames[b], [int(a == axis) for a in "xyz"])}
+                     for b in (joint.parent, joint.child)}
+            label = "monopole" if axis is None else f"dipole along the joint's {axis} axis"
+            out.append(Generator(vector={k: v for k, v in vector.items() if v != 0}, kind="transfer",
+                                 multipole=multipole, condition=0, bodies=(joint.parent, joint.child),
+                                 joint=joint, sides=sides, label=label + " (sampled)"))
+        return out

@@ -1,0 +1,378 @@
+"""The ``vp`` solver: Gautier's method in python-flint ball arithmetic
+(:mod:`baseparams.numeric.certify`), the precision raised along a ladder until two
+precisions agree, checked against independent random batches, and exact rationals
+recovered from the balls and confirmed at twice the digits."""
+
+import copy
+import math
+import time
+
+from baseparams.dynamics.excitation import batch_matrix, random_batch, stack_rows
+from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+from baseparams.errors import KinematicsError
+from baseparams.model.expressions import exact_text
+from baseparams.numeric import certify
+from baseparams.numeric.backends import Arb
+from baseparams.solvers.result import BaseParameterResult
+from baseparams.solvers.support import base_rows, raised_warning, say, untrusted_warning
+
+RIDGE_DECADES = 3          # a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
+MIN_DIGITS = 10            # coefficients must agree to 10 digits between two precisions
+LADDER = (30, 60, 120, 240, 500)
+CHECK_SEED = 7919          # seed of the first independent excitation batch (then +1, +2)
+CHECK_ROUNDS = 2           # independent batches that may be added to W before giving up
+
+
+class BallRun:
+    """One precision: W at D digits and its certified analysis."""
+
+    def __init__(self, mechanism, digits, trajectory, kept=None, pivoting="natural", progress=None,
+                 batches=()):
+
+        self.digits = digits
+        start = time.perf_counter()
+        backend = Arb(digits)
+        total = len(trajectory.times)
+        marks = {max(1, round(total * k / 4)) for k in (1, 2, 3)}
+
+        def tick(done, count):
+            if done in marks:
+                say(progress, f"vp: {digits} digits: sample {done}/{count}")
+
+        self.W, self.info = observation_matrix(mechanism, backend, trajectory, progress=tick)
+        if batches:             # independent random states added after a failed excitation check
+            self.W = stack_rows(self.W, *(batch_matrix(mechanism, backend, trajectory, b) for b in batches))
+        self.info["random_states"] = sum(b.states for b in batches)
+        with backend.activate():
+            self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting)
+            self.tail_values = certify.tail_singular_values(self.W, self.analysis)
+        self.seconds = time.perf_counter() - start
+        a = self.analysis
+        self.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
+                          for i in range(a.beta.nrows())]
+
+    def reanalyse(self, kept):
+        """This run's W analysed with imposed kept columns (a copy), or None if they are not
+        proven independent at this precision."""
+        other = copy.copy(self)
+        with Arb(self.digits).activate():
+            try:
+                other.analysis = certify.analyse(self.W, self.digits, kept=kept)
+            except ValueError:
+                return None
+            other.tail_values = certify.tail_singular_values(self.W, other.analysis)
+        a = other.analysis
+        other.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
+                           for i in range(a.beta.nrows())]
+        return other
+
+    @property
+    def rank(self):
+        return self.analysis.rank
+
+    def min_digits(self):
+        a = self.analysis
+        values = [d for i, row in enumerate(self.digits_of) for j, d in enumerate(row)
+                  if not a.beta[i, j].contains(0)]
+        return min(values, default=math.inf)
+
+    def summary(self):
+        a = self.analysis
+        return {"digits": self.digits, "rank": a.rank, "pivoting": a.pivoting,
+                "ridge_decades": _finite(a.ridge_log10), "sigma_r_lower": a.sigma_r_lower.str(4, radius=False),
+                "tail_bound": a.tail_bound.str(4, radius=False), "min_beta_digits": _finite(self.min_digits()),
+                "closure_residual": self.info.get("closure_residual"), "seconds": round(self.seconds, 3)}
+
+
+def _finite(x):
+    if x == math.inf:
+        return "inf"
+    if x == -math.inf:
+        return "-inf"
+    return round(x, 2) if isinstance(x, float) else x
+
+
+def _vp_check_line(check):
+    if "error" in check:
+        return f"the random states could not be evaluated ({check['error']})"
+    verdict = ("obey the base parameters" if check["passed"] else
+               f"do NOT obey the base parameters ({check['proven_nonzero']} entries of W_batch N proven "
+               f"nonzero)" if check["proven_nonzero"] else "do not keep the ridge")
+    return (f"{check['states']} independent random states ({check['rows']} rows) at {check['digits']} digits "
+            f"{verdict}: a ridge of {check['ridge_decades_with_batch']} decades on W and the batch together")
+
+
+def compare_runs(prev, cur):
+    """Agreement between two precisions: (ok, minimum agreement digits, reasons)."""
+    reasons = []
+    a, b = prev.analysis, cur.analysis
+    if a.rank != b.rank:
+        reasons.append(f"rank {a.rank} at {prev.digits} digits, {b.rank} at {cur.digits}")
+        return False, 0, reasons
+    if a.kept != b.kept:
+        reasons.append(f"the kept parameters differ between {prev.digits} and {cur.digits} digits")
+        return False, 0, reasons
+    worst = math.inf
+    for i in range(b.beta.nrows()):
+        for j in range(b.beta.ncols()):
+            x, y = a.beta[i, j], b.beta[i, j]
+            if x.contains(0) and y.contains(0):
+                continue
+            if not x.overlaps(y):
+                reasons.append(f"a coefficient's balls at {prev.digits} and {cur.digits} digits do not overlap")
+                return False, 0, reasons
+            if x.contains(0) != y.contains(0):
+                worst = 0
+                continue
+            worst = min(worst, certify.agreement_digits(x, y))
+    if worst < MIN_DIGITS:
+        reasons.append(f"coefficients agree to only {worst} digits between {prev.digits} and "
+                       f"{cur.digits} digits (need {MIN_DIGITS})")
+    if b.ridge_log10 < RIDGE_DECADES:
+        reasons.append(f"the proven ridge at {cur.digits} digits is {_finite(b.ridge_log10)} decades "
+                       f"(need {RIDGE_DECADES})")
+    if not (b.ridge_log10 > a.ridge_log10 or b.ridge_log10 == math.inf):
+        reasons.append("the bound after the ridge did not shrink with more digits")
+    return not reasons, worst, reasons
+
+
+def _vp_coefficients(final, prev, params):
+    """Base rows with each coefficient printed to the digits trusted: its ball's own, capped
+    by the agreement with the previous precision. Returns (rows, trusted digits of the
+    printed ones, untrusted): a nonzero coefficient with no trusted digit is left out of
+    its expression and listed in ``untrusted`` with its ball."""
+    a = final.analysis
+    same = prev is not None and prev.analysis.kept == a.kept and prev.rank == a.rank
+    trusted, untrusted = {}, []
+    for i in range(a.beta.nrows()):
+        for j in range(a.beta.ncols()):
+            d = final.digits_of[i][j]
+            if same:
+                d = min(d, certify.agreement_digits(prev.analysis.beta[i, j], a.beta[i, j]))
+            trusted[i, j] = max(0, min(d, final.digits))
+
+    def coefficient(i, j):
+        x = a.beta[i, j]
+        if x.contains(0):
+            return None
+        if trusted[i, j] < 1:
+            untrusted.append({"base": i, "parameter": params[a.eliminated[j]], "ball": x.str(5)})
+            return None
+        return certify.decimal_string(x, trusted[i, j])
+
+    rows = base_rows(params, a.kept, a.eliminated, coefficient)
+    for item in untrusted:
+        item["base"] = rows[item["base"]]["name"]
+    printed = [trusted[i, j] for i in range(a.beta.nrows()) for j in range(a.beta.ncols())
+               if not a.beta[i, j].contains(0) and trusted[i, j] >= 1]
+    return rows, printed, untrusted
+
+
+class VariablePrecisionSolver:
+    """Gautier's method in python-flint ball arithmetic, precision escalated automatically."""
+
+    name = "vp"
+    description = ("Gautier's method in ball arithmetic (python-flint): proven rank, precision "
+                   "raised until the ridge is evident and beta agrees at two precisions")
+
+    def solve(self, mechanism, digits=None, samples=None, progress=None, ladder=LADDER,
+              pivoting="natural", recover=True, kept=None, seed=CHECK_SEED, **options):
+        start = time.perf_counter()
+        trajectory = Trajectory.default(mechanism, samples=samples)
+        params = mechanism.parameters
+        warnings, notes = [], []
+        steps = [int(digits)] if digits else [int(d) for d in ladder]
+        batches, checks = [], []
+        for round_ in range(CHECK_ROUNDS + 1):
+            runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
+                                                                kept, pivoting, progress)
+            check, batch = self._excitation_check(mechanism, trajectory, runs[-1], seed + round_, progress)
+            checks.append(check)
+            if check["passed"] or "error" in check or round_ == CHECK_ROUNDS:
+                break
+            say(progress, f"vp: the excitation check failed (rank {check['rank']}): W and the batch "
+                           f"analysed together")
+            batches.append(batch)
+        final = runs[-1]
+        a = final.analysis
+        prev = runs[-2] if len(runs) >= 2 else None
+        excited = checks[-1]["passed"]
+        if batches:
+            before = checks[0]["rank"]
+            warnings.append(raised_warning(mechanism, before, a.rank, sum(b.states for b in batches))
+                            if a.rank > before else
+                            f"an independent random batch did not fit the base parameters of the "
+                            f"trajectory's W (rank {before}): W and the batch analysed together")
+        if not excited:
+            warnings.append("excitation check failed: " + _vp_check_line(checks[-1])
+                            + "; the rank is not certified")
+
+        with Arb(final.digits).activate():
+            base, printed, untrusted = _vp_coefficients(final, prev, params)
+        ridge_ok = a.ridge_log10 >= RIDGE_DECADES
+        if digits:
+            certified = ridge_ok and excited
+            if not ridge_ok:
+                warnings.append(f"no evident ridge at {final.digits} digits: proven ridge "
+                                f"{_finite(a.ridge_log10)} decades < {RIDGE_DECADES}; raise --digits")
+            notes.append("--digits fixes the precision: not confirmed at a second precision")
+        else:
+            certified = accepted and excited
+            if not accepted:
+                warnings.append("no agreement between two precisions up to "
+                                f"{final.digits} digits: " + "; ".join(reasons))
+        if untrusted:
+            warnings.append(untrusted_warning(untrusted))
+        warnings += [n for n in a.notes if "lowered" in n]
+
+        recovery = {"attempted": False}
+        if recover:
+            recovery = self._recover(mechanism, final, trajectory, batches, params, progress)
+
+        sv = a.singular_values[:a.rank] + final.tail_values
+        extra = final.info["random_states"]
+        summary = [
+            f"W: {final.W.nrows()} x {final.W.ncols()} ({final.info['samples']} samples"
+            + (f" + {extra} random states" if extra else "") + ") at "
+            f"{', '.join(str(r.digits) for r in runs)} digits; columns scaled by powers of two",
+            f"rank >= {a.rank} proven (a {a.rank} x {a.rank} block of W is nonsingular in ball arithmetic); "
+            f"s_{a.rank} >= {a.sigma_r_lower.str(3, radius=False)}, every later singular value <= "
+            f"{a.tail_bound.str(3, radius=False)}: a ridge of {_finite(a.ridge_log10)} decades",
+            (f"agreement with {prev.digits} digits: rank, kept parameters and beta to >= {agreement} digits"
+             if prev is not None and accepted else "not confirmed at a second precision"),
+            "excitation check: " + _vp_check_line(checks[-1]),
+            (f"coefficients printed with {min(printed)} to {max(printed)} trusted digits "
+             f"(kept parameters: {a.pivoting} order)" if printed else
+             f"no coefficient of beta printed (kept parameters: {a.pivoting} order)"),
+        ]
+        if recovery.get("attempted"):
+            summary.append("exact rationals: " + (
+                f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
+                f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
+                else f"not recovered ({recovery['reason']})"))
+        diagnostics = {
+            "certificate": ("rank >= r: an r x r block of the column-scaled W proven nonsingular; "
+                            "s_(r+1) <= tail_bound (Weyl); s_r >= sigma_r_lower (interlacing); "
+                            "certified when the ridge is >= 3 decades, rank, kept parameters and "
+                            "beta (>= 10 digits) agree at two precisions, and an independent random "
+                            "batch keeps a ridge of >= 3 decades with no entry of W_batch N proven nonzero"),
+            "runs": [r.summary() for r in runs],
+            "pivoting": a.pivoting,
+            "ridge_decades": _finite(a.ridge_log10),
+            "sigma_r_lower": a.sigma_r_lower.str(6, radius=False),
+            "tail_bound": a.tail_bound.str(6, radius=False),
+            "agreement_digits": _finite(agreement) if agreement is not None else None,
+            "excitation_checks": checks,
+            "random_states_in_W": extra,
+            "trusted_digits": {"min": min(printed, default=None), "max": max(printed, default=None)},
+            "untrusted": untrusted,
+            "column_scaling": "each column divided by the power of two nearest its norm (exact)",
+            "singular_values_note": (f"the first {a.rank}: sqrt of approximate eigenvalues of the scaled "
+                                     f"Gram matrix; the rest: singular values of the residual "
+                                     f"W_E - W_K beta, which bound them (Weyl)"),
+            "zero_columns": [params[j] for j in a.zero_columns],
+            "rational_recovery": recovery,
+            "notes": notes + a.notes,
+            "summary": summary,
+        }
+        return BaseParameterResult(
+            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
+            eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
+            singular_values=sv, geometry=mechanism.geometry_text, warnings=warnings,
+            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
+
+    @staticmethod
+    def _escalate(mechanism, trajectory, batches, steps, kept, pivoting, progress):
+        """W at each precision of ``steps`` until two consecutive ones agree:
+        (runs, accepted, agreement digits, reasons)."""
+        runs, accepted, agreement, reasons = [], False, None, []
+        for D in steps:
+            say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples"
+                           + (f" + {sum(b.states for b in batches)} random states" if batches else "") + ")")
+            run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress,
+                          batches=batches)
+            runs.append(run)
+            a = run.analysis
+            say(progress, f"vp: {D} digits: rank {a.rank} ({a.pivoting} order), proven ridge "
+                           f"{_finite(a.ridge_log10)} decades (s_r >= {a.sigma_r_lower.str(3, radius=False)}, "
+                           f"s_r+1 <= {a.tail_bound.str(3, radius=False)}), beta to >= "
+                           f"{_finite(run.min_digits())} digits; {run.seconds:.1f} s")
+            if len(runs) >= 2:
+                prev = runs[-2]
+                if prev.rank == run.rank and prev.analysis.kept != run.analysis.kept:
+                    # same rank, other basis choice: the previous W with this run's kept columns
+                    redone = prev.reanalyse(run.analysis.kept)
+                    if redone is not None:
+                        runs[-2] = prev = redone
+                accepted, agreement, reasons = compare_runs(prev, run)
+                if accepted:
+                    break
+                say(progress, "vp: not yet: " + "; ".join(reasons))
+        return runs, accepted, agreement, reasons
+
+    @staticmethod
+    def _excitation_check(mechanism, trajectory, final, seed, progress):
+        """An independent random batch at the final precision against the null space of the
+        final analysis (:func:`baseparams.numeric.certify.excitation_check`): (diagnostics, batch)."""
+        a = final.analysis
+        batch = random_batch(mechanism, trajectory, seed)
+        say(progress, f"vp: excitation check: {batch.states} random states at {final.digits} digits")
+        out = {"seed": seed, "states": batch.states, "digits": final.digits, "rank": a.rank}
+        backend = Arb(final.digits)
+        try:
+            Wc = batch_matrix(mechanism, backend, trajectory, batch)
+        except KinematicsError as exc:
+            return {**out, "passed": False, "error": str(exc)}, batch
+        with backend.activate():
+            bound, nonzero, decades = certify.excitation_check(Wc, a)
+            bound = bound.str(3, radius=False)
+        passed = nonzero == 0 and decades >= RIDGE_DECADES
+        return {**out, "rows": Wc.nrows(), "residual_bound": bound, "proven_nonzero": nonzero,
+                "ridge_decades_with_batch": _finite(decades), "passed": passed}, batch
+
+    def _recover(self, mechanism, final, trajectory, batches, params, progress):
+        """Exact rationals for beta from the digits its balls prove, then confirmed: each
+        must lie inside its ball at twice the digits."""
+        a = final.analysis
+        values = {}
+        for i in range(a.beta.nrows()):
+            for j in range(a.beta.ncols()):
+                x = a.beta[i, j]
+                if x.contains(0):
+                    continue
+                digits = min(final.digits_of[i][j], final.digits)
+                if digits < 8:
+                    return {"attempted": True, "succeeded": False,
+                            "reason": f"a coefficient has only {digits} proven digits"}
+                q = certify.recover_rational(x, digits)
+                if q is None:
+                    return {"attempted": True, "succeeded": False,
+                            "reason": f"no rational with a denominator below 10^{max(1, (digits - 2) // 2)} "
+                                      f"matches {params[a.kept[i]]}'s coefficient of {params[a.eliminated[j]]}"}
+                values[i, j] = q
+        D2 = 2 * final.digits
+        say(progress, f"vp: confirming {len(values)} recovered rationals at {D2} digits")
+        try:
+            check = BallRun(mechanism, D2, trajectory, kept=a.kept, progress=progress, batches=batches)
+        except (ValueError, KinematicsError) as exc:     # the result stands; only the recovery fails
+            return {"attempted": True, "succeeded": False, "reason": str(exc)}
+        b = check.analysis.beta
+        with Arb(D2).activate():            # the rationals as balls at least as tight as b's
+            return self._confirm(values, b, final, D2, a, params)
+
+    @staticmethod
+    def _confirm(values, b, final, D2, a, params):
+        for i in range(b.nrows()):
+            for j in range(b.ncols()):
+                q = values.get((i, j))
+                if q is None and not b[i, j].contains(0):
+                    return {"attempted": True, "succeeded": False,
+                            "reason": f"a coefficient zero at {final.digits} digits is not zero at {D2}"}
+                if q is not None and not certify.contains_rational(b[i, j], q):
+                    return {"attempted": True, "succeeded": False,
+                            "reason": f"{q} is outside the ball at {D2} digits"}
+        rows = base_rows(params, a.kept, a.eliminated,
+                         lambda i, j: exact_text(values[i, j]) if (i, j) in values else None)
+        return {"attempted": True, "succeeded": True, "confirmed_at_digits": D2,
+                "largest_denominator": max((q.denominator for q in values.values()), default=1),
+                "base": rows}
