@@ -1,8 +1,8 @@
 """Hook specifications: every extension point of baseparams.
 
-Built-in joint types, solvers, mechanisms and model effects register through these same
-hooks, from modules named in the ``baseparams`` entry-point group exactly as a third
-party's distribution would (see ``pyproject.toml``).
+Built-in joint types, solvers, mechanisms, mechanism readers and model effects register
+through these same hooks, from modules named in the ``baseparams`` entry-point group
+exactly as a third party's distribution would (see ``pyproject.toml``).
 """
 
 import pluggy
@@ -34,14 +34,33 @@ def baseparams_transfer_rules(joint_type):
 
 
 @hookspec
+def baseparams_readers():
+    """Return a list of mechanism readers: objects with ``name`` (``"toml"``), ``suffixes``
+    (lower-case, with the dot: ``(".toml",)``) and ``read(path)`` returning a
+    :class:`baseparams.model.mechanism.Mechanism`.
+
+    A reader walks its format and builds the mechanism with
+    :class:`baseparams.model.builder.MechanismBuilder`, passing each value's key path in
+    its format so errors name it; it raises :class:`baseparams.errors.InputError` for a bad
+    file. A mechanism file given by path is read by the reader of its suffix; two readers
+    may not claim the same suffix.
+    """
+
+
+@hookspec
 def baseparams_mechanisms():
     """Return a list of :class:`baseparams.registry.MechanismSource` (name + TOML file)."""
 
 
 @hookspec
 def baseparams_solvers():
-    """Return a list of solver objects: ``name``, ``description``, ``solve(mechanism, **options)``
-    returning a :class:`baseparams.solvers.result.BaseParameterResult`."""
+    """Return a list of solvers, each satisfying :class:`baseparams.solvers.protocol.Solver`:
+    ``name``, ``description``, ``capabilities`` (a ``Capabilities``), ``options`` (a tuple of
+    ``SolverOption``: every keyword ``solve`` accepts), ``applicable(mechanism)`` (None, or
+    the reason it cannot treat the mechanism) and
+    ``solve(mechanism, *, progress=None, **options)`` returning a
+    :class:`baseparams.solvers.result.BaseParameterResult`. See docs/solvers.md, "Writing a
+    solver"."""
 
 
 @hookspec

@@ -34,9 +34,14 @@ def plugin_manager():
 
 
 def reset():
-    """Forget loaded plugins (tests that install a distribution at run time call this)."""
-    plugin_manager.cache_clear()
+    """Forget cached answers and load the entry points of distributions installed since.
+
+    Call it after registering a plugin at run time (``plugin_manager().register(obj)``) or
+    unregistering one, or after installing a distribution in the running interpreter; plugins
+    registered at run time stay registered.
+    """
     _collect.cache_clear()
+    plugin_manager().load_setuptools_entrypoints("baseparams")
 
 
 def _distribution_of(pm, plugin):
@@ -73,6 +78,11 @@ def effects():
 
 def mechanisms():
     return _by_name("baseparams_mechanisms", "mechanism")
+
+
+def readers():
+    """name -> Registered(reader): mechanism-file readers (``name``, ``suffixes``, ``read(path)``)."""
+    return _by_name("baseparams_readers", "reader")
 
 
 def _by_name(hook_name, what):

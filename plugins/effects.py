@@ -1,4 +1,4 @@
-"""Built-in model effects with their canonical names (DESIGN.md), registered by hook."""
+"""Built-in model effects with their canonical names (docs/design.md), registered by hook."""
 
 import numpy as np
 

@@ -1,4 +1,5 @@
-"""The command line: list, show, plugins, plot mechanism, --help, --version, exit codes.
+"""The command line: list, show, plugins, plot mechanism, --help, --version, exit codes
+(solve's options and solver contract: tests/test_solver_protocol.py).
 
 Expected structure numbers come from the seed paper (SLA: 2 dof, 3 loops, 70 inertial
 parameters) and from mobility formulas (a planar four-bar and slider-crank: 3(n-1) - 2j
@@ -138,6 +139,9 @@ def test_plugins_text():
     (["plugins"], ["entry-point group", "--format"]),
     (["plot"], ["mechanism"]),
     (["plot", "mechanism"], ["--instants", "--output", "png|pdf|svg"]),
+    (["solve"], ["--solver", "--option NAME=VALUE", "Registered solvers", "  dp ", "  vp ", "  exact ",
+                 "  symbolic ", "-O recover", "not applicable"]),
+    (["report"], ["--solver", "derivation", "--keep"]),
 ])
 def test_help(verb, words):
     text = run(*verb, "--help").stdout

@@ -1,5 +1,5 @@
 """Bad mechanism files through the command line: exit code 2, one line naming the file,
-the key path and the reason, and never a traceback (DESIGN.md, "Exit codes")."""
+the key path and the reason, and never a traceback (docs/design.md, "Command line")."""
 
 import subprocess
 import sys

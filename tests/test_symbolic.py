@@ -192,9 +192,8 @@ def test_bad_option_names_are_input_errors():
 
 def test_missing_rules_make_the_rank_an_upper_bound(monkeypatch):
     """Without the S-joint rules the symbolic count is too high; the numeric check says so."""
-    import baseparams.dynamics.transfers as transfers
     original = registry.transfer_rules
-    monkeypatch.setattr(transfers.registry, "transfer_rules",
+    monkeypatch.setattr(registry, "transfer_rules",
                         lambda name: None if name == "S" else original(name))
     r = solve(resolve("sla_suspension"), trajectory=Trajectory.default(resolve("sla_suspension"), samples=40))
     assert r.rank > 41 and not r.certified and r.rank_is_upper_bound
@@ -371,3 +370,42 @@ def test_special_geometry_conditions_are_found_and_certified():
     both = fmpq_mat(len(paper) + len(ours), len(paper[0]),
                     [fmpq(v.numerator, v.denominator) for row in paper + ours for v in row])
     assert both.rank() == 41
+
+
+# ----- mechanisms written without [geometry] (issue 8) ---------------------------------------------
+def _plain_6r(with_ref):
+    """A 6R chain with every number inline (no [geometry]) and axes along z, y, x, z, y, x:
+    the generators hold no geometry symbol and no square root, so the exact field had no
+    symbol of its own. ``with_ref`` adds explicit x axes (the crash did not depend on it)."""
+    from baseparams.io.loader import parse_mechanism
+    axes = [("0", "0", "1"), ("0", "1", "0"), ("1", "0", "0")] * 2
+    offsets = [("0", "0", "0"), ("0.1", "0", "0.2"), ("0.3", "0.05", "0"),
+               ("0", "0.1", "0.2"), ("0.1", "0", "0.1"), ("0", "0.1", "0.1")]
+    lines = ['[mechanism]\nname = "plain_6r"\n']
+    for b in range(1, 7):
+        lines.append(f'[[bodies]]\nlabel = {b}\nmass = "{b}"\ncom = ["0.1", "0.05", "0.02"]\n'
+                     f'inertia_com = ["0.3", "0.01", "0.02", "0.35", "0.03", "0.25"]\n')
+    for b, (axis, point) in enumerate(zip(axes, offsets), start=1):
+        ref = ', ref = ["0", "0", "1"]' if with_ref and axis == ("1", "0", "0") else \
+            ', ref = ["1", "0", "0"]' if with_ref else ""
+        a = ", ".join(f'"{c}"' for c in axis)
+        p = ", ".join(f'"{c}"' for c in point)
+        lines.append(f'[[joints]]\ntype = "R"\nparent = {b - 1}\nchild = {b}\n'
+                     f'parent_frame = {{ point = [{p}], axis = [{a}]{ref} }}\n'
+                     f'child_frame = {{ point = ["0", "0", "0"], axis = [{a}]{ref} }}\n')
+    q = ", ".join(f'J{b - 1}_{b} = "sin({b}*t/3) + {b}/10"' for b in range(1, 7))
+    lines.append(f'[trajectory]\nt_end = "10"\nsamples = 60\nq = {{ {q} }}\n')
+    return parse_mechanism("\n".join(lines), "plain_6r.toml")
+
+
+@pytest.mark.parametrize("with_ref", [False, True])
+def test_mechanism_without_geometry_symbols(with_ref):
+    """Regression: the symbolic solver raised KeyError('_unit') when no generator held a
+    geometry symbol or a radical. Rank 36 (exact solver, independently) and the same row
+    space, exactly."""
+    mech = _plain_6r(with_ref)
+    assert not mech.geometry
+    r = solve(mech)
+    exact = registry.solvers()["exact"].item.solve(mech)
+    assert exact.rank == 36 and r.rank == 36 and r.certified
+    assert same_row_space(r.coefficient_matrix(values=True), exact.coefficient_matrix())

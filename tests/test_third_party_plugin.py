@@ -170,3 +170,61 @@ def test_without_the_plugin_the_joint_type_is_unknown(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "joints[0].type: unknown joint type 'C'" in proc.stderr
+
+
+# The same collar with masses and an exciting trajectory, for the solvers.
+MOVING = MECHANISM.replace('name = "collar"\n', 'name = "collar"\ngravity = ["0", "0", "-9.81"]\n', 1) + """
+[trajectory]
+t_start = "0"
+t_end = "10"
+samples = 60
+q = { post_s = "0.2*sin(0.7*t) + 0.05*sin(2.3*t)", post_theta = "1.2*sin(0.9*t + 0.4) + 0.3*sin(3.1*t)", swing = "0.8*sin(1.7*t) + 0.2*sin(4.1*t + 1)" }
+"""
+
+THIRD_PARTY_TEST = '''\
+def test_collar(baseparams_validate):
+    report = baseparams_validate("collar.toml")
+    assert report.ok
+'''
+
+WRONG_RULE = PLUGIN.replace('return [TransferRule("quadrupole", (0, 0, 0), (0, 0, 1), 5)]',
+                            'return [TransferRule("dipole", (0, 0, 0), (1, 0, 0), 4)]   # wrong on purpose')
+
+
+def run_pytest(site, folder):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(site)] + [p for p in [env.get("PYTHONPATH")] if p])
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_collar.py"],
+                          cwd=folder, env=env, capture_output=True, text=True, timeout=600)
+
+
+def test_the_pytest_fixture_validates_the_third_party_joint(site, tmp_path):
+    """A third party's test suite checks its joint and rule against the built-in solvers."""
+    (tmp_path / "collar.toml").write_text(MOVING)
+    (tmp_path / "test_collar.py").write_text(THIRD_PARTY_TEST)
+    proc = run_pytest(site, tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "1 passed" in proc.stdout
+
+
+@pytest.fixture(scope="module")
+def wrong_site(tmp_path_factory):
+    root = tmp_path_factory.mktemp("third_party_wrong")
+    source = root / "bp-cylindrical"
+    (source / "bp_cylindrical").mkdir(parents=True)
+    (source / "pyproject.toml").write_text(PYPROJECT)
+    (source / "bp_cylindrical" / "__init__.py").write_text('"""Cylindrical joint, wrong rule."""\n')
+    (source / "bp_cylindrical" / "plugin.py").write_text(WRONG_RULE)
+    target = root / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-index", "--quiet",
+                    "--disable-pip-version-check", "--target", str(target), str(build_wheel(source, root))],
+                   check=True, capture_output=True, timeout=120)
+    return target
+
+
+def test_a_wrong_third_party_transfer_rule_fails_the_fixture(wrong_site, tmp_path):
+    (tmp_path / "collar.toml").write_text(MOVING)
+    (tmp_path / "test_collar.py").write_text(THIRD_PARTY_TEST)
+    proc = run_pytest(wrong_site, tmp_path)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "transfer rules of C" in proc.stdout and "NOT null directions of W" in proc.stdout

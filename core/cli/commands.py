@@ -19,6 +19,8 @@ import click
 from baseparams import __version__
 from baseparams import registry
 from baseparams.errors import BaseparamsError
+from baseparams.solvers.protocol import (Capabilities, Solver, check_options, describe_solver,
+                                         options_from_text, require_applicable)
 
 
 class UserError(click.ClickException):
@@ -207,7 +209,8 @@ def plugins(fmt):
         "joints": [entry(n, r, dof=r.item.dof, suffixes=list(r.item.suffixes),
                          transfer_rules=registry.transfer_rules(n) is not None)
                    for n, r in registry.joint_types().items()],
-        "solvers": [entry(n, r) for n, r in registry.solvers().items()],
+        "solvers": [entry(n, r, **(describe_solver(r.item) if isinstance(r.item, Solver) else {}))
+                    for n, r in registry.solvers().items()],
         "mechanisms": [entry(n, r, path=str(r.item.path)) for n, r in registry.mechanisms().items()],
         "effects": [entry(n, r) for n, r in registry.effects().items()],
     }
@@ -232,48 +235,101 @@ def plugins(fmt):
 
 # ----- solve --------------------------------------------------------------------
 def get_solver(name):
-    """A registered solver by name; a UserError listing the registered ones otherwise."""
+    """A registered solver by name; a UserError listing the registered ones otherwise, or
+    naming the distribution whose solver does not implement the Solver protocol."""
     solvers = registry.solvers()
     if name not in solvers:
         raise UserError(f"unknown solver {name!r}; registered solvers: {', '.join(solvers) or '(none)'} "
                         f"(see `baseparams plugins`)")
-    return solvers[name].item
+    reg = solvers[name]
+    if not isinstance(reg.item, Solver):
+        missing = [m for m in ("name", "description", "capabilities", "options", "applicable", "solve")
+                   if not hasattr(reg.item, m)]
+        raise UserError(f"solver {name!r} (distribution {reg.distribution}) does not implement the "
+                        f"solver protocol (baseparams.solvers.protocol.Solver): missing {', '.join(missing)}")
+    return reg.item
 
 
 def _progress(message):
     click.echo(message, err=True)
 
 
-@main.command()
+def capability_words(caps: Capabilities) -> list[str]:
+    """A solver's capabilities in a few words (help texts)."""
+    words = ["closed loops" if caps.closed_loops else "open chains only"]
+    words += [w for flag, w in ((caps.needs_rational_geometry, "rational geometry only"),
+                                (caps.certifies, "certifies the rank"),
+                                (caps.exact_coefficients, "exact coefficients"),
+                                (caps.symbolic_coefficients, "symbolic coefficients"),
+                                (caps.derivation, "derivation (`report`)")) if flag]
+    return words
+
+
+class SolverListCommand(click.Command):
+    """A command whose help ends with every registered solver, its capabilities and options
+    (read from the registry when the help is shown, so plugins' solvers are listed too)."""
+
+    def format_epilog(self, ctx, formatter):
+        try:
+            solvers = registry.solvers()
+        except BaseparamsError as exc:
+            formatter.write_paragraph()
+            formatter.write_text(f"(registered solvers unavailable: {getattr(exc, 'message', exc)})")
+            return
+        with formatter.section("Registered solvers (--solver NAME; their options: -O NAME=VALUE)"):
+            for name, reg in solvers.items():
+                item = reg.item
+                if not isinstance(item, Solver):
+                    formatter.write_dl([(name, f"{getattr(item, 'description', '')} [not a Solver: "
+                                               f"unusable]")])
+                    continue
+                formatter.write_dl([(name, f"{item.description} ({'; '.join(capability_words(item.capabilities))}; "
+                                           f"from {reg.distribution})")])
+                with formatter.indentation():
+                    formatter.write_dl([(f"-O {o.name}", o.describe()) for o in item.options]
+                                       or [("", "(no options)")])
+        super().format_epilog(ctx, formatter)
+
+
+@main.command(cls=SolverListCommand)
 @click.argument("mech", metavar="MECH")
 @click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
-              help="A registered solver (`baseparams plugins` lists them; built in: dp, vp, exact).")
+              help="A registered solver (all are listed below).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=None,
-              help="Fix the working precision of a variable-precision solver [default: automatic].")
+              help="Fix the working precision of a variable-precision solver [default: automatic]; "
+                   "dp and exact ignore it with a warning.")
 @click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
               help="Samples of the exciting trajectory (or random states, for exact) "
                    "[default: the mechanism file's].")
+@click.option("-O", "--option", "extra", multiple=True, metavar="NAME=VALUE",
+              help="Any option the solver declares (listed below), e.g. -O seed=3 -O recover=false; "
+                   "repeatable. An option it does not declare is an error (exit code 2).")
 @format_option
-def solve(mech, solver_name, digits, samples, fmt):
+def solve(mech, solver_name, digits, samples, extra, fmt):
     """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
     base parameter expressions phi_b = phi_1 + beta phi_2.
 
     Progress and warnings (e.g. no clear ridge in the singular values) go to stderr.
-    Numeric coefficients carry only the digits the solver trusts.
+    Numeric coefficients carry only the digits the solver trusts. A solver that does not
+    take MECH (exact on a closed loop) says why: `not applicable: <reason>`, exit code 2.
     """
     solver = get_solver(solver_name)
-    options = {"progress": _progress}
-    if digits is not None:
-        options["digits"] = digits
-    if samples is not None:
-        options["samples"] = samples
-    result = solver.solve(load(mech), **options)
+    given = options_from_text(solver, extra)
+    for name, value in (("digits", digits), ("samples", samples)):
+        if value is not None:
+            if name in given:
+                raise UserError(f"--{name} and -O {name}=... both given; give one")
+            given[name] = value
+    options = check_options(solver, given)
+    mechanism = load(mech)
+    require_applicable(solver, mechanism)
+    result = solver.solve(mechanism, progress=_progress, **options)
     for warning in result.warnings:
         click.echo(f"warning: {warning}", err=True)
 
     def text():
         lines = [result.to_text()]
-        lines += [f"  {line}" for line in (result.diagnostics or {}).get("summary", [])]
+        lines += [f"  {line}" for line in result.diagnostics.summary]
         return "\n".join(lines)
 
     emit(fmt, result.to_json(), text)
@@ -328,10 +384,11 @@ def plot_singular_values(mech, output, solvers, digits, samples, fmt):
     results = []
     for name in solvers:
         solver = get_solver(name)
-        options = {"progress": _progress, "digits": digits, "recover": False}
-        if samples is not None:
-            options["samples"] = samples
-        result = solver.solve(mechanism, **options)
+        wanted = {"digits": digits, "recover": False, "samples": samples}
+        declared = {o.name for o in solver.options}
+        options = check_options(solver, {k: v for k, v in wanted.items() if k in declared and v is not None})
+        require_applicable(solver, mechanism)
+        result = solver.solve(mechanism, progress=_progress, **options)
         if not result.singular_values:
             raise UserError(f"solver {name!r} gives no singular values to plot")
         results.append(result)
@@ -342,6 +399,8 @@ def plot_singular_values(mech, output, solvers, digits, samples, fmt):
 # ----- report (symbolic derivation) -------------------------------------------------
 @main.command()
 @click.argument("mech", metavar="MECH")
+@click.option("--solver", "solver_name", default="symbolic", show_default=True, metavar="NAME",
+              help="A registered solver that gives a derivation (its capabilities say so).")
 @click.option("--format", "fmt", type=click.Choice(["text", "markdown", "latex"]), default="text",
               show_default=True, help="Rendering of the derivation.")
 @click.option("--keep", default="", help="Parameters never to eliminate (comma separated).")
@@ -350,16 +409,35 @@ def plot_singular_values(mech, output, solvers, digits, samples, fmt):
 @click.option("--no-certify", is_flag=True, help="Skip the ball-arithmetic rank check (faster).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Write the report to this file instead of standard output.")
-def report(mech, fmt, keep, first, no_certify, output):
+def report(mech, solver_name, fmt, keep, first, no_certify, output):
     """Derive MECH's base parameters by multipole transfers and print the derivation.
 
     Like the seed paper's Tabs. 4-5 and appendix: parameters without effect (per body and
     condition), the transfer at each joint and the parameter it eliminates, every step's
-    values, the base parameters and how the rank was checked (docs/symbolic.md).
+    values, the base parameters and how the rank was checked (docs/symbolic.md). Any
+    solver whose capabilities include a derivation may be chosen (built in: symbolic);
+    --keep, --eliminate-first and --no-certify are passed as its options of those names.
     """
     from baseparams.cli.report import render
-    solver = registry.solvers()["symbolic"].item
-    result = solver.solve(load(mech), keep=keep, eliminate_first=first, certify=not no_certify)
+    solver = get_solver(solver_name)
+    if not solver.capabilities.derivation:
+        able = [n for n, r in registry.solvers().items()
+                if isinstance(r.item, Solver) and r.item.capabilities.derivation]
+        raise UserError(f"solver {solver_name!r} gives no derivation; solvers that do: "
+                        f"{', '.join(able) or '(none)'}")
+    given = {}
+    if keep:
+        given["keep"] = keep
+    if first:
+        given["eliminate_first"] = first
+    if no_certify:
+        given["certify"] = False
+    options = check_options(solver, given)
+    mechanism = load(mech)
+    require_applicable(solver, mechanism)
+    result = solver.solve(mechanism, **options)
+    if result.diagnostics.derivation is None:
+        raise UserError(f"solver {solver_name!r} declares a derivation but its result has none")
     text = render(result, fmt)
     if output:
         try:

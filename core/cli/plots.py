@@ -293,8 +293,9 @@ def plot_singular_values(results, path, fmt=None):
 
     The axis shows log10 of the values, so that values far below double precision's
     range (a 500-digit run's 1e-500) are drawn too. Exact zeros sit on the lower edge as
-    open triangles. Where a result's diagnostics give a rank tolerance (dp) or a proven
-    bound after the ridge (vp), it is drawn as a horizontal line in the series' colour.
+    open triangles. Where a result's diagnostics give a rank tolerance
+    (``diagnostics.rank_tolerance``, dp) or a proven bound after the ridge
+    (``diagnostics.tail_bound``, vp), it is drawn as a horizontal line in the series' colour.
     """
     fig = _figure(figsize=(8, 5))
     ax = fig.add_subplot()
@@ -319,12 +320,12 @@ def plot_singular_values(results, path, fmt=None):
             ax.plot(zeros, [bottom] * len(zeros), ls="", marker="v", mfc="none", color=colour,
                     label=f"{result.solver}: exactly 0")
         ax.axvline(result.rank + 0.5, color=colour, ls=":", lw=1)
-        diag = result.diagnostics or {}
-        if diag.get("tolerance"):
-            ax.axhline(_log10_text(diag["tolerance"]), color=colour, ls="--", lw=0.8,
+        diag = result.diagnostics
+        if diag.rank_tolerance:
+            ax.axhline(_log10_text(diag.rank_tolerance), color=colour, ls="--", lw=0.8,
                        label=f"{result.solver}: rank tolerance")
-        if diag.get("tail_bound") not in (None, "0"):
-            level = _log10_text(diag["tail_bound"])
+        if diag.tail_bound is not None:
+            level = _log10_text(diag.tail_bound)
             if level is not None:
                 ax.plot([result.rank + 0.5, len(logs) + 0.5], [level, level], color=colour, ls="--",
                         lw=0.8, label=f"{result.solver}: proven bound after the ridge")

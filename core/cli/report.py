@@ -26,12 +26,13 @@ FORMATS = ("text", "markdown", "latex")
 
 
 def render(result, fmt="text"):
-    """The derivation report of a symbolic result (``result.derivation`` must be present)."""
+    """The derivation report of a result whose ``diagnostics.derivation`` is present."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown report format {fmt!r}; choose from {', '.join(FORMATS)}")
-    der = getattr(result, "derivation", None)
+    der = result.diagnostics.derivation
     if der is None:
-        raise ValueError("this result carries no derivation (only the symbolic solver makes one)")
+        raise ValueError("this result carries no derivation (only a solver whose capabilities "
+                         "include one makes it: symbolic)")
     return _Writer(fmt, der, result).write()
 
 
@@ -283,7 +284,7 @@ class _Writer:
 
 def status(result):
     """How the count stands, in a few words (the report's first paragraph)."""
-    cert = result.diagnostics.get("certificate")
+    cert = result.diagnostics.details.get("certificate")
     if result.certified:
         return "certified"
     if result.rank_is_upper_bound:
@@ -299,7 +300,7 @@ def status(result):
 
 def check_text(result):
     """What the rank check proved, and what it only gives evidence for (section 5)."""
-    cert = result.diagnostics.get("certificate")
+    cert = result.diagnostics.details.get("certificate")
     n = len(result.parameters)
     if not cert:
         return ("No numeric check was made. The count rests on the generators alone (joint-type rules, "

@@ -15,7 +15,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric.backends import Arb, Float64, in_backend_precision
 from baseparams.errors import KinematicsError, InputError
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.kinematics.krawczyk import enclose
@@ -93,6 +93,7 @@ class Sample:
     projection: list     # R: n rows x f columns, qd = R zd
     kin: TreeKinematics
 
+    @in_backend_precision
     def regressor(self):
         """K in the independent coordinates: f rows of 10 * bodies entries."""
         k_tree = tree_regressor(self.kin, self.states, self.qdd)
@@ -110,6 +111,7 @@ class Sample:
                      axis=-2)
         return np.einsum("...kf,...kp->...fp", r, k_tree)
 
+    @in_backend_precision
     def energies(self):
         return energy_forms(self.kin, self.states)
 
@@ -151,6 +153,7 @@ class Evaluator:
         digits = getattr(self.backend, "digits", None)
         return -12 if digits is None else -(digits - 5)
 
+    @in_backend_precision
     def assemble(self, z, guess=None, where=""):
         """Tree coordinates with independent values ``z``; dependent ones by Newton-Raphson."""
         st = self.structure
@@ -222,6 +225,7 @@ class Evaluator:
         return "coordinates: " + ", ".join(parts)
 
     # ----- full state -----------------------------------------------------
+    @in_backend_precision
     def sample(self, z, zd, zdd, guess=None, where=""):
         """The state with independent positions, velocities and accelerations z, zd, zdd."""
         q = self.assemble(z, guess, where)

@@ -19,11 +19,11 @@ rational, functions of the independent ones.
 import random
 from fractions import Fraction
 
-from flint import fmpq, fmpq_mat
+from flint import fmpq
 
-from baseparams.numeric.backends import Exact, TanHalf
-from baseparams.dynamics.evaluator import Evaluator
+from baseparams.dynamics.observation import RationalStates, observation_matrix
 from baseparams.errors import InputError, KinematicsError
+from baseparams.numeric.backends import Exact, TanHalf
 
 
 def coordinate_kinds(mechanism):
@@ -64,6 +64,17 @@ def _fmpq(value):
     return fmpq(value.numerator, value.denominator)
 
 
+def random_rational_states(mechanism, count, seed=0):
+    """``count`` random states with every value rational: angles as rational points of the
+    unit circle (:class:`TanHalf`), lengths inside their limits, rational velocities and
+    accelerations. They can be evaluated in any backend."""
+    names, kinds = coordinate_kinds(mechanism)
+    rng = random.Random(seed)
+    states = [_random_state(rng, mechanism, names, kinds) for _ in range(count)]
+    z, zd, zdd = (tuple(tuple(state[k]) for state in states) for k in range(3))
+    return RationalStates(z, zd, zdd, name="random rational state")
+
+
 def exact_observation_matrix(mechanism, samples, seed=0):
     """W over the rationals at ``samples`` random states: an ``fmpq_mat``.
 
@@ -71,26 +82,12 @@ def exact_observation_matrix(mechanism, samples, seed=0):
     irrational length, say).
     """
     check_exact_possible(mechanism)
-    names, kinds = coordinate_kinds(mechanism)
-    rng = random.Random(seed)
     try:
-        ev = Evaluator(mechanism, Exact())
-        rows = []
-        for _ in range(samples):
-            rows.extend(ev.sample(*_random_state(rng, mechanism, names, kinds)).regressor())
+        W, _ = observation_matrix(mechanism, Exact(), random_rational_states(mechanism, samples, seed))
     except KinematicsError as exc:
         raise InputError(f"the exact solver cannot evaluate {mechanism.name} in rational arithmetic "
                          f"({exc}); use --solver vp", file=mechanism.path) from None
-    cols = len(mechanism.parameters)
-    return fmpq_mat(len(rows), cols, [_as_fmpq(v) for row in rows for v in row])
-
-
-def _as_fmpq(v):
-    if isinstance(v, fmpq):
-        return v
-    if isinstance(v, Fraction):
-        return fmpq(v.numerator, v.denominator)
-    return fmpq(v)
+    return W
 
 
 def rref_base(W):

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
-from flint import arb, arb_mat
 
-from baseparams.numeric.backends import Float64
 from baseparams.dynamics.evaluator import Evaluator
+from baseparams.dynamics.observation import RationalStates
+from baseparams.numeric.backends import Float64
 from baseparams.errors import KinematicsError
 
 WIDEN_ANGLE = 0.3          # rad added on each side of an angle's range on the trajectory
@@ -32,19 +32,18 @@ REDRAWS = 8                # attempts per state before it is drawn inside the tr
 
 
 @dataclass(frozen=True)
-class RandomBatch:
+class RandomBatch(RationalStates):
     """States independent of the trajectory: one tuple of Fractions per state for each of
     the independent positions, velocities and accelerations, and the float64 tree
-    coordinates of each state (a closed loop's start for Newton at higher precision)."""
-    seed: int
-    z: tuple
-    zd: tuple
-    zdd: tuple
-    start: tuple              # per state: list of float tree coordinates
+    coordinates of each state (a closed loop's start for Newton at higher precision).
+    W at the batch: :func:`baseparams.dynamics.observation.observation_matrix`."""
+    seed: int = 0
+    name: str = "check state"
 
     @property
     def states(self):
-        return len(self.z)
+        """The number of states (as ``count``)."""
+        return self.count
 
 
 def random_batch(mechanism, trajectory, seed):
@@ -62,7 +61,8 @@ def random_batch(mechanism, trajectory, seed):
     for _ in range(count):
         position, start = _assembled_draw(ev, boxes, rng)
         states.append((position, tuple(_draw(rng, vel)), tuple(_draw(rng, acc)), start))
-    return RandomBatch(seed, *(tuple(column) for column in zip(*states)))
+    z, zd, zdd, start = (tuple(column) for column in zip(*states))
+    return RandomBatch(z=z, zd=zd, zdd=zdd, start=start, seed=seed)
 
 
 def _boxes(mechanism, values):
@@ -110,32 +110,3 @@ def _scales(values):
     peaks = [float(np.max(np.abs(np.asarray(v, dtype=float)))) for v in values]
     fallback = max(peaks, default=0.0) or 1.0
     return [Fraction(f"{p or fallback:.2g}") for p in peaks]
-
-
-def batch_matrix(mechanism, backend, trajectory, batch):
-    """The batch's rows of W: a numpy array for Float64; for Arb an ``arb_mat`` whose balls
-    enclose the exact values (Krawczyk-enclosed positions, as for the trajectory's W)."""
-    f = len(mechanism.independent)
-    columns = lambda rows: [np.array([float(s[k]) for s in rows]) for k in range(f)]  # noqa: E731
-    if isinstance(backend, Float64):
-        start = [np.array(column) for column in zip(*batch.start)] if mechanism.loops else None
-        sample = Evaluator(mechanism, backend).sample(columns(batch.z), columns(batch.zd), columns(batch.zdd),
-                                                      start, where="check batch: ")
-        return sample.regressor_array().reshape(batch.states * f, len(mechanism.parameters))
-    ev = Evaluator(mechanism, backend, certify=True)
-    rows = []
-    with backend.activate():
-        for z, zd, zdd, start in zip(batch.z, batch.zd, batch.zdd, batch.start):
-            guess = [backend.rational(Fraction(v)) for v in start] if mechanism.loops else None
-            number = lambda values: [backend.rational(v) for v in values]  # noqa: E731
-            sample = ev.sample(number(z), number(zd), number(zdd), guess, where="check state: ")
-            rows.extend(sample.regressor())
-        return arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
-
-
-def stack_rows(*mats):
-    """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
-    0.9 has no concatenation."""
-    cols = mats[0].ncols()
-    entries = [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)]
-    return type(mats[0])(sum(m.nrows() for m in mats), cols, entries)

@@ -1,4 +1,4 @@
-"""Exciting trajectories and the observation matrix W.
+"""Exciting trajectories: the samples at which W is usually built.
 
 A trajectory gives each independent coordinate as an expression of time (a finite
 Fourier series by default); velocities and accelerations are its exact derivatives.
@@ -8,7 +8,8 @@ continuation from the reference configuration (or, if that fails, sample after s
 along the trajectory); at D digits each sample's Newton starts from its float64 solution
 and ends in a Krawczyk enclosure. A sample that leaves the reachable range, passes a
 singular configuration or a coordinate limit stops the run with the time, the
-coordinates and the residual.
+coordinates and the residual. W itself is built by :mod:`baseparams.dynamics.observation`
+(:func:`observation_matrix` here is W over a trajectory, the default one if none is given).
 """
 
 from dataclasses import dataclass
@@ -16,10 +17,10 @@ from fractions import Fraction
 
 import numpy as np
 import sympy
-from flint import arb, arb_mat, fmpq
 
-from baseparams.numeric.backends import Arb, Float64
+from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator
+from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError, KinematicsError
 
 T = sympy.Symbol("t")
@@ -27,8 +28,12 @@ T = sympy.Symbol("t")
 
 @dataclass(frozen=True)
 class Trajectory:
+    """The independent coordinates as expressions of time, sampled at exact times; its
+    samples are a source of states for :mod:`baseparams.dynamics.observation`."""
     expressions: dict          # independent coordinate -> sympy expression of t
     times: tuple               # exact sample times (Fractions)
+    label = "trajectory"       # kinematics errors name the trajectory (and the file)
+    reports_closure = True     # arb: the worst closure residual along it is reported
 
     @classmethod
     def default(cls, mechanism, samples=None, t_start=None, t_end=None):
@@ -72,6 +77,27 @@ class Trajectory:
                 raise KinematicsError(f"{name} or its derivatives are not finite at t = {float(bad[0]):.6g} s")
         z, zd, zdd = ([v[k] for v in values] for k in range(3))
         return z, zd, zdd
+
+    # ----- a source of states (baseparams.dynamics.observation.States) -----------------
+    @property
+    def count(self):
+        return len(self.times)
+
+    def where(self, index):
+        return "" if index is None else f"at t = {float(self.times[index]):.6g} s: "
+
+    def values(self, mechanism, backend, index):
+        """Sample ``index`` computed in ``backend`` from its exact time."""
+        return self.independent_values(mechanism, backend, backend.number(self.times[index]))
+
+    def float64_sample(self, mechanism):
+        return samples_float64(mechanism, self)[0]
+
+    def starts(self, mechanism):
+        """The float64 positions of every sample (which also checks the coordinate limits)."""
+        sample, t = samples_float64(mechanism, self)
+        columns = [np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in sample.q]
+        return [[float(v[k]) for v in columns] for k in range(len(t))]
 
 
 def samples_float64(mechanism, trajectory):
@@ -119,55 +145,7 @@ def check_limits(mechanism, q, times):
 
 
 def observation_matrix(mechanism, backend, trajectory=None, progress=None):
-    """W: the regressor stacked over the trajectory's samples (sample-major rows).
-
-    float64: a numpy array. arb: a python-flint ``arb_mat``, every entry computed at the
-    backend's digits (positions refined from the float64 solution by Newton at full
-    precision). Returns (W, info) where info has the sample count and worst closure residual.
-    """
-    trajectory = trajectory or Trajectory.default(mechanism)
-    try:
-        return _observation_matrix(mechanism, backend, trajectory, progress)
-    except KinematicsError as exc:
-        where = f"{mechanism.path}: trajectory: " if mechanism.path else "trajectory: "
-        raise KinematicsError(where + str(exc)) from None
-
-
-def _observation_matrix(mechanism, backend, trajectory, progress):
-    f = len(mechanism.independent) or len(mechanism.coordinates)
-    if isinstance(backend, Float64):
-        sample, t = samples_float64(mechanism, trajectory)
-        k = sample.regressor_array()                        # (samples, f, parameters)
-        return k.reshape(len(t) * f, len(mechanism.parameters)), {"samples": len(t)}
-    if isinstance(backend, Arb):
-        return _observation_matrix_arb(mechanism, backend, trajectory, progress)
-    raise ValueError(f"observation matrix over a trajectory needs float64 or arb, not {backend.name}")
-
-
-def _observation_matrix_arb(mechanism, backend, trajectory, progress):
-    start, _ = samples_float64(mechanism, trajectory)    # also checks the coordinate limits
-    ev = Evaluator(mechanism, backend, certify=True)
-    rows = []
-    with backend.activate():
-        worst = arb(0)
-        for index, tk in enumerate(trajectory.times):
-            t = arb(fmpq(tk.numerator, tk.denominator))
-            z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
-            guess = None
-            if mechanism.loops:
-                guess = [backend.rational(Fraction(float(np.atleast_1d(v)[index]))) for v in start.q]
-            where = f"at t = {float(tk):.6g} s: "
-            sample = ev.sample(z, zd, zdd, guess, where=where)
-            rows.extend(sample.regressor())
-            if mechanism.loops:
-                values, _, _ = ev.kin.closure(sample.states)
-                for v in values:
-                    bound = abs(arb(v)).upper()
-                    if bound > worst:
-                        worst = bound
-            if progress:
-                progress(index + 1, len(trajectory.times))
-        W = arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
-        residual = worst.str(3, radius=False)
-    return W, {"samples": len(trajectory.times), "closure_residual": residual,
-               "positions_enclosed": bool(mechanism.loops)}
+    """W over ``trajectory`` (the mechanism's default one if None): the one builder,
+    :func:`baseparams.dynamics.observation.observation_matrix`, at the trajectory's samples."""
+    return observation.observation_matrix(mechanism, backend, trajectory or Trajectory.default(mechanism),
+                                          progress)

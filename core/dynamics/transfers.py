@@ -18,11 +18,11 @@ a vector n = (acceptor's change) - (donor's change) with W n = 0: a *null genera
 Ground has no parameters, so a transfer with ground changes one body only.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import sympy
 
-from baseparams import registry
 from baseparams.numeric.backends import Symbolic
 from baseparams.model.params import body_parameter_names
 
@@ -188,11 +188,16 @@ def rule_generators(mechanism, joint, rule):
     return out
 
 
-def transfer_generators(mechanism):
-    """(generators, joints without rules): every rule of every joint, tree and loop-closing."""
+def transfer_generators(mechanism, rules_of: Callable[[str], list | None]):
+    """(generators, joints without rules): every rule of every joint, tree and loop-closing.
+
+    ``rules_of``: joint type name -> its :class:`~baseparams.model.multipoles.TransferRule`
+    list, or None when unknown. Callers pass ``baseparams.registry.transfer_rules`` (or rules
+    of their own, in tests): the dynamics do not ask the plugin registry themselves.
+    """
     gens, missing = [], []
     for joint in mechanism.joints:
-        rules = registry.transfer_rules(joint.type.name)
+        rules = rules_of(joint.type.name)
         if rules is None:
             missing.append(joint)
             continue

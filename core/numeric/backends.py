@@ -2,19 +2,22 @@
 
 A backend turns exact rationals into its own numbers and supplies the few functions the
 kinematics needs (``cos_sin``, ``sqrt``, a dense linear ``solve``). Numbers themselves
-are the backend's native type and use Python operators:
+are the backend's native type and use Python operators; ``matrix(rows)`` and ``stack``
+give the backend's matrix type (numpy array, ``arb_mat``, ``fmpq_mat``, sympy Matrix):
 
 - :class:`Float64`: numpy float64; a scalar may be an array of N samples, so one pass of
   the kinematics evaluates a whole trajectory (vectorised).
 - :class:`Arb`: python-flint ``arb`` balls at a chosen number of decimal digits; every
-  result carries a rigorous error bound. Use ``with backend.activate():`` around work,
-  since flint's precision is a process-wide setting.
+  result carries a rigorous error bound. flint's precision is a process-wide setting, so
+  every public function that computes in arb enters its own with ``backend.activate()``
+  (that is, :func:`precision`), which restores the caller's on exit.
 - :class:`Exact`: python-flint ``fmpq`` rationals. Angles are given as
   :class:`TanHalf` (the rational point of the unit circle ``t = tan(theta/2)``).
 - :class:`Symbolic`: sympy expressions, for small mechanisms and for geometry symbols.
 """
 
 import contextlib
+import functools
 import math
 from fractions import Fraction
 
@@ -23,6 +26,44 @@ import sympy
 from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
 
 from baseparams.errors import KinematicsError
+
+
+@contextlib.contextmanager
+def precision(digits: int | None = None, *, bits: int | None = None):
+    """flint's working precision for the block (decimal ``digits`` or binary ``bits``),
+    restored exactly on exit: the one place a precision is entered, so no function
+    depends on a precision some caller happened to leave set."""
+    saved = ctx.prec
+    if bits is not None:
+        ctx.prec = int(bits)
+    else:
+        ctx.dps = int(digits)
+    try:
+        yield
+    finally:
+        ctx.prec = saved
+
+
+def in_backend_precision(method):
+    """Decorator for a method of an object that carries its backend (``self.backend``, or
+    ``self.kin.backend`` for an evaluated sample): the method computes in the backend's
+    precision, and the caller's is restored, so it never depends on a leftover setting."""
+    @functools.wraps(method)
+    def run(self, *args, **kwargs):
+        backend = self.backend if hasattr(self, "backend") else self.kin.backend
+        with backend.activate():
+            return method(self, *args, **kwargs)
+    return run
+
+
+def stack_flint(mats):
+    """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
+    0.9 has no concatenation. Entries are copied, never rounded."""
+    cols = mats[0].ncols()
+    rows = sum(m.nrows() for m in mats)
+    if rows == 0 or cols == 0:
+        return type(mats[0])(rows, cols)
+    return type(mats[0])(rows, cols, [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)])
 
 
 class TanHalf:
@@ -50,6 +91,28 @@ class Backend:
     def activate(self):
         """Context in which this backend's numbers are computed (precision settings)."""
         return contextlib.nullcontext()
+
+    def number(self, value):
+        """An exactly given number (int, Fraction, fmpq, or an angle as :class:`TanHalf`)
+        in this backend: how every source of states hands its values to any arithmetic."""
+        if isinstance(value, TanHalf):
+            return self.angle(value)
+        if isinstance(value, fmpq):
+            value = Fraction(int(value.p), int(value.q))
+        return self.rational(Fraction(value))
+
+    def angle(self, value: "TanHalf"):
+        """The angle ``2 atan(t)`` (its cos and sin are the exact rationals of ``value``)."""
+        raise NotImplementedError
+
+    def matrix(self, rows, columns=None):
+        """The backend's matrix of ``rows`` (lists of its numbers); ``columns`` when there
+        are no rows."""
+        raise NotImplementedError
+
+    def stack(self, *mats):
+        """Matrices of this backend stacked vertically (rows of the first, then the next ...)."""
+        raise NotImplementedError
 
     def rational(self, value: Fraction):
         raise NotImplementedError
@@ -155,6 +218,15 @@ class Float64(Backend):
     def pi(self):
         return math.pi
 
+    def angle(self, value):
+        return 2.0 * math.atan(float(Fraction(int(value.t.p), int(value.t.q))))
+
+    def matrix(self, rows, columns=None):
+        return np.array(rows, dtype=float) if rows else np.zeros((0, columns or 0))
+
+    def stack(self, *mats):
+        return np.vstack(mats)
+
     def solve(self, a, b):
         n = len(a)
         k = len(b[0])
@@ -174,24 +246,32 @@ class Float64(Backend):
 
 
 class Arb(Backend):
-    """python-flint ball arithmetic at ``digits`` decimal digits."""
+    """python-flint ball arithmetic at ``digits`` decimal digits.
+
+    Numbers made here (``rational``, ``pi``, ``number``) are born at these digits whatever
+    precision is current; arithmetic on them (operators, ``cos_sin``, ``solve``) follows
+    the current precision, which the public functions that compute set with ``activate``.
+    """
 
     name = "arb"
 
     def __init__(self, digits=50):
         self.digits = int(digits)
+        with precision(self.digits):
+            self.bits = ctx.prec
 
-    @contextlib.contextmanager
     def activate(self):
-        saved = ctx.dps
-        ctx.dps = self.digits
-        try:
-            yield self
-        finally:
-            ctx.dps = saved
+        return precision(self.digits)
+
+    def _made(self, make):
+        """``make()`` at this backend's precision (cheap when it is already current)."""
+        if ctx.prec == self.bits:
+            return make()
+        with precision(bits=self.bits):
+            return make()
 
     def rational(self, value):
-        return arb(fmpq(value.numerator, value.denominator))
+        return self._made(lambda: arb(fmpq(value.numerator, value.denominator)))
 
     def cos_sin(self, x):
         return x.cos(), x.sin()
@@ -203,7 +283,18 @@ class Arb(Backend):
         return x.exp()
 
     def pi(self):
-        return arb.pi()
+        return self._made(arb.pi)
+
+    def angle(self, value):
+        return self._made(lambda: 2 * arb(value.t).atan())
+
+    def matrix(self, rows, columns=None):
+        if not rows:
+            return arb_mat(0, columns or 0)
+        return arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
+
+    def stack(self, *mats):
+        return stack_flint(mats)
 
     def solve(self, a, b):
         A = arb_mat(len(a), len(a[0]), [arb(v) for row in a for v in row])
@@ -260,6 +351,17 @@ class Exact(Backend):
     def pi(self):
         raise KinematicsError("pi is not rational")
 
+    def angle(self, value):
+        return value
+
+    def matrix(self, rows, columns=None):
+        if not rows:
+            return fmpq_mat(0, columns or 0)
+        return fmpq_mat(len(rows), len(rows[0]), [_as_fmpq(v) for row in rows for v in row])
+
+    def stack(self, *mats):
+        return stack_flint(mats)
+
     def solve(self, a, b):
         A = fmpq_mat(len(a), len(a[0]), [fmpq(v) for row in a for v in row])
         B = fmpq_mat(len(b), len(b[0]), [fmpq(v) for row in b for v in row])
@@ -297,6 +399,15 @@ class Symbolic(Backend):
     def pi(self):
         return sympy.pi
 
+    def angle(self, value):
+        return value
+
+    def matrix(self, rows, columns=None):
+        return sympy.Matrix(rows) if rows else sympy.zeros(0, columns or 0)
+
+    def stack(self, *mats):
+        return sympy.Matrix.vstack(*mats)
+
     def solve(self, a, b):
         A = sympy.Matrix(a)
         B = sympy.Matrix(b)
@@ -305,3 +416,11 @@ class Symbolic(Backend):
 
     def to_float(self, x):
         return float(sympy.N(x))
+
+
+def _as_fmpq(v):
+    if isinstance(v, fmpq):
+        return v
+    if isinstance(v, Fraction):
+        return fmpq(v.numerator, v.denominator)
+    return fmpq(v)

@@ -41,11 +41,13 @@ import math
 from dataclasses import dataclass, field
 from fractions import Fraction
 
-from flint import acb_mat, arb, arb_mat, fmpq
+from flint import acb_mat, arb, arb_mat
 
+from baseparams.numeric.backends import precision
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
+FLOAT_BITS = 53           # precision of the helpers whose result is a float or an integer
 
 
 @dataclass
@@ -78,15 +80,17 @@ class BallAnalysis:
 
 
 def log10(x):
-    """log10 |midpoint| as a float (-inf for zero); fine for 10^-100000."""
-    x = abs(arb(x).mid())
-    if x == 0:
-        return -math.inf
-    return float(x.log() / arb(10).log())
+    """log10 |midpoint| as a float (-inf for zero); fine for 10^-100000. Computed at
+    FLOAT_BITS whatever the caller's precision: the result is a float anyway."""
+    with precision(bits=FLOAT_BITS):
+        x = abs(arb(x).mid())
+        if x == 0:
+            return -math.inf
+        return float(x.log() / arb(10).log())
 
 
 # ----- decisions (midpoints) ---------------------------------------------------
-def column_exponents(W):
+def _column_exponents(W):
     """Per column: round(log2(norm)) from the midpoints, and the zero columns.
 
     A column is zero when every entry's ball contains 0: nothing proves it nonzero, and
@@ -113,7 +117,7 @@ def column_exponents(W):
     return power_of_two_exponents(log2_norms), zero
 
 
-def approximate_pivots(G, threshold, skip=()):
+def _approximate_pivots(G, threshold, skip=()):
     """Cholesky (LDL^T) with diagonal pivoting on midpoints while the pivot exceeds ``threshold``.
 
     Returns (order, pivots): the columns in pivot order and their pivots (midpoints).
@@ -142,7 +146,7 @@ def approximate_pivots(G, threshold, skip=()):
     return order, pivots
 
 
-def natural_basis(G, threshold, target, skip=()):
+def _natural_basis(G, threshold, target, skip=()):
     """Leftmost columns (parameter order) whose midpoint Schur pivot exceeds ``threshold``."""
     n = len(G)
     kept, L = [], []            # L: rows of the (midpoint) Cholesky factor of G_KK
@@ -166,7 +170,7 @@ def natural_basis(G, threshold, target, skip=()):
     return kept
 
 
-def select_rows(Wk, Gkk):
+def _select_rows(Wk, Gkk):
     """r rows of W_K making a well-conditioned square block (a choice only: what is claimed
     is verified in arb).
 
@@ -251,7 +255,7 @@ def _verify(W, G, kept, exponents):
     Wk = _columns(W, kept, exponents)
     if not kept:
         return [], arb_mat(0, len(eliminated))
-    rows = select_rows(Wk, _submatrix(G, kept, kept))
+    rows = _select_rows(Wk, _submatrix(G, kept, kept))
     if len(rows) < len(kept):
         return None
     Wrk = _rows(Wk, rows)
@@ -268,19 +272,25 @@ def _verify(W, G, kept, exponents):
 
 # ----- the analysis --------------------------------------------------------------
 def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True):
-    """Rank, permutation and beta of an ``arb_mat`` W; call inside ``Arb(digits).activate()``.
+    """Rank, permutation and beta of an ``arb_mat`` W, computed at ``digits`` (whatever
+    precision the caller has set; it is restored on return).
 
     ``kept``: impose the kept columns (to compare two precisions, or another solver's
     permutation); ValueError if they are not proven independent.
     """
+    with precision(digits):
+        return _analyse(W, digits, kept, pivoting, approximate_spectrum)
+
+
+def _analyse(W, digits, kept, pivoting, approximate_spectrum):
     n = W.ncols()
-    exponents, zero = column_exponents(W)
+    exponents, zero = _column_exponents(W)
     everything = _columns(W, list(range(n)), exponents)
     Gm = everything.transpose() * everything
     G = [[Gm[i, j] for j in range(n)] for i in range(n)]
     gmax = max((float(abs(G[i][i].mid())) for i in range(n)), default=0.0)
     threshold = arb(NOISE_FACTOR * n * max(gmax, 1e-300)) * arb(10) ** (-digits)
-    order, pivots = approximate_pivots(G, threshold, skip=zero)
+    order, pivots = _approximate_pivots(G, threshold, skip=zero)
     notes = []
     candidates = []
     if kept is not None:
@@ -290,7 +300,7 @@ def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True)
             # a dependent column's pivot is noise amplified by cond(W_K), which can be huge
             # for this basis: demand 10^(-D/2), which noise cannot reach while cond < 10^(D/2)
             strict = max(threshold, arb(max(gmax, 1e-300)) * arb(10) ** (-(digits // 2)))
-            natural = natural_basis(G, strict, len(order), skip=zero)
+            natural = _natural_basis(G, strict, len(order), skip=zero)
             if len(natural) == len(order):
                 candidates.append((natural, "natural"))
             else:
@@ -348,7 +358,7 @@ def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True)
         for b, j in enumerate(eliminated):
             beta[a, b] = beta_s[a, b] * two ** (exponents[j] - exponents[i])
 
-    svals = approximate_singular_values(G) if approximate_spectrum else []
+    svals = _approximate_singular_values(G) if approximate_spectrum else []
     return BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
                         exponents, zero, tail, sigma_lower, svals, B, notes)
 
@@ -367,7 +377,13 @@ def excitation_check(Wc, a):
 
     A trajectory that does not excite the mechanism gives W a clean ridge at too low a
     rank (all the missing directions are exact zeros of W); only other states show it.
+    Computed at the analysis' digits.
     """
+    with precision(a.digits):
+        return _excitation_check(Wc, a)
+
+
+def _excitation_check(Wc, a):
     if not a.eliminated:
         return arb(0), 0, math.inf
     We = _columns(Wc, a.eliminated, a.exponents)
@@ -391,7 +407,13 @@ def excitation_check(Wc, a):
 def tail_singular_values(W, a):
     """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
     largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
-    singular values after the ridge one by one. Exactly zero columns of E give exact zeros."""
+    singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
+    Computed at the analysis' digits."""
+    with precision(a.digits):
+        return _tail_singular_values(W, a)
+
+
+def _tail_singular_values(W, a):
     if not a.eliminated:
         return []
     We = _columns(W, a.eliminated, a.exponents)
@@ -406,7 +428,7 @@ def tail_singular_values(W, a):
     return [v.str(6, radius=False) for v in values] + ["0"] * (E.ncols() - len(live))
 
 
-def approximate_singular_values(G):
+def _approximate_singular_values(G):
     """sqrt(|eigenvalues|) of the scaled Gram matrix, largest first, as decimal strings.
 
     ``acb_mat.eig(algorithm="approx")``: no error bounds (the cluster of zero eigenvalues
@@ -434,13 +456,16 @@ def radius_digits(x):
 
 
 def agreement_digits(a, b):
-    """Leading decimal digits on which two balls' midpoints agree (relative to ``b``)."""
+    """Leading decimal digits on which two balls' midpoints agree (relative to ``b``). The
+    difference of the exact midpoints is rounded once, at FLOAT_BITS: enough for an integer."""
     da, db = a.mid(), b.mid()
     if da == db:
         return math.inf
     if db == 0:
         return 0
-    return max(0, math.floor(log10(db) - log10(da - db)))
+    with precision(bits=FLOAT_BITS):
+        difference = da - db
+    return max(0, math.floor(log10(db) - log10(difference)))
 
 
 def decimal_string(x, digits):
@@ -468,5 +493,16 @@ def recover_rational(x, digits):
 
 
 def contains_rational(x, q):
-    """Does the ball ``x`` contain the rational ``q``?"""
-    return x.contains(arb(fmpq(q.numerator, q.denominator)))
+    """Does the ball ``x`` contain the rational ``q``? Decided exactly, from the ball's
+    exact (binary) midpoint and radius: no precision, no rounding of ``q``."""
+    if not x.is_finite():
+        return not x.mid().is_nan()          # an infinite radius contains every real
+    q = Fraction(q)
+    return abs(q - _dyadic(x.mid())) <= _dyadic(x.rad())
+
+
+def _dyadic(x):
+    """An exact arb (a binary floating-point number) as a Fraction."""
+    man, exp = x.man_exp()
+    man, exp = int(man), int(exp)
+    return Fraction(man * 2 ** exp) if exp >= 0 else Fraction(man, 2 ** -exp)

@@ -81,6 +81,6 @@ def _to_fraction(v):
     if isinstance(v, float):
         return Fraction(v)
     if isinstance(v, mpmath.mpf):
-        man, exp = v.man_exp
-        return Fraction(man) * Fraction(2) ** exp
+        man, exp = v.man_exp            # man is unsigned (mpmath 1.3): the sign comes apart
+        return (-1 if v < 0 else 1) * Fraction(man) * Fraction(2) ** exp
     return Fraction(str(v))

@@ -1,19 +1,143 @@
 """The one result type every solver returns, with its JSON and text forms.
 
 A base-parameter result is the splitting phi = (phi_1, phi_2) (``kept`` and
-``eliminated``) with ``phi_b = phi_1 + beta phi_2``. Each base parameter is stored as a
-mapping parameter -> coefficient string: decimal digits the solver trusts (numeric
-solvers), an exact rational ("625/251"), or a sympy expression in the geometry symbols
-(symbolic solver, with exact values in ``expression_values``).
+``eliminated``) with ``phi_b = phi_1 + beta phi_2``. Each base parameter is stored twice:
+
+- as text (``base``: parameter -> coefficient string, the JSON layout): decimal digits the
+  solver trusts (numeric solvers), an exact rational ("625/251"), or a sympy expression in
+  the geometry symbols (symbolic solver, with exact values in ``expression_values``);
+- as data (``coefficients``, same layout): a :class:`Coefficient` per entry, its value a
+  Fraction (exact, or the printed decimal) with the digits the solver trusts.
+
+``diagnostics`` is a :class:`Diagnostics`: typed fields that several solvers share (a
+rank tolerance, proven bounds around the ridge, the certificate, the summary lines the
+CLI prints, a derivation) and a solver-specific ``details`` dict, all emitted under the
+JSON key ``diagnostics`` (the derivation excepted).
 
 Comparing two results (same base parameters?) is :mod:`baseparams.solvers.compare`'s job.
 """
 
+import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import Any
 
 import mpmath
 import sympy
+
+# Keys of the result's JSON object, emitted by every solver (null where they do not apply:
+# digits and singular_values for dp/exact/symbolic, expression_values for all but symbolic).
+JSON_KEYS = ("mechanism", "solver", "parameters", "rank", "base", "eliminated", "certified",
+             "digits", "singular_values", "expression_values", "geometry", "warnings",
+             "diagnostics", "elapsed_s")
+# Present only when true (a symbolic count that ball arithmetic could not reach).
+OPTIONAL_JSON_KEYS = ("rank_is_upper_bound",)
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One entry of a base parameter: its printed ``text`` and its value as data.
+
+    ``value``: a Fraction (an exact coefficient, or exactly the printed decimal), or an
+    mpmath number (an algebraic symbolic value to 50 digits). ``exact``: ``value`` is the
+    coefficient itself: the exact solver, the symbolic solver's rational values, the
+    parameter a base parameter keeps (1), and vp's rationals recovered from its balls and
+    confirmed at twice the digits (``diagnostics.rational_recovery``). ``digits``: the
+    significant digits of ``value`` the solver trusts when it is not exact (the printed
+    ones for dp and vp); None when exact or unknown.
+    """
+    text: str
+    value: Fraction | mpmath.mpf
+    exact: bool = False
+    digits: int | None = None
+
+    @classmethod
+    def of_exact(cls, value: Fraction, text: str | None = None) -> "Coefficient":
+        return cls(text=str(value) if text is None else text, value=Fraction(value), exact=True)
+
+    @classmethod
+    def of_decimal(cls, text: str, rational: Fraction | None = None) -> "Coefficient":
+        """A printed decimal carrying exactly its trusted digits (dp, vp); ``rational``: an
+        exact value recovered for it (vp), which the printed digits round."""
+        digits = significant_digits(text)
+        if rational is not None:
+            return cls(text=text, value=Fraction(rational), exact=True, digits=digits)
+        return cls(text=text, value=Fraction(text), exact=False, digits=digits)
+
+    @classmethod
+    def of_text(cls, text: str, geometry: Mapping[str, str] | None = None) -> "Coefficient":
+        """A coefficient known only by its text (a solver that gave no data): its value,
+        neither exact nor with known digits."""
+        return cls(text=str(text), value=parse_coefficient(text, geometry))
+
+
+@dataclass(kw_only=True)
+class Diagnostics(Mapping):
+    """How a solver reached its result: typed fields, then solver-specific ``details``.
+
+    Typed fields (None where a solver has nothing to say):
+
+    - ``summary``: lines the CLI prints under the text result;
+    - ``rank_tolerance`` (dp): singular values above it count towards the rank;
+    - ``sigma_r_lower`` / ``tail_bound`` (vp): proven s_r >= sigma_r_lower and
+      s_(r+1) <= tail_bound, decimal strings (they may lie far below float range);
+    - ``ridge_decades`` (vp): log10(sigma_r_lower / tail_bound), a proven ridge (inf when
+      the tail is exactly zero);
+    - ``certificate``: in words, what ``certified`` rests on (vp, exact);
+    - ``derivation``: the symbolic solver's Derivation, for ``baseparams report`` (not JSON).
+
+    The JSON object is ``details`` plus every typed field that is set (ridge_decades
+    rounded to 2 decimals, "inf" for infinity), ``summary`` always. Reading it as a mapping
+    (``diagnostics["runs"]``) reads that JSON object.
+    """
+    summary: list[str] = field(default_factory=list)
+    rank_tolerance: float | None = None
+    sigma_r_lower: str | None = None
+    tail_bound: str | None = None
+    ridge_decades: float | None = None
+    certificate: str | None = None
+    derivation: Any = None
+    details: dict = field(default_factory=dict)
+
+    _TYPED = ("rank_tolerance", "sigma_r_lower", "tail_bound", "ridge_decades", "certificate")
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Diagnostics":
+        """An untyped diagnostics dict (older solvers): ``summary`` typed, the rest details."""
+        data = dict(data)
+        return cls(summary=list(data.pop("summary", [])), details=data)
+
+    def to_json(self) -> dict[str, Any]:
+        out = dict(self.details)
+        for name in self._TYPED:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if name in out:
+                raise ValueError(f"diagnostics: {name!r} is both a typed field and a detail")
+            out[name] = _json_decades(value) if name == "ridge_decades" else value
+        if "summary" in out:
+            raise ValueError("diagnostics: 'summary' is both a typed field and a detail")
+        out["summary"] = list(self.summary)
+        return out
+
+    # read-only mapping over the JSON object
+    def __getitem__(self, key: str) -> Any:
+        return self.to_json()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.to_json())
+
+    def __len__(self) -> int:
+        return len(self.to_json())
+
+
+def _json_decades(x):
+    x = float(x)
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return round(x, 2)
 
 
 @dataclass
@@ -32,7 +156,19 @@ class BaseParameterResult:
     elapsed_s: float = 0.0
     expression_values: list | None = None  # symbolic: [{param: "625/251"}], same layout as base
     rank_is_upper_bound: bool = False
-    diagnostics: dict = field(default_factory=dict)
+    diagnostics: Diagnostics = field(default_factory=Diagnostics)
+    coefficients: list | None = None    # [{param: Coefficient}], same layout as base
+
+    def __post_init__(self):
+        if not isinstance(self.diagnostics, Diagnostics):
+            self.diagnostics = Diagnostics.from_dict(self.diagnostics or {})
+        if self.coefficients is None:
+            self.coefficients = coefficient_rows(self.base, lambda p, t: Coefficient.of_text(t, self.geometry))
+
+    @property
+    def derivation(self):
+        """The symbolic derivation (``diagnostics.derivation``), or None."""
+        return self.diagnostics.derivation
 
     @property
     def kept(self):
@@ -45,19 +181,16 @@ class BaseParameterResult:
             "parameters": list(self.parameters), "rank": self.rank,
             "base": [{"name": b["name"], "expression": dict(b["expression"])} for b in self.base],
             "eliminated": list(self.eliminated), "certified": bool(self.certified),
+            "digits": self.digits,
+            "singular_values": None if self.singular_values is None else list(self.singular_values),
+            "expression_values": (None if self.expression_values is None
+                                  else [dict(v) for v in self.expression_values]),
+            "geometry": dict(self.geometry),
+            "warnings": list(self.warnings),
         }
-        if self.digits is not None:
-            out["digits"] = self.digits
-        if self.singular_values is not None:
-            out["singular_values"] = list(self.singular_values)
-        if self.expression_values is not None:
-            out["expression_values"] = [dict(v) for v in self.expression_values]
-        out["geometry"] = dict(self.geometry)
-        out["warnings"] = list(self.warnings)
         if self.rank_is_upper_bound:
             out["rank_is_upper_bound"] = True
-        if self.diagnostics:
-            out["diagnostics"] = self.diagnostics
+        out["diagnostics"] = self.diagnostics.to_json()
         out["elapsed_s"] = round(self.elapsed_s, 3)
         return out
 
@@ -76,9 +209,30 @@ class BaseParameterResult:
         return "\n".join(lines)
 
     def coefficient_matrix(self, values=False):
-        """Rows of coefficients over ``parameters``: Fractions when exact, else mpmath numbers."""
+        """Rows of coefficients over ``parameters``, parsed from the text: Fractions when exact
+        (or exact decimals), else mpmath numbers. ``values``: the symbolic solver's exact
+        values instead of its expressions."""
         rows = self.expression_values if values and self.expression_values else [b["expression"] for b in self.base]
         return [[parse_coefficient(row.get(p, "0"), self.geometry) for p in self.parameters] for row in rows]
+
+
+def coefficient_rows(base: list, entry) -> list[dict[str, Coefficient]]:
+    """``[{parameter: Coefficient}]`` in the layout of ``base``: a row's first entry (the
+    parameter it keeps, "1") is exactly 1, every other is ``entry(parameter, text)``."""
+    rows = []
+    for b in base:
+        row = {}
+        for k, (param, text) in enumerate(b["expression"].items()):
+            row[param] = (Coefficient.of_exact(Fraction(1), text) if k == 0 and _is_one(text)
+                          else entry(param, text))
+        rows.append(row)
+    return rows
+
+
+def significant_digits(text: str) -> int:
+    """Significant digits written in a decimal string ("0.50000" -> 5, "-3.3e-21" -> 2)."""
+    mantissa = str(text).strip().lower().split("e")[0].lstrip("+-").replace(".", "").lstrip("0")
+    return max(1, len(mantissa))
 
 
 def _is_one(text):

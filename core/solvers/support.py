@@ -1,8 +1,16 @@
-"""Helpers for solver authors: base-parameter rows in the result's layout, progress
-messages, and the warnings every Gautier-type solver words the same way."""
+"""Helpers for solver authors: base-parameter rows in the result's layout (as text and as
+:class:`~baseparams.solvers.result.Coefficient` data), progress messages, and the warnings
+every Gautier-type solver words the same way."""
+
+from collections.abc import Callable, Sequence
+from fractions import Fraction
+
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.result import Coefficient, coefficient_rows
 
 
-def base_rows(parameters, kept, eliminated, coefficient):
+def base_rows(parameters: Sequence[str], kept: Sequence[int], eliminated: Sequence[int],
+              coefficient: Callable[[int, int], str | None]) -> list[dict]:
     """[{"name": "phi_b01", "expression": {kept: "1", eliminated: coeff, ...}}] in kept order.
 
     ``coefficient(a, b)``: the string for row a (kept[a]) and column b (eliminated[b]), or
@@ -20,17 +28,33 @@ def base_rows(parameters, kept, eliminated, coefficient):
     return rows
 
 
-def say(progress, message):
+def decimal_coefficients(base: list, rationals: list | None = None) -> list[dict[str, Coefficient]]:
+    """Coefficient data of rows printed as decimals with exactly their trusted digits (dp,
+    vp). ``rationals``: ``[{parameter: Fraction}]`` in the same layout, exact values
+    recovered for the printed decimals (vp's rational recovery)."""
+    def entry(a):
+        return lambda param, text: Coefficient.of_decimal(
+            text, None if rationals is None else rationals[a].get(param))
+    return [coefficient_rows([b], entry(a))[0] for a, b in enumerate(base)]
+
+
+def exact_coefficients(base: list) -> list[dict[str, Coefficient]]:
+    """Coefficient data of rows printed as exact rationals (``exact_text``: "0.6", "625/251")."""
+    return coefficient_rows(base, lambda param, text: Coefficient.of_exact(Fraction(text), text))
+
+
+def say(progress: Callable[[str], None] | None, message: str) -> None:
     if progress:
         progress(message)
 
 
-def untrusted_warning(items):
+def untrusted_warning(items: Sequence) -> str:
     return (f"{len(items)} nonzero coefficients have no trusted digit: omitted from the base "
             f"parameter expressions and listed in diagnostics.untrusted")
 
 
-def raised_warning(mechanism, before, after, states, double_precision=False):
+def raised_warning(mechanism: Mechanism, before: int, after: int, states: int,
+                   double_precision: bool = False) -> str:
     cause = (f"the trajectory does not excite {mechanism.name}, or double precision lost a small "
              f"singular value of W" if double_precision else f"the trajectory does not excite {mechanism.name}")
     return (f"{cause}: rank raised from {before} to {after} by an independent random batch ({states} "

@@ -27,13 +27,20 @@ Choices made here, all reported in the result's diagnostics:
 - **Permutation.** QR with column pivoting (Businger-Golub) on ``V2^T`` picks the n-r
   parameters whose rows of V2 are the most independent: they are eliminated, which
   makes ``V22`` as well conditioned as a greedy choice can.
+- **Economy SVD.** Only ``S`` and ``V`` are used, so a tall W (rows >= n) gets the thin
+  SVD: memory ``rows x n``, not ``rows x rows`` (100,000 samples of a pendulum would
+  otherwise ask for 74.5 GiB). A wide W (rows < n) needs the full ``V`` (n x n), and then
+  ``U`` is only rows x rows.
+- **Failure.** Non-finite entries in W (a degenerate axis or a geometry value beyond
+  double precision makes the kinematics NaN) or an SVD that does not converge raise a
+  :class:`baseparams.errors.KinematicsError` saying where, never numpy's LinAlgError.
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from baseparams.errors import KinematicsError
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 RIDGE_RATIO = 1e3
@@ -59,15 +66,17 @@ class DPResult:
     warnings: list = field(default_factory=list)
 
 
-def dp_gautier(W, scale=True, rank=None):
+def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> DPResult:
     """Gautier's method on a float64 observation matrix ``W`` (rows x parameters).
 
     ``rank``: force the rank (to study what DP gives at a rank known from elsewhere);
-    by default the tolerance decides.
+    by default the tolerance decides. ``columns``: the parameters' names, for messages.
+    Raises :class:`KinematicsError` if W is not finite or the SVD fails.
     """
     W = np.asarray(W, dtype=float)
     rows, n = W.shape
-    norms = np.linalg.norm(W, axis=0)
+    _check_finite(W, columns)
+    norms = _column_norms(W)
     col_tol = max(rows, n) * EPS * (norms.max() if n else 0.0)
     zero_columns = [j for j in range(n) if norms[j] <= col_tol]
     W = W.copy()
@@ -77,7 +86,7 @@ def dp_gautier(W, scale=True, rank=None):
         s_col = np.exp2(power_of_two_exponents(np.log2(norms))) if scale else np.ones(n)
     Ws = W / s_col
 
-    _, s, vt = np.linalg.svd(Ws, full_matrices=True)
+    s, vt = _singular_values_and_vt(Ws)
     s_full = np.zeros(n)
     s_full[:len(s)] = s
     s_max = s_full[0] if n else 0.0
@@ -114,7 +123,13 @@ def dp_gautier(W, scale=True, rank=None):
     kept = [j for j in range(n) if j not in set(eliminated)]
     if eliminated:
         v21, v22 = v2[kept, :], v2[eliminated, :]
-        beta_s = -np.linalg.solve(v22.T, v21.T).T
+        try:
+            beta_s = -np.linalg.solve(v22.T, v21.T).T
+        except np.linalg.LinAlgError:
+            raise KinematicsError(
+                f"the block V22 of the null space is singular in double precision: the "
+                f"{n - r} parameters to eliminate cannot be chosen (rank {r} of {n}"
+                + (", forced" if rank is not None else "") + ")") from None
         cond22 = float(np.linalg.cond(v22))
     else:
         beta_s = np.zeros((r, 0))
@@ -127,3 +142,39 @@ def dp_gautier(W, scale=True, rank=None):
                         f"(s_{r + 1} = {noise:.3g} / s_{r} = {s_full[r - 1]:.3g} x cond(V22) = {cond22:.3g})")
     return DPResult(r, kept, eliminated, beta, beta_s, s_full, tol, s_col, zero_columns, ratios, largest,
                     clear, err, cond22, warnings)
+
+
+def _check_finite(W: np.ndarray, columns) -> None:
+    """Refuse a W with NaN or infinite entries, naming the columns (parameters) and rows hit."""
+    finite = np.isfinite(W)
+    if finite.all():
+        return
+    bad_rows, bad_cols = np.nonzero(~np.all(finite, axis=1))[0], np.nonzero(~np.all(finite, axis=0))[0]
+    names = [str(columns[j]) if columns is not None else str(j) for j in bad_cols[:6]]
+    more = f" and {len(bad_cols) - 6} more" if len(bad_cols) > 6 else ""
+    raise KinematicsError(
+        f"the observation matrix W has {int((~finite).sum())} non-finite entries (NaN or inf) in "
+        f"{len(bad_rows)} of {W.shape[0]} rows, in the columns of {', '.join(names)}{more}: the "
+        f"kinematics cannot be evaluated in double precision (a degenerate axis or ref, or a "
+        f"geometry value too small or too large for float64)")
+
+
+def _column_norms(W: np.ndarray) -> np.ndarray:
+    """Euclidean column norms without overflow or underflow (entries near 1e+-300 stay exact)."""
+    largest = np.max(np.abs(W), axis=0) if W.shape[0] else np.zeros(W.shape[1])
+    safe = np.where(largest > 0, largest, 1.0)
+    with np.errstate(over="ignore"):
+        return largest * np.linalg.norm(W / safe, axis=0)
+
+
+def _singular_values_and_vt(Ws: np.ndarray):
+    """Singular values and the full n x n V^T; economy SVD when W is tall (see the module doc)."""
+    rows, n = Ws.shape
+    try:
+        _, s, vt = np.linalg.svd(Ws, full_matrices=rows < n)
+    except np.linalg.LinAlgError:
+        raise KinematicsError(
+            f"the SVD of the observation matrix W ({rows} x {n}, largest entry "
+            f"{float(np.max(np.abs(Ws))):.3g}) did not converge in double precision: the "
+            f"kinematics are degenerate or badly scaled (try the vp solver)") from None
+    return s, vt

@@ -8,13 +8,15 @@ import time
 import numpy as np
 from flint import arb
 
-from baseparams.dynamics.excitation import batch_matrix, random_batch
-from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+from baseparams.dynamics.excitation import random_batch
+from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import KinematicsError
 from baseparams.numeric.backends import Float64
 from baseparams.numeric.certify import decimal_string
-from baseparams.solvers.result import BaseParameterResult
-from baseparams.solvers.support import base_rows, raised_warning, say, untrusted_warning
+from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.result import BaseParameterResult, Diagnostics
+from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
 from .gautier import EPS, dp_gautier
 
@@ -31,18 +33,35 @@ class DoublePrecisionSolver:
     name = "dp"
     description = ("Gautier's SVD method in double precision (numpy): rank by tolerance, "
                    "with ridge diagnostics and warnings")
+    capabilities = Capabilities(closed_loops=True)
+    options = (
+        SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
+                     "mechanism file's)", minimum=2),
+        SolverOption("scale", bool, True, "scale W's columns by powers of two near their norms"),
+        SolverOption("rank", int, None, "impose the rank (default: the tolerance rule; imposed, "
+                     "the excitation check is skipped)", minimum=0),
+        SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch"),
+        SolverOption("digits", int, None, "ignored (dp always works in double precision); "
+                     "a warning says so"),
+    )
 
-    def solve(self, mechanism, samples=None, scale=True, rank=None, progress=None, seed=CHECK_SEED,
-              **options):
+    def applicable(self, mechanism):
+        """Any mechanism: the SVD needs nothing of the geometry."""
+        return None
 
+    def solve(self, mechanism, progress=None, **options):
+        """The base parameters in float64; ``options`` as declared in ``options``."""
+        chosen = check_options(self, options)
+        samples, scale, rank, seed = (chosen[k] for k in ("samples", "scale", "rank", "seed"))
+        require_applicable(self, mechanism)
         start = time.perf_counter()
         warnings = []
-        if options.get("digits"):
+        if chosen["digits"]:
             warnings.append("dp ignores --digits: it always works in double precision")
         trajectory = Trajectory.default(mechanism, samples=samples)
         W, info = observation_matrix(mechanism, Float64(), trajectory)
         say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
-        res = dp_gautier(W, scale=scale, rank=rank)
+        res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters)
         check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
         if check.get("raised"):
             warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
@@ -101,12 +120,11 @@ class DoublePrecisionSolver:
         if res.zero_columns:
             summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
                            + " ".join(params[j] for j in res.zero_columns))
-        diagnostics = {
+        details = {
             "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
                                "(exact in binary); beta scaled back") if scale else "none",
             "numerically_zero_columns": [params[j] for j in res.zero_columns],
             "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
-            "tolerance": float(res.tolerance),
             "ridge": {"clear": bool(res.clear_ridge), "criterion":
                       f"largest ratio s_i/s_(i+1) among values above the tolerance (the value below the "
                       f"cut floored at eps*s_max) is >= {1e3:g} and falls at the tolerance cut",
@@ -120,13 +138,14 @@ class DoublePrecisionSolver:
             "untrusted": untrusted,
             "excitation_check": check,
             "samples": info["samples"], "rows": int(W.shape[0]),
-            "summary": summary,
         }
+        diagnostics = Diagnostics(summary=summary, rank_tolerance=float(res.tolerance), details=details)
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=r, base=base,
             eliminated=[params[j] for j in res.eliminated], certified=False, digits=None,
             singular_values=[repr(float(v)) for v in s], geometry=mechanism.geometry_text,
-            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
+            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
+            coefficients=decimal_coefficients(base))
 
     @staticmethod
     def _excitation_check(mechanism, trajectory, W, res, scale, rank, seed):
@@ -135,7 +154,7 @@ class DoublePrecisionSolver:
             return {"skipped": "rank forced"}, None, None
         batch = random_batch(mechanism, trajectory, seed)
         try:
-            rows = batch_matrix(mechanism, Float64(), trajectory, batch)
+            rows, _ = observation_matrix(mechanism, Float64(), batch)
         except KinematicsError as exc:
             return {"seed": seed, "states": batch.states, "error": str(exc)}, None, None
         stacked = np.vstack([W, rows])

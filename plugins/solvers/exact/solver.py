@@ -4,11 +4,13 @@ its exact rank and rref (:mod:`baseparams.dynamics.exact_states`)."""
 import math
 import time
 
-from baseparams.dynamics.exact_states import check_exact_possible, exact_observation_matrix, rref_base
-from baseparams.dynamics.excitation import stack_rows
+from baseparams.dynamics.exact_states import exact_observation_matrix, rref_base
+from baseparams.numeric.backends import Exact
+from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.solvers.result import BaseParameterResult
-from baseparams.solvers.support import base_rows, say
+from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.result import BaseParameterResult, Diagnostics
+from baseparams.solvers.support import base_rows, exact_coefficients, say
 
 EXACT_ROUNDS = 6           # independent batches before the rank is declared unsettled
 
@@ -19,14 +21,33 @@ class ExactSolver:
     name = "exact"
     description = ("exact rational arithmetic (fmpq) at random rational states: exact rank and "
                    "beta by rref; open chains with rational geometry only")
+    capabilities = Capabilities(needs_rational_geometry=True, certifies=True, exact_coefficients=True)
+    options = (
+        SolverOption("samples", int, None, "random rational states of the first batch (default: "
+                     "enough for 1.5 rows per parameter)", minimum=1),
+        SolverOption("seed", int, 2024, "seed of the random rational states"),
+        SolverOption("digits", int, None, "ignored (the arithmetic is exact); a warning says so"),
+    )
 
-    def solve(self, mechanism, samples=None, seed=2024, progress=None, **options):
+    def applicable(self, mechanism):
+        """An open chain whose kinematics stays rational at rational states: refused for a
+        closed loop (algebraic dependent coordinates) or irrational geometry, found by
+        evaluating one random state."""
+        try:
+            exact_observation_matrix(mechanism, 1, seed=0)
+        except InputError as exc:
+            return exc.reason
+        return None
 
+    def solve(self, mechanism, progress=None, **options):
+        """Exact rank and beta; ``options`` as declared in ``options``."""
+        chosen = check_options(self, options)
+        samples, seed = chosen["samples"], chosen["seed"]
+        require_applicable(self, mechanism)
         start = time.perf_counter()
         warnings = []
-        if options.get("digits"):
+        if chosen["digits"]:
             warnings.append("exact ignores --digits: its arithmetic is exact (rationals)")
-        check_exact_possible(mechanism)
         params = mechanism.parameters
         f = max(1, len(mechanism.independent or mechanism.coordinates))
         n = len(params)
@@ -38,7 +59,7 @@ class ExactSolver:
         batches, settled = 0, False
         while batches < EXACT_ROUNDS:                # an independent batch must not raise the rank
             batches += 1
-            W = stack_rows(W, exact_observation_matrix(mechanism, per_batch, seed=seed + 1000 * batches))
+            W = Exact().stack(W, exact_observation_matrix(mechanism, per_batch, seed=seed + 1000 * batches))
             new = W.rank()
             if new == rank:
                 settled = True
@@ -59,16 +80,16 @@ class ExactSolver:
                    (f"exact rank {rank}; the last batch did not raise it" if settled else
                     f"exact rank {rank} at these states; it still rose with the last batch (not certified)"),
                    "beta from the exact rref: kept parameters are the leftmost basis"]
-        diagnostics = {
-            "rank_meaning": ("exact rank of W at random rational states: the number of base parameters "
-                             "unless every sample lies on one algebraic hypersurface (probability zero); "
-                             "an extra independent batch (at least as many rows as parameters) did not "
-                             "raise it"),
-            "rows": W.nrows(), "batches": batches, "states_per_batch": per_batch,
-            "rank_first_states": first, "settled": settled, "seed": seed, "summary": summary,
-        }
+        diagnostics = Diagnostics(
+            summary=summary,
+            certificate=("exact rank of W at random rational states: the number of base parameters "
+                         "unless every sample lies on one algebraic hypersurface (probability zero); "
+                         "an extra independent batch (at least as many rows as parameters) did not "
+                         "raise it"),
+            details={"rows": W.nrows(), "batches": batches, "states_per_batch": per_batch,
+                     "rank_first_states": first, "settled": settled, "seed": seed})
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=rank, base=base,
             eliminated=[params[j] for j in eliminated], certified=settled, digits=None, singular_values=None,
             geometry=mechanism.geometry_text, warnings=warnings, elapsed_s=time.perf_counter() - start,
-            diagnostics=diagnostics)
+            diagnostics=diagnostics, coefficients=exact_coefficients(base))

@@ -36,6 +36,7 @@ import sympy
 
 from baseparams.numeric.backends import Arb, Float64, Symbolic
 from baseparams.dynamics.evaluator import Evaluator, independent_rows
+from baseparams.dynamics.observation import RationalStates, evaluate_states
 from baseparams.errors import InputError
 from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.trajectory import Trajectory
@@ -105,15 +106,9 @@ def random_states(mechanism, count=12, digits=30, seed=1):
         q = fl.assemble(zarr, where="random states: ")
         guesses = [[Fraction(float(np.atleast_1d(v)[k])) for v in q] for k in range(count)]
     backend = Arb(digits)
-    ev = Evaluator(mechanism, backend)
-    out = []
-    with backend.activate():
-        for k in range(count):
-            r = backend.rational
-            guess = None if guesses[k] is None else [r(v) for v in guesses[k]]
-            out.append(ev.sample([r(v) for v in zs[k]], [r(v) for v in zds[k]],
-                                 [r(v) for v in zdds[k]], guess, where="random state: "))
-    return out, backend
+    states = RationalStates(*(tuple(map(tuple, v)) for v in (zs, zds, zdds)),
+                            start=tuple(guesses) if mechanism.loops else None, name="random state")
+    return evaluate_states(mechanism, backend, states, certify=False), backend
 
 
 def to_mpf(x):
@@ -188,23 +183,66 @@ def to_number(expr, subs):
 
 
 def body_candidates(mechanism, label):
-    """Exact candidate points and unit directions of a body, from its joints (body axes)."""
+    """Exact candidate points and unit directions of a body (body axes).
+
+    Points: the origin and the body's joint points. Directions: the body axes, its joint
+    frames' axes, and those of every body that turns with it (connected through joints
+    that only translate, P or Fixed), carried over exactly: a prismatic joint's sliding
+    body sees the rotation axis of the joint above it (a planar motion's axis)."""
     zero, one = sympy.Integer(0), sympy.Integer(1)
     points = [("origin", [zero, zero, zero])]
-    dirs = [(f"{a}{label}", [one if i == k else zero for i in range(3)]) for k, a in enumerate("xyz")]
+    dirs = []
     backend = Symbolic()
-    for joint in mechanism.joints:
-        for side, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
-            if side != label:
-                continue
-            r, p = mechanism.numeric_frame(frame, backend, symbolic=True)
-            points.append((f"{joint.name} point", [sympy.sympify(c) for c in p]))
-            for k, a in enumerate("xyz"):
-                dirs.append((f"{joint.name} {a} axis", [r[i][k] for i in range(3)]))
+    for other, rot in same_rotation(mechanism, label):
+        via = "" if other == label else f" (body {other}'s, carried over)"
+        dirs += [(f"{a}{other}{via}", [rot[i][k] for i in range(3)]) for k, a in enumerate("xyz")]
+        for joint in mechanism.joints:
+            for side, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
+                if side != other:
+                    continue
+                r, p = mechanism.numeric_frame(frame, backend, symbolic=True)
+                if other == label:
+                    points.append((f"{joint.name} point", [sympy.sympify(c) for c in p]))
+                for k, a in enumerate("xyz"):
+                    column = [r[i][k] for i in range(3)]
+                    dirs.append((f"{joint.name} {a} axis{via}",
+                                 [sum(rot[i][m] * column[m] for m in range(3)) for i in range(3)]))
     return points, dirs
 
 
-def _dedupe(items, subs, directions=False):
+def same_rotation(mechanism, label: int) -> list:
+    """[(body, M)]: the bodies that always turn with ``label`` (through joints whose motions
+    are all translations), with M the exact rotation from that body's axes to ``label``'s
+    (``label`` itself first, M = 1). Ground is left out: its directions are not the body's."""
+    one, zero = sympy.Integer(1), sympy.Integer(0)
+    identity = [[one if i == j else zero for j in range(3)] for i in range(3)]
+    found = {label: identity}
+    frontier = [label]
+    backend = Symbolic()
+    while frontier:
+        body = frontier.pop()
+        for joint in mechanism.joints:
+            if any(kind != "P" for kind, _ in joint.type.motions) or body not in (joint.parent, joint.child):
+                continue
+            mine, theirs = ((joint.parent_frame, joint.child_frame) if body == joint.parent
+                            else (joint.child_frame, joint.parent_frame))
+            other = joint.child if body == joint.parent else joint.parent
+            if other == 0 or other in found:
+                continue
+            r_mine, _ = mechanism.numeric_frame(mine, backend, symbolic=True)
+            r_theirs, _ = mechanism.numeric_frame(theirs, backend, symbolic=True)
+            # other's axes -> joint frame (R_theirs^T) -> body's axes (R_mine) -> label's (found)
+            step = [[sum(r_mine[i][k] * r_theirs[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+            m = found[body]
+            found[other] = [[sympy.cancel(sum(m[i][k] * step[k][j] for k in range(3))) for j in range(3)]
+                            for i in range(3)]
+            frontier.append(other)
+    return list(found.items())
+
+
+def dedupe(items, subs, directions: bool = False) -> list:
+    """(name, exact vector, numeric vector) for the items whose vector (or, for
+    ``directions``, its line) at the geometry ``subs`` differs from every earlier one."""
     out, seen = [], []
     for name, vec in items:
         num = [to_number(c, subs) for c in vec]
@@ -296,8 +334,8 @@ def analyse_body(mechanism, label, forms):
 
     subs = mechanism.geometry_subs
     points, dirs = body_candidates(mechanism, label)
-    points = _dedupe(points, subs)
-    dirs = _dedupe(dirs, subs, directions=True)
+    points = dedupe(points, subs)
+    dirs = dedupe(dirs, subs, directions=True)
     motion = BodyMotion(label, omega_rank, null_dim)
     names = body_parameter_names(label)
 

@@ -50,11 +50,12 @@ from fractions import Fraction
 import sympy
 from sympy import QQ
 
+from baseparams import registry
 from baseparams.numeric.backends import Arb
 from baseparams.plugins.solvers.symbolic.body_conditions import analyse_bodies
 from baseparams.errors import InputError
 from baseparams.model.params import PARAMETER_KINDS, split_name
-from baseparams.solvers.result import BaseParameterResult
+from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
 from baseparams.plugins.solvers.symbolic.sampled_transfers import sampled_joint_transfers
 from baseparams.dynamics.transfers import transfer_generators
 
@@ -66,11 +67,16 @@ FIRST_MOMENTS = ("mx", "my", "mz")
 class ExactField:
     """Rational functions of the geometry symbols (sympy's sparse polys), with the mechanism's
     exact geometry for evaluation. Square roots left by non-unit axes become extra symbols
-    (their squares are not reduced, so zero tests are always made at the actual geometry)."""
+    (their squares are not reduced, so zero tests are always made at the actual geometry).
+
+    A mechanism whose generators use no geometry symbol and no radical (no ``[geometry]``,
+    numbers written inline) still gets a one-generator field: a placeholder symbol that
+    occurs in no expression (sympy's zero-generator fields cannot evaluate elements). It is
+    a :class:`sympy.Dummy`, as are the radicals, so no geometry name can clash with them."""
 
     def __init__(self, mechanism, expressions):
         self.mechanism = mechanism
-        self.radicals = {}          # sympy Pow (b**(1/q)) -> Symbol
+        self.radicals = {}          # sympy Pow (b**(1/q)) -> Dummy
         atoms = set()
         converted = [self._replace(sympy.sympify(e)) for e in expressions]
         for e in converted:
@@ -78,31 +84,28 @@ class ExactField:
         names = sorted(mechanism.geometry)
         symbols = [sympy.Symbol(n) for n in names if sympy.Symbol(n) in atoms]
         symbols += sorted(set(self.radicals.values()), key=lambda s: s.name)
-        symbols = symbols or [sympy.Symbol(names[0]) if names else sympy.Symbol("_unit")]
+        if not symbols:
+            symbols = [sympy.Dummy("unit")]
         self.symbols = symbols
         self.K = QQ.frac_field(*symbols)
         ring = self.K.field.ring
         values = mechanism.geometry_subs
         self.values = values
         self.exact = True
+        radical_of = {sym: root for root, sym in self.radicals.items()}
         pairs = []
         for gen, sym in zip(ring.gens, symbols):
             if sym in values:
-                pairs.append((gen, QQ(values[sym].p, values[sym].q)))
-            else:
-                base = self._radical_of(sym)
-                v = sympy.simplify(base.subs(values))
+                v = values[sym]
+            elif sym in radical_of:
+                v = sympy.simplify(radical_of[sym].subs(values))
                 if not v.is_Rational:
                     self.exact = False
                     v = sympy.Rational(0)
-                pairs.append((gen, QQ(v.p, v.q)))
+            else:                   # the placeholder: occurs nowhere, any value will do
+                v = sympy.Rational(0)
+            pairs.append((gen, QQ(v.p, v.q)))
         self.pairs = pairs
-
-    def _radical_of(self, sym):
-        for k, v in self.radicals.items():
-            if v == sym:
-                return k
-        raise KeyError(sym)
 
     def _replace(self, e):
         def repl(p):
@@ -110,7 +113,7 @@ class ExactField:
             if x.is_Rational and not x.is_Integer:
                 root = b ** sympy.Rational(1, x.q)
                 if root not in self.radicals:
-                    self.radicals[root] = sympy.Symbol(f"_r{len(self.radicals)}")
+                    self.radicals[root] = sympy.Dummy(f"r{len(self.radicals)}")
                 return self.radicals[root] ** x.p
             return p
         return e.replace(lambda p: p.is_Pow, repl) if e.has(sympy.Pow) else e
@@ -272,7 +275,7 @@ def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
             raise InputError(f"{name!r} is not a parameter of {mechanism.name} "
                              f"({params[0]} ... {params[-1]})", key=opt)
     bodies, forms = analyse_bodies(mechanism, states=states, seed=seed)
-    transfers, missing = transfer_generators(mechanism)
+    transfers, missing = transfer_generators(mechanism, registry.transfer_rules)
     for joint in mechanism.joints:
         if joint in missing:
             continue
@@ -410,15 +413,16 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     from flint import arb, arb_mat, fmpq
 
     from baseparams.numeric.certify import analyse
-    from baseparams.dynamics.excitation import batch_matrix, random_batch, stack_rows
-    from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+    from baseparams.dynamics.excitation import random_batch
+    from baseparams.dynamics.observation import observation_matrix
+    from baseparams.dynamics.trajectory import Trajectory
 
     backend = Arb(digits)
     trajectory = trajectory or Trajectory.default(mechanism)
     W, info = observation_matrix(mechanism, backend, trajectory)
     # rows at random states independent of the trajectory, so that a trajectory which does
     # not excite the mechanism cannot lower the proven rank (core/excitation.py)
-    W = stack_rows(W, batch_matrix(mechanism, backend, trajectory, random_batch(mechanism, trajectory, seed=7919)))
+    W = backend.stack(W, observation_matrix(mechanism, backend, random_batch(mechanism, trajectory, seed=7919))[0])
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}
@@ -465,17 +469,19 @@ def value_text(field_, elem):
 
 def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, seed=1,
           trajectory=None):
-    """The symbolic solver: a :class:`BaseParameterResult` plus the derivation (``.derivation``)."""
+    """The symbolic solver: a :class:`BaseParameterResult` with the derivation in
+    ``diagnostics.derivation``."""
     start = time.perf_counter()
     der = eliminate(mechanism, keep=keep, eliminate_first=eliminate_first, seed=seed)
     f = der.field
     params = list(mechanism.parameters)
     order = {p: i for i, p in enumerate(params)}
-    base, values = [], []
+    base, values, coefficients = [], [], []
     for k, (kept, form) in enumerate(der.base.items(), start=1):
         terms = sorted(form.items(), key=lambda t: (t[0] != kept, order[t[0]]))
         base.append({"name": f"phi_b{k:02d}", "expression": {p: coefficient_text(f, c) for p, c in terms}})
         values.append({p: value_text(f, c) for p, c in terms})
+        coefficients.append({p: _coefficient(base[-1]["expression"][p], values[-1][p]) for p, _ in terms})
     rank = len(der.base)
     warnings = list(der.warnings)
     diagnostics = {"conditions": [_step_json(s, f) for s in der.conditions],
@@ -500,17 +506,22 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
                        f"rank >= {cert.lower}; {cert.passed} of {cert.generators} generators n give "
                        f"balls W n that contain 0 (evidence for rank <= {len(params) - cert.passed})")
     summary.append("derivation: `baseparams report MECH` (text, markdown or latex)")
-    diagnostics["summary"] = summary
     if any(not _is_fraction_text(t) for row in values for t in row.values()):
         warnings.append("square roots of non-squares in the geometry: some expression values are algebraic")
-    result = BaseParameterResult(
+    return BaseParameterResult(
         mechanism=mechanism.name, solver="symbolic", parameters=params, rank=rank, base=base,
         eliminated=der.eliminated, certified=certified,
         geometry=mechanism.geometry_text,
         warnings=warnings, elapsed_s=time.perf_counter() - start, expression_values=values,
-        rank_is_upper_bound=upper_bound, diagnostics=diagnostics)
-    result.derivation = der
-    return result
+        rank_is_upper_bound=upper_bound, coefficients=coefficients,
+        diagnostics=Diagnostics(summary=summary, derivation=der, details=diagnostics))
+
+
+def _coefficient(text, value_text_):
+    """An expression's data: its exact rational value, or an algebraic value to 50 digits."""
+    if _is_fraction_text(value_text_):
+        return Coefficient.of_exact(Fraction(value_text_), text)
+    return Coefficient(text=text, value=parse_coefficient(value_text_), exact=False, digits=50)
 
 
 def _certificate_warnings(cert, rank):

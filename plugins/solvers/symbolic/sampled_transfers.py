@@ -3,9 +3,12 @@
 A joint type's rules (:mod:`baseparams.dynamics.transfers`) state what may cross it whatever the
 mechanism. Some mechanisms allow more: across a prismatic joint whose sliding axis stays
 parallel to the common angular velocity (a SCARA quill) dipoles cross in every direction,
-which no general rule for P joints can say. So across each joint between two moving
-bodies, a monopole at the joint centre and dipoles along the joint axes there are tried
-on the two bodies' sampled Lagrangian rows (:func:`baseparams.plugins.solvers.symbolic.body_conditions.lagrangian_rows`).
+and across a prismatic joint of a planar motion a dipole along the rotation axis crosses
+(an axis that need not be one of the joint frame's), which no general rule for P joints
+can say. So across each joint between two moving bodies, a monopole at the joint centre
+and dipoles there are tried, along the joint frame's axes and along every candidate
+direction of either body (its axes and its joints' axes, seen from the joint frame at the
+reference configuration), on the two bodies' sampled Lagrangian rows (:func:`baseparams.plugins.solvers.symbolic.body_conditions.lagrangian_rows`).
 Those that pass (relative residual below 1e-14 on the sampled states) are generators of
 condition 0, accepted on numerical evidence like the body conditions and re-checked in
 ball arithmetic by the solver.
@@ -13,7 +16,8 @@ ball arithmetic by the solver.
 
 import mpmath
 
-from baseparams.plugins.solvers.symbolic.body_conditions import NULL_TOL, lagrangian_rows, residual, to_number
+from baseparams.plugins.solvers.symbolic.body_conditions import (NULL_TOL, body_candidates, dedupe, lagrangian_rows,
+                                                                residual, to_number)
 from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.transfers import (Generator, as_vector, dipole_params, joint_frames, map_direction, map_point,
                         monopole_params)
@@ -35,9 +39,8 @@ def sampled_joint_transfers(mechanism, joint, forms, known, digits=30):
         tries = []
         if "monopole" not in known:
             tries.append(("monopole", None, lambda fr: monopole_params(map_point(fr, zero))))
-        for k, a in enumerate("xyz"):
-            u = [int(i == k) for i in range(3)]
-            tries.append(("dipole", a, lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u))))
+        for text, u, _ in joint_directions(mechanism, joint, frames):
+            tries.append(("dipole", (text, u), lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u))))
         names = body_parameter_names(joint.parent) + body_parameter_names(joint.child)
         out = []
         for multipole, axis, make in tries:
@@ -49,10 +52,24 @@ def sampled_joint_transfers(mechanism, joint, forms, known, digits=30):
             if residual(rows, num) >= NULL_TOL:
                 continue
             sides = {b: {"point": map_point(frames[b], zero),
-                         "direction": None if axis is None else map_direction(frames[b], [int(a == axis) for a in "xyz"])}
+                         "direction": None if axis is None else map_direction(frames[b], axis[1])}
                      for b in (joint.parent, joint.child)}
-            label = "monopole" if axis is None else f"dipole along the joint's {axis} axis"
+            label = "monopole" if axis is None else f"dipole along {axis[0]}"
             out.append(Generator(vector={k: v for k, v in vector.items() if v != 0}, kind="transfer",
                                  multipole=multipole, condition=0, bodies=(joint.parent, joint.child),
                                  joint=joint, sides=sides, label=label + " (sampled)"))
         return out
+
+
+def joint_directions(mechanism, joint, frames) -> list:
+    """Unit directions in the joint frame to try dipoles along, without repeats (lines):
+    the joint frame's x, y, z axes, then each body's candidate directions
+    (:func:`baseparams.plugins.solvers.symbolic.body_conditions.body_candidates`) as the joint frame sees them
+    at the reference configuration (``u = R^T d`` with R the frame's axes in that body)."""
+    items = [(f"the joint's {a} axis", [int(i == k) for i in range(3)]) for k, a in enumerate("xyz")]
+    for body in (joint.parent, joint.child):
+        r, _ = frames[body]
+        _, dirs = body_candidates(mechanism, body)
+        for name, d in dirs:
+            items.append((f"{name} of body {body}", [sum(r[k][i] * d[k] for k in range(3)) for i in range(3)]))
+    return dedupe(items, mechanism.geometry_subs, directions=True)

@@ -1,18 +1,9 @@
 """The ``symbolic`` solver's plugin object: options in, :func:`.elimination.solve` out."""
 
 from baseparams.dynamics.trajectory import Trajectory
+from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
 
 from .elimination import solve
-
-
-
-
-def _names(value):
-    if value is None:
-        return ()
-    if isinstance(value, str):
-        value = [v for v in value.replace(",", " ").split() if v]
-    return tuple(value)
 
 
 class SymbolicSolver:
@@ -21,14 +12,33 @@ class SymbolicSolver:
     name = "symbolic"
     description = ("Ros et al.'s multipole transfers, automated: exact expressions in the geometry "
                    "symbols, rank checked on W in ball arithmetic")
+    capabilities = Capabilities(closed_loops=True, certifies=True, exact_coefficients=True,
+                                symbolic_coefficients=True, derivation=True)
+    options = (
+        SolverOption("keep", tuple, (), "parameters never to eliminate (names; text: comma or "
+                     "space separated)", item=str),
+        SolverOption("eliminate_first", tuple, (), "parameters to eliminate whenever a transfer "
+                     "allows it", item=str),
+        SolverOption("certify", bool, True, "check the rank on W in ball arithmetic"),
+        SolverOption("digits", int, None, "precision of that check (default 40)", minimum=10),
+        SolverOption("samples", int, None, "trajectory samples for that check (default: the "
+                     "mechanism file's)", minimum=2),
+        SolverOption("seed", int, 1, "seed of the sampled body conditions and transfers"),
+    )
 
-    def solve(self, mechanism, keep=None, eliminate_first=None, certify=True, digits=None,
-              samples=None, seed=1, **options):
-        """``keep``/``eliminate_first``: parameter names (list or comma/space separated text);
-        ``certify``: compute W in ball arithmetic at ``digits`` (default 40) to check the rank;
-        ``samples``: trajectory samples for that check (default: the mechanism's)."""
+    def applicable(self, mechanism):
+        """Any mechanism: a joint type without transfer rules makes the rank an upper bound,
+        which the result says."""
+        return None
 
+    def solve(self, mechanism, progress=None, **options):
+        """Symbolic base parameters and their derivation; ``options`` as declared in
+        ``options``. ``progress`` is accepted and not used (the solver has no long phase
+        worth reporting)."""
+        chosen = check_options(self, options)
+        require_applicable(self, mechanism)
+        samples = chosen["samples"]
         trajectory = Trajectory.default(mechanism, samples=samples) if samples else None
-        return solve(mechanism, keep=_names(keep),
-                     eliminate_first=_names(eliminate_first),
-                     certify_rank=certify, digits=digits or 40, seed=seed, trajectory=trajectory)
+        return solve(mechanism, keep=chosen["keep"], eliminate_first=chosen["eliminate_first"],
+                     certify_rank=chosen["certify"], digits=chosen["digits"] or 40, seed=chosen["seed"],
+                     trajectory=trajectory)

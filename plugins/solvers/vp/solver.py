@@ -6,15 +6,18 @@ recovered from the balls and confirmed at twice the digits."""
 import copy
 import math
 import time
+from fractions import Fraction
 
-from baseparams.dynamics.excitation import batch_matrix, random_batch, stack_rows
-from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+from baseparams.dynamics.excitation import random_batch
+from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import KinematicsError
 from baseparams.model.expressions import exact_text
 from baseparams.numeric import certify
 from baseparams.numeric.backends import Arb
-from baseparams.solvers.result import BaseParameterResult
-from baseparams.solvers.support import base_rows, raised_warning, say, untrusted_warning
+from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.result import BaseParameterResult, Diagnostics
+from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
 RIDGE_DECADES = 3          # a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
 MIN_DIGITS = 10            # coefficients must agree to 10 digits between two precisions
@@ -41,11 +44,10 @@ class BallRun:
 
         self.W, self.info = observation_matrix(mechanism, backend, trajectory, progress=tick)
         if batches:             # independent random states added after a failed excitation check
-            self.W = stack_rows(self.W, *(batch_matrix(mechanism, backend, trajectory, b) for b in batches))
+            self.W = backend.stack(self.W, *(observation_matrix(mechanism, backend, b)[0] for b in batches))
         self.info["random_states"] = sum(b.states for b in batches)
-        with backend.activate():
-            self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting)
-            self.tail_values = certify.tail_singular_values(self.W, self.analysis)
+        self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting)
+        self.tail_values = certify.tail_singular_values(self.W, self.analysis)
         self.seconds = time.perf_counter() - start
         a = self.analysis
         self.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
@@ -55,12 +57,11 @@ class BallRun:
         """This run's W analysed with imposed kept columns (a copy), or None if they are not
         proven independent at this precision."""
         other = copy.copy(self)
-        with Arb(self.digits).activate():
-            try:
-                other.analysis = certify.analyse(self.W, self.digits, kept=kept)
-            except ValueError:
-                return None
-            other.tail_values = certify.tail_singular_values(self.W, other.analysis)
+        try:
+            other.analysis = certify.analyse(self.W, self.digits, kept=kept)
+        except ValueError:
+            return None
+        other.tail_values = certify.tail_singular_values(self.W, other.analysis)
         a = other.analysis
         other.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
                            for i in range(a.beta.nrows())]
@@ -174,9 +175,32 @@ class VariablePrecisionSolver:
     name = "vp"
     description = ("Gautier's method in ball arithmetic (python-flint): proven rank, precision "
                    "raised until the ridge is evident and beta agrees at two precisions")
+    capabilities = Capabilities(closed_loops=True, certifies=True)
+    options = (
+        SolverOption("digits", int, None, "fix the working precision (default: raised along the "
+                     "ladder until two precisions agree)", minimum=10),
+        SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
+                     "mechanism file's)", minimum=2),
+        SolverOption("ladder", tuple, LADDER, "precisions tried in turn without digits", item=int),
+        SolverOption("pivoting", str, "natural", "the kept parameters: the leftmost independent "
+                     "columns (natural) or complete pivoting's", choices=("natural", "complete")),
+        SolverOption("recover", bool, True, "recover exact rationals from the balls and confirm "
+                     "them at twice the digits"),
+        SolverOption("kept", tuple, None, "impose the kept columns, as indices into the parameters "
+                     "(default: chosen by the pivoting)", item=int),
+        SolverOption("seed", int, CHECK_SEED, "seed of the first independent random batch"),
+    )
 
-    def solve(self, mechanism, digits=None, samples=None, progress=None, ladder=LADDER,
-              pivoting="natural", recover=True, kept=None, seed=CHECK_SEED, **options):
+    def applicable(self, mechanism):
+        """Any mechanism: ball arithmetic evaluates square roots and closed loops alike."""
+        return None
+
+    def solve(self, mechanism, progress=None, **options):
+        """Certified base parameters; ``options`` as declared in ``options``."""
+        chosen = check_options(self, options)
+        digits, samples, ladder, pivoting, recover, kept, seed = (
+            chosen[k] for k in ("digits", "samples", "ladder", "pivoting", "recover", "kept", "seed"))
+        require_applicable(self, mechanism)
         start = time.perf_counter()
         trajectory = Trajectory.default(mechanism, samples=samples)
         params = mechanism.parameters
@@ -207,8 +231,7 @@ class VariablePrecisionSolver:
             warnings.append("excitation check failed: " + _vp_check_line(checks[-1])
                             + "; the rank is not certified")
 
-        with Arb(final.digits).activate():
-            base, printed, untrusted = _vp_coefficients(final, prev, params)
+        base, printed, untrusted = _vp_coefficients(final, prev, params)
         ridge_ok = a.ridge_log10 >= RIDGE_DECADES
         if digits:
             certified = ridge_ok and excited
@@ -250,17 +273,9 @@ class VariablePrecisionSolver:
                 f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
                 f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
                 else f"not recovered ({recovery['reason']})"))
-        diagnostics = {
-            "certificate": ("rank >= r: an r x r block of the column-scaled W proven nonsingular; "
-                            "s_(r+1) <= tail_bound (Weyl); s_r >= sigma_r_lower (interlacing); "
-                            "certified when the ridge is >= 3 decades, rank, kept parameters and "
-                            "beta (>= 10 digits) agree at two precisions, and an independent random "
-                            "batch keeps a ridge of >= 3 decades with no entry of W_batch N proven nonzero"),
+        details = {
             "runs": [r.summary() for r in runs],
             "pivoting": a.pivoting,
-            "ridge_decades": _finite(a.ridge_log10),
-            "sigma_r_lower": a.sigma_r_lower.str(6, radius=False),
-            "tail_bound": a.tail_bound.str(6, radius=False),
             "agreement_digits": _finite(agreement) if agreement is not None else None,
             "excitation_checks": checks,
             "random_states_in_W": extra,
@@ -273,13 +288,25 @@ class VariablePrecisionSolver:
             "zero_columns": [params[j] for j in a.zero_columns],
             "rational_recovery": recovery,
             "notes": notes + a.notes,
-            "summary": summary,
         }
+        diagnostics = Diagnostics(
+            summary=summary, details=details,
+            certificate=("rank >= r: an r x r block of the column-scaled W proven nonsingular; "
+                         "s_(r+1) <= tail_bound (Weyl); s_r >= sigma_r_lower (interlacing); "
+                         "certified when the ridge is >= 3 decades, rank, kept parameters and "
+                         "beta (>= 10 digits) agree at two precisions, and an independent random "
+                         "batch keeps a ridge of >= 3 decades with no entry of W_batch N proven nonzero"),
+            ridge_decades=float(a.ridge_log10),
+            sigma_r_lower=a.sigma_r_lower.str(6, radius=False),
+            tail_bound=a.tail_bound.str(6, radius=False))
+        rationals = ([{p: Fraction(t) for p, t in row["expression"].items()} for row in recovery["base"]]
+                     if recovery.get("succeeded") else None)
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
             eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
             singular_values=sv, geometry=mechanism.geometry_text, warnings=warnings,
-            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics)
+            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
+            coefficients=decimal_coefficients(base, rationals))
 
     @staticmethod
     def _escalate(mechanism, trajectory, batches, steps, kept, pivoting, progress):
@@ -320,12 +347,11 @@ class VariablePrecisionSolver:
         out = {"seed": seed, "states": batch.states, "digits": final.digits, "rank": a.rank}
         backend = Arb(final.digits)
         try:
-            Wc = batch_matrix(mechanism, backend, trajectory, batch)
+            Wc, _ = observation_matrix(mechanism, backend, batch)
         except KinematicsError as exc:
             return {**out, "passed": False, "error": str(exc)}, batch
-        with backend.activate():
-            bound, nonzero, decades = certify.excitation_check(Wc, a)
-            bound = bound.str(3, radius=False)
+        bound, nonzero, decades = certify.excitation_check(Wc, a)
+        bound = bound.str(3, radius=False)
         passed = nonzero == 0 and decades >= RIDGE_DECADES
         return {**out, "rows": Wc.nrows(), "residual_bound": bound, "proven_nonzero": nonzero,
                 "ridge_decades_with_batch": _finite(decades), "passed": passed}, batch
@@ -357,8 +383,7 @@ class VariablePrecisionSolver:
         except (ValueError, KinematicsError) as exc:     # the result stands; only the recovery fails
             return {"attempted": True, "succeeded": False, "reason": str(exc)}
         b = check.analysis.beta
-        with Arb(D2).activate():            # the rationals as balls at least as tight as b's
-            return self._confirm(values, b, final, D2, a, params)
+        return self._confirm(values, b, final, D2, a, params)      # exact containment: no precision
 
     @staticmethod
     def _confirm(values, b, final, D2, a, params):

@@ -1,0 +1,169 @@
+"""The observation matrix W (the regressor stacked over states), one builder for every arithmetic.
+
+Every source of states (the exciting trajectory, an independent random batch, the exact
+solver's random rational states) gives the builder the same few things (:class:`States`):
+its independent positions, velocities and accelerations in any backend, all states at
+once in float64, and float64 tree coordinates to start a closed loop's Newton from. The
+backend decides how W is built and what matrix it is:
+
+- :class:`~baseparams.numeric.backends.Float64`: all states at once, vectorised (the fast
+  path); a numpy array.
+- :class:`~baseparams.numeric.backends.Arb`: state after state at the backend's digits from
+  the start; a closed loop's positions by Newton at full precision from the float64
+  solution, then a Krawczyk enclosure, so every ball of W contains its exact value; an
+  ``arb_mat``. The builder enters the backend's precision itself and restores the caller's.
+- :class:`~baseparams.numeric.backends.Exact`: state after state over the rationals (open
+  chains); an ``fmpq_mat``.
+
+Rows are sample-major: the ``f`` rows of the first state, then of the second ...
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from flint import arb
+
+from baseparams.dynamics.evaluator import Evaluator, Sample
+from baseparams.errors import KinematicsError
+from baseparams.numeric.backends import Arb, Backend, Float64
+
+Progress = Callable[[int, int], None]
+
+
+class States(Protocol):
+    """What the builder needs from a source of states."""
+
+    label: str           # prefixed (with the mechanism file) to kinematics errors; "" for none
+    reports_closure: bool  # arb: report the worst closure residual (one more closure per state)
+
+    @property
+    def count(self) -> int:
+        """How many states."""
+
+    def where(self, index: int | None) -> str:
+        """Message prefix naming state ``index`` (None: all states at once)."""
+
+    def values(self, mechanism, backend: Backend, index: int) -> tuple[list, list, list]:
+        """State ``index``'s independent positions, velocities, accelerations in ``backend``."""
+
+    def float64_sample(self, mechanism) -> Sample:
+        """Every state at once in float64 (arrays over states), positions assembled."""
+
+    def starts(self, mechanism) -> list | None:
+        """Per state, float64 tree coordinates to start Newton from (used for closed loops),
+        or None to start from the reference configuration. Called before the per-state
+        arithmetics for every mechanism: a trajectory checks its coordinate limits here."""
+
+
+@dataclass(frozen=True)
+class RationalStates:
+    """States given exactly: per state, a tuple of the independent positions (Fraction,
+    fmpq, or :class:`~baseparams.numeric.backends.TanHalf` for an angle: exact in every
+    backend, rational cos and sin in Exact), one of velocities and one of accelerations;
+    for a closed loop, per state the float tree coordinates to start Newton from."""
+
+    z: tuple
+    zd: tuple
+    zdd: tuple
+    start: tuple | None = None
+    name: str = "state"
+    label: str = ""
+    reports_closure: bool = False
+
+    @property
+    def count(self) -> int:
+        return len(self.z)
+
+    def where(self, index):
+        return f"{self.name}s: " if index is None else f"{self.name} {index + 1}: "
+
+    def values(self, mechanism, backend, index):
+        return tuple([backend.number(v) for v in column[index]] for column in (self.z, self.zd, self.zdd))
+
+    def float64_sample(self, mechanism):
+        backend = Float64()
+        f = len(self.z[0]) if self.z else 0
+        columns = [[np.array([backend.number(s[k]) for s in values]) for k in range(f)]
+                   for values in (self.z, self.zd, self.zdd)]
+        start = None
+        if mechanism.loops and self.start is not None:
+            start = [np.array([float(v) for v in column]) for column in zip(*self.start)]
+        return Evaluator(mechanism, backend).sample(*columns, start, where=self.where(None))
+
+    def starts(self, mechanism):
+        return None if self.start is None else [[float(v) for v in s] for s in self.start]
+
+
+def observation_matrix(mechanism, backend: Backend, states: States,
+                       progress: Progress | None = None) -> tuple[object, dict]:
+    """W at ``states`` in ``backend``'s arithmetic and matrix type: (W, info).
+
+    info: ``samples`` (the number of states); in arb also ``positions_enclosed`` and, when
+    the source asks for it, ``closure_residual`` (an upper bound of the worst loop-closure
+    residual, text).
+    ``progress(done, count)`` is called after each state (per-state arithmetics).
+    """
+    try:
+        if isinstance(backend, Float64):
+            return _vectorised(mechanism, states)
+        return _per_state(mechanism, backend, states, progress)
+    except KinematicsError as exc:
+        if not states.label:
+            raise
+        where = f"{mechanism.path}: {states.label}: " if mechanism.path else f"{states.label}: "
+        raise KinematicsError(where + str(exc)) from None
+
+
+def evaluate_states(mechanism, backend: Backend, states: States, certify: bool = True) -> list[Sample]:
+    """The evaluated states themselves (for analyses other than W), state after state in
+    ``backend``; ``certify`` (arb): closed-loop positions enclosed by Krawczyk's test."""
+    ev = Evaluator(mechanism, backend, certify=certify)
+    with backend.activate():
+        return list(_each_sample(ev, states))
+
+
+def _width(mechanism):
+    return len(mechanism.independent) or len(mechanism.coordinates)
+
+
+def _vectorised(mechanism, states):
+    k = states.float64_sample(mechanism).regressor_array()        # (states, f, parameters)
+    return k.reshape(states.count * _width(mechanism), len(mechanism.parameters)), {"samples": states.count}
+
+
+def _each_sample(ev, states):
+    """Each state evaluated in turn (call within the backend's precision)."""
+    mechanism, backend = ev.mechanism, ev.backend
+    starts = states.starts(mechanism)
+    for index in range(states.count):
+        guess = [backend.number(v) for v in starts[index]] if starts is not None and mechanism.loops else None
+        z, zd, zdd = states.values(mechanism, backend, index)
+        yield ev.sample(z, zd, zdd, guess, where=states.where(index))
+
+
+def _per_state(mechanism, backend, states, progress):
+    ev = Evaluator(mechanism, backend, certify=True)
+    enclosing = isinstance(backend, Arb)
+    residual = enclosing and states.reports_closure
+    rows = []
+    with backend.activate():
+        worst = arb(0)
+        for index, sample in enumerate(_each_sample(ev, states)):
+            rows.extend(sample.regressor())
+            if residual and mechanism.loops:
+                values, _, _ = ev.kin.closure(sample.states)
+                for v in values:
+                    bound = abs(arb(v)).upper()
+                    if bound > worst:
+                        worst = bound
+            if progress:
+                progress(index + 1, states.count)
+        W = backend.matrix(rows, len(mechanism.parameters))
+        info = {"samples": states.count}
+        if enclosing:
+            info["positions_enclosed"] = bool(mechanism.loops)
+        if residual:
+            info["closure_residual"] = worst.str(3, radius=False)
+    return W, info

@@ -1,0 +1,415 @@
+"""Random mechanisms, as mechanism-file text, for cross-checking the solvers.
+
+Each function takes a seed and returns the TOML text of a mechanism file (the format of
+docs/mechanism-format.md): :func:`baseparams.io.loader.parse_mechanism` reads it, and a
+user may save it and run the CLI on it. The same seed always gives the same text.
+
+What is random, and why:
+
+- *Topology* (:func:`serial_chain`, :func:`tree`): 2-12 bodies, R and P joints (S and U
+  on request), so that the solvers meet chains and branches of every length and mix.
+- *Joint frames*, drawn independently on each side of each joint, so that the bodies'
+  reference poses are random too. Axes along a body axis (with or without ``ref``),
+  Pythagorean axes in a coordinate plane such as (3, 4, 0) (with or without ``ref``: the
+  default x axis is then still rational) and fully general rational frames from integer
+  quaternions such as axis (1, 2, 2)/3 with an explicit ``ref``; axes are written
+  normalised or as unnormalised integer vectors. Every frame is rational, so the exact
+  solver applies; ``irrational`` (a probability) adds axes such as (1, 1, 1) without
+  ``ref``, whose default x axis has an irrational length.
+- *Offsets*: decimal strings, each component zero with probability ``zero_offset`` so that
+  intersecting and parallel axes (special geometry, where parameters regroup) are common.
+- *Inertia*: mass > 0, a centre of mass, and an inertia at the COM ``R diag R^T`` with R a
+  rational rotation and principal moments from positive second moments (so positive
+  definite with the triangle inequalities). Base parameters do not depend on these
+  values; they make the file complete for simulation.
+- *Trajectory*: per coordinate an offset and three sines of distinct frequencies (a
+  Fourier trajectory), amplitudes by joint type (S joints stay far from their Cardan
+  singularity). *Gravity*: along -z, along another axis, or a random rational vector.
+
+:func:`four_bar` gives a closed loop: a planar four-bar with random rational link
+lengths, its plane and its bodies' frames rotated at random, exactly closed at the
+reference configuration, and a crank motion that stays well inside its assembly range.
+"""
+
+import math
+import random
+from fractions import Fraction
+
+from baseparams.model.expressions import exact_text
+
+_UNIT = [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
+_PYTHAGOREAN = [(3, 4, 5), (5, 12, 13), (8, 15, 17), (7, 24, 25), (20, 21, 29)]
+
+
+# ----- exact little vectors ---------------------------------------------------------------
+def _dot(a, b):
+    return sum(x * y for x, y in zip(a, b))
+
+
+def _scale(v, s):
+    return tuple(x * s for x in v)
+
+
+def _sub(a, b):
+    return tuple(x - y for x, y in zip(a, b))
+
+
+def _add(a, b):
+    return tuple(x + y for x, y in zip(a, b))
+
+
+def _matvec(rows, v):
+    return tuple(_dot(row, v) for row in rows)
+
+
+def _transpose(rows):
+    return tuple(tuple(rows[i][j] for i in range(3)) for j in range(3))
+
+
+def _matmul(a, b):
+    bt = _transpose(b)
+    return tuple(tuple(_dot(a[i], bt[j]) for j in range(3)) for i in range(3))
+
+
+def _integer_multiple(v):
+    """The shortest integer vector along the rational vector ``v``."""
+    fr = [Fraction(x) for x in v]
+    den = math.lcm(*(x.denominator for x in fr))
+    ints = [int(x * den) for x in fr]
+    g = math.gcd(*ints) or 1
+    return tuple(x // g for x in ints)
+
+
+def _text(x):
+    return exact_text(Fraction(x))
+
+
+def _vector(v):
+    return "[" + ", ".join(f'"{_text(x)}"' for x in v) + "]"
+
+
+class _Draw:
+    """The seeded random source, with the rational draws the generators share."""
+
+    def __init__(self, seed):
+        self.rng = random.Random(seed)
+
+    def decimal(self, lo, hi, places=2):
+        """A decimal with ``places`` places in [lo, hi]."""
+        k = 10 ** places
+        return Fraction(self.rng.randint(round(lo * k), round(hi * k)), k)
+
+    def sign(self):
+        return self.rng.choice((1, -1))
+
+    def rotation(self, small=3):
+        """A rational rotation (rows) from an integer quaternion: entries p/n, n = |q|^2."""
+        while True:
+            a, b, c, d = (self.rng.randint(-small, small) for _ in range(4))
+            n = a * a + b * b + c * c + d * d
+            if n:
+                break
+        r = ((a * a + b * b - c * c - d * d, 2 * (b * c - a * d), 2 * (b * d + a * c)),
+             (2 * (b * c + a * d), a * a - b * b + c * c - d * d, 2 * (c * d - a * b)),
+             (2 * (b * d - a * c), 2 * (c * d + a * b), a * a - b * b - c * c + d * d))
+        return tuple(tuple(Fraction(x, n) for x in row) for row in r)
+
+    def signed_permutation(self):
+        """A rotation (rows) that maps body axes onto body axes."""
+        while True:
+            perm = self.rng.sample(range(3), 3)
+            signs = [self.sign() for _ in range(3)]
+            rows = tuple(tuple(Fraction(signs[i]) if j == perm[i] else Fraction(0) for j in range(3))
+                         for i in range(3))
+            if _det(rows) == 1:
+                return rows
+
+    def pythagorean_rotation(self):
+        """A rotation about a body axis by an angle with rational cosine and sine."""
+        a, b, c = self.rng.choice(_PYTHAGOREAN)
+        co, si = Fraction(a, c) * self.sign(), Fraction(b, c) * self.sign()
+        k = self.rng.randrange(3)
+        i, j = [m for m in range(3) if m != k]
+        rows = [[Fraction(int(r == s)) for s in range(3)] for r in range(3)]
+        rows[i][i], rows[i][j], rows[j][i], rows[j][j] = co, -si, si, co
+        return tuple(tuple(row) for row in rows)
+
+
+def _det(r):
+    return (r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+            - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]))
+
+
+# ----- frames -------------------------------------------------------------------------------
+def _frame_text(point, rot, draw, irrational=False):
+    """A joint frame (inline table) with origin ``point`` and axes the columns of ``rot``;
+    ``ref`` is usually left out when the loader's default x axis is the frame's own.
+    ``irrational``: instead an axis with no zero component and no ``ref`` (its default x
+    axis, made perpendicular to it, has an irrational length)."""
+    x, z = _transpose(rot)[0], _transpose(rot)[2]
+    if irrational:
+        axis = tuple(draw.sign() * draw.rng.randint(1, 3) for _ in range(3))
+        return f"{{ point = {_vector(point)}, axis = {_vector(axis)} }}"
+    unnormalised = draw.rng.random() < 0.5
+    axis = _integer_multiple(z) if unnormalised else z
+    ref = _integer_multiple(x) if unnormalised else x
+    if x == _default_x(z) and draw.rng.random() < 0.7:
+        return f"{{ point = {_vector(point)}, axis = {_vector(axis)} }}"
+    return f"{{ point = {_vector(point)}, axis = {_vector(axis)}, ref = {_vector(ref)} }}"
+
+
+def _default_x(z):
+    """The loader's default x axis for the unit axis ``z`` when it is rational, else None
+    (docs/mechanism-format.md: the body axis least aligned with z, made perpendicular)."""
+    k = min(range(3), key=lambda i: (abs(z[i]), i))
+    e = _UNIT[k]
+    d = _dot(e, z)
+    v = _sub(e, _scale(z, d))
+    n2 = _dot(v, v)
+    root = Fraction(math.isqrt(n2.numerator), math.isqrt(n2.denominator))
+    if root * root != n2:
+        return None
+    return _scale(v, 1 / root)
+
+
+def _random_rotation(draw):
+    """A frame orientation: body axes (often), a rational turn about a body axis, or general."""
+    u = draw.rng.random()
+    if u < 0.5:
+        return draw.signed_permutation()
+    if u < 0.75:
+        return _matmul(draw.signed_permutation(), draw.pythagorean_rotation())
+    return draw.rotation()
+
+
+def _default_frame(draw, rot):
+    """``rot`` with its x axis replaced by the loader's default when that is rational and a
+    coin says so (a frame written without ``ref``)."""
+    cols = _transpose(rot)
+    x = _default_x(cols[2])
+    if x is None or draw.rng.random() < 0.5:
+        return rot
+    y = _cross(cols[2], x)
+    return _transpose((x, y, cols[2]))
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _point(draw, zero_offset, scale=Fraction(3, 10)):
+    return tuple(Fraction(0) if draw.rng.random() < zero_offset else draw.decimal(-scale, scale)
+                 for _ in range(3))
+
+
+# ----- bodies, trajectory, gravity ----------------------------------------------------------
+def _body_text(label, draw):
+    """Mass, COM and an inertia at the COM that is positive definite (triangle inequalities)."""
+    mass = draw.decimal(Fraction(1, 2), 5, 1)
+    com = tuple(draw.decimal(Fraction(-2, 10), Fraction(2, 10)) for _ in range(3))
+    s = [mass * draw.decimal(Fraction(1, 1000), Fraction(3, 100), 3) for _ in range(3)]
+    principal = (s[1] + s[2], s[0] + s[2], s[0] + s[1])
+    rot = draw.rotation(2) if draw.rng.random() < 0.5 else draw.signed_permutation()
+    tensor = [[sum(rot[i][k] * principal[k] * rot[j][k] for k in range(3)) for j in range(3)]
+              for i in range(3)]
+    entries = [tensor[i][j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
+    return (f"[[bodies]]\nlabel = {label}\nmass = \"{_text(mass)}\"\ncom = {_vector(com)}\n"
+            f"inertia_com = {_vector(entries)}\n")
+
+
+def _fourier(draw, amplitude, offset=Fraction(0)):
+    """An offset plus three sines of distinct frequencies, total amplitude <= ``amplitude``."""
+    freqs = draw.rng.sample([Fraction(k, 10) for k in range(5, 31)], 3)
+    weights = [draw.decimal(Fraction(2, 10), 1) for _ in range(3)]
+    total = sum(weights)
+    terms = [_text(offset)] if offset else []
+    for w, f in zip(weights, freqs):
+        a = Fraction(round(amplitude * w / total * 1000), 1000)
+        phase = draw.decimal(0, 3, 1)
+        terms.append(f"{_text(a)}*sin({_text(f)}*t + {_text(phase)})")
+    return " + ".join(terms)
+
+
+AMPLITUDE = {"R": Fraction(12, 10), "P": Fraction(2, 10), "U": Fraction(1)}
+
+
+def _trajectory(draw, coordinates, samples):
+    q = []
+    for name, kind in coordinates:
+        if kind == "S":          # Cardan angles: b stays within 0.6 rad of 0, far from 90 deg
+            expr = _fourier(draw, Fraction(6, 10))
+        elif kind == "P":
+            expr = _fourier(draw, AMPLITUDE["P"], draw.decimal(Fraction(-1, 10), Fraction(1, 10)))
+        else:
+            expr = _fourier(draw, AMPLITUDE.get(kind, Fraction(1)), draw.decimal(Fraction(-5, 10), Fraction(5, 10), 1))
+        q.append(f'{name} = "{expr}"')
+    return (f'[trajectory]\nt_start = "0"\nt_end = "10"\nsamples = {samples}\n'
+            f"q = {{ {', '.join(q)} }}\n")
+
+
+def _gravity(draw):
+    u = draw.rng.random()
+    if u < 0.5:
+        return (Fraction(0), Fraction(0), Fraction(-981, 100))
+    if u < 0.7:
+        k = draw.rng.randrange(3)
+        return tuple(Fraction(-981, 100) * draw.sign() if i == k else Fraction(0) for i in range(3))
+    return tuple(draw.decimal(-10, 10, 1) for _ in range(3))
+
+
+# ----- open mechanisms ----------------------------------------------------------------------
+def serial_chain(seed: int, bodies: int | None = None, max_bodies: int = 6, types: str = "RP",
+                 spherical: float = 0.0, irrational: float = 0.0, zero_offset: float = 0.3,
+                 samples: int = 100) -> str:
+    """A random serial chain (TOML text); see the module docstring for what is random.
+
+    ``bodies``: the number of moving bodies (default: random in 2..``max_bodies``);
+    ``types``: the 1-coordinate joint types drawn from (R three times as often as P);
+    ``spherical``: the probability of an S or U joint; ``irrational``: of a frame without
+    ``ref`` whose default x axis is irrational (the exact solver refuses those).
+    """
+    draw = _Draw(f"chain:{seed}")
+    n = bodies or draw.rng.randint(2, max_bodies)
+    return _open(f"gen_chain_{seed}", draw, list(range(n)), types, spherical, irrational,
+                 zero_offset, samples)
+
+
+def tree(seed: int, bodies: int | None = None, max_bodies: int = 6, types: str = "RP",
+         spherical: float = 0.0, irrational: float = 0.0, zero_offset: float = 0.3,
+         samples: int = 100) -> str:
+    """A random tree (TOML text): each body hangs from an earlier one (or from ground,
+    for at most two bodies), the previous body preferred so that branches are long."""
+    draw = _Draw(f"tree:{seed}")
+    n = bodies or draw.rng.randint(3, max(3, max_bodies))
+    parents, grounded = [0], 1
+    for b in range(2, n + 1):
+        if grounded < 2 and draw.rng.random() < 0.15:
+            parents.append(0)
+            grounded += 1
+        elif draw.rng.random() < 0.5:
+            parents.append(b - 1)
+        else:
+            parents.append(draw.rng.randint(1, b - 1))
+    return _open(f"gen_tree_{seed}", draw, parents, types, spherical, irrational, zero_offset, samples)
+
+
+def _open(name, draw, parents, types, spherical, irrational, zero_offset, samples):
+    """Mechanism text for the tree given by ``parents`` (body b + 1 hangs from parents[b];
+    a serial chain when parents[b] == b)."""
+    pool = [t for t in types for _ in range(3 if t == "R" else 1)]
+    out = [f'[mechanism]\nname = "{name}"\ntitle = "Generated: {name}"\n'
+           f'description = "Random mechanism from baseparams.model.generate (seed in the name)."\n'
+           f"gravity = {_vector(_gravity(draw))}\n"]
+    out += [_body_text(b, draw) for b in range(1, len(parents) + 1)]
+    coordinates = []
+    for index, parent in enumerate(parents):
+        child = index + 1
+        jtype = draw.rng.choice("SU") if draw.rng.random() < spherical else draw.rng.choice(pool)
+        names = [f"q{child}"] if jtype in "RP" else [f"q{child}{s}" for s in ("abc" if jtype == "S" else "xy")]
+        coordinates += [(c, jtype) for c in names]
+        frames = []
+        for side in ("parent", "child"):
+            rot = _default_frame(draw, _random_rotation(draw))
+            point = _point(draw, zero_offset) if side == "parent" or draw.rng.random() < 0.5 else (0, 0, 0)
+            odd = draw.rng.random() < irrational
+            frames.append(_frame_text(point, rot, draw, irrational=odd))
+        quoted = ", ".join(f'"{c}"' for c in names)
+        out.append(f'[[joints]]\ntype = "{jtype}"\nparent = {parent}\nchild = {child}\n'
+                   f"coordinates = [{quoted}]\n"
+                   f"parent_frame = {frames[0]}\nchild_frame = {frames[1]}\n")
+    out.append(_trajectory(draw, coordinates, samples))
+    return "\n".join(out)
+
+
+# ----- a closed loop ------------------------------------------------------------------------
+def _unit_2d(draw):
+    """A rational unit vector of the plane (a Pythagorean direction, or an axis)."""
+    if draw.rng.random() < 0.2:
+        return draw.rng.choice([(1, 0), (0, 1), (-1, 0), (0, -1)])
+    a, b, c = draw.rng.choice(_PYTHAGOREAN)
+    if draw.rng.random() < 0.5:
+        a, b = b, a
+    return (Fraction(a, c) * draw.sign(), Fraction(b, c) * draw.sign())
+
+
+def _four_bar_ok(a, b, c, d, swing):
+    """Float check that the crank can swing by +-``swing`` rad from the reference with the
+    coupler-rocker angle (transmission) kept within 25..155 degrees (no dead point)."""
+    l1, l2, l3 = math.dist((0, 0), b), math.dist(b, c), math.dist(c, d)
+    ang0 = math.atan2(b[1], b[0])
+    for k in range(-20, 21):
+        t = ang0 + swing * k / 20
+        bx, by = l1 * math.cos(t), l1 * math.sin(t)
+        e = math.dist((bx, by), d)
+        cos_mu = (l2 * l2 + l3 * l3 - e * e) / (2 * l2 * l3)
+        if not -math.cos(math.radians(25)) < cos_mu < math.cos(math.radians(25)):
+            return False
+    return True
+
+
+def four_bar(seed: int, samples: int = 100) -> str:
+    """A random planar four-bar (TOML text): crank A-B, coupler B-C, rocker D-C, the
+    coupler-rocker joint closing the loop; the crank angle is independent.
+
+    Random: the reference directions of the three links (rational unit vectors, so that
+    the loop closes exactly with rational lengths: D = B + L2 u2 - L3 u3), the lengths
+    (decimals), the plane's orientation in ground axes and each body's frame (rational
+    rotations about the joint axis and offsets along it), inertias, gravity and a crank
+    motion of at most 0.5 rad about the reference that keeps the transmission angle in
+    25..155 degrees."""
+    draw = _Draw(f"four_bar:{seed}")
+    while True:
+        lengths = [draw.decimal(Fraction(1, 10), Fraction(6, 10)) for _ in range(3)]
+        u1, u2, u3 = (_unit_2d(draw) for _ in range(3))
+        b = _scale(u1, lengths[0])
+        c = _add(b, _scale(u2, lengths[1]))
+        d = _sub(c, _scale(u3, lengths[2]))
+        if math.dist((0, 0), d) > 0.05 and _four_bar_ok(*[tuple(map(float, p)) for p in ((0, 0), b, c, d)], 0.5):
+            break
+    plane = _random_rotation(draw)              # the plane's axes (x, y in plane, z normal) in ground
+    origin = _point(draw, 0.5)
+
+    def world(p2):                               # a plane point in ground coordinates
+        return _add(origin, _matvec(plane, (p2[0], p2[1], 0)))
+
+    # body frames (in the plane's axes): origin at the proximal joint, x along the link,
+    # then turned by a random rational rotation (about the normal or in general) and shifted
+    links = {1: ((0, 0), u1), 2: (b, u2), 3: (d, u3)}
+    poses = {}
+    for body, (p2, u) in links.items():
+        x = (u[0], u[1], 0)
+        link = _transpose(((x[0], x[1], 0), (-x[1], x[0], 0), (0, 0, 1)))
+        turn = _random_rotation(draw)
+        rot = _matmul(_matmul(plane, link), turn)
+        poses[body] = (rot, _add(world(p2), _matvec(plane, (0, 0, draw.decimal(Fraction(-1, 10), Fraction(1, 10))))))
+    poses[0] = (((1, 0, 0), (0, 1, 0), (0, 0, 1)), (0, 0, 0))
+    joints = [("JA", 0, 1, (0, 0), False), ("JB", 1, 2, b, False), ("JD", 0, 3, d, False), ("JC", 2, 3, c, True)]
+    out = [f'[mechanism]\nname = "gen_four_bar_{seed}"\ntitle = "Generated: gen_four_bar_{seed}"\n'
+           f'description = "Random planar four-bar from baseparams.model.generate."\n'
+           f"gravity = {_vector(_gravity(draw))}\n"]
+    out += [_body_text(label, draw) for label in (1, 2, 3)]
+    for name, parent, child, p2, loop in joints:
+        joint_rot = _matmul(plane, _random_turn_about_z(draw))     # z: the plane's normal
+        sides = []
+        for body in (parent, child):
+            rot, o = poses[body]
+            local_rot = _matmul(_transpose(rot), joint_rot)
+            local_point = _matvec(_transpose(rot), _sub(world(p2), o))
+            sides.append(_frame_text(local_point, local_rot, draw))
+        out.append(f'[[joints]]\nname = "{name}"\ntype = "R"\nparent = {parent}\nchild = {child}\n'
+                   f'coordinates = ["q{name[1].lower()}"]\n' + ("loop = true\n" if loop else "")
+                   + f"parent_frame = {sides[0]}\nchild_frame = {sides[1]}\n")
+    out.append('[coordinates]\nindependent = ["qa"]\n')
+    out.append(f'[trajectory]\nt_start = "0"\nt_end = "10"\nsamples = {samples}\n'
+               f'q = {{ qa = "{_fourier(draw, Fraction(1, 2))}" }}\n')
+    return "\n".join(out)
+
+
+def _random_turn_about_z(draw):
+    """A rotation about z by a rational-cosine angle (or none)."""
+    if draw.rng.random() < 0.4:
+        return ((1, 0, 0), (0, 1, 0), (0, 0, 1))
+    a, b, c = draw.rng.choice(_PYTHAGOREAN)
+    co, si = Fraction(a, c) * draw.sign(), Fraction(b, c) * draw.sign()
+    return ((co, -si, 0), (si, co, 0), (0, 0, 1))

@@ -1,0 +1,235 @@
+"""The contract between baseparams and a solver: what it declares, what it may be asked.
+
+A solver is any object registered through the ``baseparams_solvers`` hook that satisfies
+:class:`Solver`:
+
+- ``name`` and ``description`` (text for ``baseparams plugins`` and ``solve --help``);
+- ``capabilities``: a :class:`Capabilities` (what kind of mechanism it takes, what its
+  result proves and holds), so that callers choose a solver by property, not by name;
+- ``options``: a tuple of :class:`SolverOption`, every keyword ``solve`` accepts besides
+  ``progress``; :func:`check_options` rejects any other and fills the defaults;
+- ``applicable(mechanism)``: None when the solver can treat the mechanism, else the
+  reason it cannot (a sentence for the user), found without solving;
+- ``solve(mechanism, *, progress=None, **options)``: a
+  :class:`~baseparams.solvers.result.BaseParameterResult`. ``options`` are keywords named
+  in ``options``; ``progress``, when given, receives one-line messages. A solver raises
+  :class:`NotApplicable` (:func:`require_applicable`) when asked to solve a mechanism it
+  does not take, and :class:`~baseparams.errors.InputError` for bad options.
+
+Keyword options (not one dict) keep the library call short:
+``solver.solve(mech, digits=30, recover=False)``.
+"""
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from baseparams.errors import InputError
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.result import BaseParameterResult
+
+Progress = Callable[[str], None]
+
+_TRUE = ("true", "yes", "on", "1")
+_FALSE = ("false", "no", "off", "0")
+_TYPE_WORDS = {int: "an integer", float: "a number", bool: "true or false", str: "a string",
+               tuple: "a list"}
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a solver takes and what its result holds (all False unless declared).
+
+    closed_loops: treats mechanisms with kinematic loops.
+    needs_rational_geometry: needs geometry that stays rational in its arithmetic (unit
+        axes with rational components, no square roots).
+    certifies: ``certified`` can be true (the rank proven, not only estimated).
+    exact_coefficients: its coefficients are exact numbers by construction.
+    symbolic_coefficients: its coefficients are expressions in the geometry symbols.
+    derivation: its result carries a derivation (``diagnostics.derivation``) that
+        ``baseparams report`` renders.
+    """
+    closed_loops: bool = False
+    needs_rational_geometry: bool = False
+    certifies: bool = False
+    exact_coefficients: bool = False
+    symbolic_coefficients: bool = False
+    derivation: bool = False
+
+
+@dataclass(frozen=True)
+class SolverOption:
+    """One keyword ``solve`` accepts.
+
+    ``type``: int, float, bool, str or tuple (a sequence of ``item``; a str is split on
+    commas and spaces). ``default`` None means "automatic" and is always accepted.
+    ``choices``: the allowed values of a str option (empty: any). ``minimum``: the least
+    value of a number option.
+    """
+    name: str
+    type: type
+    default: Any = None
+    help: str = ""
+    item: type | None = None
+    choices: tuple = ()
+    minimum: int | float | None = None
+
+    def describe(self) -> str:
+        """``type, default ...: help`` for help texts (an automatic default: in the help)."""
+        kind = "|".join(self.choices) if self.choices else (
+            f"list of {self.item.__name__}" if self.type is tuple and self.item else self.type.__name__)
+        default = "" if self.default is None else f", default {_show(self.default) or 'none'}"
+        return f"{kind}{default}" + (f": {self.help}" if self.help else "")
+
+
+@runtime_checkable
+class Solver(Protocol):
+    """What every registered solver provides (see the module docstring)."""
+    name: str
+    description: str
+    capabilities: Capabilities
+    options: tuple[SolverOption, ...]
+
+    def applicable(self, mechanism: Mechanism) -> str | None:
+        """None if this solver takes ``mechanism``, else the reason it does not."""
+
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None,
+              **options: Any) -> BaseParameterResult:
+        """The base parameters of ``mechanism``; ``options`` as declared in ``options``."""
+
+
+class NotApplicable(InputError):
+    """A solver asked for a mechanism it does not take (exit code 2 in the CLI)."""
+
+    def __init__(self, solver: str, reason: str, file: str | None = None):
+        self.solver = solver
+        self.why = reason
+        super().__init__(f"solver {solver!r} is not applicable: {reason}", file=file)
+
+
+def require_applicable(solver: Solver, mechanism: Mechanism) -> None:
+    """Raise :class:`NotApplicable` (naming the mechanism's file) unless ``solver`` takes it."""
+    reason = solver.applicable(mechanism)
+    if reason is not None:
+        raise NotApplicable(solver.name, reason, file=mechanism.path)
+
+
+def check_options(solver: Solver, given: Mapping[str, Any]) -> dict[str, Any]:
+    """Every declared option of ``solver``: the given values (checked, sequences as tuples)
+    and the defaults for the rest.
+
+    InputError (naming the solver, the option and the accepted ones) for an unknown
+    option, a value of the wrong type, a value outside its choices or below its minimum.
+    """
+    declared = {o.name: o for o in solver.options}
+    out = {name: o.default for name, o in declared.items()}
+    for name, value in given.items():
+        if name not in declared:
+            raise InputError(f"solver {solver.name!r} has no option {name!r}; its options: "
+                             f"{', '.join(declared) or '(none)'}")
+        out[name] = _checked(solver.name, declared[name], value)
+    return out
+
+
+def options_from_text(solver: Solver, pairs: Iterable[str]) -> dict[str, Any]:
+    """``["seed=3", "recover=false"]`` (command-line text) -> typed values for
+    :func:`check_options`. InputError for a pair without ``=``, an unknown option or a value
+    that does not parse as the option's type."""
+    declared = {o.name: o for o in solver.options}
+    out = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not name:
+            raise InputError(f"option {pair!r}: expected NAME=VALUE")
+        if name not in declared:
+            raise InputError(f"solver {solver.name!r} has no option {name!r}; its options: "
+                             f"{', '.join(declared) or '(none)'}")
+        if name in out:
+            raise InputError(f"option {name!r} given twice")
+        out[name] = _parse(solver.name, declared[name], text)
+    return out
+
+
+def describe_solver(solver: Solver) -> dict[str, Any]:
+    """Capabilities and options as plain data (``baseparams plugins --format json``)."""
+    caps = solver.capabilities
+    return {"capabilities": {k: bool(getattr(caps, k)) for k in Capabilities.__dataclass_fields__},
+            "options": [{"name": o.name, "type": o.type.__name__, "default": _json_default(o.default),
+                         "help": o.help} for o in solver.options]}
+
+
+# ----- values -----------------------------------------------------------------------
+def _fail(solver, option, value, want):
+    raise InputError(f"solver {solver!r}: option {option.name!r} must be {want}, got {value!r}")
+
+
+def _checked(solver, option, value):
+    if value is None:
+        if option.default is None:
+            return None
+        _fail(solver, option, value, _TYPE_WORDS.get(option.type, option.type.__name__))
+    kind = option.type
+    if kind is tuple:
+        if isinstance(value, str):
+            value = [v for v in value.replace(",", " ").split() if v]
+        if not isinstance(value, (list, tuple)):
+            _fail(solver, option, value, "a list")
+        item = option.item
+        if item is not None:
+            for v in value:
+                if not _is_a(v, item):
+                    _fail(solver, option, value, f"a list of {item.__name__} values")
+        return tuple(value)
+    if not _is_a(value, kind):
+        _fail(solver, option, value, _TYPE_WORDS.get(kind, kind.__name__))
+    if option.choices and value not in option.choices:
+        _fail(solver, option, value, "one of " + ", ".join(map(str, option.choices)))
+    if option.minimum is not None and value < option.minimum:
+        _fail(solver, option, value, f"at least {option.minimum}")
+    return float(value) if kind is float else value
+
+
+def _is_a(value, kind):
+    if kind is int:             # bool is an int subclass, but True is no sample count
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+def _parse(solver, option, text):
+    kind = option.type
+    if text.lower() in ("none", "auto", "automatic") and option.default is None:
+        return None
+    if kind is bool:
+        if text.lower() in _TRUE:
+            return True
+        if text.lower() in _FALSE:
+            return False
+        _fail(solver, option, text, "true or false")
+    if kind is tuple:
+        parts = [v for v in text.replace(",", " ").split() if v]
+        return tuple(_parse_scalar(solver, option, option.item or str, p) for p in parts)
+    return _parse_scalar(solver, option, kind, text)
+
+
+def _parse_scalar(solver, option, kind, text):
+    if kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            _fail(solver, option, text, _TYPE_WORDS[kind])
+    return text
+
+
+def _show(value):
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return ",".join(map(str, value))
+    return str(value)
+
+
+def _json_default(value):
+    return list(value) if isinstance(value, tuple) else value
