@@ -55,7 +55,7 @@ def test_show_sla_matches_the_seed_paper():
     assert (info["dof"], info["loops"], info["parameter_count"]) == (2, 3, 70)
     assert info["independent"] == ["theta1", "theta2"]
     assert info["bodies"] == [1, 2, 3, 4, 5, 6, 7]
-    # DESIGN.md's joint list: 0-1 R, 0-2 R, 1-3 S, 2-3 S, 0-4 U, 4-3 S, 3-5 R, 0-6 U, 6-7 P, 7-1 S
+    # docs/design.md's SLA joint list: 0-1 R, 0-2 R, 1-3 S, 2-3 S, 0-4 U, 4-3 S, 3-5 R, 0-6 U, 6-7 P, 7-1 S
     assert [(j["parent"], j["child"], j["type"]) for j in info["joints"]] == [
         (0, 1, "R"), (0, 2, "R"), (1, 3, "S"), (2, 3, "S"), (0, 4, "U"), (4, 3, "S"), (3, 5, "R"),
         (0, 6, "U"), (6, 7, "P"), (7, 1, "S")]
