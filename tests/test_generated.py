@@ -30,6 +30,7 @@ OPTIONS = {"dp": {}, "vp": {}, "exact": {}, "symbolic": {}}
 
 # (family, seed, keyword arguments of the generator)
 DEFAULT = ([("serial_chain", s, {"max_bodies": 4, "samples": 40}) for s in range(8)]
+           + [("serial_chain", s, {"max_bodies": 4, "samples": 40}) for s in (20, 21)]
            + [("serial_chain", s, {"max_bodies": 3, "spherical": 0.4, "samples": 40}) for s in range(8, 12)]
            + [("tree", s, {"max_bodies": 4, "samples": 40}) for s in range(10)]
            + [("four_bar", s, {"samples": 40}) for s in range(4)]

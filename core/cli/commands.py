@@ -58,6 +58,7 @@ def emit(fmt, data, text):
 
 def load(mech):
     """A registered mechanism name or a path to a mechanism file -> Mechanism."""
+    # imported on use, as below: `baseparams --help` and `list` need no sympy or flint
     from baseparams.io.loader import resolve
     return resolve(mech)
 

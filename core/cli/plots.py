@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from baseparams.dynamics.trajectory import Trajectory, samples_float64
+from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError
 
@@ -82,15 +84,12 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
 
 def _poses(mech, instants):
     """{label: [(R, p) per instant]} and a legend label per instant."""
-    from baseparams.kinematics.tree import TreeKinematics
-
     if mech.trajectory is None:
         states = TreeKinematics(mech, Float64()).forward([0.0] * len(mech.coordinates))
         poses = {b.label: [(_arr(states[b.label].rot, 0, 1), _arr(states[b.label].pos, 0, 1))]
                  for b in mech.bodies}
         return poses, ["reference configuration"]
 
-    from baseparams.dynamics.trajectory import Trajectory, samples_float64
     sample, t = samples_float64(mech, Trajectory.default(mech))
     n = len(t)
     name = mech.independent[0] if mech.independent else mech.coordinates[0]

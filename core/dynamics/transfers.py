@@ -20,6 +20,7 @@ Ground has no parameters, so a transfer with ground changes one body only.
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from fractions import Fraction
 
 import sympy
 
@@ -209,8 +210,6 @@ def transfer_generators(mechanism, rules_of: Callable[[str], list | None]):
 def numeric_vector(generator, mechanism, values=None):
     """The generator's full 10*bodies vector with the geometry substituted (exact Fractions or
     sympy numbers when a square root of a non-square remains)."""
-    from fractions import Fraction
-
     subs = mechanism.geometry_subs if values is None else \
         {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in values.items()}
     out = []

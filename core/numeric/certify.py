@@ -41,6 +41,7 @@ import math
 from dataclasses import dataclass, field
 from fractions import Fraction
 
+import numpy as np
 from flint import acb_mat, arb, arb_mat
 
 from baseparams.numeric.backends import precision
@@ -180,7 +181,6 @@ def _select_rows(Wk, Gkk):
     (Cholesky on midpoints); QR with column pivoting on ``Q^T`` in float64 then picks
     rows whose block of Q, hence of W_K, is as well conditioned as a greedy choice can.
     """
-    import numpy as np
     r = Wk.ncols()
     R = _cholesky_mid(Gkk)
     Q = Wk

@@ -130,7 +130,7 @@ def _space_checks(results, rank, capabilities):
             continue
         same = same_row_space(exact[ref_name], exact[other])
         checks.append(Check(f"space {ref_name} = {other}", same,
-                            f"exact comparison (rational rank of the stacked rows): "
+                            "exact comparison (rational rank of the stacked rows): "
                             + ("the same base-parameter space" if same else "DIFFERENT base-parameter spaces"),
                             about=other))
     for name, r in results.items():

@@ -15,6 +15,8 @@ from typing import Any
 
 from baseparams import registry
 from baseparams.errors import BaseparamsError, InputError
+from baseparams.io.loader import load_mechanism
+from baseparams.orchestrate.model_checks import model_checks
 
 MODEL = "model"     # the pseudo-solver name of a mechanism's model checks
 
@@ -68,7 +70,6 @@ class Outcome:
 
 def load(mechanism: MechanismText):
     """The Mechanism in ``mechanism.text``, read by the reader its file name's suffix picks."""
-    from baseparams.io.loader import load_mechanism        # io imports the registry: keep jobs light
     with tempfile.TemporaryDirectory(prefix="baseparams-job-") as folder:
         path = Path(folder) / mechanism.filename
         path.write_text(mechanism.text, encoding="utf-8")
@@ -98,7 +99,6 @@ def run_job(job: Job) -> Outcome:
             status = MISSING_PLUGIN if "unknown joint type" in text else ERROR
             return outcome(status, message=text)
         if job.solver == MODEL:
-            from baseparams.orchestrate.model_checks import model_checks
             return outcome(OK, result={"checks": [c.to_json() for c in model_checks(mechanism)]})
         solver = solvers[job.solver].item
         reason = solver.applicable(mechanism) if hasattr(solver, "applicable") else None

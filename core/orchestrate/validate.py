@@ -83,6 +83,7 @@ def validate(mechanisms: Sequence[MechanismText], solvers: Sequence[str] | None 
     """Run every solver (and the model checks) on every mechanism and cross-check them."""
     solvers = select_solvers(solvers)
     jobs = [Job(m, s) for m in mechanisms for s in ([MODEL] if model else []) + solvers]
+    jobs.sort(key=expected_cost, reverse=True)     # longest first: workers finish together
     outcomes = (runner or InProcess()).run(jobs, timeout=timeout, progress=progress)
     capabilities = {n: getattr(r.item, "capabilities", None) for n, r in registry.solvers().items()}
     reports = []
@@ -90,6 +91,19 @@ def validate(mechanisms: Sequence[MechanismText], solvers: Sequence[str] | None 
         mine = {o.solver: o for o in outcomes if o.mechanism == m.name}
         reports.append(_mechanism_report(m, mine, solvers, capabilities))
     return Report(reports, solvers)
+
+
+SOLVER_WEIGHT = {"vp": 3.0, "symbolic": 2.0, MODEL: 1.5, "dp": 0.5, "exact": 0.3}
+
+
+def expected_cost(job: Job) -> float:
+    """A rough guess of a job's time, to start the longest first (the report's order does not
+    depend on it): bodies x (1 + loops), read from a TOML file's tables (loops = joints -
+    bodies), times a weight per solver; other formats by their text's length."""
+    text = job.mechanism.text
+    bodies, joints = text.count("[[bodies]]"), text.count("[[joints]]")
+    size = bodies * (1 + max(0, joints - bodies)) if bodies else len(text) / 1000
+    return size * SOLVER_WEIGHT.get(job.solver, 1.0)
 
 
 def _mechanism_report(m: MechanismText, outcomes: dict[str, Outcome], solvers, capabilities) -> MechanismReport:
@@ -128,11 +142,12 @@ def _mechanism_report(m: MechanismText, outcomes: dict[str, Outcome], solvers, c
 def render_text(report: Report) -> str:
     lines = []
     width = max([len(m.name) for m in report.mechanisms] + [9])
-    header = f"{'mechanism':<{width}}  " + "  ".join(f"{s:<24}" for s in report.solvers)
-    lines += [header, "-" * len(header.rstrip())]
+    header = (f"{'mechanism':<{width}}  " + "  ".join(f"{s:<24}" for s in report.solvers)).rstrip()
+    lines += [header, "-" * len(header)]
     for m in report.mechanisms:
         cells = [_cell(m.solvers[s]) for s in report.solvers]
-        lines.append(f"{m.name:<{width}}  " + "  ".join(f"{c:<24}" for c in cells) + ("" if m.ok else "  FAILED"))
+        row = f"{m.name:<{width}}  " + "  ".join(f"{c:<24}" for c in cells)
+        lines.append(row.rstrip() + ("" if m.ok else "  FAILED"))
     failed = [(m, c) for m in report.mechanisms for c in m.checks if not c.ok]
     warned = [(m, c) for m in report.mechanisms for c in m.checks if c.warned]
     notes = [(m.name, s, row["verdict"]) for m in report.mechanisms for s, row in m.solvers.items()

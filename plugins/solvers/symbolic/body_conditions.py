@@ -189,7 +189,7 @@ def body_candidates(mechanism, label):
     frames' axes, and those of every body that turns with it (connected through joints
     that only translate, P or Fixed), carried over exactly: a prismatic joint's sliding
     body sees the rotation axis of the joint above it (a planar motion's axis)."""
-    zero, one = sympy.Integer(0), sympy.Integer(1)
+    zero = sympy.Integer(0)
     points = [("origin", [zero, zero, zero])]
     dirs = []
     backend = Symbolic()

@@ -48,16 +48,22 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 
 import sympy
+from flint import arb, arb_mat, fmpq
 from sympy import QQ
 
 from baseparams import registry
-from baseparams.numeric.backends import Arb
-from baseparams.plugins.solvers.symbolic.body_conditions import analyse_bodies
+from baseparams.dynamics.excitation import random_batch
+from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.dynamics.transfers import transfer_generators
 from baseparams.errors import InputError
 from baseparams.model.params import PARAMETER_KINDS, split_name
+from baseparams.numeric.backends import Arb
+from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
-from baseparams.plugins.solvers.symbolic.sampled_transfers import sampled_joint_transfers
-from baseparams.dynamics.transfers import transfer_generators
+
+from .body_conditions import analyse_bodies
+from .sampled_transfers import sampled_joint_transfers
 
 DIAGONAL = ("Ixx", "Iyy", "Izz")
 FIRST_MOMENTS = ("mx", "my", "mz")
@@ -410,13 +416,6 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
       |W n| <= 10^-(digits/2) max|W| max|n|. W's balls enclose the exact W at the states,
       so a true null vector always passes; passing on N states is not a proof that n is one.
     """
-    from flint import arb, arb_mat, fmpq
-
-    from baseparams.numeric.certify import analyse
-    from baseparams.dynamics.excitation import random_batch
-    from baseparams.dynamics.observation import observation_matrix
-    from baseparams.dynamics.trajectory import Trajectory
-
     backend = Arb(digits)
     trajectory = trajectory or Trajectory.default(mechanism)
     W, info = observation_matrix(mechanism, backend, trajectory)
