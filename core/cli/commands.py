@@ -195,7 +195,7 @@ def show(mech, fmt):
 def plugins(fmt):
     """List the installed plugins and the distributions providing them.
 
-    Joint types, solvers, mechanisms and model effects. Built-ins come from the
+    Joint types, solvers, mechanisms, model effects and mechanism-file readers. Built-ins come from the
     `baseparams` distribution; a third party registers its own through the `baseparams`
     entry-point group (see README.md, "Plugins"). A joint type marked [no transfer rules]
     makes the symbolic solver's rank an upper bound.
@@ -214,6 +214,7 @@ def plugins(fmt):
                     for n, r in registry.solvers().items()],
         "mechanisms": [entry(n, r, path=str(r.item.path)) for n, r in registry.mechanisms().items()],
         "effects": [entry(n, r) for n, r in registry.effects().items()],
+        "readers": [entry(n, r, suffixes=list(r.item.suffixes)) for n, r in registry.readers().items()],
     }
 
     def text():
@@ -224,6 +225,8 @@ def plugins(fmt):
             dist = max([len(i["distribution"]) for i in items] + [1])
             for i in items:
                 note = i.get("description") or i.get("path", "")
+                if kind == "readers":
+                    note = f"{' '.join(i['suffixes'])}  {note}"
                 if kind == "joints" and not i["transfer_rules"]:
                     note += " [no transfer rules]"
                 lines.append(f"  {i['name']:<{width}}  {i['distribution']:<{dist}}  {note}".rstrip())
