@@ -209,23 +209,6 @@ class TomlClaimer:
         return [type("Claimer", (), {"name": "claimer", "suffixes": (".TOML",), "read": None})()]
 
 
-@pytest.fixture
-def registered():
-    """Register plugins at run time, then forget them (the registry is shared by all tests)."""
-    pm = registry.plugin_manager()
-    added = []
-
-    def register(plugin):
-        pm.register(plugin)
-        added.append(plugin)
-        registry.reset()
-
-    yield register
-    for plugin in added:
-        pm.unregister(plugin)
-    registry.reset()
-
-
 def test_the_toml_reader_is_a_builtin_plugin():
     readers = registry.readers()
     assert readers["toml"].distribution == "baseparams"

@@ -192,3 +192,17 @@ def test_show_gives_the_files_citation():
     from baseparams.io.loader import resolve
     info = json.loads(CliRunner().invoke(main, ["show", "puma560", "--format", "json"]).stdout)
     assert info["citation"] == resolve("puma560").source and "Armstrong" in info["citation"]
+
+
+def test_an_internal_error_is_one_line_and_exit_3(monkeypatch):
+    """A bug (here: the registry raising) is reported in one line, exit code 3; --debug
+    lets the traceback through."""
+    def broken():
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(registry, "mechanisms", broken)
+    result = CliRunner().invoke(main, ["list"])
+    assert result.exit_code == 3
+    assert result.stderr.startswith("internal error: RuntimeError: boom") and "Traceback" not in result.stderr
+    result = CliRunner().invoke(main, ["--debug", "list"])
+    assert isinstance(result.exception, RuntimeError)

@@ -117,20 +117,24 @@ def build_wheel(source, out_dir):
     return wheel
 
 
-@pytest.fixture(scope="module")
-def site(tmp_path_factory):
-    root = tmp_path_factory.mktemp("third_party")
+def install_distribution(root, plugin_text):
+    """``bp-cylindrical`` with ``plugin_text`` as its plugin module, installed into root/site."""
     source = root / "bp-cylindrical"
     (source / "bp_cylindrical").mkdir(parents=True)
     (source / "pyproject.toml").write_text(PYPROJECT)
     (source / "bp_cylindrical" / "__init__.py").write_text('"""Cylindrical joint for baseparams."""\n')
-    (source / "bp_cylindrical" / "plugin.py").write_text(PLUGIN)
+    (source / "bp_cylindrical" / "plugin.py").write_text(plugin_text)
     wheel = build_wheel(source, root)
     target = root / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-index", "--quiet",
                     "--disable-pip-version-check", "--target", str(target), str(wheel)],
                    check=True, capture_output=True, timeout=120)
     return target
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    return install_distribution(tmp_path_factory.mktemp("third_party"), PLUGIN)
 
 
 def cli(site, *args):
@@ -209,17 +213,7 @@ def test_the_pytest_fixture_validates_the_third_party_joint(site, tmp_path):
 
 @pytest.fixture(scope="module")
 def wrong_site(tmp_path_factory):
-    root = tmp_path_factory.mktemp("third_party_wrong")
-    source = root / "bp-cylindrical"
-    (source / "bp_cylindrical").mkdir(parents=True)
-    (source / "pyproject.toml").write_text(PYPROJECT)
-    (source / "bp_cylindrical" / "__init__.py").write_text('"""Cylindrical joint, wrong rule."""\n')
-    (source / "bp_cylindrical" / "plugin.py").write_text(WRONG_RULE)
-    target = root / "site"
-    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-index", "--quiet",
-                    "--disable-pip-version-check", "--target", str(target), str(build_wheel(source, root))],
-                   check=True, capture_output=True, timeout=120)
-    return target
+    return install_distribution(tmp_path_factory.mktemp("third_party_wrong"), WRONG_RULE)
 
 
 def test_a_wrong_third_party_transfer_rule_fails_the_fixture(wrong_site, tmp_path):

@@ -36,23 +36,6 @@ def strip_timings(data):
     return data
 
 
-@pytest.fixture
-def registered():
-    """Register plugin objects for one test, then take them out again."""
-    pm = registry.plugin_manager()
-    added = []
-
-    def register(plugin):
-        pm.register(plugin)
-        added.append(plugin)
-        registry.reset()
-
-    yield register
-    for plugin in added:
-        pm.unregister(plugin)
-    registry.reset()
-
-
 @pytest.fixture(scope="module")
 def fast_report():
     return validate(mechanism_texts(FAST), ["dp", "exact", "vp"])

@@ -32,7 +32,8 @@ class UserError(click.ClickException):
 
 
 class Group(click.Group):
-    """A click group that reports baseparams' own errors as :class:`UserError`."""
+    """A click group that reports baseparams' own errors as :class:`UserError` (exit 2) and
+    anything else, a bug, as one line and exit code 3 (``--debug``: the traceback)."""
     group_class = type          # subgroups (``plot``) use this class too
 
     def invoke(self, ctx):
@@ -40,6 +41,17 @@ class Group(click.Group):
             return super().invoke(ctx)
         except BaseparamsError as exc:
             raise UserError(getattr(exc, "message", str(exc))) from None
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except Exception as exc:
+            if ctx.find_root().params.get("debug"):
+                raise
+            click.echo(f"internal error: {type(exc).__name__}: {exc} (a bug in baseparams or a plugin; "
+                       f"please report it; rerun with --debug for the traceback)", err=True)
+            ctx.exit(INTERNAL_ERROR)
+
+
+INTERNAL_ERROR = 3
 
 
 def format_option(function):
@@ -74,13 +86,14 @@ def _version():
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=_version(), prog_name="baseparams")
-def main():
+@click.option("--debug", is_flag=True, help="Show the traceback of an internal error (exit code 3).")
+def main(debug):
     """Base inertial parameters of mechanisms.
 
     MECH is a registered mechanism name (see `baseparams list`) or a path to a
     mechanism file (TOML, see docs/mechanism-format.md). Exit codes: 0 success,
     1 a check failed, 2 bad input or usage (the message names the file, the key
-    and the reason).
+    and the reason), 3 an internal error (a bug: rerun with --debug for the traceback).
     """
 
 
