@@ -207,3 +207,12 @@ def test_json_report_keys():
     m = data["mechanisms"][0]
     assert set(m) >= {"name", "ok", "solvers", "checks"}
     assert all(set(c) >= {"name", "ok", "detail"} for c in m["checks"])
+
+
+def test_two_files_of_one_name_are_kept_apart(tmp_path):
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "robot.toml").write_text(
+            (registry.mechanisms()["pendulum"].item.path).read_text())
+    texts = mechanism_texts([str(tmp_path / "a" / "robot.toml"), str(tmp_path / "b" / "robot.toml")])
+    assert [t.name for t in texts] == ["robot", "robot#2"]

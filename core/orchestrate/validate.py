@@ -60,6 +60,8 @@ def mechanism_texts(names_or_paths: Iterable[str]) -> list[MechanismText]:
                 raise InputError(f"unknown mechanism {item!r}: not a registered name "
                                  f"({', '.join(known) or 'none registered'}) and not a file")
             name = path.stem
+        if any(m.name == name for m in out):           # two files of one name: keep both apart
+            name = f"{name}#{len(out) + 1}"
         try:
             out.append(MechanismText.read(name, path))
         except (OSError, UnicodeDecodeError) as exc:
