@@ -3,7 +3,6 @@ plugins, ``import baseparams`` loads no plugin, every built-in solver lives unde
 plugins/solvers/ and satisfies the Solver protocol."""
 
 import ast
-import inspect
 import subprocess
 import sys
 from pathlib import Path
@@ -43,5 +42,5 @@ def test_built_in_solvers_live_under_plugins_solvers_and_keep_the_protocol():
             continue
         solver = reg.item
         assert isinstance(solver, Solver), name
-        source = Path(inspect.getfile(type(solver))).resolve()
-        assert (ROOT / "plugins" / "solvers") in source.parents, (name, source)
+        # plugins/solvers/ is installed as baseparams.plugins.solvers (editable or not)
+        assert type(solver).__module__.startswith("baseparams.plugins.solvers."), (name, type(solver).__module__)
