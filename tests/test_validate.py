@@ -18,10 +18,11 @@ from click.testing import CliRunner
 from baseparams import registry
 from baseparams.cli import main
 from baseparams.hookspecs import hookimpl
+from baseparams.model import generate
 from baseparams.model.multipoles import TransferRule
 from baseparams.orchestrate.jobs import DIED, MISSING_PLUGIN, NOT_APPLICABLE, TIMEOUT, Job, run_job
 from baseparams.orchestrate.runners import DaskCluster, InProcess, Processes
-from baseparams.orchestrate.validate import mechanism_texts, validate
+from baseparams.orchestrate.validate import mechanism_texts, render_text, validate
 from baseparams.solvers.protocol import Capabilities
 
 FAST = ["pendulum", "planar_2r", "four_bar"]
@@ -62,7 +63,12 @@ def test_the_cli_prints_the_table_and_exits_0(tmp_path):
     assert result.exit_code == 0 and result.output.startswith("| mechanism | dp | checks |")
 
 
-def test_bad_input_exits_2():
+def test_bad_input_exits_2(tmp_path):
+    broken = tmp_path / "broken.toml"
+    broken.write_text(generate.serial_chain(101, bodies=3).replace('type = "R"', 'type = "Q"', 1)
+                      .replace('type = "P"', 'type = "Q"', 1))
+    result = CliRunner().invoke(main, ["validate", str(broken)])
+    assert result.exit_code == 2 and "unknown joint type 'Q'" in result.output, result.output
     runner = CliRunner()
     for args in (["validate"], ["validate", "no_such_mechanism"], ["validate", "pendulum", "--solvers", "nope"],
                  ["validate", "--all", "pendulum"]):
@@ -198,6 +204,18 @@ def test_a_worker_without_the_plugin_says_so(registered):
     texts = mechanism_texts(["pendulum"])
     outcome = run_job(Job(texts[0], "not_installed_anywhere"))
     assert outcome.status == MISSING_PLUGIN and "not installed on this worker" in outcome.message
+
+
+def test_generated_mechanisms_validate(tmp_path):
+    """Mechanisms nobody tuned for: a random chain, a random tree and a random four-bar."""
+    paths = []
+    for name, text in (("chain", generate.serial_chain(101, bodies=4)), ("tree", generate.tree(202, bodies=4)),
+                       ("loop", generate.four_bar(303))):
+        paths.append(tmp_path / f"{name}.toml")
+        paths[-1].write_text(text)
+    report = validate(mechanism_texts([str(p) for p in paths]), ["dp", "exact", "vp"])
+    assert report.ok, render_text(report)
+    assert report.mechanisms[2].solvers["exact"]["status"] == NOT_APPLICABLE
 
 
 def test_json_report_keys():

@@ -12,6 +12,7 @@ from typing import Any
 
 from baseparams import registry
 from baseparams.errors import InputError
+from baseparams.io.loader import load_mechanism
 from baseparams.orchestrate.checks import cross_checks
 from baseparams.orchestrate.jobs import (MODEL, NOT_APPLICABLE, OK, Job, MechanismText, Outcome)
 from baseparams.orchestrate.model_checks import Check
@@ -48,7 +49,9 @@ class Report:
 
 
 def mechanism_texts(names_or_paths: Iterable[str]) -> list[MechanismText]:
-    """Registered names or file paths -> their files' text (InputError naming a bad one)."""
+    """Registered names or file paths -> their files' text. Each file is read here first, so
+    a bad one is an InputError (exit 2) naming file, key and reason, not a failed check; a
+    worker that cannot read what this process can reports a missing plugin instead."""
     known = registry.mechanisms()
     out = []
     for item in names_or_paths:
@@ -66,6 +69,7 @@ def mechanism_texts(names_or_paths: Iterable[str]) -> list[MechanismText]:
             out.append(MechanismText.read(name, path))
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"cannot read: {exc}", file=path) from None
+        load_mechanism(path)
     return out
 
 
