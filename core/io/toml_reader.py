@@ -14,12 +14,13 @@ from baseparams.errors import InputError
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.mechanism import Mechanism
 
-TOP_LEVEL = ("mechanism", "geometry", "bodies", "joints", "coordinates", "trajectory")
+TOP_LEVEL = ("mechanism", "geometry", "bodies", "joints", "coordinates", "trajectory", "effects")
 HEADER_KEYS = ("name", "title", "description", "source", "gravity")
 BODY_KEYS = ("label", "name", "inertia", "mass", "com", "inertia_com")
 JOINT_KEYS = ("name", "type", "parent", "child", "coordinates", "loop", "limits",
               "parent_frame", "child_frame")
 TRAJECTORY_KEYS = ("t_start", "t_end", "samples", "q")
+EFFECT_KEYS = ("kind", "coordinate", "values")
 
 
 class TomlReader:
@@ -119,4 +120,13 @@ class _Walker:
             b.trajectory(self.table(trajectory, "trajectory.q", required=True),
                          t_start=trajectory.get("t_start", 0), t_end=trajectory.get("t_end", 10),
                          samples=trajectory.get("samples", 200), key="trajectory")
+        effects = self.data.get("effects", [])
+        if not isinstance(effects, list):
+            raise self.error("effects", "must be an array of tables: [[effects]]")
+        for i, effect in enumerate(effects):
+            key = f"effects[{i}]"
+            if not isinstance(effect, dict):
+                raise self.error(key, "must be a table")
+            self.check_keys(effect, key, EFFECT_KEYS)
+            b.effect(effect.get("kind"), effect.get("coordinate"), effect.get("values"), key=key)
         return b.build()

@@ -29,7 +29,7 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.model.expressions import ExpressionError, parse_decimal, parse_expression, to_fraction
 from baseparams.model.joints import JointType
-from baseparams.model.mechanism import Body, Frame, Joint, Mechanism, TrajectorySpec, TreeEdge
+from baseparams.model.mechanism import Body, EffectSpec, Frame, Joint, Mechanism, TrajectorySpec, TreeEdge
 from baseparams.model.params import PARAMETER_KINDS, from_mass_properties
 
 NAME_RE = re.compile(r"^[a-z0-9_]+$")
@@ -76,6 +76,7 @@ class MechanismBuilder:
         self._coordinates: set[str] = set()
         self._independent: tuple[tuple[str, ...], str] | None = None
         self._trajectory: tuple[TrajectorySpec, str] | None = None
+        self._effects: list[tuple[EffectSpec, str]] = []
 
     # ----- errors and values ---------------------------------------------------------
     def error(self, key: str | None, reason: str) -> InputError:
@@ -324,6 +325,32 @@ class MechanismBuilder:
                  for name, text in q.items()}
         self._trajectory = (TrajectorySpec(exprs, t0, t1, samples), key)
 
+    def effect(self, kind: str, coordinate: str, values: Mapping[str, Value] | None = None, *,
+               key: str | None = None) -> EffectSpec:
+        """A model effect (friction, spring, offset ...: a registered effect kind) acting on a
+        joint coordinate, with optionally known coefficients (``{"fv": "0.8"}``). The
+        coordinate is checked against the tree coordinates by :meth:`build`."""
+        key = key or f"effects[{len(self._effects)}]"
+        effects = registry.effects()
+        if not isinstance(kind, str) or kind not in effects:
+            raise self.error(f"{key}.kind", f"unknown effect {kind!r}; known: {', '.join(sorted(effects))}")
+        if not isinstance(coordinate, str):
+            raise self.error(f"{key}.coordinate", "required: a joint coordinate name")
+        if any(spec.kind == kind and spec.coordinate == coordinate for spec, _ in self._effects):
+            raise self.error(key, f"{kind} on {coordinate} is already included")
+        raw = {} if values is None else values
+        if not isinstance(raw, Mapping):
+            raise self.error(f"{key}.values", "must be a table: coefficient = value")
+        coefficients = effects[kind].item.coefficients
+        exact = {}
+        for name, value in raw.items():
+            if name not in coefficients:
+                raise self.error(f"{key}.values.{name}", f"not a coefficient of {kind} ({', '.join(coefficients)})")
+            exact[name] = self.rational(value, f"{key}.values.{name}")
+        spec = EffectSpec(kind, coordinate, exact)
+        self._effects.append((spec, key))
+        return spec
+
     # ----- the whole -----------------------------------------------------------------
     def build(self) -> Mechanism:
         """Check the whole and return the Mechanism (the builder may be built again)."""
@@ -337,12 +364,16 @@ class MechanismBuilder:
         independent = self._checked_independent(coordinates, loops)
         trajectory = self._checked_trajectory(independent or coordinates)
         gruebler = 6 * len(bodies) - sum(6 - j.type.dof for j in self._joints)
+        for spec, key in self._effects:
+            if spec.coordinate not in coordinates:
+                raise self.error(f"{key}.coordinate", f"{spec.coordinate!r} is not a tree coordinate "
+                                 f"(tree coordinates: {', '.join(coordinates)})")
         return Mechanism(
             name=self.name, bodies=tuple(bodies), joints=tuple(self._joints), tree=tuple(tree),
             loops=tuple(loops), coordinates=coordinates, independent=independent,
             geometry=dict(self._geometry), gravity=self._gravity, trajectory=trajectory,
             title=self.title, description=self.description, source=self.source, path=self.path,
-            gruebler=gruebler)
+            gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects))
 
     def _spanning_tree(self, bodies):
         """Joints in declaration order; one joining two placed bodies closes a loop."""

@@ -68,6 +68,15 @@ class TrajectorySpec:
     samples: int = 200
 
 
+@dataclass(frozen=True)
+class EffectSpec:
+    """A model effect the mechanism includes (``[[effects]]``): its registered kind, the joint
+    coordinate it acts on, and the coefficients already known (name -> exact value)."""
+    kind: str
+    coordinate: str
+    values: dict = field(default_factory=dict, compare=False)
+
+
 @dataclass(frozen=True, eq=False)
 class Mechanism:
     name: str
@@ -85,6 +94,7 @@ class Mechanism:
     source: str = ""
     path: str | None = None
     gruebler: int = 0
+    effects: tuple = ()               # EffectSpec, file order
 
     # ----- names and counts -------------------------------------------------
     @property

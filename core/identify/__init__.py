@@ -1,0 +1,1 @@
+"""Identification and diagnosis: measured data, simulation, least squares, the missing-effect loop."""
