@@ -43,7 +43,20 @@ def baseparams_readers():
     :class:`baseparams.model.builder.MechanismBuilder`, passing each value's key path in
     its format so errors name it; it raises :class:`baseparams.errors.InputError` for a bad
     file. A mechanism file given by path is read by the reader of its suffix; two readers
-    may not claim the same suffix.
+    may not claim the same suffix. Optional: ``options`` (names of keyword options ``read``
+    accepts, which ``baseparams convert`` offers as flags: ``merge_fixed``, ``floating_base``)
+    and ``read_notes(path, **options)`` returning ``(mechanism, notes)`` (``convert`` prints
+    the notes).
+    """
+
+
+@hookspec
+def baseparams_writers():
+    """Return a list of mechanism writers: objects with ``name`` (``"urdf"``), ``suffixes``
+    (lower-case, with the dot) and ``write(mechanism, path)``, which writes the mechanism
+    in their format (``baseparams convert``) and returns a list of notes (what the format
+    could not hold, what was approximated). A bad request is an
+    :class:`baseparams.errors.InputError`; two writers may not claim the same suffix.
     """
 
 

@@ -85,6 +85,11 @@ def readers():
     return _by_name("baseparams_readers", "reader")
 
 
+def writers():
+    """name -> Registered(writer): mechanism-file writers (``name``, ``suffixes``, ``write(mechanism, path)``)."""
+    return _by_name("baseparams_writers", "writer")
+
+
 def _by_name(hook_name, what):
     out = {}
     for reg in _collect(hook_name):

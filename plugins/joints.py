@@ -1,4 +1,4 @@
-"""Built-in joint types R, P, S, U and Fixed, registered like any third party's.
+"""Built-in joint types R, P, S, U, Fixed and Free, registered like any third party's.
 
 Transfer rules follow from Delta L = 0 (seed paper, section 3.3): a multipole may cross a
 joint when it is fixed in both bodies and the bodies' velocities (monopole, dipole) or
@@ -36,6 +36,12 @@ FIXED = JointType(
     name="Fixed", description="rigid connection",
     closure=POINT + (("dot", "z", "x"), ("dot", "z", "y"), ("dot", "x", "y")),
 )
+FREE = JointType(
+    name="Free", description="floating base: translations along x, y, z, then rotations about x, y, z "
+    "(Cardan angles a, b, c; singular at b = +-pi/2)",
+    motions=(("P", "x"), ("P", "y"), ("P", "z"), ("R", "x"), ("R", "y"), ("R", "z")),
+    suffixes=("x", "y", "z", "a", "b", "c"), closure=(), uses_axis=False,
+)
 
 # Multipoles that may cross each joint (joint-frame coordinates).
 ORIGIN = (0, 0, 0)
@@ -54,12 +60,17 @@ RULES = {
     "Fixed": (TransferRule("monopole", ORIGIN, None, 1),
               TransferRule("dipole", ORIGIN, (1, 0, 0), 4), TransferRule("dipole", ORIGIN, (0, 1, 0), 4),
               TransferRule("dipole", ORIGIN, Z, 4), TransferRule("quadrupole", ORIGIN, None, 6)),
+    # Nothing crosses a free joint: every multipole transfer needs some velocity (of a point,
+    # along a direction, or the angular velocity) shared by the two bodies, and a free joint
+    # constrains none. An empty list is a complete answer, not an unknown: the symbolic
+    # result stays exact.
+    "Free": (),
 }
 
 
 @hookimpl
 def baseparams_joint_types():
-    return [REVOLUTE, PRISMATIC, SPHERICAL, UNIVERSAL, FIXED]
+    return [REVOLUTE, PRISMATIC, SPHERICAL, UNIVERSAL, FIXED, FREE]
 
 
 @hookimpl

@@ -1,1 +1,16 @@
-"""URDF in and out: the reader (and writer) of robot description files, registered like a third party's."""
+"""URDF in and out (docs/urdf.md): the reader and the writer, registered like any third party's."""
+
+from baseparams.hookspecs import hookimpl
+
+from .reader import UrdfReader
+from .writer import UrdfWriter
+
+
+@hookimpl
+def baseparams_readers():
+    return [UrdfReader()]
+
+
+@hookimpl
+def baseparams_writers():
+    return [UrdfWriter()]

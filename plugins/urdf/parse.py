@@ -1,0 +1,306 @@
+"""URDF XML -> checked, exact link and joint records (no mechanism yet).
+
+The standard library's ``xml.etree.ElementTree`` reads the file: URDF is a small,
+flat XML vocabulary, and a parser dependency (urdfdom's Python bindings, yourdfpy,
+urdf_parser_py) would add nothing this module needs while parsing numbers through
+floats. Every number is read from the attribute text as a :class:`~decimal.Decimal`,
+so no value passes through a binary float; rotations become exact rationals
+(:mod:`.rotations`). Every problem is an :class:`~baseparams.errors.InputError` naming
+the file, the element (``joint[name=elbow].origin.rpy``) and the reason.
+"""
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from decimal import Decimal, InvalidOperation
+from fractions import Fraction
+from pathlib import Path
+
+from baseparams.errors import InputError
+from baseparams.model.params import from_mass_properties
+
+from .rotations import IDENTITY, ROUNDED, Rotation, is_long, matmul, matvec, rounded, rpy_matrix, transpose
+
+JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+ZERO3 = (Fraction(0), Fraction(0), Fraction(0))
+
+
+@dataclass
+class Link:
+    name: str
+    key: str
+    inertia: tuple | None            # ten parameters about the link origin, link axes (Fractions)
+    has_inertial: bool = False
+
+
+@dataclass
+class UrdfJoint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    key: str
+    rotation: Rotation = IDENTITY     # joint frame (= child link frame) in the parent link frame
+    origin: tuple = ZERO3
+    axis: tuple = (Fraction(0), Fraction(0), Fraction(1))
+    limits: tuple | None = None       # (lower, upper) Decimals
+    damping: Decimal | None = None
+    friction: Decimal | None = None
+
+
+@dataclass
+class Urdf:
+    """A parsed, checked URDF: links in file order, joints in file order, the root link."""
+    path: str
+    robot: str
+    links: dict                       # name -> Link (file order)
+    joints: list                      # UrdfJoint (file order)
+    root: str
+    notes: list = field(default_factory=list)
+
+
+class _Parser:
+    def __init__(self, path: str):
+        self.path = path
+        self.notes: list[str] = []
+
+    def error(self, key, reason):
+        return InputError(reason, file=self.path, key=key)
+
+    # ----- numbers -------------------------------------------------------------------------
+    def decimals(self, text, key, count):
+        parts = (text or "").split()
+        if len(parts) != count:
+            raise self.error(key, f"needs {count} number(s), got {text!r}")
+        out = []
+        for part in parts:
+            try:
+                value = Decimal(part)
+            except InvalidOperation:
+                raise self.error(key, f"{part!r} is not a number") from None
+            if not value.is_finite():
+                raise self.error(key, f"{part!r} is not a finite number")
+            out.append(value)
+        return out
+
+    def number(self, elem, attr, key, default=None):
+        text = elem.get(attr)
+        if text is None:
+            if default is None:
+                raise self.error(f"{key}.{attr}", "missing (required)")
+            return default
+        return self.decimals(text, f"{key}.{attr}", 1)[0]
+
+    def origin(self, parent, key):
+        """(R, p) of an ``<origin>`` child (identity when absent)."""
+        elem = parent.find("origin")
+        if elem is None:
+            return IDENTITY, ZERO3
+        okey = f"{key}.origin"
+        xyz = [Fraction(v) for v in self.decimals(elem.get("xyz", "0 0 0"), f"{okey}.xyz", 3)]
+        rpy = self.decimals(elem.get("rpy", "0 0 0"), f"{okey}.rpy", 3)
+        rot, how = rpy_matrix(*rpy)
+        for name, value, h in zip(("roll", "pitch", "yaw"), rpy, how):
+            if h == "snapped":
+                self.notes.append(f"{okey}.rpy: {name} {value} taken as exactly "
+                                  f"{_quarter_text(value)} (within 1e-9)")
+            elif h == "rational":
+                self.notes.append(f"{okey}.rpy: {name} {value} is not a multiple of pi/2: taken as the "
+                                  f"rational rotation within 2e-17 rad of it (approximate)")
+        return rot, tuple(xyz)
+
+    # ----- elements ------------------------------------------------------------------------
+    def link(self, elem, key):
+        name = elem.get("name")
+        inertial = elem.find("inertial")
+        if inertial is None:
+            return Link(name, key, None)
+        ikey = f"{key}.inertial"
+        rot, com = self.origin(inertial, ikey)
+        mass_elem = inertial.find("mass")
+        if mass_elem is None:
+            raise self.error(f"{ikey}.mass", "missing (required in <inertial>)")
+        mass = Fraction(self.number(mass_elem, "value", f"{ikey}.mass"))
+        if mass < 0:
+            raise self.error(f"{ikey}.mass.value", f"negative mass {float(mass):g}")
+        tensor_elem = inertial.find("inertia")
+        if tensor_elem is None:
+            raise self.error(f"{ikey}.inertia", "missing (required in <inertial>)")
+        e = {a: Fraction(self.number(tensor_elem, a, f"{ikey}.inertia"))
+             for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+        tensor = ((e["ixx"], e["ixy"], e["ixz"]), (e["ixy"], e["iyy"], e["iyz"]), (e["ixz"], e["iyz"], e["izz"]))
+        problem = semidefinite_problem(tensor)
+        if problem:
+            raise self.error(f"{ikey}.inertia", f"not a physical inertia: {problem}")
+        if mass == 0 and any(v for row in tensor for v in row):
+            self.notes.append(f"{ikey}: zero mass with a nonzero inertia (kept as written)")
+        # the tensor at the COM in the inertial frame's axes, turned into link axes: R I R^T
+        turned = matmul(matmul(rot, tensor), transpose(rot))
+        entries = [turned[i][j] for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
+        phi = tuple(from_mass_properties(mass, com, entries))
+        if any(is_long(v) for v in phi):
+            self.notes.append(f"{ikey}: parameters rounded to {ROUNDED} significant digits (the inertial "
+                              "frame's rotation is approximate)")
+        return Link(name, key, tuple(rounded(v) for v in phi), True)
+
+    def joint(self, elem, key, links):
+        name = elem.get("name")
+        jtype = elem.get("type")
+        if jtype not in JOINT_TYPES:
+            raise self.error(f"{key}.type", f"unknown joint type {jtype!r} (URDF types: {', '.join(JOINT_TYPES)})")
+        if jtype == "planar":
+            raise self.error(f"{key}.type", "planar joints are not supported (docs/urdf.md): model the "
+                             "plane motion as two prismatic joints and a revolute one through massless links")
+        if elem.find("mimic") is not None:
+            raise self.error(f"{key}.mimic", "mimic joints are not supported (docs/urdf.md): a mimic joint "
+                             "couples two coordinates, which baseparams has no constraint for; remove "
+                             "<mimic> to let the joint move on its own, or make it fixed")
+        ends = []
+        for end in ("parent", "child"):
+            sub = elem.find(end)
+            link = None if sub is None else sub.get("link")
+            if link is None:
+                raise self.error(f"{key}.{end}", "missing <" + end + " link=...> (required)")
+            if link not in links:
+                raise self.error(f"{key}.{end}", f"link {link!r} is not defined")
+            ends.append(link)
+        if ends[0] == ends[1]:
+            raise self.error(key, "parent and child are the same link")
+        rot, origin = self.origin(elem, key)
+        joint = UrdfJoint(name, jtype, ends[0], ends[1], key, rot, origin)
+        if jtype in ("revolute", "continuous", "prismatic"):
+            axis_elem = elem.find("axis")
+            if axis_elem is not None:
+                axis = tuple(Fraction(v) for v in self.decimals(axis_elem.get("xyz", "1 0 0"), f"{key}.axis.xyz", 3))
+                if not any(axis):
+                    raise self.error(f"{key}.axis.xyz", "zero-length axis")
+                joint.axis = axis
+            else:
+                joint.axis = (Fraction(1), Fraction(0), Fraction(0))      # the URDF default
+        limit = elem.find("limit")
+        if jtype in ("revolute", "prismatic") and limit is not None:
+            lo = self.number(limit, "lower", f"{key}.limit", Decimal(0))
+            hi = self.number(limit, "upper", f"{key}.limit", Decimal(0))
+            if lo < hi:
+                joint.limits = (lo, hi)
+            else:
+                self.notes.append(f"{key}.limit: lower {lo} is not below upper {hi}: no limits taken")
+        dynamics = elem.find("dynamics")
+        if dynamics is not None and jtype in ("revolute", "continuous", "prismatic"):
+            for attr in ("damping", "friction"):
+                if dynamics.get(attr) is not None:
+                    value = self.number(dynamics, attr, f"{key}.dynamics")
+                    if value < 0:
+                        raise self.error(f"{key}.dynamics.{attr}", f"negative {attr} {value}")
+                    setattr(joint, attr, value)
+        return joint
+
+
+def _quarter_text(value):
+    k = round(float(value) / 1.5707963267948966)
+    return {0: "0", 1: "pi/2", -1: "-pi/2", 2: "pi", -2: "-pi"}.get(k, f"{k}*pi/2")
+
+
+def semidefinite_problem(tensor) -> str | None:
+    """Why a symmetric 3x3 rational matrix is not positive semidefinite (None if it is):
+    exactly, by its principal minors (all must be >= 0)."""
+    t = tensor
+    diag = [t[0][0], t[1][1], t[2][2]]
+    names = ("ixx", "iyy", "izz")
+    for name, d in zip(names, diag):
+        if d < 0:
+            return f"{name} = {float(d):g} is negative"
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        if t[i][i] * t[j][j] - t[i][j] * t[j][i] < 0:
+            return f"the {names[i]}-{names[j]} minor is negative (a product of inertia too large)"
+    det = (t[0][0] * (t[1][1] * t[2][2] - t[1][2] * t[2][1]) - t[0][1] * (t[1][0] * t[2][2] - t[1][2] * t[2][0])
+           + t[0][2] * (t[1][0] * t[2][1] - t[1][1] * t[2][0]))
+    if det < 0:
+        return "its determinant is negative (not positive semidefinite)"
+    return None
+
+
+def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
+    """Parse and check URDF ``text``: elements, numbers, names, one root, a tree (no cycles)."""
+    path = str(path)
+    p = _Parser(path)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise InputError(f"malformed XML: {exc}", file=path) from None
+    if root.tag != "robot":
+        raise p.error(root.tag, "the top element must be <robot>")
+    robot = root.get("name") or Path(path).stem
+    links = {}
+    for i, elem in enumerate(root.findall("link")):
+        name = elem.get("name")
+        key = f"link[name={name}]" if name else f"link[{i}]"
+        if not name:
+            raise p.error(f"{key}.name", "missing (required)")
+        if name in links:
+            raise p.error(key, f"link {name!r} is defined twice")
+        links[name] = p.link(elem, key)
+    if not links:
+        raise p.error("robot", "no <link> element")
+    joints, names, parent_of = [], set(), {}
+    for i, elem in enumerate(root.findall("joint")):
+        name = elem.get("name")
+        key = f"joint[name={name}]" if name else f"joint[{i}]"
+        if not name:
+            raise p.error(f"{key}.name", "missing (required)")
+        if name in names:
+            raise p.error(key, f"joint {name!r} is defined twice")
+        names.add(name)
+        joint = p.joint(elem, key, links)
+        if joint.child in parent_of:
+            raise p.error(f"{key}.child", f"link {joint.child!r} already has a parent joint "
+                          f"({parent_of[joint.child].name}): URDF is a tree (closed loops are not URDF)")
+        parent_of[joint.child] = joint
+        joints.append(joint)
+    roots = [name for name in links if name not in parent_of]
+    if not roots:
+        raise p.error("robot", f"the joints form a cycle: {_cycle(links, parent_of)}")
+    if len(roots) > 1:
+        raise p.error("robot", f"more than one root link ({', '.join(roots)}): every link but one needs a "
+                      "parent joint")
+    reached = {roots[0]}
+    frontier = [roots[0]]
+    while frontier:
+        link = frontier.pop()
+        for j in joints:
+            if j.parent == link and j.child not in reached:
+                reached.add(j.child)
+                frontier.append(j.child)
+    unreached = [name for name in links if name not in reached]
+    if unreached:
+        raise p.error("robot", f"the joints form a cycle: {_cycle({n: None for n in unreached}, parent_of)}")
+    if not any(link.has_inertial for name, link in links.items() if name != roots[0]):
+        raise p.error("robot", "no moving link has an <inertial> element: a visual or collision "
+                      "(mesh-only) description has no dynamic model; add <inertial> elements")
+    return Urdf(path, robot, links, joints, roots[0], p.notes)
+
+
+def _cycle(links, parent_of):
+    start = next(iter(links))
+    seen, name = [], start
+    while name not in seen:
+        seen.append(name)
+        name = parent_of[name].parent
+    loop = seen[seen.index(name):] + [name]
+    return " <- ".join(loop)
+
+
+# ----- rigid transforms of ten inertial parameters -----------------------------------------------
+def transform_parameters(phi, rot, p):
+    """Ten parameters about a frame B (B axes) -> about frame A (A axes), where B's axes are
+    ``rot``'s columns in A and B's origin is ``p`` in A. Exact for exact inputs (mass
+    distribution: x_A = rot x_B + p, so h_A = rot h + m p and the second moments follow)."""
+    m, hx, hy, hz, ixx, ixy, ixz, iyy, iyz, izz = phi
+    inertia = ((ixx, ixy, ixz), (ixy, iyy, iyz), (ixz, iyz, izz))
+    h = matvec(rot, (hx, hy, hz))
+    turned = matmul(matmul(rot, inertia), transpose(rot))
+    ph = sum(a * b for a, b in zip(p, h))
+    pp = sum(a * a for a in p)
+    out = [[turned[i][j] + (2 * ph + m * pp) * (1 if i == j else 0) - p[i] * h[j] - h[i] * p[j] - m * p[i] * p[j]
+            for j in range(3)] for i in range(3)]
+    return (m, h[0] + m * p[0], h[1] + m * p[1], h[2] + m * p[2],
+            out[0][0], out[0][1], out[0][2], out[1][1], out[1][2], out[2][2])
