@@ -1,0 +1,206 @@
+"""``baseparams simulate`` and ``baseparams identify`` (registered on ``main``; docs/identification.md)."""
+
+import json
+from fractions import Fraction
+from pathlib import Path
+
+import click
+
+from baseparams import registry
+from baseparams.cli.commands import _progress, emit, format_option, get_solver, load, main
+from baseparams.errors import InputError
+from baseparams.model.mechanism import EffectSpec, Mechanism
+from baseparams.solvers.protocol import check_options, require_applicable
+
+# The identification modules (scipy.signal, scipy.linalg, cvxpy) are imported by the verbs
+# that use them, as in commands.py: `baseparams --help` and `list` stay fast.
+
+
+# ----- --effect ---------------------------------------------------------------------------
+def parse_effect(text: str, mechanism: Mechanism, *, values: bool) -> EffectSpec:
+    """``KIND:COORD`` (values=False), or with values (values=True) ``KIND:COORD=V[,V...]`` (the
+    coefficients in the effect's order) or ``KIND:COORD:NAME=V[,NAME=V...]``; values are
+    exact decimals or rationals."""
+    key = f"--effect {text}"
+    head, _, given = text.partition("=") if values else (text, "", "")
+    parts = head.split(":")
+    if len(parts) not in (2, 3) or not all(p.strip() for p in parts[:2]) or (len(parts) == 3 and not values):
+        form = "KIND:COORD=VALUE[,VALUE] or KIND:COORD:NAME=VALUE[,NAME=VALUE]" if values else "KIND:COORD"
+        raise InputError(f"expected {form}", key=key)
+    kind, coordinate = parts[0].strip(), parts[1].strip()
+    effects = registry.effects()
+    if kind not in effects:
+        raise InputError(f"unknown effect {kind!r}; registered: {', '.join(sorted(effects))}", key=key)
+    if coordinate not in mechanism.coordinates:
+        raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
+                         f"(coordinates: {', '.join(mechanism.coordinates)})", key=key)
+    if not values:
+        return EffectSpec(kind, coordinate)
+    coefficients = effects[kind].item.coefficients
+    if len(parts) == 3:                          # KIND:COORD:NAME=V,NAME=V (head holds NAME)
+        pairs = (parts[2] + "=" + given).split(",")
+        out = {}
+        for pair in pairs:
+            name, sep, value = pair.partition("=")
+            name = name.strip()
+            if not sep or name not in coefficients:
+                raise InputError(f"{pair!r}: expected NAME=VALUE with NAME one of {', '.join(coefficients)}",
+                                 key=key)
+            out[name] = _number(value, key)
+    else:
+        numbers = [v for v in given.split(",")] if given else []
+        if len(numbers) != len(coefficients):
+            raise InputError(f"{kind} has {len(coefficients)} coefficients ({', '.join(coefficients)}): "
+                             f"give {len(coefficients)} values, not {len(numbers)}", key=key)
+        out = {name: _number(v, key) for name, v in zip(coefficients, numbers)}
+    missing = [c for c in coefficients if c not in out]
+    if missing:
+        raise InputError(f"no value for {', '.join(missing)}", key=key)
+    return EffectSpec(kind, coordinate, out)
+
+
+def _number(text: str, key: str) -> Fraction:
+    try:
+        return Fraction(text.strip())
+    except (ValueError, ZeroDivisionError):
+        raise InputError(f"{text.strip()!r} is not a number", key=key) from None
+
+
+def _noise(text: str) -> list[float] | float:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"{text!r}: expected SD or SD,SD,... (one per independent coordinate)",
+                         key="--noise") from None
+    return values[0] if len(values) == 1 else values
+
+
+def _same_file(a: str | None, b: str | None) -> bool:
+    return bool(a and b) and Path(a).resolve() == Path(b).resolve()
+
+
+# ----- simulate ---------------------------------------------------------------------------
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="CSV file to write.")
+@click.option("--effect", "effects", multiple=True, metavar="KIND:COORD=VALUE[,VALUE]",
+              help="A hidden effect on any joint coordinate (dependent ones too), its coefficients in "
+                   "the effect's order, or KIND:COORD:NAME=VALUE[,NAME=VALUE]; repeatable.")
+@click.option("--noise", default="0", show_default=True, metavar="SD[,SD...]",
+              help="Standard deviation of the Gaussian noise on tau, one for all coordinates or one each.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random numbers.")
+@click.option("--samples", type=click.IntRange(2, 10_000_000), default=None,
+              help="Samples of the exciting trajectory [default: the mechanism file's].")
+@click.option("--truth", type=click.Path(dir_okay=False), default=None,
+              help="JSON file for the truth (parameters, effects, noise); never in the CSV.")
+@click.option("--random-inertia", is_flag=True,
+              help="Random physically consistent bodies instead of the file's inertias.")
+@click.option("--no-derivatives", is_flag=True,
+              help="Write only t, q and tau (identify then estimates qd and qdd).")
+@format_option
+def simulate(mech, output, effects, noise, seed, samples, truth, random_inertia, no_derivatives, fmt):
+    """Synthetic measured data for MECH along its exciting trajectory.
+
+    tau = K phi + the effects' forces + Gaussian noise, with phi the file's inertial
+    parameters (or random physically consistent ones), velocities and accelerations the
+    trajectory's exact derivatives. The mechanism's own [[effects]] with every value given
+    are simulated too. CSV layout: docs/design.md; files are written atomically.
+    """
+    from baseparams.identify.data import MIN_SAMPLES, atomic_write, write_measured
+    from baseparams.identify.fit import split_effects
+    from baseparams.identify.simulate import simulate as run_simulation
+    if samples is not None and samples < MIN_SAMPLES:
+        raise InputError(f"{samples} samples: at least {MIN_SAMPLES} are needed", key="--samples")
+    mechanism = load(mech)
+    named = [parse_effect(text, mechanism, values=True) for text in effects]
+    keys = {(s.kind, s.coordinate) for s in named}
+    if len(keys) < len(named):
+        raise InputError("an effect is named twice (same kind and coordinate)", key="--effect")
+    _, known = split_effects(mechanism, [])
+    hidden = [s for s in known if (s.kind, s.coordinate) not in keys] + named
+    for path in (output, truth):
+        if _same_file(path, mechanism.path):
+            raise InputError("would overwrite the mechanism file", file=path)
+    if truth and _same_file(truth, output):
+        raise InputError("the truth and the data would be the same file", file=truth)
+    data, truth_data = run_simulation(mechanism, samples=samples, noise_sd=_noise(noise), seed=seed,
+                                      effects=hidden, random_inertia=random_inertia)
+    write_measured(output, data, derivatives=not no_derivatives)
+    if truth:
+        atomic_write(truth, json.dumps(truth_data, indent=2) + "\n")
+    summary = {"output": str(output), "truth": truth, "samples": data.count,
+               "coordinates": list(data.coordinates), "effects": len(hidden)}
+    emit(fmt, summary, f"wrote {output} ({data.count} samples, coordinates {', '.join(data.coordinates)}, "
+                       f"{len(hidden)} hidden effects)" + (f"; truth in {truth}" if truth else ""))
+
+
+# ----- identify ---------------------------------------------------------------------------
+@main.command()
+@click.argument("mech", metavar="MECH")
+@click.argument("data_path", metavar="DATA.csv")
+@click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
+              help="An effect to identify with the inertial parameters (any joint coordinate); repeatable.")
+@click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
+              help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
+                   "carry too few digits on badly conditioned mechanisms, which the result notes).")
+@click.option("--physical", is_flag=True,
+              help="Also physically consistent standard parameters reproducing the base estimates "
+                   "(needs cvxpy: pip install 'baseparams[physical]').")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Also write the JSON result to this file (atomically).")
+@format_option
+def identify(mech, data_path, effects, solver_name, physical, output, fmt):
+    """Least squares on MECH's base parameters (and named effects) from measured DATA.csv.
+
+    Weighted per coordinate (Gautier: each coordinate's noise SD from an ordinary fit, then
+    refitted with weights 1/SD). Prints every estimate with its standard deviation and
+    relative std (%), the condition number and the NRMS residual per coordinate. Effects
+    in the mechanism's [[effects]] without values are identified too; those with every
+    value are subtracted as known.
+    """
+    from baseparams.identify.base import BaseModel
+    from baseparams.identify.data import atomic_write, read_measured
+    from baseparams.identify.fit import identify as fit, split_effects
+    from baseparams.identify.model import standard_parameters
+    if physical:
+        from baseparams.identify import physical as consistency     # cvxpy: an optional extra
+        consistency.require_cvxpy()
+    mechanism = load(mech)
+    named = [parse_effect(text, mechanism, values=False) for text in effects]
+    to_identify, known = split_effects(mechanism, named)
+    data = read_measured(data_path, mechanism)
+    solver = get_solver(solver_name)
+    require_applicable(solver, mechanism)
+    result = solver.solve(mechanism, progress=_progress, **check_options(solver, {}))
+    for warning in result.warnings:
+        click.echo(f"warning: {warning}", err=True)
+    base = BaseModel.from_result(result, mechanism)
+    identification = fit(mechanism, data, effects=to_identify, base=base, known=known)
+    if physical:
+        prior, source = None, "least-norm parameters B^+ phi_b"
+        if all(b.inertia is not None for b in mechanism.bodies):
+            prior, source = standard_parameters(mechanism), "the mechanism file's inertias"
+        found = consistency.physical_fit(identification.base_estimates, base,
+                                         std=identification.std[:base.rank], prior=prior)
+        identification.physical = consistency.physical_json(found, tuple(mechanism.parameters))
+        identification.extras["physical_fit"] = {
+            "max_deviation_std": found.max_deviation, "prior": source, "solver": found.solver,
+            "status": found.status,
+            "min_pseudo_inertia_eigenvalue": dict(zip(map(str, mechanism.body_labels),
+                                                      map(float, found.min_eigenvalues)))}
+    out = identification.to_json()
+    if output:
+        atomic_write(output, json.dumps(out, indent=2) + "\n")
+
+    def text():
+        lines = [identification.to_text()]
+        if identification.physical is not None:
+            info = identification.extras["physical_fit"]
+            lines.append(f"  physically consistent parameters (prior: {info['prior']}; the base "
+                         f"estimates reproduced within {info['max_deviation_std']:.3g} std):")
+            lines += [f"    {k} = {v}" for k, v in identification.physical.items()]
+        if output:
+            lines.append(f"wrote {output}")
+        return "\n".join(lines)
+
+    emit(fmt, out, text)

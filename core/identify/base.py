@@ -1,0 +1,75 @@
+"""Base parameters as a linear map, for fitting: phi_b = B phi.
+
+Any solver's :class:`~baseparams.solvers.result.BaseParameterResult` gives the rows of B
+(each base parameter's coefficients over the standard parameters; the symbolic solver's
+exact values). Every row of the regressor K lies in B's row space (that is what makes the
+base parameters identifiable and the others not), so K phi = K_b (B phi) with
+K_b = K B^+ = K B^T (B B^T)^-1, computed here by least squares on B^T (no normal
+equations). Identification fits phi_b with K_b.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from baseparams.errors import InputError
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.result import BaseParameterResult
+
+
+@dataclass(frozen=True)
+class BaseModel:
+    """``names`` (phi_b01 ...), ``parameters`` (the standard ones, mechanism order), ``B``
+    (rank x P, float64), ``expressions`` (each base parameter as the solver printed it) and
+    the solver's name."""
+    names: tuple[str, ...]
+    parameters: tuple[str, ...]
+    B: np.ndarray
+    expressions: tuple[dict, ...] = ()
+    solver: str = ""
+
+    @classmethod
+    def from_result(cls, result: BaseParameterResult, mechanism: Mechanism | None = None) -> "BaseModel":
+        """B from a solver's result (symbolic coefficients: their exact values), columns in
+        the mechanism's parameter order."""
+        rows = result.coefficient_matrix(values=True)
+        B = np.array([[float(v) for v in row] for row in rows], dtype=float).reshape(len(rows), -1)
+        parameters = tuple(result.parameters)
+        if mechanism is not None and tuple(mechanism.parameters) != parameters:
+            order = [parameters.index(p) for p in mechanism.parameters]
+            B, parameters = B[:, order], tuple(mechanism.parameters)
+        if not np.all(np.isfinite(B)):
+            raise InputError(f"the {result.solver} solver's base parameters of {result.mechanism} "
+                             "have non-finite coefficients in float64")
+        return cls(tuple(b["name"] for b in result.base), parameters, B,
+                   tuple(dict(b["expression"]) for b in result.base), result.solver)
+
+    @property
+    def rank(self) -> int:
+        return len(self.names)
+
+    def values(self, phi: np.ndarray) -> np.ndarray:
+        """phi_b = B phi (phi: (P,) or (P, k))."""
+        return self.B @ phi
+
+    def columns(self, K: np.ndarray) -> np.ndarray:
+        """The base regressor K_b = K B^+ for K (..., P): (..., rank)."""
+        K = np.asarray(K, dtype=float)
+        if K.shape[-1] != self.B.shape[1]:
+            raise ValueError(f"K has {K.shape[-1]} columns, B {self.B.shape[1]}")
+        if self.rank == 0:
+            return np.zeros(K.shape[:-1] + (0,))
+        flat = K.reshape(-1, K.shape[-1])
+        # min || B^T X - K^T ||: X = (B^T)^+ K^T, i.e. K_b^T
+        solution, *_ = scipy.linalg.lstsq(self.B.T, flat.T, lapack_driver="gelsy")
+        return solution.T.reshape(K.shape[:-1] + (self.rank,))
+
+    def residual_outside(self, K: np.ndarray) -> float:
+        """How far K's rows are from B's row space, relative to K: 0 when K phi = K_b B phi
+        holds exactly; a check that the base model fits this regressor."""
+        K = np.asarray(K, dtype=float).reshape(-1, self.B.shape[1])
+        scale = np.linalg.norm(K)
+        if scale == 0:
+            return 0.0
+        return float(np.linalg.norm(K - self.columns(K) @ self.B) / scale)

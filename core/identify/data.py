@@ -1,0 +1,380 @@
+"""Measured data: the CSV layout of docs/design.md, read with every error named, and written back.
+
+Layout: a header row, then one sample a row. Columns (any order): ``t`` (s); for each
+independent coordinate ``c`` of the mechanism ``q_c``, optional ``qd_c`` and ``qdd_c``, and
+``tau_c`` (the generalized force on ``c``). Other columns are ignored with a note. Rows are
+named by their line in the file (the header is row 1), as a spreadsheet numbers them.
+
+Velocities and accelerations that the file does not give are estimated by Savitzky-Golay
+smoothing differentiation (:func:`savgol_derivatives`), which needs uniform sampling: a file
+whose time steps vary by more than :data:`UNIFORM_TOLERANCE` must give ``qd_c`` and ``qdd_c``.
+The positions must close the mechanism's loops and respect its coordinate limits: the first
+sample that does not is named by its row and time.
+"""
+
+import csv
+import io
+import math
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.signal import savgol_coeffs, savgol_filter
+
+from baseparams.dynamics.evaluator import Evaluator, Sample
+from baseparams.errors import InputError, KinematicsError
+from baseparams.identify.model import Motion, evaluate, independent_names
+from baseparams.model.mechanism import Mechanism
+from baseparams.numeric.backends import Float64
+
+# Savitzky-Golay differentiation: polynomial order, and the least number of samples it needs.
+SG_ORDER = 4
+MIN_SAMPLES = 2 * SG_ORDER + 1
+# Relative spread of the time steps up to which sampling counts as uniform (SG needs it).
+UNIFORM_TOLERANCE = 1e-3
+# The smoothing window's largest relative error on the second derivative of a sinusoid at
+# the positions' bandwidth (see savgol_window).
+SG_BIAS = 1e-3
+# Bandwidth: the frequency below which this fraction of the (detrended) positions' power lies.
+BANDWIDTH_POWER = 0.9999
+MAX_FILE_BYTES = 2_000_000_000
+
+
+@dataclass
+class MeasuredData:
+    """Samples of the independent coordinates and their generalized forces.
+
+    ``motion``: t, q, qd, qdd (N, f); ``tau`` (N, f), columns in ``coordinates`` order (the
+    mechanism's independent coordinates); ``path``: the file read (None when simulated);
+    ``notes``: what reading did that a user should know (ignored columns, estimated
+    derivatives and the window used); ``estimated``: which of "qd", "qdd" were estimated.
+    ``sample``: the kinematics at every sample (loops closed), kept so a fit need not
+    evaluate it again.
+    """
+    motion: Motion
+    tau: np.ndarray
+    coordinates: tuple[str, ...]
+    path: str | None = None
+    notes: tuple[str, ...] = ()
+    estimated: tuple[str, ...] = ()
+    sample: Sample | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def count(self) -> int:
+        return self.motion.count
+
+    def take(self, rows: np.ndarray | slice) -> "MeasuredData":
+        """The samples ``rows`` (a training part, a holdout block); the kinematics are dropped."""
+        return MeasuredData(self.motion.take(rows), self.tau[rows], self.coordinates, self.path,
+                            self.notes, self.estimated)
+
+
+# ----- reading ----------------------------------------------------------------------------
+def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True
+                  ) -> MeasuredData:
+    """Read measured data for ``mechanism`` from the CSV file ``path`` (InputError naming the
+    file, the row and/or column and the reason otherwise). ``check_kinematics``: close the
+    loops at every sample now (and keep the result in ``sample``)."""
+    path = str(path)
+    text = _read_text(path)
+    coordinates = independent_names(mechanism)
+    header, rows = _parse_rows(path, text)
+    columns, notes = _columns(path, header, coordinates)
+    values = _numbers(path, header, rows)
+    t = values[:, columns["t"]]
+    _check_times(path, t, rows)
+    if len(t) < MIN_SAMPLES:
+        raise InputError(f"{len(t)} samples; at least {MIN_SAMPLES} are needed", file=path)
+
+    def block(prefix):
+        return np.stack([values[:, columns[f"{prefix}_{c}"]] for c in coordinates], axis=1)
+
+    q, tau = block("q"), block("tau")
+    given = {kind: all(f"{kind}_{c}" in columns for c in coordinates) for kind in ("qd", "qdd")}
+    partial = [kind for kind in ("qd", "qdd") if not given[kind]
+               and any(f"{kind}_{c}" in columns for c in coordinates)]
+    for kind in partial:
+        missing = [f"{kind}_{c}" for c in coordinates if f"{kind}_{c}" not in columns]
+        raise InputError(f"columns {', '.join(missing)} missing: give {kind} for every coordinate "
+                         f"or for none (then it is estimated)", file=path, key="header")
+    estimated = tuple(kind for kind in ("qd", "qdd") if not given[kind])
+    qd = block("qd") if given["qd"] else None
+    qdd = block("qdd") if given["qdd"] else None
+    if estimated:
+        step = _uniform_step(path, t, rows, estimated)
+        window = savgol_window(q, step)
+        d1, d2 = savgol_derivatives(q, step, window)
+        qd = d1 if qd is None else qd
+        qdd = d2 if qdd is None else qdd
+        trim = window // 2
+        notes.append(f"{' and '.join(estimated)} estimated by Savitzky-Golay differentiation "
+                     f"(order {SG_ORDER}, window {window} samples = {window * step:.4g} s); the first "
+                     f"and last {trim} samples are dropped (their derivatives would be extrapolated)")
+        keep = slice(trim, len(t) - trim)
+        t, q, qd, qdd, tau, rows = t[keep], q[keep], qd[keep], qdd[keep], tau[keep], rows[keep]
+    motion = Motion(t, q, qd, qdd)
+    data = MeasuredData(motion, tau, coordinates, path, tuple(notes), estimated)
+    if check_kinematics:
+        data.sample = kinematics(mechanism, data, [line for line, _ in rows])
+    return data
+
+
+def kinematics(mechanism: Mechanism, data: MeasuredData, rows: list[int] | None = None) -> Sample:
+    """The kinematics at every sample, loops closed; a sample that cannot close (or leaves a
+    coordinate's range) is an InputError naming the file's row (``rows``: each sample's line;
+    default: sample k on line k + 2) and the time."""
+    lines = rows if rows is not None else [k + 2 for k in range(data.count)]
+    try:
+        return evaluate(mechanism, data.motion)
+    except KinematicsError as exc:
+        message, k = str(exc), None
+        if mechanism.loops:
+            found = _first_unreachable(mechanism, data.motion)
+            if found is not None:
+                k, message = found
+        if k is None:
+            match = re.search(r"at t = ([-+0-9.eEinfa]+) s", message)
+            if match:
+                k = int(np.argmin(np.abs(data.motion.t - float(match.group(1)))))
+        raise InputError(f"the positions cannot be reached by {mechanism.name}: {message}",
+                         file=data.path, key=None if k is None else f"row {lines[k]}") from None
+
+
+def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] | None:
+    """The first sample whose loops do not close from the reference configuration, and why;
+    by bisection over batches (each sample of a batch is closed on its own), so a bad sample
+    is named even when following the data in time would fail earlier on a coarse step."""
+    evaluator = Evaluator(mechanism, Float64())
+
+    def fails(rows: slice) -> str | None:
+        z = [np.ascontiguousarray(motion.q[rows, j]) for j in range(motion.q.shape[1])]
+        try:
+            evaluator.assemble(z, None, where=f"at t = {motion.t[rows][0]:.6g} s: ")
+        except KinematicsError as exc:
+            return str(exc)
+        return None
+
+    lo, hi = 0, motion.count
+    if fails(slice(lo, hi)) is None:
+        return None
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if fails(slice(lo, mid)) is not None:
+            hi = mid
+        else:
+            lo = mid
+    message = fails(slice(lo, hi))
+    return None if message is None else (lo, message)
+
+
+def _read_text(path: str) -> str:
+    try:
+        size = os.path.getsize(path)
+        if size > MAX_FILE_BYTES:
+            raise InputError(f"{size} bytes: larger than the {MAX_FILE_BYTES} bytes a data file may have",
+                             file=path)
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except IsADirectoryError:
+        raise InputError("is a directory, not a CSV file", file=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", file=path) from None
+    if not raw.strip():
+        raise InputError("empty file: a CSV file with a header row and samples is needed", file=path)
+    if b"\x00" in raw:
+        raise InputError("binary file (it contains NUL bytes): not a CSV file", file=path)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not a text file (byte {exc.start} is not UTF-8): not a CSV file", file=path) from None
+    return text
+
+
+def _parse_rows(path: str, text: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    """The header and the data rows with their line numbers; blank lines skipped."""
+    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+    header, rows = None, []
+    try:
+        for fields in reader:
+            if not fields or all(not f.strip() for f in fields):
+                continue
+            if header is None:
+                header = [f.strip() for f in fields]
+                header_line = reader.line_num
+                continue
+            if len(fields) != len(header):
+                raise InputError(f"{len(fields)} fields, the header has {len(header)}: not a CSV file "
+                                 "with this header", file=path, key=f"row {reader.line_num}")
+            rows.append((reader.line_num, fields))
+    except csv.Error as exc:
+        raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
+    if header is None:
+        raise InputError("no header row", file=path)
+    if len(header) < 2:
+        raise InputError(f"the header {','.join(header)!r} has one column: not a comma-separated "
+                         "file with columns t, q_<coordinate>, tau_<coordinate>", file=path,
+                         key=f"row {header_line}")
+    if not rows:
+        raise InputError("a header but no samples", file=path)
+    return header, rows
+
+
+def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tuple[dict[str, int], list[str]]:
+    """Column index by name; missing, empty and duplicate names are errors, unknown ones notes."""
+    for k, name in enumerate(header):
+        if not name:
+            raise InputError(f"column {k + 1} has no name", file=path, key="header")
+    seen = {}
+    for k, name in enumerate(header):
+        if name in seen:
+            raise InputError(f"column {name!r} appears twice (columns {seen[name] + 1} and {k + 1})",
+                             file=path, key="header")
+        seen[name] = k
+    known = {"t"} | {f"{kind}_{c}" for c in coordinates for kind in ("q", "qd", "qdd", "tau")}
+    required = ["t"] + [f"{kind}_{c}" for c in coordinates for kind in ("q", "tau")]
+    missing = [name for name in required if name not in seen]
+    if missing:
+        raise InputError(f"missing columns {', '.join(missing)} (the independent coordinates of this "
+                         f"mechanism are {', '.join(coordinates)}; layout in docs/design.md)",
+                         file=path, key="header")
+    notes = []
+    unknown = [name for name in header if name not in known]
+    if unknown:
+        notes.append(f"columns ignored (not part of the layout): {', '.join(unknown)}")
+    return {name: k for name, k in seen.items() if name in known}, notes
+
+
+def _numbers(path: str, header: list[str], rows: list[tuple[int, list[str]]]) -> np.ndarray:
+    """All fields as float64; a field that is not a finite number names its row and column."""
+    out = np.empty((len(rows), len(header)))
+    for i, (line, fields) in enumerate(rows):
+        for k, text in enumerate(fields):
+            try:
+                value = float(text)
+            except ValueError:
+                value = None
+            if value is None or not math.isfinite(value):
+                shown = text.strip() if len(text) <= 40 else text.strip()[:37] + "..."
+                reason = "is not a number" if value is None else "is not finite"
+                raise InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {header[k]}")
+            out[i, k] = value
+    return out
+
+
+def _check_times(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]]) -> None:
+    bad = np.nonzero(np.diff(t) <= 0)[0]
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise InputError(f"t = {t[k]:.17g} does not increase (previous row: t = {t[k - 1]:.17g})",
+                         file=path, key=f"row {rows[k][0]}, column t")
+
+
+def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], estimated) -> float:
+    """The sampling step, checked uniform (Savitzky-Golay assumes it)."""
+    steps = np.diff(t)
+    step = float(np.median(steps))
+    off = np.nonzero(np.abs(steps - step) > UNIFORM_TOLERANCE * step)[0]
+    if off.size:
+        k = int(off[0]) + 1
+        raise InputError(f"time step {steps[k - 1]:.6g} s differs from the median step {step:.6g} s: "
+                         f"{' and '.join(estimated)} can only be estimated from uniformly sampled data "
+                         f"(Savitzky-Golay); resample, or give the columns "
+                         f"{', '.join(kind + '_<coordinate>' for kind in estimated)}",
+                         file=path, key=f"row {rows[k][0]}, column t")
+    return step
+
+
+# ----- smoothing differentiation ----------------------------------------------------------
+def savgol_window(q: np.ndarray, step: float) -> int:
+    """The Savitzky-Golay window (odd number of samples) for positions ``q`` (N, f).
+
+    The positions' bandwidth f_b is the frequency below which a fraction BANDWIDTH_POWER of
+    their power lies (detrended, Blackman-tapered so the ends leak no power to high
+    frequencies; largest over the coordinates). The window is the longest whose second
+    derivative of a sinusoid at f_b is off by at most SG_BIAS (relative): the signal passes
+    almost untouched, and everything above it, noise included, is smoothed as much as that
+    allows. At least SG_ORDER + 1 samples (odd), at most N/10 (read_measured drops half a
+    window at each end, where the derivatives would be extrapolated).
+    """
+    n = q.shape[0]
+    fb = 0.0
+    for column in np.atleast_2d(q.T):
+        detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
+        power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
+        if power.sum() <= 0:
+            continue
+        cumulative = np.cumsum(power) / power.sum()
+        index = int(np.searchsorted(cumulative, BANDWIDTH_POWER))
+        fb = max(fb, np.fft.rfftfreq(n, step)[min(index, len(power) - 1)])
+    smallest = (SG_ORDER + 2) // 2                        # half-widths: window = 2 half + 1
+    largest = max(smallest, (n // 10 - 1) // 2)
+    if fb <= 0:
+        return 2 * smallest + 1
+    omega = 2 * np.pi * fb * step                          # radians per sample
+
+    def bias(half: int) -> float:
+        c = savgol_coeffs(2 * half + 1, SG_ORDER, deriv=2, use="dot")
+        response = np.sum(c * np.exp(1j * omega * np.arange(-half, half + 1)))
+        return float(abs(response / -(omega ** 2) - 1))
+
+    if bias(smallest) > SG_BIAS:
+        return 2 * smallest + 1
+    lo, hi = smallest, largest                               # bias grows with the window
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if bias(mid) <= SG_BIAS else (lo, mid - 1)
+    return 2 * lo + 1
+
+
+def savgol_derivatives(q: np.ndarray, step: float, window: int | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(qd, qdd) of uniformly sampled positions ``q`` (N, f) by Savitzky-Golay differentiation
+    (order SG_ORDER; ends fitted by the polynomial of the end window, scipy's mode 'interp')."""
+    window = savgol_window(q, step) if window is None else window
+    d1 = savgol_filter(q, window, SG_ORDER, deriv=1, delta=step, axis=0, mode="interp")
+    d2 = savgol_filter(q, window, SG_ORDER, deriv=2, delta=step, axis=0, mode="interp")
+    return d1, d2
+
+
+# ----- writing ----------------------------------------------------------------------------
+def header_for(coordinates: tuple[str, ...], derivatives: bool = True) -> list[str]:
+    """The columns :func:`write_measured` writes, in order."""
+    kinds = ("q", "qd", "qdd", "tau") if derivatives else ("q", "tau")
+    return ["t"] + [f"{kind}_{c}" for c in coordinates for kind in kinds]
+
+
+def write_measured(path: str | os.PathLike, data: MeasuredData, *, derivatives: bool = True) -> None:
+    """Write ``data`` in the CSV layout (``derivatives``: with qd and qdd columns), each number
+    to 17 significant digits (read back exactly); atomically (a temporary file renamed), so
+    a failed write never leaves a truncated file behind."""
+    path = Path(path)
+    columns = [data.motion.t[:, None]]
+    for j in range(len(data.coordinates)):
+        parts = ((data.motion.q, data.motion.qd, data.motion.qdd, data.tau) if derivatives
+                 else (data.motion.q, data.tau))
+        columns += [a[:, j:j + 1] for a in parts]
+    table = np.hstack(columns)
+    buffer = io.StringIO()
+    buffer.write(",".join(header_for(data.coordinates, derivatives)) + "\n")
+    np.savetxt(buffer, table, fmt="%.17g", delimiter=",")
+    atomic_write(path, buffer.getvalue())
+
+
+def atomic_write(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    try:
+        fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+        os.replace(temporary, path)
+    except OSError as exc:
+        Path(temporary).unlink(missing_ok=True)
+        raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None

@@ -1,0 +1,322 @@
+"""Weighted least squares on the base parameters and the named effects' coefficients.
+
+The model (:mod:`baseparams.identify.model`): tau = K_b phi_b + C theta (+ the known effects'
+forces, subtracted first), stacked over samples and independent coordinates. Gautier's
+noise weighting: an ordinary least-squares fit gives each coordinate's residual, whose
+variance (over its own degrees of freedom, N minus the sum of the leverages of that
+coordinate's rows) estimates the coordinate's noise SD sigma_j; each coordinate's rows are
+then divided by sigma_j and refitted. The SDs are estimated once more from that weighted
+fit (see WEIGHTING_PASSES) before the final fit. The covariance of the estimates is
+s^2 (X_w^T X_w)^-1, s^2 the weighted residual variance (about 1 when the noise model holds),
+computed from a QR factorisation of the column-scaled weighted matrix (no normal equations).
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from baseparams import registry
+from baseparams.errors import InputError
+from baseparams.identify.base import BaseModel
+from baseparams.identify.data import MeasuredData, kinematics
+from baseparams.identify.model import design, effect_values
+from baseparams.model.mechanism import EffectSpec, Mechanism
+
+# Unit-norm columns whose pivoted-QR diagonal falls below this fraction of the largest are
+# dependent to working precision: the data do not excite them (the SLA's weakest base
+# parameter is legitimately near 1e-13, so only rounding-level dependence is refused).
+NOT_EXCITED = 1e-15
+# An effect column whose distance from the span of the columns before it is below this
+# fraction of its norm is absorbed (exact dependence, up to rounding).
+ABSORB = 1e-9
+# Above this relative distance of K from the base model's row space the fit says the base
+# model is inexact (dp's coefficients on a badly conditioned mechanism).
+BASE_MODEL_TOLERANCE = 1e-8
+# Fits that estimate the noise SDs (the first one unweighted) before the final weighted fit.
+WEIGHTING_PASSES = 2
+# A coordinate's noise SD is taken at least this fraction of its RMS force (noise-free data).
+NOISE_FLOOR = 1e-13
+
+
+@dataclass
+class Identification:
+    """What a fit found. ``names``/``kinds``: the unknowns (base parameters "base", then the
+    effects' coefficients "effect"); ``estimates``, ``covariance``; per coordinate the noise SD
+    used as weight (``noise_sd``), ``nrms`` (RMS residual / RMS measured force) and the
+    ``residual`` (N, f) of the weighted fit; ``condition_number`` of the weighted regressor
+    with unit-norm columns."""
+    mechanism: str
+    data: str | None
+    coordinates: tuple[str, ...]
+    base: BaseModel
+    effects: tuple[EffectSpec, ...]
+    known: tuple[EffectSpec, ...]
+    names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    estimates: np.ndarray
+    covariance: np.ndarray
+    noise_sd: np.ndarray
+    nrms: np.ndarray
+    residual: np.ndarray
+    condition_number: float
+    samples: int
+    dof: int
+    residual_variance: float
+    notes: tuple[str, ...] = ()
+    absorbed: dict = field(default_factory=dict)  # name -> {kept name: coefficient}
+    base_model_error: float = 0.0
+    physical: dict | None = None              # set by the caller (identify --physical)
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+
+    @property
+    def relative_std(self) -> np.ndarray:
+        """100 std / |estimate| (%), inf for an estimate of exactly 0."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.estimates != 0, 100 * self.std / np.abs(self.estimates), np.inf)
+
+    @property
+    def base_estimates(self) -> np.ndarray:
+        return self.estimates[: self.base.rank]
+
+    @property
+    def base_covariance(self) -> np.ndarray:
+        return self.covariance[: self.base.rank, : self.base.rank]
+
+    def stands_for(self, values: dict[str, float]) -> np.ndarray:
+        """What the estimates estimate, given every unknown's true value (base parameters
+        and all effect coefficients, absorbed ones included): each kept unknown plus its
+        share of the absorbed ones. Compares a fit with a simulation's truth."""
+        out = np.array([float(values[name]) for name in self.names])
+        for name, into in self.absorbed.items():
+            for kept, coefficient in into.items():
+                out[self.names.index(kept)] += coefficient * float(values[name])
+        return out
+
+    def value(self, name: str) -> float:
+        return float(self.estimates[self.names.index(name)])
+
+    def _entry(self, k: int) -> dict:
+        return {"name": self.names[k], "value": float(self.estimates[k]), "std": float(self.std[k]),
+                "relative_std_percent": _finite(self.relative_std[k])}
+
+    def to_json(self) -> dict:
+        base = []
+        for k, name in enumerate(self.base.names):      # every base parameter is kept (fit checks)
+            base.append({**self._entry(k), "expression": dict(self.base.expressions[k])
+                         if self.base.expressions else {}})
+        effects = []
+        for spec in self.effects:
+            entries = []
+            for name in registry.effects()[spec.kind].item.coefficient_names(spec.coordinate):
+                entries.append(self._entry(self.names.index(name)) if name in self.names else
+                               {"name": name, "value": None, "std": None, "relative_std_percent": None,
+                                "absorbed_into": dict(self.absorbed[name])})
+            effects.append({"kind": spec.kind, "coordinate": spec.coordinate, "coefficients": entries})
+        out = {
+            "mechanism": self.mechanism,
+            "data": self.data,
+            "solver": self.base.solver,
+            "samples": self.samples,
+            "coordinates": list(self.coordinates),
+            "rank": self.base.rank,
+            "base": base,
+            "effects": effects,
+            "known_effects": [{"kind": s.kind, "coordinate": s.coordinate,
+                               "values": {n: str(v) for n, v in s.values.items()}} for s in self.known],
+            "condition_number": _finite(self.condition_number),
+            "noise_sd": dict(zip(self.coordinates, map(float, self.noise_sd))),
+            "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
+            "dof": self.dof,
+            "base_model_error": float(self.base_model_error),
+            "residual_variance": float(self.residual_variance),
+            "notes": list(self.notes),
+        }
+        out.update(self.extras)
+        if self.physical is not None:
+            out["physical"] = dict(self.physical)
+        return out
+
+    def to_text(self) -> str:
+        lines = [f"{self.mechanism}: {self.samples} samples x {len(self.coordinates)} coordinates, "
+                 f"{self.base.rank} base parameters ({self.base.solver}) + {len(self.names) - self.base.rank} "
+                 f"effect coefficients; condition number {self.condition_number:.3g}"]
+        width = max([len(n) for n in self.names] + [4])
+        lines.append(f"  {'name':<{width}}  {'estimate':>13}  {'std':>10}  {'std %':>8}")
+        for k, name in enumerate(self.names):
+            if k == self.base.rank and k:
+                lines.append("  effects:")
+            rel = self.relative_std[k]
+            lines.append(f"  {name:<{width}}  {self.estimates[k]:>13.6g}  {self.std[k]:>10.3g}  "
+                         + (f"{rel:>8.3g}" if math.isfinite(rel) else f"{'-':>8}"))
+        lines.append("  per coordinate: noise SD (weight) / NRMS residual")
+        for c, sd, nrms in zip(self.coordinates, self.noise_sd, self.nrms):
+            lines.append(f"    {c}: {sd:.4g} / {nrms:.4g}")
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _finite(x: float) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def split_effects(mechanism: Mechanism, named: Sequence[EffectSpec]) -> tuple[list[EffectSpec], list[EffectSpec]]:
+    """(to identify, known): the mechanism's [[effects]] with every coefficient given are
+    known (their force is subtracted), the others are identified, and so is every effect in
+    ``named`` (which overrides a known one of the same kind and coordinate)."""
+    named_keys = {(s.kind, s.coordinate) for s in named}
+    identify, known = [], []
+    for spec in mechanism.effects:
+        if (spec.kind, spec.coordinate) in named_keys:
+            continue
+        coefficients = registry.effects()[spec.kind].item.coefficients
+        (known if all(c in spec.values for c in coefficients) else identify).append(spec)
+    seen = set()
+    for spec in list(identify) + list(named):
+        key = (spec.kind, spec.coordinate)
+        if key in seen:
+            raise InputError(f"the effect {spec.kind} on {spec.coordinate} is named twice", key="effect")
+        seen.add(key)
+    return identify + [EffectSpec(s.kind, s.coordinate) for s in named], known
+
+
+def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[EffectSpec] = (),
+             base: BaseModel, known: Sequence[EffectSpec] = ()) -> Identification:
+    """Fit the base parameters and ``effects``' coefficients to ``data`` (``known`` effects,
+    every coefficient given, are subtracted first). An effect coefficient whose column is a
+    combination of the columns before it (a zero-free-length strut spring on the SLA acts
+    exactly like gravity) cannot be identified: it is absorbed, like a grouped inertial
+    parameter, and ``absorbed`` says what the remaining estimates then stand for."""
+    effects, known = tuple(effects), tuple(known)
+    sample = data.sample if data.sample is not None else kinematics(mechanism, data)
+    inertial, columns = design(mechanism, data.motion, effects + known, sample)
+    n, f = data.tau.shape
+    identified_width = sum(len(registry.effects()[s.kind].item.coefficients) for s in effects)
+    y = data.tau.copy()
+    if known:
+        y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
+    X = np.concatenate([base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
+    all_names = tuple(base.names) + tuple(columns.names[:identified_width])
+    notes = list(data.notes)
+    outside = base.residual_outside(inertial.matrix)
+    if outside > BASE_MODEL_TOLERANCE:
+        notes.append(f"the {base.solver} solver's base parameters reproduce the regressor only to "
+                     f"{outside:.2g} (relative): its coefficients carry too few digits for this "
+                     "mechanism; a certified solver (--solver vp) models it exactly")
+    stacked, target = X.reshape(n * f, -1), y.reshape(n * f)
+    scale = np.linalg.norm(stacked, axis=0)
+    dead = [all_names[k] for k in range(len(all_names)) if scale[k] == 0]
+    if dead:
+        raise InputError(f"{', '.join(dead)} have no effect on these data (their columns are zero): "
+                         "drop them or excite them", file=data.path)
+    if n * f <= len(all_names):
+        raise InputError(f"{n} samples x {f} coordinates = {n * f} equations for {len(all_names)} unknowns "
+                         f"({base.rank} base parameters, {identified_width} effect coefficients): "
+                         "more samples are needed", file=data.path)
+    kept, absorbed = _independent(stacked / scale, base.rank, all_names, data.path)
+    absorbed = {name: {k: v * scale[all_names.index(name)] / scale[all_names.index(k)]
+                       for k, v in into.items()} for name, into in absorbed.items()}
+    for name, into in absorbed.items():
+        effects_part = [f"{k} + {v:.4g} {name}" for k, v in into.items() if k not in base.names]
+        grouped = [k for k in into if k in base.names]
+        parts = effects_part + ([f"{len(grouped)} base parameters ({', '.join(grouped[:3])}"
+                                 + (", ..." if len(grouped) > 3 else "") + ")"] if grouped else [])
+        notes.append(f"{name} cannot be identified on these data (its column is a combination of the "
+                     f"others): it is absorbed into {'; '.join(parts)} (JSON: absorbed_into)")
+    stacked, scale = stacked[:, kept], scale[kept]
+    names = tuple(all_names[k] for k in kept)
+    kinds = tuple("base" if k < base.rank else "effect" for k in kept)
+    p = len(kept)
+    rms_force = np.sqrt(np.mean(y ** 2, axis=0))
+    floor = NOISE_FLOOR * max(float(rms_force.max()), np.finfo(float).tiny)
+    # Gautier: an ordinary fit, each coordinate's noise SD from its residual, a weighted refit.
+    # Then once more from the weighted fit's residual: the ordinary residual of a quiet
+    # coordinate carries some of a noisy one's noise (through the shared parameters), so the
+    # first SDs are biased when the coordinates' noise levels differ much.
+    sigma = np.ones(f)
+    for _ in range(WEIGHTING_PASSES):
+        weights = np.tile(1 / sigma, n)
+        weighted = stacked * weights[:, None]
+        wscale = np.linalg.norm(weighted, axis=0)
+        theta_w, q_factor = _solve(weighted / wscale, target * weights, names, data.path)
+        residual = ((target - stacked @ (theta_w / wscale))).reshape(n, f)
+        leverage = np.sum(q_factor ** 2, axis=1).reshape(n, f).sum(axis=0)
+        dof = np.maximum(n - leverage, 1.0)
+        sigma = np.maximum(np.sqrt(np.sum(residual ** 2, axis=0) / dof), floor)
+    weights = np.tile(1 / sigma, n)
+    weighted = stacked * weights[:, None]
+    wscale = np.linalg.norm(weighted, axis=0)
+    theta_w, _ = _solve(weighted / wscale, target * weights, names, data.path)
+    estimates = theta_w / wscale
+    _, r_factor = scipy.linalg.qr(weighted / wscale, mode="economic")
+    wres = target * weights - (weighted / wscale) @ theta_w
+    variance = float(wres @ wres) / (n * f - p)
+    r_inverse = scipy.linalg.solve_triangular(r_factor, np.eye(p))
+    covariance = variance * (r_inverse @ r_inverse.T) / np.outer(wscale, wscale)
+    singular = scipy.linalg.svdvals(weighted / wscale)
+    condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
+    final = y - (stacked @ estimates).reshape(n, f)
+    measured_rms = np.sqrt(np.mean(data.tau ** 2, axis=0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nrms = np.where(measured_rms > 0, np.sqrt(np.mean(final ** 2, axis=0)) / measured_rms, 0.0)
+    return Identification(mechanism=mechanism.name, data=data.path, coordinates=data.coordinates,
+                          base=base, effects=effects, known=known, names=names, kinds=kinds,
+                          estimates=estimates, covariance=covariance, noise_sd=sigma, nrms=nrms,
+                          residual=final, condition_number=condition, samples=n, dof=n * f - p,
+                          residual_variance=variance, notes=tuple(notes), absorbed=absorbed,
+                          base_model_error=outside)
+
+
+def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None
+                 ) -> tuple[list[int], dict[str, dict[str, float]]]:
+    """(kept columns, absorbed): the base columns (all must be excited), then each effect
+    column kept unless it lies in the span of the kept ones (relative residual below ABSORB),
+    in which case its expansion over them {kept name: coefficient} is returned."""
+    basis = np.zeros((len(matrix), 0))
+    if rank:
+        basis, r_factor, pivots = scipy.linalg.qr(matrix[:, :rank], mode="economic", pivoting=True)
+        diagonal = np.abs(np.diag(r_factor))
+        weak = [names[pivots[k]] for k in range(rank) if diagonal[k] <= NOT_EXCITED * diagonal[0]]
+        if weak:
+            raise InputError(f"these data do not excite the base parameters {', '.join(weak)} (the columns "
+                             "are dependent on this trajectory): excite the mechanism more richly",
+                             file=path)
+    kept = list(range(rank))
+    absorbed = {}
+    for k in range(rank, matrix.shape[1]):
+        column = matrix[:, k]
+        rest = column - basis @ (basis.T @ column)
+        rest = rest - basis @ (basis.T @ rest)            # twice is enough (Kahan, Parlett)
+        size = np.linalg.norm(rest)
+        if size <= ABSORB * np.linalg.norm(column):
+            coefficients = scipy.linalg.lstsq(matrix[:, kept], column)[0]
+            absorbed[names[k]] = {names[i]: float(c) for i, c in zip(kept, coefficients)
+                                  if abs(c) > 1e-6 * np.abs(coefficients).max()}
+            continue
+        basis = np.column_stack([basis, rest / size])
+        kept.append(k)
+    return kept, absorbed
+
+
+def _solve(matrix: np.ndarray, target: np.ndarray, names: tuple[str, ...], path: str | None
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares by a pivoted QR of a column-scaled matrix; (solution, Q). Columns that
+    are collinear to working precision are an InputError naming them."""
+    q_factor, r_factor, pivots = scipy.linalg.qr(matrix, mode="economic", pivoting=True)
+    diagonal = np.abs(np.diag(r_factor))
+    if diagonal[-1] <= NOT_EXCITED * diagonal[0]:
+        null = scipy.linalg.svd(matrix, full_matrices=False)[2][-1]
+        involved = [names[k] for k in np.argsort(-np.abs(null)) if abs(null[k]) > 0.1 * np.abs(null).max()]
+        raise InputError(f"{', '.join(involved)} cannot be told apart on these data (their columns are "
+                         "collinear): drop one of the effects, or excite the mechanism differently",
+                         file=path)
+    solution = np.empty(matrix.shape[1])
+    solution[pivots] = scipy.linalg.solve_triangular(r_factor, q_factor.T @ target)
+    return solution, q_factor

@@ -1,0 +1,136 @@
+"""Synthetic measured data with a known truth: the proof bench of identification and diagnosis.
+
+Along the mechanism's default exciting trajectory (its exact derivatives), the generalized
+forces are ``tau = K phi + sum_e C_e theta_e + noise``: K and C_e from
+:mod:`baseparams.identify.model` (the same model the fit uses), phi the file's inertial
+parameters or random physically consistent ones, the effects' coefficients as given, and
+independent Gaussian noise of a given SD on each coordinate's tau. The truth is returned
+separately and never written into the data.
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+import sympy
+from scipy.spatial.transform import Rotation
+
+from baseparams import registry
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.errors import InputError
+from baseparams.identify.data import MeasuredData
+from baseparams.identify.model import (Motion, design, effect_values, evaluate, independent_names,
+                                       standard_parameters)
+from baseparams.model.mechanism import EffectSpec, Mechanism
+from baseparams.model.params import from_mass_properties
+from baseparams.numeric.backends import Float64
+
+# Random bodies: mass uniform in MASS_RANGE (kg); the mass's second moments along random
+# principal axes are m (u L)^2 with u uniform in SPREAD_RANGE and L the body's size (the
+# farthest joint point on it); the centre of mass uniform in the ball of radius L/2.
+MASS_RANGE = (0.5, 5.0)
+SPREAD_RANGE = (0.05, 0.6)
+SMALLEST_SIZE = 0.05
+
+
+def trajectory_motion(mechanism: Mechanism, samples: int | None = None) -> Motion:
+    """The default exciting trajectory's samples with its exact derivatives, float64."""
+    trajectory = Trajectory.default(mechanism, samples=samples)
+    t = np.array([float(x) for x in trajectory.times])
+    z, zd, zdd = trajectory.independent_values(mechanism, Float64(), t)
+    q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v, float), t.shape) for v in values], axis=1)
+                  for values in (z, zd, zdd))
+    return Motion(t, q, qd, qdd)
+
+
+def body_sizes(mechanism: Mechanism) -> dict[int, float]:
+    """Each moving body's size: the distance of its farthest joint point from its origin."""
+    geometry = {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator)
+                for k, v in mechanism.geometry.items()}
+    sizes = {b.label: SMALLEST_SIZE for b in mechanism.bodies}
+    for joint in mechanism.joints:
+        for body, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
+            if body in sizes:
+                point = [float(sympy.sympify(c).subs(geometry)) for c in frame.point]
+                sizes[body] = max(sizes[body], float(np.linalg.norm(point)))
+    return sizes
+
+
+def random_physical_inertia(mechanism: Mechanism, rng: np.random.Generator) -> np.ndarray:
+    """Random physically consistent standard parameters, body after body: mass > 0, and the
+    inertia tensor at the centre of mass positive definite with strict triangle inequalities
+    (principal moments d2+d3, d1+d3, d1+d2 of positive second moments d1, d2, d3 of the mass)."""
+    sizes = body_sizes(mechanism)
+    out = []
+    for body in mechanism.bodies:
+        size = sizes[body.label]
+        mass = rng.uniform(*MASS_RANGE)
+        direction = rng.standard_normal(3)
+        com = direction / np.linalg.norm(direction) * size / 2 * rng.uniform() ** (1 / 3)
+        d = mass * (rng.uniform(*SPREAD_RANGE, size=3) * size) ** 2
+        rotation = Rotation.random(random_state=rng).as_matrix()
+        tensor = rotation @ np.diag([d[1] + d[2], d[0] + d[2], d[0] + d[1]]) @ rotation.T
+        entries = [tensor[0, 0], tensor[0, 1], tensor[0, 2], tensor[1, 1], tensor[1, 2], tensor[2, 2]]
+        out.extend(from_mass_properties(mass, com, entries))
+    return np.array(out, dtype=float)
+
+
+def _noise_vector(noise_sd: float | Sequence[float], coordinates: tuple[str, ...]) -> np.ndarray:
+    sd = np.broadcast_to(np.asarray(noise_sd, dtype=float), (len(coordinates),)) if np.ndim(noise_sd) == 0 \
+        else np.asarray(noise_sd, dtype=float)
+    if sd.shape != (len(coordinates),):
+        raise InputError(f"{len(sd)} noise SDs for {len(coordinates)} coordinates "
+                         f"({', '.join(coordinates)})", key="noise")
+    if not np.all(np.isfinite(sd)) or np.any(sd < 0):
+        raise InputError(f"noise SDs must be finite and >= 0, not {list(sd)}", key="noise")
+    return np.array(sd)
+
+
+def simulate(mechanism: Mechanism, *, samples: int | None = None, noise_sd: float | Sequence[float] = 0.0,
+             seed: int = 0, effects: Sequence[EffectSpec] = (), random_inertia: bool = False
+             ) -> tuple[MeasuredData, dict]:
+    """(data, truth): measured data along the default trajectory and what produced it.
+
+    ``noise_sd``: one SD for every coordinate's tau or one per independent coordinate;
+    ``effects``: hidden effects, each with all its coefficients in ``values``. The truth:
+    {"mechanism", "parameters": {name: value}, "effects": [{"kind", "coordinate", "values"}],
+    "noise_sd": [...], "seed", "samples", "random_inertia", "rms_tau": {coordinate: RMS of
+    the noise-free tau}, "rms_effect": [{coordinate: RMS of that effect's force}]}.
+    """
+    rng = np.random.default_rng(seed)
+    coordinates = independent_names(mechanism)
+    sd = _noise_vector(noise_sd, coordinates)
+    motion = trajectory_motion(mechanism, samples)
+    sample = evaluate(mechanism, motion)
+    phi = random_physical_inertia(mechanism, rng) if random_inertia else standard_parameters(mechanism)
+    effects = list(effects)
+    inertial, columns = design(mechanism, motion, effects, sample)
+    theta = effect_values(mechanism, effects)
+    clean = inertial.matrix @ phi
+    rms_effect, start = [], 0
+    for spec in effects:
+        width = len(registry.effects()[spec.kind].item.coefficients)
+        force = columns.matrix[:, :, start:start + width] @ theta[start:start + width]
+        rms_effect.append(dict(zip(coordinates, _rms(force).tolist())))
+        clean = clean + force
+        start += width
+    tau = clean + rng.standard_normal(clean.shape) * sd
+    data = MeasuredData(motion, tau, coordinates, None, (), (), sample)
+    truth = {
+        "mechanism": mechanism.name,
+        "parameters": dict(zip(mechanism.parameters, phi.tolist())),
+        "effects": [{"kind": spec.kind, "coordinate": spec.coordinate,
+                     "values": {name: float(spec.values[name])
+                                for name in registry.effects()[spec.kind].item.coefficients}}
+                    for spec in effects],
+        "noise_sd": sd.tolist(),
+        "seed": seed,
+        "samples": motion.count,
+        "random_inertia": random_inertia,
+        "rms_tau": dict(zip(coordinates, _rms(clean).tolist())),
+        "rms_effect": rms_effect,
+    }
+    return data, truth
+
+
+def _rms(values: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.asarray(values) ** 2, axis=0))
