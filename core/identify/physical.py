@@ -57,6 +57,11 @@ class PhysicalFit:
         return float(np.max(np.abs(self.deviation))) if self.deviation.size else 0.0
 
 
+INTERIOR = 1e-6
+"""The pseudo-inertia is kept this far (relative to the body's typical inertia and mass)
+inside the positive semidefinite cone."""
+
+
 def require_cvxpy() -> None:
     if cp is None:
         raise InputError("physically consistent parameters (--physical) need cvxpy: "
@@ -114,7 +119,12 @@ def physical_fit(base_estimate: np.ndarray, base: BaseModel, *, std: np.ndarray 
     constraints = []
     for body in range(P // 10):
         J = _pseudo_inertia_expression(phi[10 * body: 10 * body + 10])
-        constraints.append((J + J.T) / 2 >> 0)
+        # strictly inside the cone by a small margin: a solution on its boundary (a thin rod)
+        # would, after the solver's own tolerance, break the exact checks of the mechanism
+        # reader (triangle inequalities) when the parameters are written back to a file
+        t = typical[10 * body: 10 * body + 10]
+        margin = INTERIOR * np.diag([t[4], t[4], t[4], t[0]])
+        constraints.append((J + J.T) / 2 - margin >> 0)
     problem = cp.Problem(cp.Minimize(fit + regular), constraints)
     used = ""
     for solver in ("CLARABEL", "SCS"):
