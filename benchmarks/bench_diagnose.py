@@ -1,0 +1,300 @@
+"""The proof of ``diagnose`` on data with hidden effects (issue 10): a seeded campaign.
+
+For each mechanism the model's columns along its default trajectory are computed once
+(:func:`baseparams.identify.diagnose.prepare`, the same columns ``simulate`` uses), and
+each dataset is tau = K phi + hidden effects + Gaussian noise, with phi random physically
+consistent inertias (a new draw per dataset) and the noise SD on each coordinate 2 % of
+that coordinate's RMS inertial torque. Effect-to-noise ratio: the largest, over the
+independent coordinates, of RMS(effect force) / noise SD; the effect's coefficients are
+scaled to it. Springs rest near the coordinate's mean position (q0 = mean + 0.1 SD), so
+their force is a spring's, not an offset's.
+
+Hidden effects are drawn among the candidates diagnosis can test on this motion: not
+absorbed by the inertial model, not acting on too few samples (a Stribeck bump), and
+keeping at least 5 % of their norm beyond the inertial model (the others are reported as
+'confusable with the model'; how many were left out is printed).
+
+Scenarios: nothing hidden; one effect of each kind on random coordinates at ratios 1..20;
+pairs at ratio 5; confusable pairs (|corr| > 0.95 after projecting out the inertial model).
+Prints the false-effect rate, the confusion matrix, right-name rates per kind and ratio,
+pairs, confusable pairs, the gap shrink, and the SLA timing with a yardstick.
+
+    python benchmarks/bench_diagnose.py            # full campaign (about 20-40 min on 2 cores)
+    python benchmarks/bench_diagnose.py --quick    # a small run (a few minutes)
+"""
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")     # small matrices: threads only contend
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from collections import Counter, defaultdict  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from baseparams import registry  # noqa: E402
+from baseparams.identify import selection as S  # noqa: E402
+from baseparams.identify.diagnose import WEAK, diagnose, prepare  # noqa: E402
+from baseparams.identify.model import evaluate  # noqa: E402
+from baseparams.identify.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
+from baseparams.io.loader import resolve  # noqa: E402
+
+MECHANISMS = ["pendulum", "planar_2r", "puma560", "four_bar", "slider_crank", "sla_suspension",
+              "stewart_platform"]
+RATIOS = [1, 2, 3, 5, 10, 20]
+NOISE = 0.02
+
+
+def testable(problem, phi, rng):
+    """Candidates a hidden effect can be drawn from, and the correlation matrix of their
+    (single-column summary) directions beyond the inertial model."""
+    n, f, _ = problem.inertial.shape
+    clean = problem.inertial @ phi
+    fit = S.weighted_fit(problem.inertial, clean + rng.standard_normal(clean.shape) * NOISE *
+                         np.sqrt(np.mean(clean ** 2, axis=0)))
+    out, skipped = [], Counter()
+    for i, cand in enumerate(problem.candidates):
+        basis = S.candidate_basis(cand, fit)
+        test = S.wald(fit.residual, basis, (n, f), fit.rank) if basis.shape[1] else S.NOT_TESTED
+        Z = (cand.columns * fit.weights[None, :, None]).reshape(n * f, -1)
+        norms = np.linalg.norm(Z, axis=0)
+        norms[norms == 0] = 1
+        kept = np.linalg.svd(S.project_out(Z / norms, fit.basis), compute_uv=False).min()
+        if not test.tested:
+            skipped[test.reason] += 1
+        elif kept < WEAK:
+            skipped["weak"] += 1
+        else:
+            out.append(i)
+    return out, skipped, fit
+
+
+def effect_force(problem, index, motion_q, coords, rng):
+    cand = problem.candidates[index]
+    theta = rng.uniform(0.5, 1.5, size=cand.columns.shape[-1]) * rng.choice([-1, 1])
+    if cand.kind == "spring":
+        q = motion_q[:, coords.index(cand.coordinate)]
+        theta[1] = theta[0] * (np.mean(q) + 0.1 * np.std(q))
+    return cand.columns @ theta
+
+
+def scaled(force, sd, ratio):
+    rms = np.sqrt(np.mean(force ** 2, axis=0))
+    return force * ratio / np.max(rms / sd)
+
+
+def outcome(d, truth):
+    """'right' (the truth named, nothing else), 'right+extra', 'ambiguous' (the truth in an
+    ambiguous group, no wrong name), 'wrong' (a wrong name), 'none'."""
+    named = {(e["kind"], e["coordinate"]) for e in d.effects}
+    groups = [{(c["kind"], c["coordinate"]) for c in a["candidates"]} for a in d.ambiguous]
+    truth = set(truth)
+    wrong = named - truth
+    explained = {t for t in truth if t in named or any(t in g for g in groups)}
+    if truth <= named and not wrong:
+        return "right"
+    if truth <= named:
+        return "right+extra"
+    if wrong:
+        return "wrong"
+    if explained == truth:
+        return "ambiguous"
+    return "none" if not explained else "partial"
+
+
+def run_mechanism(name, args, report):
+    m = resolve(name)
+    motion = trajectory_motion(m, args.samples)
+    sample = evaluate(m, motion)
+    problem = prepare(m, motion, sample)
+    coords = list(m.coordinates)
+    q_tree = np.stack([np.broadcast_to(np.asarray(v, float), (motion.count,)) for v in sample.q], axis=1)
+    rng = np.random.default_rng(args.seed)
+    pool, skipped, _ = testable(problem, random_physical_inertia(m, rng), rng)
+    kinds = sorted({problem.candidates[i].kind for i in pool})
+    report["skipped"][name] = dict(skipped)
+    report["pool"][name] = len(pool)
+
+    def dataset(hidden, ratio):
+        phi = random_physical_inertia(m, rng)
+        clean = problem.inertial @ phi
+        sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
+        tau = clean.copy()
+        for index in hidden:
+            tau += scaled(effect_force(problem, index, q_tree, coords, rng), sd, ratio)
+        noise = rng.standard_normal(clean.shape) * sd
+        held = int(round(0.3 * motion.count))
+        floor = np.sqrt(np.mean((sd / np.sqrt(np.mean(tau[-held:] ** 2, axis=0))) ** 2))
+        started = time.perf_counter()
+        d = diagnose(problem, tau + noise)
+        report["time"][name].append(time.perf_counter() - started)
+        return d, floor
+
+    # nothing hidden
+    for _ in range(args.null):
+        d, floor = dataset([], 0)
+        report["null"][name].append(bool(d.effects))
+        report["null_ambiguous"][name].append(bool(d.ambiguous))
+        report["null_closed"][name].append(d.closed)
+    # one effect of each kind
+    for kind in kinds:
+        choices = [i for i in pool if problem.candidates[i].kind == kind]
+        for ratio in RATIOS:
+            for _ in range(args.single):
+                index = int(rng.choice(choices))
+                d, floor = dataset([index], ratio)
+                truth = [(kind, problem.candidates[index].coordinate)]
+                result = outcome(d, truth)
+                report["single"][(kind, ratio)].append(result)
+                if ratio >= 3:
+                    named = [e["kind"] for e in d.effects]
+                    label = kind if result.startswith("right") else (
+                        named[0] if named else ("ambiguous" if d.ambiguous else "none"))
+                    report["confusion"][(kind, label)] += 1
+                    report["shrink"][name].append((d.gap["before"], d.gap["after"], d.gap["holdout_before"],
+                                                   d.gap["holdout_after"], floor))
+    # pairs
+    for _ in range(args.pairs):
+        a, b = rng.choice(pool, size=2, replace=False)
+        ca, cb = problem.candidates[a], problem.candidates[b]
+        if ca.coordinate == cb.coordinate and {ca.kind, cb.kind} == {"spring", "offset"}:
+            continue                       # one spring with another rest position: not two effects
+        d, floor = dataset([a, b], 5)
+        report["pairs"][name].append(outcome(d, [(ca.kind, ca.coordinate), (cb.kind, cb.coordinate)]))
+    # confusable pairs: the truth and a rival nearly collinear beyond the inertial model
+    confusable = confusable_pairs(problem, pool, rng, m)
+    report["confusable_found"][name] = len(confusable)
+    for k in range(min(args.confusable, 10 * len(confusable))):
+        a, b = confusable[k % len(confusable)]
+        d, _ = dataset([a], 5)
+        ca = problem.candidates[a]
+        report["confusable"][name].append(outcome(d, [(ca.kind, ca.coordinate)]))
+
+
+def confusable_pairs(problem, pool, rng, m):
+    phi = random_physical_inertia(m, rng)
+    _, _, fit = testable(problem, phi, rng)
+    n, f, _ = problem.inertial.shape
+    first = {}
+    for i in pool:
+        b = S.candidate_basis(problem.candidates[i], fit)
+        first[i] = b[:, 0] if b.shape[1] == 1 else None
+    single = [i for i in pool if first[i] is not None]
+    out = []
+    for x, i in enumerate(single):
+        for j in single[x + 1:]:
+            if abs(first[i] @ first[j]) > 0.95:
+                out.append((i, j))
+                out.append((j, i))
+    return out
+
+
+def rate(values, good):
+    values = list(values)
+    return (sum(v in good for v in values) / len(values)) if values else float("nan")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a small run")
+    parser.add_argument("--mechanisms", nargs="*", default=MECHANISMS)
+    parser.add_argument("--seed", type=int, default=2024)
+    args = parser.parse_args()
+    args.samples = 300
+    args.null, args.single, args.pairs, args.confusable = (20, 2, 10, 10) if args.quick else (100, 10, 40, 40)
+    report = {k: defaultdict(list) for k in ("null", "null_ambiguous", "null_closed", "single", "pairs",
+                                              "confusable", "time", "shrink")}
+    report["confusion"] = Counter()
+    report.update({"skipped": {}, "pool": {}, "confusable_found": {}})
+    started = time.perf_counter()
+    for name in args.mechanisms:
+        t0 = time.perf_counter()
+        run_mechanism(name, args, report)
+        print(f"{name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    print_report(report, args)
+    timing(args)
+    print(f"campaign: {time.perf_counter() - started:.0f} s")
+
+
+def print_report(report, args):
+    print(f"\nsamples {args.samples} per dataset, noise SD {NOISE:.0%} of each coordinate's RMS inertial "
+          f"torque, holdout 0.3, alpha 0.05, seed {args.seed}")
+    print("\ncandidates hidden effects are drawn from (left out: absorbed / support / weak):")
+    for name in report["pool"]:
+        print(f"  {name:18s} {report['pool'][name]:4d}  left out {report['skipped'][name]}")
+    print("\nnothing hidden: false-effect rate (a named effect), ambiguous reported, exit 0 (closed)")
+    for name, values in report["null"].items():
+        print(f"  {name:18s} n={len(values):4d}  false {np.mean(values):6.1%}  ambiguous "
+              f"{np.mean(report['null_ambiguous'][name]):6.1%}  closed {np.mean(report['null_closed'][name]):6.1%}")
+    kinds = sorted({k for k, _ in report["single"]})
+    print("\none hidden effect: right kind and coordinate (nothing else named) / right or ambiguous, by ratio")
+    print("  " + "kind".ljust(20) + "".join(f"{r:>14d}" for r in RATIOS))
+    for kind in kinds:
+        cells = []
+        for r in RATIOS:
+            v = report["single"][(kind, r)]
+            cells.append(f"{rate(v, {'right'}):5.0%}/{rate(v, {'right', 'right+extra', 'ambiguous'}):4.0%} n{len(v):<2d}"
+                         if v else " " * 14)
+        print("  " + kind.ljust(20) + "".join(f"{c:>14s}" for c in cells))
+    at3 = [o for (k, r), v in report["single"].items() if r >= 3 for o in v]
+    print(f"  all kinds, ratio >= 3: right {rate(at3, {'right'}):.1%}, right+extra {rate(at3, {'right+extra'}):.1%}, "
+          f"ambiguous {rate(at3, {'ambiguous'}):.1%}, wrong {rate(at3, {'wrong'}):.1%}, "
+          f"none {rate(at3, {'none', 'partial'}):.1%} (n={len(at3)})")
+    labels = kinds + ["ambiguous", "none"]
+    print("\nconfusion matrix, ratio >= 3 (rows: hidden kind; columns: named kind)")
+    print("  " + " " * 18 + "".join(f"{lab[:10]:>11s}" for lab in labels))
+    for kind in kinds:
+        print("  " + kind[:18].ljust(18) + "".join(f"{report['confusion'][(kind, lab)]:11d}" for lab in labels))
+    print("\npairs at ratio 5: both named / both named or ambiguous / a wrong name")
+    for name, values in report["pairs"].items():
+        print(f"  {name:18s} n={len(values):3d}  {rate(values, {'right', 'right+extra'}):6.1%}  "
+              f"{rate(values, {'right', 'right+extra', 'ambiguous'}):6.1%}  {rate(values, {'wrong'}):6.1%}")
+    print("\nconfusable pairs (|corr| > 0.95 beyond the model), one hidden at ratio 5: "
+          "confident wrong / ambiguous / right")
+    for name, values in report["confusable"].items():
+        print(f"  {name:18s} pairs {report['confusable_found'][name]:3d} n={len(values):3d}  wrong "
+              f"{rate(values, {'wrong'}):6.1%}  ambiguous {rate(values, {'ambiguous'}):6.1%}  right "
+              f"{rate(values, {'right', 'right+extra'}):6.1%}")
+    print("\ngap shrink, one effect at ratio >= 3 (medians): fit before -> after; holdout before -> after; "
+          "holdout noise floor; holdout after within 10 % of the floor")
+    for name, rows in report["shrink"].items():
+        a = np.array(rows, dtype=float)
+        within = np.mean(a[:, 3] <= 1.1 * a[:, 4])
+        print(f"  {name:18s} {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f};  {np.median(a[:, 2]):.4f} -> "
+              f"{np.median(a[:, 3]):.4f};  floor {np.median(a[:, 4]):.4f};  within {within:.0%}")
+    print("\ndiagnose time per dataset (median, s):")
+    for name, values in report["time"].items():
+        print(f"  {name:18s} {np.median(values):.3f}")
+
+
+def timing(args):
+    """diagnose on the SLA with 2,000 samples, against one plain OLS fit of the same data."""
+    m = resolve("sla_suspension")
+    rng = np.random.default_rng(args.seed)
+    started = time.perf_counter()
+    motion = trajectory_motion(m, 2000)
+    sample = evaluate(m, motion)
+    problem = prepare(m, motion, sample)
+    prepared = time.perf_counter() - started
+    clean = problem.inertial @ random_physical_inertia(m, rng)
+    sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
+    byl = {c.label: c for c in problem.candidates}
+    tau = clean + scaled(byl["viscous_friction:damper_s"].columns @ np.array([1.0]), sd, 5)
+    tau += rng.standard_normal(tau.shape) * sd
+    started = time.perf_counter()
+    d = diagnose(problem, tau)
+    elapsed = time.perf_counter() - started
+    A = problem.inertial.reshape(-1, problem.inertial.shape[-1])
+    started = time.perf_counter()
+    np.linalg.lstsq(A, tau.reshape(-1), rcond=None)
+    ols = time.perf_counter() - started
+    print(f"\nSLA, 2000 samples, {len(problem.candidates)} candidates: kinematics + columns {prepared:.2f} s, "
+          f"diagnose {elapsed:.2f} s, total {prepared + elapsed:.2f} s (target <= 10 s); one plain OLS fit "
+          f"{ols * 1e3:.1f} ms (diagnose = {elapsed / ols:.0f} OLS fits); named "
+          f"{[(e['kind'], e['coordinate']) for e in d.effects]}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,68 @@
+"""The candidate library of diagnosis: every registered effect (third parties' included) on
+every tree coordinate, or a user's selection ``KIND[:COORD]``, minus the effects the
+mechanism already has. Columns come from :func:`baseparams.identify.model.effect_columns`,
+so an effect on a dependent coordinate (a strut spring) reaches the independent ones
+through R^T exactly as simulation and identification model it.
+
+Spring and offset: a spring's columns are q and -1 (coefficients k and k q0), and on an
+independent coordinate its -1 column is exactly an offset there. Both stay candidates;
+selection (:mod:`.selection`) tests what each adds beyond the current model, prefers the
+offset when the spring's q column adds nothing significant beyond it, and once either is in
+the model the other is tested only on what it still adds (an offset is then absorbed).
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from baseparams import registry
+from baseparams.dynamics.evaluator import Sample
+from baseparams.errors import InputError
+from baseparams.identify.model import effect_columns
+from baseparams.identify.selection import Candidate
+from baseparams.model.mechanism import Mechanism
+
+
+def parse_selection(mechanism: Mechanism, specs: Sequence[str]) -> list[tuple[str, str]]:
+    """``KIND[:COORD]`` strings -> (kind, coordinate) pairs; a bare KIND means every tree
+    coordinate. Unknown kinds or coordinates are InputErrors naming the option."""
+    effects = registry.effects()
+    out: list[tuple[str, str]] = []
+    for spec in specs:
+        kind, _, coordinate = spec.partition(":")
+        kind, coordinate = kind.strip(), coordinate.strip()
+        if kind not in effects:
+            raise InputError(f"unknown effect {kind!r} in {spec!r}; known: {', '.join(sorted(effects))}",
+                             key="--candidates")
+        if coordinate and coordinate not in mechanism.coordinates:
+            raise InputError(f"{coordinate!r} in {spec!r} is not a joint coordinate of {mechanism.name} "
+                             f"(coordinates: {', '.join(mechanism.coordinates)})", key="--candidates")
+        for c in ([coordinate] if coordinate else mechanism.coordinates):
+            if (kind, c) not in out:
+                out.append((kind, c))
+    return out
+
+
+def all_pairs(mechanism: Mechanism) -> list[tuple[str, str]]:
+    """Every registered effect on every tree coordinate."""
+    return [(kind, c) for kind in registry.effects() for c in mechanism.coordinates]
+
+
+def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None
+            ) -> tuple[list[Candidate], list[str]]:
+    """(candidates, notes): the candidates' columns at ``n`` samples, without the mechanism's
+    own effects; an effect whose columns are not finite on this data (a plugin's bug) is
+    left out with a note rather than stopping the diagnosis."""
+    pairs = all_pairs(mechanism) if pairs is None else pairs
+    present = {(e.kind, e.coordinate) for e in mechanism.effects}
+    out, notes = [], []
+    for kind, coordinate in pairs:
+        if (kind, coordinate) in present:
+            continue
+        names, columns = effect_columns(mechanism, sample, n, kind, coordinate)
+        columns = np.ascontiguousarray(columns, dtype=float)
+        if not np.all(np.isfinite(columns)):
+            notes.append(f"candidate {kind}:{coordinate} left out: its columns are not finite on this data")
+            continue
+        out.append(Candidate(kind, coordinate, tuple(names), columns))
+    return out, notes

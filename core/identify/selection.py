@@ -1,0 +1,389 @@
+"""Statistical selection of missing effects: forward steps of Wald tests with a
+heteroscedasticity-and-autocorrelation-consistent (HAC) covariance, Holm's correction over
+the candidates, and encompassing tests that decide whether the winner is named or reported
+as ambiguous with its rivals.
+
+Everything works on the weighted, stacked rows of the model (sample-major: the f
+coordinates of sample 1, then of sample 2 ...). Each coordinate's rows are divided by its
+noise level estimated from the current model's residual (Gautier's weighting), so a
+coordinate with a large torque does not drown the others.
+
+Why these choices:
+
+- A candidate's columns are first projected on the orthogonal complement of the current
+  model (Frisch-Waugh-Lovell): the test then sees only what the candidate adds, and a
+  candidate the model absorbs (rotor inertia on a joint whose inertia is already a base
+  parameter; an offset once a spring on the same independent coordinate is in) has no
+  direction left and is not tested at all (``absorbed``).
+- Wald, not score (LM), statistics: with a strong missing effect the LM statistic's HAC
+  variance is computed from a residual that still contains the effect, which bounds the
+  statistic near N / lags and makes every correlated candidate look alike. The Wald
+  statistic uses the residual after the candidate is added, so the true effect stands out.
+- The HAC covariance sums each sample's scores over its coordinates and applies the
+  Newey-West (Bartlett) kernel over time (Driscoll-Kraay), with statsmodels'
+  ``S_hac_simple``. The lag window is at least the Newey-West rule 4 (N/100)^(2/9) and at
+  least the lag where the residual's autocorrelation falls inside its 95 % band: oversampled,
+  low-pass-filtered residuals are correlated over many samples and a naive F test would
+  reject far too often.
+- p values from F(r, dof) (r the candidate's directions, dof the rows left), ranked by the
+  Wilson-Hilferty normal equivalent of the statistic, which does not saturate at p = 0 and
+  compares candidates with different numbers of columns.
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+from statsmodels.stats.sandwich_covariance import S_hac_simple
+from statsmodels.tsa.stattools import acf
+
+# A model direction is kept when its singular value, columns scaled to unit norm, exceeds
+# RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
+RANK_TOL = 1e-6
+# Noise weighting: at most this many fits, until no weight changes by more than the tolerance.
+REWEIGHTING_PASSES = 12
+REWEIGHTING_TOL = 1e-3
+# A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
+# current model is projected out is absorbed by the model.
+ABSORB_TOL = 1e-7
+MAX_STEPS = 12
+# The tests are asymptotic in the number of samples a candidate acts on: a candidate whose
+# directions spread over fewer samples than this fraction of the data (a Stribeck bump
+# sampled at a few zero crossings) is not tested (its statistic would be one spike).
+MIN_SUPPORT = 0.05
+
+
+@dataclass(frozen=True)
+class Test:
+    """A Wald test: statistic, degrees of freedom (directions tested), p value, and the
+    Wilson-Hilferty normal equivalent ``z`` used for ranking; ``lags`` of the HAC window."""
+    stat: float
+    df: int
+    pvalue: float
+    z: float
+    lags: int = 0
+    reason: str = ""              # why not tested: "absorbed" or "support"
+
+    @property
+    def tested(self) -> bool:
+        return self.df > 0
+
+
+NOT_TESTED = Test(0.0, 0, 1.0, -np.inf, reason="absorbed")
+TOO_SPARSE = Test(0.0, 0, 1.0, -np.inf, reason="support")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """An effect on one coordinate: ``columns`` (N, f, c) on the independent coordinates."""
+    kind: str
+    coordinate: str
+    names: tuple[str, ...]
+    columns: np.ndarray
+
+    @property
+    def label(self) -> str:
+        return f"{self.kind}:{self.coordinate}"
+
+
+@dataclass
+class Rival:
+    """Evidence on a candidate that competes with the winner: both directions of the
+    encompassing test and the correlation of what the two explain."""
+    index: int
+    winner_over_rival: Test
+    rival_over_winner: Test
+    correlation: float
+
+
+@dataclass
+class Step:
+    """One forward step: every candidate's test, the Holm-adjusted p values, the chosen
+    candidate (None when nothing is significant) and the rivals it cannot be told from."""
+    tests: list[Test]
+    adjusted: np.ndarray
+    chosen: int | None = None
+    confusable: list[Rival] = field(default_factory=list)
+    beaten: list[Rival] = field(default_factory=list)
+
+
+@dataclass
+class Selection:
+    steps: list[Step]
+    added: list[int]              # candidate indices, in the order they entered the model
+    ambiguous: dict               # added index -> the confusable rivals of that step
+
+
+# ----- linear algebra --------------------------------------------------------------------
+def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | None = None) -> np.ndarray:
+    """An orthonormal basis of the range of ``matrix`` (rows, k): directions whose singular
+    value exceeds ``tol`` times the norm of the corresponding ``reference`` columns (the
+    columns before a projection; default: the largest singular value)."""
+    if matrix.shape[1] == 0:
+        return np.zeros((matrix.shape[0], 0))
+    if reference is not None:
+        scale = np.linalg.norm(reference, axis=0)
+        scale[scale == 0] = 1.0
+        scaled = matrix / scale
+        u, s, _ = np.linalg.svd(scaled, full_matrices=False)
+        keep = s > tol
+    else:
+        scale = np.linalg.norm(matrix, axis=0)
+        scale[scale == 0] = 1.0
+        u, s, _ = np.linalg.svd(matrix / scale, full_matrices=False)
+        keep = s > tol * (s[0] if s.size else 0.0)
+    return u[:, keep]
+
+
+def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """matrix minus its projection on the (orthonormal) ``basis``."""
+    if basis.shape[1] == 0:
+        return matrix
+    return matrix - basis @ (basis.T @ matrix)
+
+
+def newey_west_lags(n: int) -> int:
+    return int(np.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
+
+
+def hac_lags(residual: np.ndarray) -> int:
+    """The HAC window for a residual (N, f), from its mean autocorrelation over the
+    coordinates: 0 (White's covariance) when already the first lag is inside the 95 % band
+    +-1.96/sqrt(N) of a white sequence; otherwise twice the number of leading lags outside
+    it, at least the Newey-West rule 4 (N/100)^(2/9), at most N/4. (A fixed Newey-West window
+    on a white residual makes small-sample tests reject too often; one too short for a
+    correlated residual makes them reject far too often.)"""
+    n = residual.shape[0]
+    base = newey_west_lags(n)
+    limit = max(base, n // 4)
+    if n < 8:
+        return base
+    nlags = min(limit, n - 1)
+    mean = np.zeros(nlags + 1)
+    count = 0
+    for column in residual.T:
+        if np.std(column) > 0:
+            mean += acf(column, nlags=nlags, fft=True)
+            count += 1
+    if count == 0:
+        return base
+    mean /= count
+    inside = np.nonzero(np.abs(mean[1:]) < 1.96 / np.sqrt(n))[0]
+    leading = int(inside[0]) if inside.size else nlags
+    if leading == 0:
+        return 0
+    return int(min(limit, max(base, 2 * leading)))
+
+
+def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
+    """The fewest samples any direction of ``basis`` effectively acts on (participation
+    ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
+    n, f = shape
+    w = (basis ** 2).reshape(n, f, -1).sum(axis=1)
+    w = w / np.maximum(w.sum(axis=0), 1e-300)
+    return float(np.min(1.0 / np.sum(w ** 2, axis=0)))
+
+
+def wilson_hilferty(stat: float, df: int) -> float:
+    """The normal deviate with the same upper tail as chi2(df) at ``stat`` (approximately)."""
+    if df <= 0:
+        return -np.inf
+    c = 2.0 / (9.0 * df)
+    return float(((max(stat, 0.0) / df) ** (1.0 / 3.0) - (1.0 - c)) / np.sqrt(c))
+
+
+def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int,
+         lags: int | None = None) -> Test:
+    """Wald test that the orthonormal directions ``basis`` (rows, r), orthogonal to the null
+    model, have zero coefficients, given the null model's ``residual`` (rows,). HAC covariance:
+    per-sample scores summed over the f coordinates, Bartlett kernel over time."""
+    r = basis.shape[1]
+    if r == 0:
+        return NOT_TESTED
+    n, f = shape
+    if support(basis, shape) < max(MIN_SUPPORT * n, 10):
+        return TOO_SPARSE
+    gamma = basis.T @ residual
+    augmented = residual - basis @ gamma
+    if lags is None:
+        lags = hac_lags(augmented.reshape(n, f))
+    scores = (basis * augmented[:, None]).reshape(n, f, r).sum(axis=1)
+    rows = n * f
+    S = S_hac_simple(scores, nlags=lags) * rows / max(rows - dof - r, 1)   # small-sample factor
+    try:
+        stat = float(gamma @ np.linalg.solve(S, gamma))
+    except np.linalg.LinAlgError:
+        stat = float(gamma @ np.linalg.pinv(S) @ gamma)
+    denominator = max(n - int(np.ceil(dof / f)) - r, 1)     # samples left: scores are per sample
+    pvalue = float(stats.f.sf(stat / r, r, denominator))
+    return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
+
+
+# ----- the weighted model ------------------------------------------------------------------
+@dataclass
+class Fit:
+    """A weighted least-squares fit of y (N, f) on model columns (N, f, p)."""
+    weights: np.ndarray           # (f,): 1 / noise level per coordinate
+    basis: np.ndarray             # orthonormal basis of the weighted model's range (N f, rank)
+    residual: np.ndarray          # weighted residual (N f,)
+    coefficients: np.ndarray      # (p,), minimum-norm on the column-scaled model
+    rank: int
+
+
+def noise_levels(residual: np.ndarray, dof: int) -> np.ndarray:
+    """Per-coordinate noise level of a residual (N, f), with the degrees of freedom spent."""
+    n, f = residual.shape
+    level = np.sqrt(np.sum(residual ** 2, axis=0) / max(n * f - dof, 1) * f)
+    positive = level[level > 0]
+    floor = (positive.min() if positive.size else 1.0) * 1e-12 or 1e-300
+    return np.maximum(level, floor)
+
+
+def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> Fit:
+    """Least squares of y on ``model``; ``weights`` None: estimated from an unweighted fit
+    (Gautier's per-coordinate noise weighting, iterated)."""
+    n, f, p = model.shape
+    if weights is None:
+        # Gautier's weighting, iterated to its fixed point: one pass from the ordinary fit
+        # leaves a quiet coordinate's SD many times too large when the coordinates' forces
+        # differ by orders of magnitude (its residual then carries the loud ones' misfit,
+        # which a whiteness test reads as structure)
+        weights = np.ones(f)
+        for _ in range(REWEIGHTING_PASSES):
+            fit = weighted_fit(model, y, weights)
+            new = 1.0 / noise_levels(fit.residual.reshape(n, f) / weights, fit.rank)
+            converged = np.max(np.abs(new / weights - 1.0)) < REWEIGHTING_TOL
+            weights = new
+            if converged:
+                break
+    A = (model * weights[None, :, None]).reshape(n * f, p)
+    b = (y * weights[None, :]).reshape(n * f)
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    u, s, vt = np.linalg.svd(A / scale, full_matrices=False)
+    keep = s > RANK_TOL * (s[0] if s.size else 0.0)
+    u, s, vt = u[:, keep], s[keep], vt[keep]
+    proj = u.T @ b
+    coefficients = (vt.T @ (proj / s)) / scale
+    residual = b - u @ proj
+    return Fit(weights, u, residual, coefficients, int(keep.sum()))
+
+
+def candidate_basis(candidate: Candidate, fit: Fit) -> np.ndarray:
+    """The candidate's directions beyond the current model (weighted, orthonormal)."""
+    n, f, c = candidate.columns.shape
+    Z = (candidate.columns * fit.weights[None, :, None]).reshape(n * f, c)
+    return orthonormal_basis(project_out(Z, fit.basis), ABSORB_TOL, reference=Z)
+
+
+def conditional(first: np.ndarray, given: np.ndarray) -> np.ndarray:
+    """The directions of ``first`` beyond ``given`` (both orthonormal, beyond the model)."""
+    return orthonormal_basis(project_out(first, given), ABSORB_TOL, reference=first)
+
+
+def correlation(residual: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Correlation of what ``a`` and ``b`` each explain of the residual."""
+    fa, fb = a @ (a.T @ residual), b @ (b.T @ residual)
+    na, nb = np.linalg.norm(fa), np.linalg.norm(fb)
+    return float(fa @ fb / (na * nb)) if na > 0 and nb > 0 else 0.0
+
+
+def holm(pvalues: Sequence[float]) -> np.ndarray:
+    """Holm's step-down adjusted p values (statsmodels' ``multipletests(method="holm")`` gives
+    the same, tests/test_diagnose.py checks it, but it runs ``gc.collect()`` on every call:
+    85 ms in a process holding sympy, more than all of a step's tests)."""
+    p = np.asarray(pvalues, dtype=float)
+    order = np.argsort(p)
+    m = len(p)
+    stepped = np.maximum.accumulate(np.minimum(p[order] * (m - np.arange(m)), 1.0))
+    out = np.empty(m)
+    out[order] = stepped
+    return out
+
+
+# ----- the forward loop ----------------------------------------------------------------------
+def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
+           max_steps: int = MAX_STEPS) -> Selection:
+    """Forward selection: test every candidate against the current model, Holm-correct, add
+    the most significant (or, for a confusable group, its strongest member, reported as
+    ambiguous), refit and repeat until no candidate is significant."""
+    n, f, _ = model.shape
+    added: list[int] = []
+    steps: list[Step] = []
+    ambiguous: dict = {}
+    for _ in range(max_steps):
+        current = np.concatenate([model] + [candidates[i].columns for i in added], axis=-1)
+        fit = weighted_fit(current, y)
+        dof = fit.rank
+        bases, tests = {}, []
+        for i, cand in enumerate(candidates):
+            if i in added:
+                tests.append(NOT_TESTED)
+                continue
+            bases[i] = candidate_basis(cand, fit)
+            tests.append(wald(fit.residual, bases[i], (n, f), dof))
+        tested = [i for i, t in enumerate(tests) if t.tested]
+        adjusted = np.ones(len(candidates))
+        if tested:
+            adjusted[tested] = holm([tests[i].pvalue for i in tested])
+        step = Step(tests, adjusted)
+        steps.append(step)
+        significant = [i for i in tested if adjusted[i] <= alpha]
+        if not significant:
+            break
+        winner = max(significant, key=lambda i: tests[i].z)
+        rivals = [i for i in tested if tests[i].pvalue <= alpha and i != winner]
+        winner, confusable, beaten = resolve(winner, rivals, bases, fit, (n, f), dof, alpha)
+        step.chosen, step.confusable, step.beaten = winner, confusable, beaten
+        added.append(winner)
+        if confusable:
+            ambiguous[winner] = confusable
+    return Selection(steps, added, ambiguous)
+
+
+def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[int, int], dof: int,
+            alpha: float) -> tuple[int, list[Rival], list[Rival]]:
+    """Compare the winner with each rival by encompassing tests (does each add significantly
+    to the other?). A rival nested in the winner (an offset inside a spring on the same
+    independent coordinate) replaces it when the winner's extra directions are not
+    significant: the simpler effect explains the data. A rival that adds over the winner
+    while the winner adds nothing over it replaces the winner. Rivals over which the winner
+    adds nothing, and that add nothing over the winner, are confusable with it: the data
+    cannot tell them apart."""
+    seen = {winner}
+    rivals = [winner] + list(rivals)       # after a switch the first winner is a rival too
+    while True:
+        A = bases[winner]
+        confusable, beaten, switch = [], [], []
+        for j in rivals:
+            if j == winner:
+                continue
+            B = bases[j]
+            a_given_b, b_given_a = conditional(A, B), conditional(B, A)
+            res_b = fit.residual - B @ (B.T @ fit.residual)
+            res_a = fit.residual - A @ (A.T @ fit.residual)
+            t_ab = wald(res_b, a_given_b, shape, dof + B.shape[1])
+            t_ba = wald(res_a, b_given_a, shape, dof + A.shape[1])
+            rival = Rival(j, t_ab, t_ba, correlation(fit.residual, A, B))
+            a_adds = t_ab.tested and t_ab.pvalue <= alpha
+            b_adds = t_ba.tested and t_ba.pvalue <= alpha
+            if not t_ba.tested:                 # rival nested in the winner
+                (beaten if a_adds else switch).append(rival)
+            elif not t_ab.tested:               # winner nested in the rival
+                (switch if b_adds else beaten).append(rival)
+            elif a_adds and not b_adds:
+                beaten.append(rival)
+            elif not a_adds and b_adds:
+                switch.append(rival)
+            elif not a_adds and not b_adds:
+                confusable.append(rival)
+            # both add: two distinct effects; the rival competes again at the next step
+        fresh = [r for r in switch if r.index not in seen]
+        if not fresh:
+            confusable += [r for r in switch if r.index in seen]
+            return winner, confusable, beaten
+        # the simplest (fewest directions), then the strongest rival that explains the winner's signal
+        best = min(fresh, key=lambda r: (bases[r.index].shape[1], -r.rival_over_winner.z))
+        winner = best.index
+        seen.add(winner)
