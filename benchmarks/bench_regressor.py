@@ -1,11 +1,17 @@
-"""Benchmark: building the observation matrix W (not run by CI; prints its figures).
+"""Benchmark: the float64 regressor against Pinocchio, and the observation matrix W (not run by CI).
 
-- SLA suspension, N = 200 samples: float64, and arb at 30, 100 and 500 digits
-  (goal: 30 digits <= 2 s on the 2-core reference machine).
-- PUMA 560 float64, per-sample cost in one vectorised batch (goal: <= 10 us per sample;
-  Pinocchio's C++ regressor takes about 5 us per call).
+1. Regressor per sample, PUMA 560 and a 7R arm, batches of 1,000 / 10,000 / 50,000 random
+   states, measured side by side in this process: ours (the generated straight-line code,
+   :mod:`baseparams.dynamics.codegen`, generated once per mechanism; the time to generate it
+   is printed apart), the generic vectorised numpy path it replaced, and Pinocchio's
+   ``computeJointTorqueRegressor`` called sample after sample into one preallocated array
+   (the way a Python user batches it). Target: ours / Pinocchio <= 1.0.
+2. SLA suspension W (200 samples, loop closure included): float64, cold (first call in the
+   process: generates the code) and warm; arb at 30, 100 and 500 digits.
 
-Run: python benchmarks/bench_regressor.py [--repeat R]
+Pinocchio is optional (``import pinocchio``); without it the yardstick column says so.
+
+Run: python benchmarks/bench_regressor.py [--repeat R] [--quick]
 """
 
 import argparse
@@ -15,14 +21,24 @@ import tracemalloc
 
 import numpy as np
 
+from baseparams.dynamics import codegen
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.dynamics.regressor import tree_regressor_array
+from baseparams.dynamics.trajectory import observation_matrix
+from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.model import generate
 from baseparams.numeric.backends import Arb, Float64
-from baseparams.io.loader import resolve
-from baseparams.dynamics.trajectory import Trajectory, observation_matrix
+
+try:
+    import pinocchio as pin
+except ImportError:          # the yardstick is optional
+    pin = None
+
+SEVEN_R_SEED = 7             # generate.serial_chain(7, bodies=7, types="R"): the 7R arm
 
 
 def best_of(repeat, fn):
-    times = []
-    result = None
+    times, result = [], None
     for _ in range(repeat):
         start = time.perf_counter()
         result = fn()
@@ -38,29 +54,129 @@ def peak_memory_mb(fn):
     return peak / 2 ** 20
 
 
+def _se3(rot, point):
+    return pin.SE3(np.array(rot, dtype=float), np.array(point, dtype=float))
+
+
+def pinocchio_model(mechanism):
+    """A Pinocchio model with the mechanism's kinematics (open chains and trees of 1-coordinate
+    R and P joints): joint j placed at its parent frame in the parent's *joint* frame, which
+    is the parent body's frame moved by its child frame (body = joint frame x child^-1).
+    Inertias are the file's own, about each body's origin (when the child frames are
+    identities, Pinocchio's dynamic parameters are ours, in its order m, mc, Ixx Ixy Iyy Ixz
+    Iyz Izz: :func:`pin_columns`)."""
+    backend = Float64()
+    model = pin.Model()
+    model.gravity.linear = np.array(mechanism.numeric_gravity(backend), dtype=float)
+    joint_of, child_of = {0: 0}, {0: pin.SE3.Identity()}
+    bodies = {b.label: b for b in mechanism.bodies}
+    for edge in mechanism.tree:
+        joint = edge.joint
+        if edge.reversed or joint.type.name not in ("R", "P"):
+            raise ValueError("pinocchio_model: open chains of R and P joints only")
+        fp = _se3(*mechanism.numeric_frame(joint.parent_frame, backend))
+        fc = _se3(*mechanism.numeric_frame(joint.child_frame, backend))
+        placement = child_of[joint.parent] * fp       # parent joint frame -> this joint's frame
+        kind = pin.JointModelRZ() if joint.type.name == "R" else pin.JointModelPZ()
+        jid = model.addJoint(joint_of[joint.parent], kind, placement, f"j{joint.child}")
+        joint_of[joint.child], child_of[joint.child] = jid, fc
+        inertia = pin.Inertia.FromDynamicParameters(np.array(_pin_parameters(bodies[joint.child]), dtype=float))
+        model.appendBodyToJoint(jid, inertia, fc.inverse())          # the body frame in the joint frame
+    return model
+
+
+def _pin_parameters(body):
+    """m, mx, my, mz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz of a body (Pinocchio's order), or a
+    valid placeholder when the file has none."""
+    values = body.inertia
+    if values is None:
+        return [1.0, 0.1, 0.0, 0.0, 0.1, 0.0, 0.1, 0.0, 0.0, 0.1]
+    m, mx, my, mz, ixx, ixy, ixz, iyy, iyz, izz = (float(values[k]) for k in range(10))
+    return [m, mx, my, mz, ixx, ixy, iyy, ixz, iyz, izz]
+
+
+PIN_ORDER = (0, 1, 2, 3, 4, 5, 7, 6, 8, 9)   # ours (m mx my mz Ixx Ixy Ixz Iyy Iyz Izz) -> Pinocchio's
+
+
+def pin_columns(bodies):
+    """Column permutation taking our regressor's columns to Pinocchio's."""
+    return [10 * b + k for b in range(bodies) for k in PIN_ORDER]
+
+
+def states(n, count, seed=0):
+    rng = np.random.default_rng(seed)
+    return [rng.uniform(-2.0, 2.0, (count, n)) for _ in range(3)]
+
+
+def ours(mechanism, q, qd, qdd):
+    return codegen.tree_regressor(mechanism, list(q.T), list(qd.T), list(qdd.T))
+
+
+def generic(mechanism, q, qd, qdd):
+    ev = Evaluator(mechanism, Float64())
+    sample = ev.sample(list(q.T), list(qd.T), list(qdd.T))
+    return tree_regressor_array(sample.kin, sample.states, sample.qdd)
+
+
+def pinocchio_batch(model, data, q, qd, qdd):
+    out = np.empty((len(q), model.nv, 10 * (model.njoints - 1)))
+    for i in range(len(q)):
+        out[i] = pin.computeJointTorqueRegressor(model, data, q[i], qd[i], qdd[i])
+    return out
+
+
+def regressor_table(name, mechanism, batches, repeat):
+    n = len(mechanism.coordinates)
+    start = time.perf_counter()
+    codegen.compiled(mechanism, "regressor")
+    print(f"\n{name}: {n} coordinates, {len(mechanism.parameters)} parameters; code generated and "
+          f"compiled in {time.perf_counter() - start:.2f} s (once per mechanism and process)")
+    model = data = None
+    if pin is not None:
+        model = pinocchio_model(mechanism)
+        data = model.createData()
+    print(f"{'samples':>8} {'ours us/sample':>15} {'generic numpy':>14} {'Pinocchio':>10} {'ours/Pinocchio':>15}")
+    for count in batches:
+        q, qd, qdd = states(n, count)
+        t_ours, k = best_of(repeat, lambda: ours(mechanism, q, qd, qdd))
+        t_gen, k0 = best_of(max(1, repeat // 2), lambda: generic(mechanism, q, qd, qdd))
+        assert np.allclose(k, k0, rtol=1e-12, atol=1e-12 * np.abs(k0).max())
+        line = f"{count:8d} {t_ours / count * 1e6:15.2f} {t_gen / count * 1e6:14.2f}"
+        if model is not None:
+            t_pin, y = best_of(repeat, lambda: pinocchio_batch(model, data, q, qd, qdd))
+            line += f" {t_pin / count * 1e6:10.2f} {t_ours / t_pin:15.2f}"
+        else:
+            line += f" {'(absent)':>10} {'-':>15}"
+        print(line)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="batches of 1,000 and 10,000 only; no arb")
     args = parser.parse_args()
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}, "
+          f"numpy {np.__version__}, Pinocchio {pin.__version__ if pin else 'absent (pip install pin)'}")
+    batches = (1000, 10000) if args.quick else (1000, 10000, 50000)
+    regressor_table("PUMA 560", resolve("puma560"), batches, args.repeat)
+    seven = parse_mechanism(generate.serial_chain(SEVEN_R_SEED, bodies=7, types="R"))
+    regressor_table(f"7R arm (generate.serial_chain({SEVEN_R_SEED}, bodies=7, types='R'))", seven, batches,
+                    args.repeat)
+
     sla = resolve("sla_suspension")
-    print("\nSLA suspension, W = 400 x 70 (200 samples, 2 dof)")
-    print(f"{'arithmetic':>12} {'time (s)':>10} {'peak MB':>8}  closure residual")
+    print("\nSLA suspension, W = 400 x 70 (200 samples, 2 dof, loop closure included)")
+    print(f"{'arithmetic':>16} {'time (s)':>10} {'peak MB':>8}  closure residual")
+    start = time.perf_counter()
+    observation_matrix(sla, Float64())
+    print(f"{'float64 (cold)':>16} {time.perf_counter() - start:10.3f}")
     t, _ = best_of(args.repeat, lambda: observation_matrix(sla, Float64()))
-    print(f"{'float64':>12} {t:10.3f} {peak_memory_mb(lambda: observation_matrix(sla, Float64())):8.1f}")
+    print(f"{'float64 (warm)':>16} {t:10.3f} {peak_memory_mb(lambda: observation_matrix(sla, Float64())):8.1f}")
+    if args.quick:
+        return
     for digits in (30, 100, 500):
         t, (_, info) = best_of(args.repeat if digits < 500 else 1, lambda: observation_matrix(sla, Arb(digits)))
         mem = peak_memory_mb(lambda: observation_matrix(sla, Arb(digits)))
-        print(f"{f'arb {digits}':>12} {t:10.3f} {mem:8.1f}  {info['closure_residual']}")
-
-    puma = resolve("puma560")
-    print("\nPUMA 560 float64, one vectorised batch (regressor rows = 6 per sample)")
-    print(f"{'samples':>8} {'time (s)':>10} {'us/sample':>10}")
-    for n in (1000, 10000, 50000):
-        trajectory = Trajectory.default(puma, samples=n)
-        t, (w, _) = best_of(args.repeat, lambda: observation_matrix(puma, Float64(), trajectory))
-        assert w.shape == (6 * n, 60) and np.isfinite(w).all()
-        print(f"{n:8d} {t:10.3f} {t / n * 1e6:10.2f}")
+        print(f"{f'arb {digits}':>16} {t:10.3f} {mem:8.1f}  {info['closure_residual']}")
 
 
 if __name__ == "__main__":

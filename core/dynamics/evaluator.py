@@ -19,7 +19,8 @@ from baseparams.numeric.backends import Arb, Float64, in_backend_precision
 from baseparams.errors import KinematicsError, InputError
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.kinematics.krawczyk import enclose
-from baseparams.dynamics.regressor import energy_forms, tree_regressor, tree_regressor_array
+from baseparams.dynamics.regressor import energy_forms, tree_regressor_array
+from baseparams.dynamics import codegen
 
 
 @dataclass(frozen=True)
@@ -96,14 +97,18 @@ class Sample:
     @in_backend_precision
     def regressor(self):
         """K in the independent coordinates: f rows of 10 * bodies entries."""
-        k_tree = tree_regressor(self.kin, self.states, self.qdd)
+        k_tree = codegen.regressor_rows(self.kin, self.q, self.qd, self.qdd, self.states)
         if not self.kin.mechanism.loops:
             return k_tree
         return project(self.projection, k_tree, self.kin.zero)
 
     def regressor_array(self):
         """float64 only: K as an array (samples, f, 10 * bodies), without per-entry Python work."""
-        k_tree = tree_regressor_array(self.kin, self.states, self.qdd)
+        mech = self.kin.mechanism
+        if codegen.worthwhile(mech, "regressor", self.q):
+            k_tree = codegen.tree_regressor(mech, self.q, self.qd, self.qdd)
+        else:
+            k_tree = tree_regressor_array(self.kin, self.states, self.qdd)
         if not self.kin.mechanism.loops:
             return k_tree
         shape = k_tree.shape[:-2]
@@ -186,7 +191,7 @@ class Evaluator:
         # positions are as exact as double precision allows, not merely below 1e-12
         polish = isinstance(self.backend, Float64) and tol <= -12
         for _ in range(60):
-            values, rows, _ = self.kin.closure(self.kin.forward(q))
+            values, rows = self._closure(q)
             res = [values[i] for i in st.rows]
             if all(self.backend.small(v, tol) for v in res):
                 if not polish:
@@ -208,12 +213,19 @@ class Evaluator:
         # every equation, the redundant ones included, must now hold, to 1000 times the Newton
         # tolerance: the redundant ones were not solved for, they follow
         slack = tol + 3
-        values, _, _ = self.kin.closure(self.kin.forward(q))
+        values, _ = self._closure(q)
         if not all(self.backend.small(v, slack) for v in values):
             worst = max(self.backend.magnitude(v) for v in values)
             raise KinematicsError(f"{where}a redundant closure equation is violated (residual "
                                   f"{worst:.3g}): the geometry is inconsistent; {self.describe(q)}")
         return q
+
+    def _closure(self, q):
+        """Closure values and Jacobian rows at q (float64 batches: generated code once it pays)."""
+        if isinstance(self.backend, Float64) and codegen.worthwhile(self.mechanism, "closure", q):
+            return codegen.closure(self.mechanism, q)
+        values, rows, _ = self.kin.closure(self.kin.forward(q))
+        return values, rows
 
     def describe(self, q, only=None):
         parts = []
@@ -243,7 +255,7 @@ class Evaluator:
         """qd = R zd with R = [I; -Phi_d^-1 Phi_z]; qdd = R zdd - [0; Phi_d^-1 gamma]."""
         st = self.structure
         zero, one = self.kin.zero, self.kin.one
-        _, rows, _ = self.kin.closure(self.kin.forward(q))
+        _, rows = self._closure(q)
         jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
         jz = [[rows[i][j] for j in st.independent] for i in st.rows]
         try:
@@ -257,7 +269,10 @@ class Evaluator:
             r[i] = [-v for v in x[a]]
         qd = [_dot(r[i], zd, zero) for i in range(self.n)]
         states = self.kin.forward(q, qd)
-        _, _, bias = self.kin.closure(states, want_bias=True)
+        if isinstance(self.backend, Float64) and codegen.worthwhile(self.mechanism, "closure", q):
+            bias = codegen.closure_bias(self.mechanism, q, qd)
+        else:
+            _, _, bias = self.kin.closure(states, want_bias=True)
         s = self.backend.solve(jd, [[bias[i]] for i in st.rows])
         extra = [zero] * self.n
         for a, i in enumerate(st.dependent):

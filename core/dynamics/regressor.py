@@ -46,6 +46,11 @@ def tree_regressor(kin, states, qdd):
     if isinstance(kin.backend, Float64):
         full = tree_regressor_array(kin, states, qdd)
         return [[full[..., k, p] for p in range(full.shape[-1])] for k in range(kin.n)]
+    return generic_tree_regressor(kin, states, qdd)
+
+
+def generic_tree_regressor(kin, states, qdd):
+    """K's rows in any number type (the definition; float64 runs its generated form)."""
     zero = kin.zero
     rows = [[] for _ in range(kin.n)]
     for body in kin.mechanism.body_labels:
@@ -77,6 +82,9 @@ def tree_regressor_array(kin, states, qdd):
     for body in kin.mechanism.body_labels:
         jw, jv, cols = _body_terms(kin, states[body], qdd)
         coords = sorted(jw)
+        if not coords:              # a body welded to the ground (a URDF base link): no columns
+            blocks.append(np.zeros(size + (kin.n, 10)))
+            continue
         wrench = _stack([[f[0], f[1], f[2], n[0], n[1], n[2]] for f, n in cols], size)   # (..., 10, 6)
         jac = _stack([jv[c] + jw[c] for c in coords], size)                              # (..., k, 6)
         block = np.zeros(size + (kin.n, 10))

@@ -48,6 +48,7 @@ from baseparams.numeric.backends import precision
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
+SPECTRUM_IN_ARB_UP_TO = 80  # parameters: approximate spectra by an eig at D digits up to here
 FLOAT_BITS = 53           # precision of the helpers whose result is a float or an integer
 
 
@@ -101,21 +102,71 @@ def _column_exponents(W):
     nonzero, a higher precision shows it (and the ``vp`` solver's ranks then differ).
     """
     rows, cols = W.nrows(), W.ncols()
+    entries = W.entries()
     log2_norms, zero = [], []
     for j in range(cols):
-        total = arb(0)
-        all_contain_zero = True
-        for i in range(rows):
-            x = W[i, j]
-            if all_contain_zero and not x.contains(0):
-                all_contain_zero = False
-            total += x.mid() * x.mid()
-        if all_contain_zero:
+        column = entries[j::cols] if rows else []
+        if all(x.contains(0) for x in column):
             zero.append(j)
             log2_norms.append(None)
-        else:
-            log2_norms.append(log10(total) / 2 / math.log10(2))
+            continue
+        total = arb(0)
+        for x in column:
+            m = x.mid()
+            total += m * m
+        log2_norms.append(log10(total) / 2 / math.log10(2))
     return power_of_two_exponents(log2_norms), zero
+
+
+PANEL = 16                 # pivots per block update of the Schur complement
+
+
+def _eliminations(G, threshold, complete=True, skip=(), target=None):
+    """Symmetric Gaussian elimination (LDL^T) on the midpoints of G, one pivot at a time:
+    yields (column, pivot, Schur column) for each pivot above ``threshold``.
+
+    ``complete``: the largest remaining diagonal next (complete pivoting), until none
+    exceeds the threshold; else the columns in order, those at or below the threshold
+    skipped (the leftmost basis), until ``target`` pivots. Blocked: a pivot's column is
+    the panel-start matrix's minus the panel's earlier pivots (n x PANEL work in Python),
+    the matrix itself is updated once per panel by one arb_mat product (in C); the
+    diagonal is kept current. Every result is rounded to its midpoint (decisions only).
+    """
+    A = G.mid()
+    n = A.nrows()
+    entries = A.entries()
+    diag = [entries[j * n + j] for j in range(n)]
+    open_ = [j for j in range(n) if j not in set(skip)]
+    cols, scaled = [], []
+    count = 0
+    while open_ and (target is None or count < target):
+        if complete:
+            j = max(open_, key=lambda k: (diag[k], -k))
+        else:
+            j = open_[0]
+        p = diag[j]
+        open_.remove(j)
+        if not p > threshold:
+            if complete:
+                return
+            continue
+        col = entries[j::n]
+        for c, sc in zip(cols, scaled):
+            f = sc[j]
+            col = [(x - y * f).mid() for x, y in zip(col, c)]
+        inv = 1 / p
+        sc = [(x * inv).mid() for x in col]
+        for k in open_:
+            diag[k] = (diag[k] - col[k] * sc[k]).mid()
+        cols.append(col)
+        scaled.append(sc)
+        count += 1
+        yield j, p, col
+        if len(cols) == PANEL:
+            A = (A - arb_mat(len(cols), n, [x for c in cols for x in c]).transpose()
+                 * arb_mat(len(cols), n, [x for c in scaled for x in c])).mid()
+            entries = A.entries()
+            cols, scaled = [], []
 
 
 def _approximate_pivots(G, threshold, skip=()):
@@ -123,52 +174,16 @@ def _approximate_pivots(G, threshold, skip=()):
 
     Returns (order, pivots): the columns in pivot order and their pivots (midpoints).
     """
-    n = len(G)
-    A = [[x.mid() for x in row] for row in G]
-    remaining = [j for j in range(n) if j not in set(skip)]
     order, pivots = [], []
-    while remaining:
-        best = max(remaining, key=lambda j: (A[j][j], -j))
-        p = A[best][best]
-        if not p > threshold:
-            break
-        order.append(best)
+    for j, p, _ in _eliminations(G, threshold, complete=True, skip=skip):
+        order.append(j)
         pivots.append(p)
-        remaining.remove(best)
-        col = {i: A[i][best] for i in remaining}
-        inv = 1 / p
-        for i in remaining:
-            f = (col[i] * inv).mid()
-            if f == 0:
-                continue
-            row = A[i]
-            for j in remaining:
-                row[j] = (row[j] - f * col[j]).mid()
     return order, pivots
 
 
 def _natural_basis(G, threshold, target, skip=()):
     """Leftmost columns (parameter order) whose midpoint Schur pivot exceeds ``threshold``."""
-    n = len(G)
-    kept, L = [], []            # L: rows of the (midpoint) Cholesky factor of G_KK
-    for j in range(n):
-        if len(kept) == target:
-            break
-        if j in skip:
-            continue
-        y = []
-        for a, k in enumerate(kept):
-            s = G[k][j].mid()
-            for b in range(a):
-                s -= L[a][b] * y[b]
-            y.append((s / L[a][a]).mid())
-        d = G[j][j].mid()
-        for v in y:
-            d -= v * v
-        if d.mid() > threshold:
-            kept.append(j)
-            L.append(y + [d.mid().sqrt().mid()])
-    return kept
+    return [j for j, _, _ in _eliminations(G, threshold, complete=False, skip=skip, target=target)]
 
 
 def _select_rows(Wk, Gkk):
@@ -196,20 +211,16 @@ def _select_rows(Wk, Gkk):
 def _cholesky_mid(G):
     """Upper-triangular R with R^T R = G (midpoints), or None if a pivot is not positive."""
     n = G.nrows()
-    R = [[arb(0)] * n for _ in range(n)]
-    for i in range(n):
-        d = G[i, i].mid()
-        for k in range(i):
-            d = (d - R[k][i] * R[k][i]).mid()
-        if not d > 0:
+    R = arb_mat(n, n)
+    done = 0
+    for i, p, col in _eliminations(G, arb(0), complete=False):
+        if i != done:                    # an earlier pivot was not positive
             return None
-        R[i][i] = d.sqrt().mid()
-        for j in range(i + 1, n):
-            v = G[i, j].mid()
-            for k in range(i):
-                v = (v - R[k][i] * R[k][j]).mid()
-            R[i][j] = (v / R[i][i]).mid()
-    return arb_mat(n, n, [R[i][j] for i in range(n) for j in range(n)])
+        root = p.sqrt().mid()
+        for j in range(i, n):
+            R[i, j] = (col[j] / root).mid()
+        done += 1
+    return R if done == n else None
 
 
 # ----- matrices ------------------------------------------------------------------
@@ -217,42 +228,51 @@ def _columns(W, cols, exponents):
     """The scaled columns ``cols`` of W as an arb_mat (exact power-of-two scaling)."""
     two = arb(2)
     powers = [two ** (-exponents[j]) for j in cols]
-    rows = W.nrows()
-    if not cols:
-        return arb_mat(rows, 0)
-    return arb_mat(rows, len(cols), [W[i, j] * p for i in range(rows) for j, p in zip(cols, powers)])
+    rows, n = W.nrows(), W.ncols()
+    if not cols or not rows:
+        return arb_mat(rows, len(cols))
+    e = W.entries()
+    return arb_mat(rows, len(cols), [e[i * n + j] * p for i in range(rows) for j, p in zip(cols, powers)])
+
+
+def _pick(M, cols):
+    """Columns ``cols`` of M (copied, not rounded)."""
+    return _submatrix(M, list(range(M.nrows())), cols) if M.nrows() else arb_mat(0, len(cols))
 
 
 def _rows(M, rows):
-    if not rows or not M.ncols():
-        return arb_mat(len(rows), M.ncols())
-    return arb_mat(len(rows), M.ncols(), [M[i, j] for i in rows for j in range(M.ncols())])
+    n = M.ncols()
+    if not rows or not n:
+        return arb_mat(len(rows), n)
+    e = M.entries()
+    return arb_mat(len(rows), n, [x for i in rows for x in e[i * n:(i + 1) * n]])
 
 
 def _submatrix(G, rows, cols):
     if not rows or not cols:
         return arb_mat(len(rows), len(cols))
-    return arb_mat(len(rows), len(cols), [G[i][j] for i in rows for j in cols])
+    n = G.ncols()
+    e = G.entries()
+    return arb_mat(len(rows), len(cols), [e[i * n + j] for i in rows for j in cols])
 
 
 def _mid(M):
-    return arb_mat(M.nrows(), M.ncols(), [M[i, j].mid() for i in range(M.nrows()) for j in range(M.ncols())])
+    return M.mid()
 
 
 def _frobenius_upper(M):
     """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits)."""
     total = arb(0)
-    for i in range(M.nrows()):
-        for j in range(M.ncols()):
-            total += arb(abs(M[i, j]).upper()) ** 2
+    for x in M.entries():
+        total += arb(abs(x).upper()) ** 2
     return arb(total.sqrt().upper())
 
 
-def _verify(W, G, kept, exponents):
+def _verify(Ws, G, kept):
     """(rows, beta_s) with Ws_RK beta_s = Ws_RE solved in ball arithmetic, or None when
     Ws_RK is not proven nonsingular."""
-    eliminated = [j for j in range(W.ncols()) if j not in set(kept)]
-    Wk = _columns(W, kept, exponents)
+    eliminated = [j for j in range(Ws.ncols()) if j not in set(kept)]
+    Wk = _pick(Ws, kept)
     if not kept:
         return [], arb_mat(0, len(eliminated))
     rows = _select_rows(Wk, _submatrix(G, kept, kept))
@@ -261,7 +281,7 @@ def _verify(W, G, kept, exponents):
     Wrk = _rows(Wk, rows)
     try:
         if eliminated:
-            beta_s = Wrk.solve(_rows(_columns(W, eliminated, exponents), rows))
+            beta_s = Wrk.solve(_rows(_pick(Ws, eliminated), rows))
         else:
             Wrk.inv()
             beta_s = arb_mat(len(kept), 0)
@@ -286,9 +306,8 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
     n = W.ncols()
     exponents, zero = _column_exponents(W)
     everything = _columns(W, list(range(n)), exponents)
-    Gm = everything.transpose() * everything
-    G = [[Gm[i, j] for j in range(n)] for i in range(n)]
-    gmax = max((float(abs(G[i][i].mid())) for i in range(n)), default=0.0)
+    G = everything.transpose() * everything
+    gmax = max((float(abs(G[i, i].mid())) for i in range(n)), default=0.0)
     threshold = arb(NOISE_FACTOR * n * max(gmax, 1e-300)) * arb(10) ** (-digits)
     order, pivots = _approximate_pivots(G, threshold, skip=zero)
     notes = []
@@ -310,7 +329,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
     verified = None
     while verified is None:
         for cand, how in candidates:
-            verified = _verify(W, G, cand, exponents)
+            verified = _verify(everything, G, cand)
             if verified is not None:
                 kept, used = cand, how
                 break
@@ -326,9 +345,9 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
     eliminated = [j for j in range(n) if j not in set(kept)]
 
     # s_{r+1} <= ||Ws_E - Ws_K B||_F for any exact B (Weyl: [Ws_K, Ws_K B] has rank r)
-    Wk = _columns(W, kept, exponents)
+    Wk = _pick(everything, kept)
     if eliminated and kept:
-        We = _columns(W, eliminated, exponents)
+        We = _pick(everything, eliminated)
         B = _mid(beta_s)
         try:                            # one least-squares refinement of B on all rows
             E = _mid(We - Wk * B)
@@ -338,7 +357,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
         tail = _frobenius_upper(We - Wk * B)
     elif eliminated:
         B = arb_mat(0, len(eliminated))
-        tail = _frobenius_upper(_columns(W, eliminated, exponents))
+        tail = _frobenius_upper(_pick(everything, eliminated))
     else:
         B = arb_mat(len(kept), 0)
         tail = arb(0)
@@ -358,7 +377,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
         for b, j in enumerate(eliminated):
             beta[a, b] = beta_s[a, b] * two ** (exponents[j] - exponents[i])
 
-    svals = _approximate_singular_values(G) if approximate_spectrum else []
+    svals = _approximate_singular_values(G, everything) if approximate_spectrum else []
     return BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
                         exponents, zero, tail, sigma_lower, svals, B, notes)
 
@@ -420,7 +439,14 @@ def _tail_singular_values(W, a):
     E = _mid(We - _columns(W, a.kept, a.exponents) * a.refined) if a.kept else _mid(We)
     live = [j for j in range(E.ncols()) if any(E[i, j] != 0 for i in range(E.nrows()))]
     values = []
-    if live:
+    if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
+        Ml = _submatrix(E, list(range(E.nrows())), live)
+        biggest = max(abs(x) for x in Ml.entries())
+        exponent = int(math.floor(log10(biggest) / math.log10(2)))
+        values = np.linalg.svd(_float_matrix(Ml, exponent), compute_uv=False)
+        two = arb(2) ** exponent
+        values = [arb(float(v)) * two for v in values] + [arb(0)] * (len(live) - len(values))
+    elif live:
         Ml = arb_mat(E.nrows(), len(live), [E[i, j] for i in range(E.nrows()) for j in live])
         M = Ml.transpose() * Ml
         values = [abs(e.real.mid()).sqrt() for e in acb_mat(M).eig(algorithm="approx")]
@@ -428,20 +454,32 @@ def _tail_singular_values(W, a):
     return [v.str(6, radius=False) for v in values] + ["0"] * (E.ncols() - len(live))
 
 
-def _approximate_singular_values(G):
+def _approximate_singular_values(G, Ws):
     """sqrt(|eigenvalues|) of the scaled Gram matrix, largest first, as decimal strings.
 
     ``acb_mat.eig(algorithm="approx")``: no error bounds (the cluster of zero eigenvalues
     defeats rigorous isolation); the values after the ridge are the working precision's
-    noise, and ``BallAnalysis.tail_bound`` bounds them rigorously.
+    noise, and ``BallAnalysis.tail_bound`` bounds them rigorously. Beyond
+    ``SPECTRUM_IN_ARB_UP_TO`` parameters (an eig at D digits costs tens of seconds there)
+    they are the float64 singular values of Ws's midpoints: the same values to float
+    accuracy (absolute 1e-16 of the largest), nothing proven either way.
     """
-    n = len(G)
+    n = G.nrows()
     if n == 0:
         return []
-    M = acb_mat(n, n, [G[i][j] for i in range(n) for j in range(n)])
+    if n > SPECTRUM_IN_ARB_UP_TO:
+        values = np.linalg.svd(_float_matrix(Ws), compute_uv=False) if Ws.nrows() else np.zeros(0)
+        return [arb(float(v)).str(12, radius=False) for v in values] + ["0"] * (n - len(values))
+    M = acb_mat(G)
     values = [abs(e.real.mid()).sqrt() for e in M.eig(algorithm="approx")]
     values.sort(key=lambda v: -log10(v))
     return [v.str(12, radius=False) for v in values]
+
+
+def _float_matrix(M, exponent=0):
+    """The midpoints of M times 2^-exponent (exact) as a float64 array."""
+    scale = arb(2) ** (-exponent)
+    return np.array([float((x.mid() * scale).mid()) for x in M.entries()]).reshape(M.nrows(), M.ncols())
 
 
 # ----- digits, agreement, rationals ------------------------------------------------

@@ -5,8 +5,14 @@ recovered from the balls and confirmed at twice the digits."""
 
 import copy
 import math
+import sys
 import time
 from fractions import Fraction
+
+try:
+    import resource
+except ImportError:        # not on Windows: peak memory is then not reported
+    resource = None
 
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import observation_matrix
@@ -24,6 +30,32 @@ MIN_DIGITS = 10            # coefficients must agree to 10 digits between two pr
 LADDER = (30, 60, 120, 240, 500)
 CHECK_SEED = 7919          # seed of the first independent excitation batch (then +1, +2)
 CHECK_ROUNDS = 2           # independent batches that may be added to W before giving up
+ROWS_PER_PARAMETER = 4     # default W when the file's trajectory gives more than MAX_ROWS_PER_PARAMETER
+MAX_ROWS_PER_PARAMETER = 6
+MIN_SAMPLES = 10
+
+
+def default_samples(mechanism):
+    """Samples of the file's trajectory for W: the file's, unless they give more than 6 rows
+    per parameter; then 4 rows per parameter (the rank is at most the number of
+    parameters: 4 per parameter leave a wide margin). More rows only cost time (the
+    analysis grows as rows x parameters^2); an excitation too poor for the rank is caught
+    by the independent random batch, which then joins W."""
+    if mechanism.trajectory is None:
+        return None
+    f = max(1, len(mechanism.independent))
+    samples, params = mechanism.trajectory.samples, len(mechanism.parameters)
+    if samples * f <= MAX_ROWS_PER_PARAMETER * params:
+        return samples
+    return max(MIN_SAMPLES, math.ceil(ROWS_PER_PARAMETER * params / f))
+
+
+def peak_memory_mb():
+    """The process's peak resident memory so far (MB), or None where unknown."""
+    if resource is None:
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / 2 ** 20 if sys.platform == "darwin" else peak / 2 ** 10, 1)
 
 
 class BallRun:
@@ -202,7 +234,7 @@ class VariablePrecisionSolver:
             chosen[k] for k in ("digits", "samples", "ladder", "pivoting", "recover", "kept", "seed"))
         require_applicable(self, mechanism)
         start = time.perf_counter()
-        trajectory = Trajectory.default(mechanism, samples=samples)
+        trajectory = Trajectory.default(mechanism, samples=samples or default_samples(mechanism))
         params = mechanism.parameters
         warnings, notes = [], []
         steps = [int(digits)] if digits else [int(d) for d in ladder]
@@ -288,6 +320,7 @@ class VariablePrecisionSolver:
             "zero_columns": [params[j] for j in a.zero_columns],
             "rational_recovery": recovery,
             "notes": notes + a.notes,
+            "peak_memory_mb": peak_memory_mb(),
         }
         diagnostics = Diagnostics(
             summary=summary, details=details,

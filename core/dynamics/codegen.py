@@ -1,0 +1,696 @@
+"""The float64 regressor (and loop-closure terms) as straight-line numpy code, generated once per mechanism.
+
+Why: the generic kinematics (:mod:`baseparams.kinematics.tree`, :mod:`.regressor`) runs on
+any number type, so over a batch of samples it makes thousands of small numpy calls on
+Python lists, most of them multiplying by the exact zeros and ones of the joint frames.
+Here the same generic code runs once on *tracing* numbers (:class:`Sym`) that record each
+operation instead of computing it; zeros and ones fold away, repeated subexpressions are
+shared (hash-consing, the common subexpression elimination sympy.cse would do, without
+sympy's cost on large chains), dead terms are dropped, and what is left is written out as
+one Python function of numpy arrays, evaluated in cache-sized chunks of the batch.
+
+Because the recorded operations are the generic code's own, in the same order, the
+generated regressor equals the generic one to the last bit except where a folded ``x * 1``
+or ``x + 0`` skipped a rounding-free operation; tests/test_codegen.py checks it to 1e-12
+relative on generated chains, trees and loops, and against Pinocchio.
+
+The source is standalone (numpy only): ``baseparams export MECH --to python`` writes it
+(with the base regressor) as a module users import; :func:`compiled` execs the same text.
+"""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy
+from flint import arb
+
+from baseparams.dynamics.regressor import generic_tree_regressor, tree_regressor as tree_regressor_rows_generic
+from baseparams.kinematics.tree import TreeKinematics
+from baseparams.numeric.backends import Arb, Exact, Symbolic
+
+CHUNK = 2000          # samples per pass of the numpy code: its temporaries stay in cache
+
+
+# ----- tracing numbers ------------------------------------------------------------------------
+class Graph:
+    """Recorded operations: node i is ``ops[i] = (op, a, b)``; an operand is a node id (int)
+    or ``("c", value)``, an exact constant (sympy number or int) of the geometry."""
+
+    def __init__(self):
+        self.ops: list[tuple] = []
+        self._memo: dict[tuple, Sym] = {}
+
+    def node(self, op, a=None, b=None):
+        x, y = _operand(a), _operand(b)
+        if op in ("add", "mul") and (isinstance(x, tuple) or (isinstance(y, int) and y < x)):
+            x, y = y, x                       # commutative: one node for a+b and b+a, node first
+        key = (op, x, y)
+        found = self._memo.get(key)
+        if found is None:
+            found = Sym(self, len(self.ops))
+            self.ops.append(key)
+            self._memo[key] = found
+        return found
+
+    def input(self, name):
+        return self.node("in", ("i", name))
+
+
+def _operand(v):
+    if v is None or isinstance(v, tuple):
+        return v
+    return v.index if isinstance(v, Sym) else ("c", sympy.sympify(v))
+
+
+def _const(v):
+    return not isinstance(v, Sym)
+
+
+def _negated(v):
+    """The x of ``v = -x`` (a traced negation), else None: negations fold into + and -."""
+    if isinstance(v, Sym):
+        op = v.graph.ops[v.index]
+        if op[0] == "neg":
+            return Sym(v.graph, op[1])
+    return None
+
+
+def _graph(a, b):
+    return (a if isinstance(a, Sym) else b).graph
+
+
+def _add(a, b):
+    if _const(a) and _const(b):
+        return a + b
+    if _const(a) and a == 0:
+        return b
+    if _const(b) and b == 0:
+        return a
+    if _negated(b) is not None:
+        return _sub(a, _negated(b))
+    if _negated(a) is not None:
+        return _sub(b, _negated(a))
+    return _graph(a, b).node("add", a, b)
+
+
+def _sub(a, b):
+    if _const(a) and _const(b):
+        return a - b
+    if _const(b) and b == 0:
+        return a
+    if _const(a) and a == 0:
+        return _neg(b)
+    if _negated(b) is not None:
+        return _add(a, _negated(b))
+    return _graph(a, b).node("sub", a, b)
+
+
+def _mul(a, b):
+    if _const(a) and _const(b):
+        return a * b
+    if _const(a):
+        a, b = b, a
+    if _const(b):
+        if b == 0:
+            return b * 0
+        if b == 1:
+            return a
+        if b == -1:
+            return _neg(a)
+        if _negated(a) is not None:
+            return _mul(_negated(a), -b)
+        return a.graph.node("mul", a, b)
+    if _negated(a) is not None and _negated(b) is not None:
+        return _mul(_negated(a), _negated(b))
+    return a.graph.node("mul", a, b)
+
+
+def _div(a, b):
+    if _const(a) and _const(b):
+        return a / b
+    if _const(b) and b == 1:
+        return a
+    if _const(b):
+        return _mul(a, 1 / sympy.sympify(b))
+    return _graph(a, b).node("div", a, b)
+
+
+def _neg(a):
+    if _const(a):
+        return -a
+    if _negated(a) is not None:
+        return _negated(a)
+    return a.graph.node("neg", a)
+
+
+class Sym:
+    """A traced value: arithmetic records a node of its :class:`Graph`."""
+
+    __slots__ = ("graph", "index")
+
+    def __init__(self, graph, index):
+        self.graph = graph
+        self.index = index
+
+    __add__ = _add
+
+    def __radd__(self, other):
+        return _add(other, self)
+
+    __sub__ = _sub
+
+    def __rsub__(self, other):
+        return _sub(other, self)
+
+    __mul__ = _mul
+
+    def __rmul__(self, other):
+        return _mul(other, self)
+
+    __truediv__ = _div
+
+    def __rtruediv__(self, other):
+        return _div(other, self)
+
+    __neg__ = _neg
+
+    def __pos__(self):
+        return self
+
+    def cos(self):
+        inner = _negated(self)
+        return self.graph.node("cos", self if inner is None else inner)
+
+    def sin(self):
+        inner = _negated(self)
+        return self.graph.node("sin", self) if inner is None else _neg(self.graph.node("sin", inner))
+
+
+class _Tracing(Symbolic):
+    """Exact sympy geometry (so a constant is exact in every arithmetic the code runs in);
+    angles are traced."""
+
+    def cos_sin(self, x):
+        if isinstance(x, Sym):
+            return x.cos(), x.sin()
+        return super().cos_sin(x)
+
+
+# ----- what is traced ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class Kernel:
+    """One generated function: its inputs (subsets of q, qd, qdd) and the arrays it fills,
+    each ``name -> (trailing shape, [(index, traced value)])``."""
+    name: str
+    inputs: tuple
+    outputs: dict
+
+
+PARTS = ("regressor", "closure")   # what can be generated: K_tree; the loop-closure terms
+
+
+def trace(mechanism, parts=PARTS) -> tuple[Graph, list[Kernel]]:
+    """Run the generic tree regressor (``"regressor"``) and, for a closed loop, the closure
+    equations with their Jacobian and bias (``"closure"``, :meth:`TreeKinematics.closure`)
+    of ``mechanism`` on tracing numbers: the graph and the kernels to write from it."""
+    kin = TreeKinematics(mechanism, _Tracing())
+    g = Graph()
+    n = kin.n
+    q, qd, qdd = ([g.input((name, i)) for i in range(n)] for name in ("q", "qd", "qdd"))
+    states = kin.forward(q, qd)
+    kernels = []
+    if "regressor" in parts:
+        rows = generic_tree_regressor(kin, states, qdd)
+        p = 10 * len(mechanism.body_labels)
+        kernels.append(Kernel("_tree_regressor", ("q", "qd", "qdd"), {
+            "K": ((n, p), [((k, j), v) for k, row in enumerate(rows) for j, v in enumerate(row)])}))
+    if "closure" in parts and mechanism.loops:
+        values, jac, _ = kin.closure(kin.forward(q))
+        m = len(values)
+        kernels.append(Kernel("_closure", ("q",), {
+            "phi": ((m,), [((i,), v) for i, v in enumerate(values)]),
+            "jac": ((m, n), [((i, j), v) for i, row in enumerate(jac) for j, v in enumerate(row)])}))
+        _, _, bias = kin.closure(states, want_bias=True)
+        kernels.append(Kernel("_closure_bias", ("q", "qd"), {
+            "gamma": ((m,), [((i,), v) for i, v in enumerate(bias)])}))
+    return g, kernels
+
+
+# ----- writing the code -----------------------------------------------------------------------
+_BINARY = {"add": ("+", "add"), "sub": ("-", "subtract"), "mul": ("*", "multiply"), "div": ("/", "divide")}
+_UNARY = {"neg": "negative", "cos": "cos", "sin": "sin"}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where a kernel's output array gets its entries: ``slots[j]`` (a flat index into the
+    array of trailing ``shape``) is row j of the buffer the kernel fills, computed by node
+    ``nodes[j]``; ``constants`` are (flat index, exact value) pairs, the same for every
+    sample; every other entry is exactly zero."""
+    shape: tuple
+    slots: tuple
+    nodes: tuple
+    constants: tuple
+
+
+def layouts(kernel: Kernel) -> dict[str, Layout]:
+    out = {}
+    for name, (shape, entries) in kernel.outputs.items():
+        slots, nodes, constants = [], [], []
+        for index, v in entries:
+            flat = int(np.ravel_multi_index(index, shape))
+            if isinstance(v, Sym):
+                slots.append(flat)
+                nodes.append(v.index)
+            elif v != 0:
+                constants.append((flat, sympy.sympify(v)))
+        out[name] = Layout(tuple(shape), tuple(slots), tuple(nodes), tuple(constants))
+    return out
+
+
+@dataclass
+class Constants:
+    """The exact constants the kernels of one module read, numbered in order of use."""
+    values: list = field(default_factory=list)
+    _index: dict = field(default_factory=dict)
+
+    def ref(self, value) -> str:
+        k = self._index.get(value)
+        if k is None:
+            k = self._index[value] = len(self.values)
+            self.values.append(value)
+        return f"C[{k}]"
+
+
+def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bool = False) -> str:
+    """``def name(<inputs>, C, <buffers>)``: straight-line code of the kernel.
+
+    numpy flavour: inputs are (coordinates, chunk) arrays and row j of each buffer receives
+    its layout's slot j (computed straight into the row, ``out=``). ``scalar`` flavour (ball
+    or rational arithmetic, one state per call): inputs are sequences of numbers, buffers
+    are lists, ``F`` is the backend's (cos, sin). ``C``: the constants' values in the
+    arithmetic of the call.
+
+    Only nodes an output needs are written; a register is reused once its value's last
+    reader has run, so a long chain does not keep every temporary of the chunk alive."""
+    ops = graph.ops
+    writes: dict[int, list] = {}
+    for name, layout in layouts(kernel).items():
+        for row, node in enumerate(layout.nodes):
+            writes.setdefault(node, []).append(f"{name}[{row}]")
+    live = [False] * len(ops)
+    stack = list(writes)
+    while stack:
+        i = stack.pop()
+        if live[i]:
+            continue
+        live[i] = True
+        stack.extend(x for x in _operands(ops[i]) if not live[x])
+    last = {}
+    for i, op in enumerate(ops):
+        if live[i]:
+            for x in _operands(op):
+                last[x] = i
+    lines = [f"def {kernel.name}({', '.join(kernel.inputs + (('C', 'F') if scalar else ('C',)) + tuple(kernel.outputs))}):"]
+    free: list[str] = []
+    reg: dict[int, str] = {}
+    count = 0
+    for i, op in enumerate(ops):
+        if not live[i]:
+            continue
+        kind, a, b = op
+        rows = writes.get(i, [])
+        first = None                 # the buffer row the value was computed into
+        if kind == "in":
+            expr = f"{a[1][0]}[{a[1][1]}]"
+        else:
+            ra = reg[a] if isinstance(a, int) else constants.ref(a[1])
+            rb = reg[b] if isinstance(b, int) else constants.ref(b[1]) if b is not None else None
+            if rows and not scalar:
+                args = f"{ra}, {rb}" if kind in _BINARY else ra
+                name = _BINARY[kind][1] if kind in _BINARY else _UNARY[kind]
+                expr = f"_np.{name}({args}, out={rows[0]})"
+                first, rows = rows[0], rows[1:]
+            elif kind in _BINARY:
+                expr = f"{ra} {_BINARY[kind][0]} {rb}"
+            elif kind == "neg":
+                expr = f"-{ra}"
+            else:
+                expr = f"F[{('cos', 'sin').index(kind)}]({ra})" if scalar else f"_np.{kind}({ra})"
+            for x in set(_operands(op)):
+                if last[x] == i:
+                    free.append(reg.pop(x))
+        if i in last or first is None:
+            if free:
+                target = free.pop()
+            else:
+                target, count = f"r{count}", count + 1
+            reg[i] = target
+            lines.append(f"    {target} = {expr}")
+            source = target
+        else:
+            lines.append(f"    {expr}")
+            source = first
+        lines.extend(f"    {row} = {source}" for row in rows)
+        if i not in last and i in reg:
+            free.append(reg.pop(i))
+    if len(lines) == 1:
+        lines.append("    pass")
+    return "\n".join(lines) + "\n"
+
+
+def _operands(op):
+    return [x for x in op[1:] if isinstance(x, int)] if op[0] != "in" else []
+
+
+def _float_literal(value) -> str:
+    v = float(sympy.N(value, 30))
+    if not math.isfinite(v):
+        raise ValueError(f"non-finite constant {value} in the traced code")
+    return repr(v)
+
+
+# ----- the module -----------------------------------------------------------------------------
+_RUNTIME = '''
+def _columns(x, n):
+    """(..., n) -> ((n, samples) contiguous, leading shape)."""
+    x = _np.asarray(x, dtype=float)
+    if x.shape[-1:] != (n,):
+        raise ValueError(f"expected an array with last axis of length {n}, got shape {x.shape}")
+    lead = x.shape[:-1]
+    return _np.ascontiguousarray(x.reshape(-1, n).T), lead
+
+
+def _evaluate(kernel, layouts, inputs):
+    """Run ``kernel`` over (coordinates, samples) ``inputs`` chunk by chunk; one array
+    (samples, *shape) per output, filled from the kernel's buffers."""
+    count = inputs[0].shape[1]
+    outs, buffers = [], []
+    for shape, slots, constants in layouts:
+        size = 1
+        for s in shape:
+            size *= s
+        out = _np.zeros((count, size))
+        for index, value in constants:
+            out[:, index] = value
+        outs.append(out)
+        buffers.append(_np.empty((len(slots), min(count, _CHUNK))))
+    for start in range(0, count, _CHUNK):
+        stop = min(start + _CHUNK, count)
+        views = [b[:, :stop - start] for b in buffers]
+        kernel(*[x[:, start:stop] for x in inputs], _C, *views)
+        for out, view, (_, slots, _) in zip(outs, views, layouts):
+            # samples-last buffer to samples-first array, in blocks that stay in cache
+            for at in range(0, stop - start, 256):
+                end = min(at + 256, stop - start)
+                if slots:
+                    out[start + at:start + end, slots] = view[:, at:end].T
+    return [out.reshape((count,) + shape) for out, (shape, _, _) in zip(outs, layouts)]
+'''
+
+_OPEN_API = '''
+
+def tree_regressor(q, qd, qdd):
+    """K of the tree coordinates, (..., n, p), for positions, velocities, accelerations
+    q, qd, qdd of shape (..., n) (coordinate order: COORDINATES)."""
+    (x, lead), (xd, _), (xdd, _) = (_columns(v, len(COORDINATES)) for v in _np.broadcast_arrays(q, qd, qdd))
+    return _evaluate(_tree_regressor, _LAYOUTS["_tree_regressor"], [x, xd, xdd])[0].reshape(
+        lead + (len(COORDINATES), len(PARAMETERS)))
+'''
+
+_CLOSED_API = '''
+
+def closure(q):
+    """The loop-closure equations at tree coordinates q (..., n): (phi (..., m), jacobian (..., m, n))."""
+    x, lead = _columns(q, len(COORDINATES))
+    phi, jac = _evaluate(_closure, _LAYOUTS["_closure"], [x])
+    return phi.reshape(lead + phi.shape[1:]), jac.reshape(lead + jac.shape[1:])
+
+
+def closure_bias(q, qd):
+    """gamma (..., m): on the constraint manifold the accelerations satisfy J qdd + gamma = 0."""
+    (x, lead), (xd, _) = (_columns(v, len(COORDINATES)) for v in _np.broadcast_arrays(q, qd))
+    gamma, = _evaluate(_closure_bias, _LAYOUTS["_closure_bias"], [x, xd])
+    return gamma.reshape(lead + gamma.shape[1:])
+
+
+def projection(q):
+    """R (..., n, f) with qd = R zd at tree coordinates q on the constraint manifold
+    (z: the INDEPENDENT coordinates): identity rows for z, -J_d^-1 J_z for the others."""
+    _, jac = closure(q)
+    jac = jac[..., list(EQUATIONS), :]
+    jd, jz = jac[..., list(DEPENDENT)], jac[..., list(INDEPENDENT)]
+    r = _np.zeros(jac.shape[:-2] + (len(COORDINATES), len(INDEPENDENT)))
+    r[..., list(INDEPENDENT), range(len(INDEPENDENT))] = 1.0
+    r[..., list(DEPENDENT), :] = -_np.linalg.solve(jd, jz)
+    return r
+'''
+
+
+def module_source(mechanism, parts=PARTS, header: str = "", extra: str = "") -> str:
+    """The standalone module (numpy only) of ``mechanism``'s float64 ``parts``: constants,
+    the generated kernels, ``tree_regressor`` and, for a closed loop, ``closure``,
+    ``closure_bias`` and ``projection``. ``header`` opens the module docstring; ``extra``
+    (Python source) is appended (the export adds ``regressor`` and ``base_regressor``)."""
+    graph, kernels = trace(mechanism, parts)
+    structure = _structure(mechanism)
+    constants = Constants()
+    text = [f'"""{header or "The float64 regressor of " + mechanism.name + ", generated by baseparams."}\n"""',
+            "", "import numpy as _np", "",
+            f"MECHANISM = {mechanism.name!r}",
+            f"COORDINATES = {tuple(mechanism.coordinates)!r}   # tree coordinates: the last axis of q, qd, qdd",
+            f"PARAMETERS = {tuple(mechanism.parameters)!r}",
+            f"INDEPENDENT = {tuple(structure.independent)!r}   # indices into COORDINATES",
+            f"DEPENDENT = {tuple(structure.dependent)!r}",
+            f"EQUATIONS = {tuple(structure.rows)!r}   # the independent closure equations",
+            f"_CHUNK = {CHUNK}", ""]
+    table = {}
+    for kernel in kernels:
+        text.append(kernel_source(graph, kernel, constants))
+        table[kernel.name] = [(lay.shape, lay.slots, tuple((i, float(sympy.N(v, 30))) for i, v in lay.constants))
+                              for lay in layouts(kernel).values()]
+    text.append(f"_LAYOUTS = {table!r}")
+    text.append("_C = (" + "".join(f"{_float_literal(v)}, " for v in constants.values) + ")   # geometry constants")
+    text.append(_RUNTIME)
+    if "regressor" in parts:
+        text.append(_OPEN_API)
+    if "closure" in parts and mechanism.loops:
+        text.append(_CLOSED_API)
+    if extra:
+        text.append(extra)
+    return "\n".join(text) + "\n"
+
+
+def _structure(mechanism):
+    # the evaluator's choice of independent coordinates and closure equations; imported
+    # here, not at the top, because the evaluator imports this module
+    from baseparams.dynamics.evaluator import closure_structure
+    return closure_structure(mechanism)
+
+
+# ----- in this process ------------------------------------------------------------------------
+# Generating and compiling costs about as much as evaluating the generic numpy code on a few
+# thousand samples (0.1 s for a 6R arm, 6 s for a 48-body chain), so the float64 paths use
+# the generated code once it is compiled or when the batch is large enough to pay for it.
+GENERATE_AT = {"regressor": 2000, "closure": 50}   # samples
+_CACHE: dict = {}
+_CACHE_SIZE = 32
+
+
+def compiled(mechanism, part: str) -> dict:
+    """The generated module of one of ``mechanism``'s ``PARTS``, executed once and cached."""
+    key = (mechanism, part)
+    namespace = _CACHE.get(key)
+    if namespace is None:
+        source = module_source(mechanism, (part,))
+        namespace = {"__name__": f"baseparams_generated_{part}"}
+        exec(compile(source, f"<baseparams generated {part}: {mechanism.name}>", "exec"), namespace)
+        if len(_CACHE) >= _CACHE_SIZE:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = namespace
+    return namespace
+
+
+def worthwhile(mechanism, part: str, values) -> bool:
+    """Should a float64 batch (``values``: per-coordinate scalars or arrays) run the
+    generated code? Yes once it is compiled, or for at least ``GENERATE_AT[part]`` samples."""
+    if (mechanism, part) in _CACHE:
+        return True
+    shape = np.broadcast_shapes(*(np.shape(v) for v in values)) if len(values) else ()
+    return int(np.prod(shape, dtype=int)) >= GENERATE_AT[part]
+
+
+def tree_regressor(mechanism, q, qd, qdd) -> np.ndarray:
+    """K of the tree coordinates (..., n, p) from lists (one entry per coordinate) of
+    float64 scalars or arrays of samples, as :class:`~baseparams.dynamics.evaluator.Sample`
+    holds them: the generated equivalent of :func:`~.regressor.tree_regressor_array`."""
+    return _run(mechanism, "regressor", "_tree_regressor", (q, qd, qdd))[0]
+
+
+def closure(mechanism, q) -> tuple[list, list]:
+    """Closure values and Jacobian rows as :meth:`TreeKinematics.closure` gives them (lists
+    of per-sample arrays), from per-coordinate values ``q``."""
+    phi, jac = _run(mechanism, "closure", "_closure", (q,))
+    m, n = jac.shape[-2:]
+    return [phi[..., i] for i in range(m)], [[jac[..., i, j] for j in range(n)] for i in range(m)]
+
+
+def closure_bias(mechanism, q, qd) -> list:
+    """The closure bias terms (list of per-sample arrays) at positions and velocities q, qd."""
+    gamma = _run(mechanism, "closure", "_closure_bias", (q, qd))[0]
+    return [gamma[..., i] for i in range(gamma.shape[-1])]
+
+
+def _run(mechanism, part, kernel, groups):
+    module = compiled(mechanism, part)
+    n = len(mechanism.coordinates)
+    values = [np.asarray(v, dtype=float) for group in groups for v in group]
+    shape = np.broadcast_shapes(*(v.shape for v in values)) if values else ()
+    count = int(np.prod(shape, dtype=int))
+    inputs = []
+    for g in range(len(groups)):
+        block = np.empty((n, count))
+        for i in range(n):
+            block[i] = np.broadcast_to(values[g * n + i], shape).reshape(-1)
+        inputs.append(block)
+    outs = module["_evaluate"](module[kernel], module["_LAYOUTS"][kernel], inputs)
+    return [out.reshape(shape + out.shape[1:]) for out in outs]
+
+
+# ----- ball and rational arithmetic -------------------------------------------------------------
+# One state per call, in the backend's own numbers: every operation is the backend's (a ball
+# operation in arb, so each entry's ball still contains its exact value), minus the work on
+# exact zeros and ones and the repeated subexpressions of the generic code.
+_SCALAR: dict = {}
+_SCALAR_CONSTANTS: dict = {}
+
+
+def _scalar_module(mechanism, part):
+    key = (mechanism, part)
+    found = _SCALAR.get(key)
+    if found is None:
+        graph, kernels = trace(mechanism, (part,))
+        constants = Constants()
+        source = "\n".join(kernel_source(graph, k, constants, scalar=True) for k in kernels)
+        namespace: dict = {}
+        exec(compile(source, f"<baseparams generated {part}, scalar: {mechanism.name}>", "exec"), namespace)
+        found = (namespace, {k.name: layouts(k) for k in kernels}, tuple(constants.values))
+        if len(_SCALAR) >= _CACHE_SIZE:
+            _SCALAR.pop(next(iter(_SCALAR)))
+        _SCALAR[key] = found
+    return found
+
+
+def _backend_constants(mechanism, part, backend, values):
+    """The constants in ``backend`` (at its digits), computed once per precision."""
+    key = (mechanism, part, backend.name, getattr(backend, "digits", None))
+    found = _SCALAR_CONSTANTS.get(key)
+    if found is None:
+        with backend.activate():
+            found = tuple(backend.evaluate(v) for v in values)
+        if len(_SCALAR_CONSTANTS) >= 4 * _CACHE_SIZE:
+            _SCALAR_CONSTANTS.pop(next(iter(_SCALAR_CONSTANTS)))
+        _SCALAR_CONSTANTS[key] = found
+    return found
+
+
+def _trig(backend):
+    if isinstance(backend, Arb):
+        return (arb.cos, arb.sin)
+    return (lambda x: backend.cos_sin(x)[0], lambda x: backend.cos_sin(x)[1])
+
+
+def scalar_tree_regressor(mechanism, backend, q, qd, qdd) -> list:
+    """K_tree at one state in ``backend``'s arithmetic (arb, rationals): n rows of 10 *
+    bodies entries, as :func:`~.regressor.generic_tree_regressor` gives them. Call within
+    the backend's precision."""
+    namespace, lays, values = _scalar_module(mechanism, "regressor")
+    constants = _backend_constants(mechanism, "regressor", backend, values)
+    layout = lays["_tree_regressor"]["K"]
+    buffer = [None] * len(layout.slots)
+    namespace["_tree_regressor"](q, qd, qdd, constants, _trig(backend), buffer)
+    n, p = layout.shape
+    flat = [backend.rational(Fraction(0))] * (n * p)
+    for slot, v in zip(layout.slots, buffer):
+        flat[slot] = v
+    for slot, v in layout.constants:
+        flat[slot] = backend.evaluate(v)
+    return [flat[k * p:(k + 1) * p] for k in range(n)]
+
+
+def regressor_rows(kin, q, qd, qdd, states) -> list:
+    """K_tree's rows at one state: generated code in arb and rationals, the generic
+    recursion otherwise (float64 and sympy keep :func:`~.regressor.tree_regressor`)."""
+    if isinstance(kin.backend, (Arb, Exact)):
+        return scalar_tree_regressor(kin.mechanism, kin.backend, q, qd, qdd)
+    return tree_regressor_rows_generic(kin, states, qdd)
+
+
+# ----- the export -------------------------------------------------------------------------------
+_EXPORT_OPEN = '''
+
+def regressor(q, qd, qdd):
+    """K (..., n, p): tau = K phi, for q, qd, qdd of shape (..., n) in COORDINATES order."""
+    return tree_regressor(q, qd, qdd)
+'''
+
+_EXPORT_CLOSED = '''
+
+def regressor(q, qd, qdd):
+    """K (..., f, p) in the independent coordinates (tau_z = K phi; f = len(INDEPENDENT)).
+
+    q, qd, qdd (..., n): ALL tree coordinates (COORDINATES order) on the constraint
+    manifold: positions closing the loops (closure(q)[0] ~ 0), velocities qd = R zd and
+    accelerations with J qdd + gamma = 0. This module does not solve the loop closure;
+    K = R^T K_tree with R = projection(q)."""
+    return _np.einsum("...kf,...kp->...fp", projection(q), tree_regressor(q, qd, qdd))
+'''
+
+_EXPORT_BASE = '''
+
+def base_regressor(q, qd, qdd):
+    """The base regressor (..., rows, len(BASE_PARAMETERS)): the columns BASE_COLUMNS of
+    regressor(q, qd, qdd), since K phi = K_kept phi_b with phi_b = phi_kept + beta phi_eliminated."""
+    return regressor(q, qd, qdd)[..., list(BASE_COLUMNS)]
+'''
+
+
+def export_source(mechanism, result) -> str:
+    """A standalone module (numpy only) with ``regressor(q, qd, qdd) -> K`` and
+    ``base_regressor`` (the columns of ``result``'s base parameters), the base parameter
+    expressions in its docstring and in ``BASE_PARAMETERS``."""
+    params = list(mechanism.parameters)
+    base = [(row["name"], dict(row["expression"])) for row in result.base]
+    columns = [params.index(next(p for p, c in expr.items() if c == "1" and p not in result.eliminated))
+               for _, expr in base]
+    closed = bool(mechanism.loops)
+    lines = [f"The regressor of {mechanism.name}, generated by baseparams ({result.solver} solver: rank {result.rank}"
+             + (", certified" if result.certified else "") + ").",
+             "",
+             "Standalone: needs numpy only. Arrays of states may have any leading shape (a batch).",
+             "",
+             "- regressor(q, qd, qdd) -> K: tau = K phi, phi = PARAMETERS (10 per body: m mx my mz",
+             "  Ixx Ixy Ixz Iyy Iyz Izz, first moments and inertia about the body origin).",
+             "- base_regressor(q, qd, qdd) -> K_b = K[..., BASE_COLUMNS]: tau = K_b phi_b.",
+             "- tree_regressor(q, qd, qdd): K of all tree coordinates."]
+    if closed:
+        lines += ["",
+                  "CLOSED LOOPS: q, qd, qdd are ALL tree coordinates (COORDINATES), already on the",
+                  "constraint manifold (the loops closed, qd and qdd consistent): this module does",
+                  "not solve the loop closure. K is then in the independent coordinates",
+                  "(INDEPENDENT): K = R^T K_tree, R = projection(q) from the closure Jacobian",
+                  "(closure(q) gives the equations' values to check a state, closure_bias(q, qd)",
+                  "the acceleration constraint J qdd + gamma = 0)."]
+    lines += ["", "Base parameters (phi_b = phi_kept + beta phi_eliminated):"]
+    lines += [f"  {name} = " + " + ".join(p if c == "1" else f"({c})*{p}" for p, c in expr.items())
+              for name, expr in base]
+    extra = (_EXPORT_CLOSED if closed else _EXPORT_OPEN) + _EXPORT_BASE + "\n" + "\n".join([
+        f"BASE_SOLVER = {result.solver!r}",
+        f"BASE_RANK = {result.rank!r}",
+        f"BASE_PARAMETERS = {tuple(base)!r}",
+        f"BASE_COLUMNS = {tuple(columns)!r}   # indices into PARAMETERS"])
+    return module_source(mechanism, PARTS, header="\n".join(lines).replace('"""', "'''"), extra=extra)
