@@ -123,7 +123,9 @@ def test_hidden_effects_on_a_generated_chain_recovered_when_named():
     z = (fit.estimates - fit.stands_for(truth_values(base, truth))) / fit.std
     assert np.abs(z).max() < 4.5
     unnamed = identify(mech, data, base=base)
-    assert np.all(fit.nrms <= unnamed.nrms + 1e-12) and unnamed.nrms.max() > 2 * fit.nrms.max()
+    # weighted least squares lowers the weighted sum, not every coordinate's residual: a
+    # coordinate the effects do not touch may move by a fraction of a percent either way
+    assert np.all(fit.nrms <= unnamed.nrms * 1.01) and unnamed.nrms.max() > 2 * fit.nrms.max()
 
 
 @pytest.mark.parametrize("solver", ["dp", pytest.param("vp", marks=pytest.mark.slow)])

@@ -5,8 +5,8 @@ forces, subtracted first), stacked over samples and independent coordinates. Gau
 noise weighting: an ordinary least-squares fit gives each coordinate's residual, whose
 variance (over its own degrees of freedom, N minus the sum of the leverages of that
 coordinate's rows) estimates the coordinate's noise SD sigma_j; each coordinate's rows are
-then divided by sigma_j and refitted. The SDs are estimated once more from that weighted
-fit (see WEIGHTING_PASSES) before the final fit. The covariance of the estimates is
+then divided by sigma_j and refitted; the SDs are re-estimated from each weighted fit until
+they settle (WEIGHTING_PASSES, WEIGHTING_TOL) before the final fit. The covariance of the estimates is
 s^2 (X_w^T X_w)^-1, s^2 the weighted residual variance (about 1 when the noise model holds),
 computed from a QR factorisation of the column-scaled weighted matrix (no normal equations).
 """
@@ -35,8 +35,10 @@ ABSORB = 1e-9
 # Above this relative distance of K from the base model's row space the fit says the base
 # model is inexact (dp's coefficients on a badly conditioned mechanism).
 BASE_MODEL_TOLERANCE = 1e-8
-# Fits that estimate the noise SDs (the first one unweighted) before the final weighted fit.
-WEIGHTING_PASSES = 2
+# Fits that estimate the noise SDs (the first one unweighted) before the final weighted fit:
+# at most this many, until no SD changes by more than WEIGHTING_TOL (relative).
+WEIGHTING_PASSES = 12
+WEIGHTING_TOL = 1e-3
 # A coordinate's noise SD is taken at least this fraction of its RMS force (noise-free data).
 NOISE_FLOOR = 1e-13
 
@@ -237,9 +239,11 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     rms_force = np.sqrt(np.mean(y ** 2, axis=0))
     floor = NOISE_FLOOR * max(float(rms_force.max()), np.finfo(float).tiny)
     # Gautier: an ordinary fit, each coordinate's noise SD from its residual, a weighted refit.
-    # Then once more from the weighted fit's residual: the ordinary residual of a quiet
+    # Then again from each weighted fit's residual: the ordinary residual of a quiet
     # coordinate carries some of a noisy one's noise (through the shared parameters), so the
     # first SDs are biased when the coordinates' noise levels differ much.
+    # Iterated to the fixed point (at most WEIGHTING_PASSES fits): diagnosis measured one pass
+    # leaving a quiet PUMA coordinate's SD 16 times too large (docs/diagnosis.md).
     sigma = np.ones(f)
     for _ in range(WEIGHTING_PASSES):
         weights = np.tile(1 / sigma, n)
@@ -249,7 +253,10 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
         residual = ((target - stacked @ (theta_w / wscale))).reshape(n, f)
         leverage = np.sum(q_factor ** 2, axis=1).reshape(n, f).sum(axis=0)
         dof = np.maximum(n - leverage, 1.0)
+        previous = sigma
         sigma = np.maximum(np.sqrt(np.sum(residual ** 2, axis=0) / dof), floor)
+        if np.max(np.abs(sigma / previous - 1.0)) < WEIGHTING_TOL:
+            break
     weights = np.tile(1 / sigma, n)
     weighted = stacked * weights[:, None]
     wscale = np.linalg.norm(weighted, axis=0)
