@@ -69,7 +69,13 @@ def _string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+class RawInteger(str):
+    """An integer literal kept as its digits: CPython's int() and str() refuse more than 4300."""
+
+
 def _value(value) -> str:
+    if isinstance(value, RawInteger):
+        return str.__str__(value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -180,7 +186,9 @@ def _misspell_key(doc, rng):
             options.append((("bodies", b), "mass", "mas"))
         options.append((("bodies", b), "label", "lable"))
     for j in range(len(doc["joints"])):
-        options += [(("joints", j), "coordinates", "coordinate"), (("joints", j), "type", "typ")]
+        options += [(("joints", j), "coordinates", "coordinate"), (("joints", j), "type", "typ"),
+                    (("joints", j), "child_frame", "child_fram"), (("joints", j, "parent_frame"), "axis", "axes"),
+                    (("joints", j), "limits", "limit")]
     if "trajectory" in doc:
         options += [(("trajectory",), "samples", "sample"), (("trajectory",), "t_end", "tend")]
     options = [o for o in options if o[1] in _get(doc, o[0])]
@@ -293,8 +301,64 @@ def _non_physical(doc, rng):
     return "geometry name m2 (a parameter name)", doc, "invalid", "invalid"
 
 
+def _huge_integer(doc, rng):
+    """Integers past CPython's 4300-digit int() guard, or merely absurd, where integers go."""
+    j = rng.randrange(len(doc["joints"]))
+    b = rng.randrange(len(doc["bodies"]))
+    value = rng.choice([RawInteger("9" * 5000), 10 ** 40, -(10 ** 30)])
+    options = [("joints", j, "parent"), ("joints", j, "child"), ("bodies", b, "label")]
+    if "trajectory" in doc:
+        options.append(("trajectory", "samples"))
+    path = rng.choice(options)
+    _set(doc, path, value)
+    shown = f"{len(value)}-digit integer" if isinstance(value, RawInteger) else str(value)
+    return f"{_path_text(path)} = {shown}", doc, "invalid", "invalid"
+
+
+RESERVED_NAMES = ["t", "pi", "sin", "E", "I", "lambda", "gamma", "nan", "Izz1", "m1", "mx2"]
+
+
+def _name_collision(doc, rng):
+    """A geometry or coordinate name that is a parameter name or means something else."""
+    name = rng.choice(RESERVED_NAMES)
+    j = rng.randrange(len(doc["joints"]))
+    joint = doc["joints"][j]
+    one_coordinate = joint["type"] in ("R", "P")
+    if rng.random() < 0.5 or not one_coordinate:
+        doc["geometry"] = dict(doc.get("geometry", {}), **{name: "1"})
+        return f"geometry name {name}", doc, "invalid", "invalid"
+    joint["coordinates"] = [name]
+    return f"joints[{j}].coordinates = [{name!r}]", doc, "invalid", "invalid"
+
+
+def _effect_mistake(doc, rng):
+    """A broken [[effects]] table: unknown kind, coordinate or coefficient, a misspelt key,
+    a wrong type, a duplicate."""
+    coordinate = (doc.get("coordinates", {}).get("independent") or doc["joints"][0].get("coordinates")
+                  or [doc["joints"][0].get("name", "J0_1")])[0]
+    good = {"kind": "viscous_friction", "coordinate": coordinate}
+    kind = rng.choice(["kind", "coordinate", "coefficient", "misspelt", "type", "duplicate", "not_array"])
+    if kind == "kind":
+        effects = [dict(good, kind="viscous_fiction")]
+    elif kind == "coordinate":
+        effects = [dict(good, coordinate="nope")]
+    elif kind == "coefficient":
+        effects = [dict(good, values={"fc": "0.5"})]
+    elif kind == "misspelt":
+        effects = [{"kind": "viscous_friction", "coordinat": coordinate}]
+    elif kind == "type":
+        effects = [dict(good, values=rng.choice([["0.5"], "0.5", {"fv": True}]))]
+    elif kind == "duplicate":
+        effects = [good, dict(good)]
+    else:
+        doc["effects"] = dict(good)
+        return "effects is a table, not an array of tables", doc, "invalid", "invalid"
+    doc["effects"] = effects
+    return f"[[effects]] with a mistake ({kind})", doc, "invalid", "invalid"
+
+
 def _unicode(doc, rng):
-    kind = rng.choice(["title", "name", "geometry_key", "number"])
+    kind = rng.choice(["title", "name", "geometry_key", "number", "key"])
     if kind == "title":
         doc["mechanism"]["title"] = "Pendule \u00fc \u4e2d\u6587 \U0001F680 \u202e"
         return "unicode title", doc, "valid", "valid"
@@ -304,6 +368,9 @@ def _unicode(doc, rng):
     if kind == "geometry_key":
         doc["geometry"] = dict(doc.get("geometry", {}), **{"L\u00e9": "1"})
         return "geometry key L\u00e9", doc, "invalid", "invalid"
+    if kind == "key":
+        doc["bodies"][0]["m\u0430ss"] = "1"           # a Cyrillic a: looks like "mass"
+        return "bodies[0] key with a Cyrillic letter", doc, "invalid", "invalid"
     path = rng.choice(_numeric_leaves(doc))
     value = rng.choice(JUNK_TEXT)
     _set(doc, path, value)
@@ -311,7 +378,12 @@ def _unicode(doc, rng):
 
 
 def _bom(text, rng):
-    return "UTF-8 BOM before the text", b"\xef\xbb\xbf" + text, "any", "any"
+    kind = rng.choice(["utf8", "utf8_twice", "utf16"])
+    if kind == "utf8":
+        return "UTF-8 BOM before the text", b"\xef\xbb\xbf" + text, "valid", "valid"
+    if kind == "utf8_twice":
+        return "two UTF-8 BOMs", b"\xef\xbb\xbf" * 2 + text, "invalid", "invalid"
+    return "UTF-16 text with its BOM", text.decode("utf-8").encode("utf-16"), "invalid", "invalid"
 
 
 def _binary_junk(text, rng):
@@ -334,7 +406,8 @@ DOC_MUTATIONS = {
     "misspelt_key": _misspell_key, "wrong_type": _wrong_type, "extreme_number": _extreme_number,
     "huge_number": _huge_but_parseable, "absurd_samples": _absurd_samples, "non_finite": _non_finite,
     "broken_reference": _broken_reference, "cycle": _cycle, "non_physical": _non_physical,
-    "unicode": _unicode,
+    "unicode": _unicode, "huge_integer": _huge_integer, "name_collision": _name_collision,
+    "effect_mistake": _effect_mistake,
 }
 BYTE_MUTATIONS = {"bom": _bom, "binary_junk": _binary_junk, "truncated": _truncated, "empty": _empty}
 KINDS = ("identity",) + tuple(DOC_MUTATIONS) + tuple(BYTE_MUTATIONS)

@@ -3,31 +3,39 @@ every mutation kind of the pendulum file, with ``show`` and ``solve --solver dp`
 fresh interpreter with a CPU-time limit. No run may print a traceback, hang, exit with a
 code other than 0 or 2, or exit 0 on input that is invalid.
 
-Known gaps, whose fixes belong to work in progress (the strict schema in the loader, the
-CLI's last-resort handler), are marked ``xfail(strict=True)``: when one is fixed, its test
-XPASSes and fails, and the mark must go. benchmarks/fuzz_mechanisms.py runs the whole
+A known gap would be marked ``xfail(strict=True)`` in KNOWN_GAPS (so that its fix XPASSes
+and fails, and the mark goes); there are none. benchmarks/fuzz_mechanisms.py runs the whole
 corpus (every built-in mechanism) and prints the table.
+
+Below the corpus, property-based tests (hypothesis) of the loader, in process: any text,
+random or a mutated built-in file, gives a Mechanism or an InputError (never another
+exception) within a time bound, with a one-line message that names the file and leaks no
+Python repr; and the schema's JSON Schema rendering agrees with the validator on every
+corpus document (jsonschema as an independent implementation).
 """
 
+import json
+import re
+import time
 import tomllib
 from concurrent.futures import ThreadPoolExecutor
 from decimal import Decimal
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import fuzz_corpus
+from baseparams.errors import InputError
+from baseparams.io.loader import check_trajectory, parse_mechanism
+from baseparams.io.schema import json_schema, validate
+from baseparams.model.mechanism import Mechanism
 
 MECHANISM = "pendulum"
 CPU_LIMIT = 10.0           # seconds of CPU per run: a healthy run of this file takes ~2
 CASES = {case.name: case for case in fuzz_corpus.corpus(seed=0, mechanisms=[MECHANISM])}
 
-SCHEMA = "the strict schema (loader work in progress, issue 13)"
-KNOWN_GAPS = {
-    (f"{MECHANISM}.absurd_samples.0", "show"): f"show does not check trajectory.samples; {SCHEMA}",
-    (f"{MECHANISM}.absurd_samples.0", "solve"): f"no maximum sample count yet: 1e9 samples run on; {SCHEMA}",
-    (f"{MECHANISM}.non_physical.0", "show"): f"a negative principal inertia is accepted; {SCHEMA}",
-    (f"{MECHANISM}.non_physical.0", "solve"): f"a negative principal inertia is accepted; {SCHEMA}",
-}
+KNOWN_GAPS: dict = {}       # (case name, command) -> reason, for xfail(strict=True)
 
 
 def _params():
@@ -75,3 +83,141 @@ def test_toml_writer_round_trips_every_builtin_file(name, path):
     original = tomllib.loads(path.read_text(encoding="utf-8"), parse_float=Decimal)
     rewritten = tomllib.loads(fuzz_corpus.dumps(original), parse_float=Decimal)
     assert rewritten == original
+
+
+HEAVY = {"puma560", "sla_suspension", "stewart_platform"}     # seconds per load: slow-marked
+
+
+@pytest.mark.parametrize("mechanism", [
+    pytest.param(name, marks=[pytest.mark.slow] if name in HEAVY else [])
+    for name in sorted(fuzz_corpus.mechanism_files())])
+def test_every_case_is_refused_or_accepted_as_labelled_in_process(mechanism):
+    """Every corpus case of a built-in file, in process (no interpreter start-up): an
+    "invalid" case raises an InputError from loading plus the trajectory check (what
+    ``show`` runs), a "valid" one loads; messages name the file and leak no Python."""
+    for case in fuzz_corpus.corpus(seed=0, mechanisms=[mechanism]):
+        expect = case.show
+        try:
+            text = case.data.decode("utf-8")
+            mech = parse_mechanism(text, f"{case.name}.toml")
+            check_trajectory(mech)
+        except UnicodeDecodeError:
+            assert expect != "valid", case.detail        # the reader refuses non-UTF-8 (exit 2)
+            continue
+        except InputError as exc:
+            assert expect != "valid", f"{case.name} ({case.detail}): {exc.message}"
+            _check_message(exc.message, f"{case.name}.toml")
+            continue
+        assert expect != "invalid", f"{case.name} ({case.detail}) was accepted"
+
+
+# ----- property-based: the loader ---------------------------------------------------
+
+LOADER = settings(max_examples=60, deadline=None, derandomize=True, database=None,
+                  suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+LOAD_SECONDS = 5.0
+BASES = [path.read_text(encoding="utf-8") for name, path in sorted(fuzz_corpus.mechanism_files().items())
+         if name in ("pendulum", "four_bar", "planar_2r")]
+ASSIGNMENT = re.compile(r"^(\s*)([A-Za-z_][A-Za-z0-9_]*)(\s*=\s*)(.*)$")
+VALUES = st.one_of(
+    st.sampled_from(['"0"', '"1e400"', "nan", "-inf", '"L/0"', "[]", "{}", "true", '"m2"', "1e999",
+                     '"2**2**2**2**2"', '"-1"', "99", "-1", '""', '"t"', "[1, 2]", '["0", "0"]',
+                     '["1e-300", "0", "0"]', "{ a = 1 }", '"\\u0000"', "0x10", "1979-05-27",
+                     '"sin(t)"', '"E"', '"lambda"', "9" * 5000, '"' + "9" * 300 + '"']),
+    st.text(max_size=12).map(json.dumps),
+    st.integers(-10 ** 6, 10 ** 6).map(str),
+    st.decimals(allow_nan=False, allow_infinity=False, places=4).map(str),
+)
+KEYS = st.sampled_from(["mass", "mas", "com", "typ", "type", "axis", "axes", "label", "samples", "q",
+                        "inertia", "loop", "limits", "coordinates", "kind", "values", "\u043c"])
+
+
+@st.composite
+def mutated_files(draw):
+    lines = draw(st.sampled_from(BASES)).splitlines()
+    for _ in range(draw(st.integers(1, 4))):
+        i = draw(st.integers(0, len(lines) - 1))
+        op = draw(st.sampled_from(["value", "value", "delete", "duplicate", "key", "insert"]))
+        match = ASSIGNMENT.match(lines[i])
+        if op == "value" and match:
+            lines[i] = match[1] + match[2] + match[3] + draw(VALUES)
+        elif op == "key" and match:
+            lines[i] = match[1] + draw(KEYS) + match[3] + match[4]
+        elif op == "delete":
+            del lines[i]
+        elif op == "duplicate":
+            lines.insert(i, lines[i])
+        elif op == "insert":
+            lines.insert(i, draw(st.one_of(st.text(max_size=30), st.sampled_from(
+                ["[[joints]]", "[[bodies]]", "label = 1", "[[effects]]", 'kind = "spring"', "[geometry]",
+                 "[trajectory]", "\ufeff", "loop = true"]))))
+        if not lines:
+            break
+    return "\n".join(lines) + "\n"
+
+
+def _check_message(message: str, path: str) -> None:
+    assert message.startswith(path + ": "), message
+    assert "\n" not in message and len(message) < 1000, message
+    assert not re.search(r"Decimal\(|Fraction\(|<class |Traceback", message), message
+
+
+def _load(text: str, path: str = "fuzz.toml"):
+    start = time.perf_counter()
+    try:
+        mech = parse_mechanism(text, path)
+        check_trajectory(mech)
+    except InputError as exc:
+        _check_message(exc.message, path)
+        mech = None
+    assert time.perf_counter() - start < LOAD_SECONDS
+    return mech
+
+
+@LOADER
+@given(mutated_files())
+def test_a_mutated_file_gives_a_mechanism_or_an_input_error(text):
+    mech = _load(text)
+    assert mech is None or isinstance(mech, Mechanism)
+
+
+@LOADER
+@given(st.one_of(st.text(max_size=200), st.binary(max_size=200).map(lambda b: b.decode("latin-1"))))
+def test_any_text_gives_a_mechanism_or_an_input_error(text):
+    mech = _load(text)
+    assert mech is None or isinstance(mech, Mechanism)
+
+
+# ----- the schema, twice -------------------------------------------------------------
+
+def _as_json(value):
+    """A parsed TOML value as JSON data: a finite Decimal as a float, nan and inf (not JSON)
+    as strings, which the schema's value type also allows (the builder refuses them)."""
+    if isinstance(value, Decimal):
+        return float(value) if value.is_finite() else str(value)
+    if isinstance(value, list):
+        return [_as_json(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_json(v) for k, v in value.items()}
+    return value
+
+
+def test_the_json_schema_agrees_with_the_validator():
+    jsonschema = pytest.importorskip("jsonschema")
+    checker = jsonschema.Draft202012Validator(json_schema())
+    jsonschema.Draft202012Validator.check_schema(json_schema())
+    seen = {True: 0, False: 0}
+    for case in fuzz_corpus.corpus(seed=0) + fuzz_corpus.corpus(seed=1, mechanisms=["pendulum", "four_bar"]):
+        try:
+            doc = tomllib.loads(case.data.decode("utf-8").removeprefix("\ufeff"), parse_float=Decimal)
+        except (UnicodeDecodeError, ValueError):
+            continue
+        try:
+            validate(doc, "x.toml")
+            ours = True
+        except InputError:
+            ours = False
+        theirs = checker.is_valid(_as_json(doc))
+        assert ours == theirs, (case.name, case.detail)
+        seen[ours] += 1
+    assert seen[True] > 40 and seen[False] > 20, seen

@@ -11,6 +11,8 @@ To add a verb: write a function decorated with ``@main.command()`` (or ``@plot.c
 for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
 """
 
+import csv
+import io
 import json
 import textwrap
 
@@ -68,11 +70,15 @@ def emit(fmt, data, text):
         click.echo(text() if callable(text) else text)
 
 
-def load(mech):
-    """A registered mechanism name or a path to a mechanism file -> Mechanism."""
+def load(mech, warn=True):
+    """A registered mechanism name or a path to a mechanism file -> Mechanism; its
+    warnings (``Mechanism.warnings``) go to stderr unless ``warn`` is false."""
     # imported on use, as below: `baseparams --help` and `list` need no sympy or flint
     from baseparams.io.loader import resolve
-    return resolve(mech)
+    mechanism = resolve(mech)
+    for warning in mechanism.warnings if warn else ():
+        click.echo(f"warning: {warning}", err=True)
+    return mechanism
 
 
 def _wrap(words, indent="  "):
@@ -111,7 +117,7 @@ def list_mechanisms(fmt):
     for name, reg in registry.mechanisms().items():
         row = {"name": name, "title": "", "source": reg.distribution, "path": str(reg.item.path)}
         try:
-            row["title"] = load(name).title
+            row["title"] = load(name, warn=False).title
         except BaseparamsError as exc:      # one broken file must not hide the others
             row["error"] = getattr(exc, "message", str(exc))
         rows.append(row)
@@ -154,6 +160,7 @@ def describe(mech):
         "parameter_count": len(mech.parameters),
         "parameters": list(mech.parameters),
         "geometry": mech.geometry_text,
+        "warnings": list(mech.warnings),
     }
 
 
@@ -198,7 +205,10 @@ def show(mech, fmt):
     equations are printed beside them. MECH is a registered name or a path to a
     mechanism file.
     """
-    info = describe(load(mech))
+    from baseparams.io.loader import check_trajectory
+    mechanism = load(mech)
+    info = describe(mechanism)
+    check_trajectory(mechanism)          # what solve checks before solving (issue 13)
     emit(fmt, info, lambda: describe_text(info))
 
 
@@ -208,7 +218,7 @@ def show(mech, fmt):
 def plugins(fmt):
     """List the installed plugins and the distributions providing them.
 
-    Joint types, solvers, mechanisms, model effects and mechanism-file readers. Built-ins come from the
+    Joint types, solvers, mechanisms, model effects, mechanism-file readers and writers. Built-ins come from the
     `baseparams` distribution; a third party registers its own through the `baseparams`
     entry-point group (see README.md, "Plugins"). A joint type marked [no transfer rules]
     makes the symbolic solver's rank an upper bound.
@@ -228,6 +238,7 @@ def plugins(fmt):
         "mechanisms": [entry(n, r, path=str(r.item.path)) for n, r in registry.mechanisms().items()],
         "effects": [entry(n, r) for n, r in registry.effects().items()],
         "readers": [entry(n, r, suffixes=list(r.item.suffixes)) for n, r in registry.readers().items()],
+        "writers": [entry(n, r, suffixes=list(r.item.suffixes)) for n, r in registry.writers().items()],
     }
 
     def text():
@@ -238,7 +249,7 @@ def plugins(fmt):
             dist = max([len(i["distribution"]) for i in items] + [1])
             for i in items:
                 note = i.get("description") or i.get("path", "")
-                if kind == "readers":
+                if kind in ("readers", "writers"):
                     note = f"{' '.join(i['suffixes'])}  {note}"
                 if kind == "joints" and not i["transfer_rules"]:
                     note += " [no transfer rules]"
@@ -321,7 +332,9 @@ class SolverListCommand(click.Command):
 @click.option("-O", "--option", "extra", multiple=True, metavar="NAME=VALUE",
               help="Any option the solver declares (listed below), e.g. -O seed=3 -O recover=false; "
                    "repeatable. An option it does not declare is an error (exit code 2).")
-@format_option
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True,
+              help="Output format: readable text, one JSON object, or CSV (name,expression: one row per "
+                   "base parameter, coefficients as the solver wrote them).")
 def solve(mech, solver_name, digits, samples, extra, fmt):
     """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
     base parameter expressions phi_b = phi_1 + beta phi_2.
@@ -349,7 +362,36 @@ def solve(mech, solver_name, digits, samples, extra, fmt):
         lines += [f"  {line}" for line in result.diagnostics.summary]
         return "\n".join(lines)
 
+    if fmt == "csv":
+        click.echo(base_csv(result), nl=False)
+        return
     emit(fmt, result.to_json(), text)
+
+
+def base_csv(result) -> str:
+    """``name,expression`` rows, one per base parameter; the expression keeps every digit
+    the solver wrote (``m2 + 0.5*mx3 - (L**2)*Izz1``)."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(["name", "expression"])
+    for b in result.base:
+        terms = []
+        for param, coeff in b["expression"].items():
+            text = str(coeff).strip()
+            sign = "-" if text.startswith("-") else "+"
+            body = text.lstrip("+-") if _plain_number(text) else f"({text})"
+            terms.append((sign, param if body == "1" else f"{body}*{param}"))
+        expression = " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ")
+        writer.writerow([b["name"], expression if expression else "0"])
+    return out.getvalue()
+
+
+def _plain_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
 
 
 # ----- plot ---------------------------------------------------------------------
@@ -461,8 +503,11 @@ def report(mech, solver_name, fmt, keep, first, no_certify, output):
             fh = open(output, "w", encoding="utf-8")
         except OSError as exc:
             raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
-        with fh:
-            fh.write(text)
+        try:
+            with fh:
+                fh.write(text)
+        except OSError as exc:           # a full disk, /dev/full
+            raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
         click.echo(f"wrote {output}")
     else:
         click.echo(text, nl=False)

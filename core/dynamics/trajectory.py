@@ -10,8 +10,17 @@ and ends in a Krawczyk enclosure. A sample that leaves the reachable range, pass
 singular configuration or a coordinate limit stops the run with the time, the
 coordinates and the residual. W itself is built by :mod:`baseparams.dynamics.observation`
 (:func:`observation_matrix` here is W over a trajectory, the default one if none is given).
+
+Sample counts are bounded before anything is allocated: at most
+:data:`~baseparams.model.mechanism.MAX_SAMPLES`, and the float64 working memory that
+:func:`float64_bytes` estimates must stay below :func:`memory_limit` (2 GiB unless the
+environment variable ``BASEPARAMS_MAX_MEMORY`` says otherwise, e.g. ``8G``). The estimate
+is what the float64 stage every solver runs (dp's W and SVD; vp's starting positions)
+measured on the built-in mechanisms (benchmarks/sample_memory.py), rounded up.
 """
 
+import os
+import re
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -22,8 +31,62 @@ from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator
 from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError, KinematicsError
+from baseparams.model.mechanism import MAX_SAMPLES
 
 T = sympy.Symbol("t")
+MEMORY_VARIABLE = "BASEPARAMS_MAX_MEMORY"
+DEFAULT_MEMORY_LIMIT = 2 * 1024 ** 3
+_UNITS = {"": 1, "K": 1024, "M": 1024 ** 2, "G": 1024 ** 3, "T": 1024 ** 4}
+
+
+def float64_bytes(mechanism, samples: int) -> int:
+    """Estimated peak working memory (bytes, beyond the interpreter's) of the float64
+    observation matrix over ``samples`` samples and its SVD.
+
+    Per sample: 8 bytes x (400 + 2 n p + 8 f p) with n tree coordinates, f independent ones
+    and p columns of W. Measured peaks (benchmarks/sample_memory.py) stay below it on the
+    built-in mechanisms: the n p term is the vectorised kinematics and regressor (a few
+    arrays per coordinate and parameter), the f p term W itself, its economy SVD and their
+    copies, the constant the per-sample scalars."""
+    n = len(mechanism.coordinates)
+    f = len(mechanism.independent) or n
+    p = len(mechanism.parameters) + 4 * len(getattr(mechanism, "effects", ()))
+    return int(samples) * 8 * (400 + 2 * n * p + 8 * f * p)
+
+
+def memory_limit() -> int:
+    """Bytes the float64 stage may use: ``BASEPARAMS_MAX_MEMORY`` (``8G``, ``512M``, ``2.5G``,
+    bytes) or 2 GiB."""
+    text = os.environ.get(MEMORY_VARIABLE, "").strip()
+    if not text:
+        return DEFAULT_MEMORY_LIMIT
+    match = re.fullmatch(r"([0-9]+(?:\.[0-9]*)?)\s*([KMGT]?)(?:i?B)?", text, re.IGNORECASE)
+    if match is None or float(match[1]) <= 0:
+        raise InputError(f"{MEMORY_VARIABLE} must be a size such as 8G, 512M or a number of bytes, "
+                         f"not {text[:20]!r}")
+    return int(float(match[1]) * _UNITS[match[2].upper()])
+
+
+def check_sample_count(mechanism, samples: int, key: str | None = "trajectory.samples") -> None:
+    """Refuse (InputError) a sample count above MAX_SAMPLES or whose estimated float64 memory
+    exceeds :func:`memory_limit`, before anything is allocated; the message gives the
+    estimate and how to raise the limit."""
+    if not 2 <= samples <= MAX_SAMPLES:
+        raise InputError(f"{samples} samples: from 2 to {MAX_SAMPLES:,} are accepted",
+                         file=mechanism.path, key=key)
+    need, limit = float64_bytes(mechanism, samples), memory_limit()
+    if need > limit:
+        f = len(mechanism.independent) or len(mechanism.coordinates)
+        raise InputError(
+            f"{samples:,} samples need about {_size(need)} of working memory (W is {samples * f:,} x "
+            f"{len(mechanism.parameters)}), above the limit of {_size(limit)}: use fewer samples "
+            f"(at most about {max(2, samples * limit // need):,}), or raise the limit with the "
+            f"environment variable {MEMORY_VARIABLE} (e.g. {MEMORY_VARIABLE}=16G)",
+            file=mechanism.path, key=key)
+
+
+def _size(n: int) -> str:
+    return f"{n / 1024 ** 3:.1f} GiB" if n >= 1024 ** 3 else f"{n / 1024 ** 2:.0f} MiB"
 
 
 @dataclass(frozen=True)
@@ -42,9 +105,7 @@ class Trajectory:
             raise InputError("the mechanism file has no [trajectory] section", file=mechanism.path,
                              key="trajectory")
         n = samples or spec.samples
-        if n < 2:
-            raise InputError(f"a trajectory needs at least 2 samples, not {n}", file=mechanism.path,
-                             key="trajectory.samples")
+        check_sample_count(mechanism, n, None if samples else "trajectory.samples")
         t0 = spec.t_start if t_start is None else Fraction(t_start)
         t1 = spec.t_end if t_end is None else Fraction(t_end)
         times = tuple(t0 + (t1 - t0) * k / (n - 1) for k in range(n))

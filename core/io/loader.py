@@ -8,8 +8,11 @@ kinematics and so lives above the model. Every problem is an
 
 from pathlib import Path
 
+import numpy as np
+
 from baseparams import registry
 from baseparams.dynamics.evaluator import closure_structure
+from baseparams.dynamics.trajectory import Trajectory, samples_float64
 from baseparams.errors import InputError, KinematicsError
 from baseparams.io.toml_reader import parse_toml
 from baseparams.model.mechanism import Mechanism
@@ -86,6 +89,10 @@ def check_mobility(mech: Mechanism) -> None:
         structure = closure_structure(mech)
     except KinematicsError as exc:
         raise error("joints", f"cannot evaluate the kinematics: {exc}") from None
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        raise error("joints", f"cannot evaluate the kinematics in double precision ({type(exc).__name__}): "
+                              f"check the magnitudes of the geometry") from None
+    _check_redundant_joints(mech, structure)
     if structure.dof == 0:
         raise error("joints", f"the mechanism has no degree of freedom "
                               f"(Gruebler count {mech.gruebler}; closure rank {structure.rank})")
@@ -98,3 +105,39 @@ def check_mobility(mech: Mechanism) -> None:
         missing = [c for c in mech.independent if c not in mech.trajectory.expressions]
         if missing:
             raise error("trajectory.q", f"no expression for {', '.join(missing)}")
+
+
+def _check_redundant_joints(mech: Mechanism, structure) -> None:
+    """Refuse a loop-closing joint none of whose closure equations is independent of the
+    other joints' (a second coaxial revolute between the same bodies, a duplicated joint):
+    it constrains nothing, and Newton would have no equation to solve."""
+    if not mech.loops:
+        return
+    kept, start = set(structure.rows), 0
+    for joint in mech.loops:
+        count = len(joint.type.closure)
+        if count and not kept.intersection(range(start, start + count)):
+            index = mech.joints.index(joint)
+            raise InputError(f"joint {joint.name!r} ({joint.type.name}, {joint.parent} -> {joint.child}) is "
+                             f"redundant: its {count} closure equations all follow from the other joints "
+                             f"(a duplicated or coaxial joint?); remove it",
+                             file=mech.path, key=f"joints[{index}]")
+        start += count
+
+
+def check_trajectory(mech: Mechanism, samples: int | None = None) -> None:
+    """Everything ``solve`` checks of the default trajectory before solving: the sample count
+    and its memory, every expression evaluable and finite, the loops closed and the
+    coordinate limits respected at every sample (float64). Raises InputError (the file,
+    ``trajectory`` and the reason: the time and the coordinates)."""
+    if mech.trajectory is None:
+        return
+    trajectory = Trajectory.default(mech, samples=samples)
+    try:
+        samples_float64(mech, trajectory)
+    except KinematicsError as exc:
+        raise InputError(str(exc), file=mech.path, key="trajectory") from None
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        raise InputError(f"cannot be evaluated in double precision ({type(exc).__name__}): check the "
+                         f"magnitudes of the geometry and of the expressions", file=mech.path,
+                         key="trajectory") from None

@@ -1,26 +1,32 @@
-"""The TOML mechanism format (docs/mechanism-format.md): parse, walk the tables, call the builder.
+"""The TOML mechanism format (docs/mechanism-format.md): parse, validate, walk the tables, call the builder.
 
-Everything that is not TOML (names, references, exact values, spanning tree, coordinates)
-is :class:`baseparams.model.builder.MechanismBuilder`'s; this module only knows the
-tables and the key paths that name them in errors (``joints[2].type``). TOML floats are
-parsed as :class:`decimal.Decimal`, so no geometry passes through a binary float.
+The document is first checked against :data:`baseparams.io.schema.SCHEMA` (unknown keys
+with a "did you mean", value types); everything that is not TOML (names, references,
+exact values, physics, spanning tree, coordinates) is
+:class:`baseparams.model.builder.MechanismBuilder`'s. This module only knows the tables
+and the key paths that name them in errors (``joints[2].type``). TOML floats are parsed
+as :class:`decimal.Decimal`, so no geometry passes through a binary float. A UTF-8 byte
+order mark (which some Windows editors write) is skipped.
 """
 
+import re
 import tomllib
 from decimal import Decimal
 from pathlib import Path
 
 from baseparams.errors import InputError
+from baseparams.io.schema import SCHEMA, validate
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.mechanism import Mechanism
 
-TOP_LEVEL = ("mechanism", "geometry", "bodies", "joints", "coordinates", "trajectory", "effects")
-HEADER_KEYS = ("name", "title", "description", "source", "gravity")
-BODY_KEYS = ("label", "name", "inertia", "mass", "com", "inertia_com")
-JOINT_KEYS = ("name", "type", "parent", "child", "coordinates", "loop", "limits",
-              "parent_frame", "child_frame")
-TRAJECTORY_KEYS = ("t_start", "t_end", "samples", "q")
-EFFECT_KEYS = ("kind", "coordinate", "values")
+TOP_LEVEL = tuple(SCHEMA.fields)
+HEADER_KEYS = tuple(SCHEMA.fields["mechanism"][0].fields)
+BODY_KEYS = tuple(SCHEMA.fields["bodies"][0].table.fields)
+JOINT_KEYS = tuple(SCHEMA.fields["joints"][0].table.fields)
+TRAJECTORY_KEYS = tuple(SCHEMA.fields["trajectory"][0].fields)
+EFFECT_KEYS = tuple(SCHEMA.fields["effects"][0].table.fields)
+BOM = "\ufeff"
+LONG_INTEGER = re.compile(r"[0-9_]{4301,}")
 
 
 class TomlReader:
@@ -34,99 +40,70 @@ class TomlReader:
         """The mechanism in the file at ``path`` (without the mobility check)."""
         path = Path(path)
         try:
-            text = path.read_text(encoding="utf-8")
+            data = path.read_bytes()
         except FileNotFoundError:
             raise InputError("no such file", file=path) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read: {exc}", file=path) from None
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror or exc}", file=path) from None
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            line = data[:exc.start].count(b"\n") + 1
+            raise InputError(f"not UTF-8 text: byte 0x{data[exc.start]:02x} at line {line} "
+                             f"(byte {exc.start}); mechanism files are UTF-8", file=path) from None
         return parse_toml(text, path)
 
 
 def parse_toml(text: str, path: str | Path = "<string>") -> Mechanism:
     """The mechanism described by TOML ``text`` (``path`` names it in errors)."""
+    text = text.removeprefix(BOM)
     try:
         data = tomllib.loads(text, parse_float=Decimal)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"malformed TOML: {exc}", file=path) from None
+    except ValueError:
+        # int() refuses literals of more than 4300 digits (CPython's guard against slow
+        # conversions); tomllib lets that ValueError through
+        match = LONG_INTEGER.search(text)
+        where = f" at line {text.count(chr(10), 0, match.start()) + 1}" if match else ""
+        raise InputError(f"an integer with more than 4300 digits{where}: out of range", file=path) from None
+    validate(data, str(path))
     return _Walker(data, str(path)).build()
 
 
 class _Walker:
-    """Walks the TOML tables in file order, handing each value and its key path to the builder."""
+    """Walks the tables of a document the schema accepted, in file order, handing each value
+    and its key path to the builder (which checks names, references and values)."""
 
     def __init__(self, data: dict, path: str):
         self.data = data
         self.path = path
 
-    def error(self, key, reason):
-        return InputError(reason, file=self.path, key=key)
-
-    def table(self, obj, key, required=False):
-        value = obj.get(key.split(".")[-1])
-        if value is None:
-            if required:
-                raise self.error(key, "missing (required)")
-            return {}
-        if not isinstance(value, dict):
-            raise self.error(key, f"must be a table, not {type(value).__name__}")
-        return value
-
-    def array_of_tables(self, key):
-        raw = self.data.get(key)
-        if not isinstance(raw, list) or not raw:
-            raise self.error(key, f"at least one [[{key}]] table is required")
-        for i, item in enumerate(raw):
-            if not isinstance(item, dict):
-                raise self.error(f"{key}[{i}]", "must be a table")
-        return raw
-
-    def check_keys(self, table, key, known):
-        unknown = set(table) - set(known)
-        if unknown:
-            raise self.error(key, f"unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(known)})")
-
     def build(self) -> Mechanism:
         data = self.data
-        for key in data:
-            if key not in TOP_LEVEL:
-                raise self.error(key, f"unknown section (known: {', '.join(sorted(TOP_LEVEL))})")
-        head = self.table(data, "mechanism", required=True)
-        self.check_keys(head, "mechanism", HEADER_KEYS)
-        b = MechanismBuilder(head.get("name"), self.path, title=head.get("title", ""),
+        head = data["mechanism"]
+        b = MechanismBuilder(head["name"], self.path, title=head.get("title", ""),
                              description=head.get("description", ""), source=head.get("source", ""))
-        for name, value in self.table(data, "geometry").items():
+        for name, value in data.get("geometry", {}).items():
             b.geometry(name, value, key=f"geometry.{name}")
         if "gravity" in head:
             b.gravity(head["gravity"], key="mechanism.gravity")
-        for i, body in enumerate(self.array_of_tables("bodies")):
-            key = f"bodies[{i}]"
-            self.check_keys(body, key, BODY_KEYS)
-            b.body(body.get("label"), body.get("name", ""), mass=body.get("mass"), com=body.get("com"),
-                   inertia_com=body.get("inertia_com"), inertia=body.get("inertia"), key=key)
-        for i, joint in enumerate(self.array_of_tables("joints")):
-            key = f"joints[{i}]"
-            self.check_keys(joint, key, JOINT_KEYS)
-            b.joint(joint.get("type"), joint.get("parent"), joint.get("child"), name=joint.get("name"),
-                    parent_frame=joint.get("parent_frame"), child_frame=joint.get("child_frame"),
+        for i, body in enumerate(data["bodies"]):
+            b.body(body["label"], body.get("name", ""), mass=body.get("mass"), com=body.get("com"),
+                   inertia_com=body.get("inertia_com"), inertia=body.get("inertia"), key=f"bodies[{i}]")
+        for i, joint in enumerate(data["joints"]):
+            b.joint(joint["type"], joint["parent"], joint["child"], name=joint.get("name"),
+                    parent_frame=joint["parent_frame"], child_frame=joint["child_frame"],
                     coordinates=joint.get("coordinates"), limits=joint.get("limits"),
-                    loop=joint.get("loop", False), key=key)
-        coordinates = self.table(data, "coordinates")
-        self.check_keys(coordinates, "coordinates", ("independent",))
+                    loop=joint.get("loop", False), key=f"joints[{i}]")
+        coordinates = data.get("coordinates", {})
         if "independent" in coordinates:
             b.independent(coordinates["independent"], key="coordinates.independent")
-        trajectory = self.table(data, "trajectory")
-        if trajectory:
-            self.check_keys(trajectory, "trajectory", TRAJECTORY_KEYS)
-            b.trajectory(self.table(trajectory, "trajectory.q", required=True),
-                         t_start=trajectory.get("t_start", 0), t_end=trajectory.get("t_end", 10),
-                         samples=trajectory.get("samples", 200), key="trajectory")
-        effects = self.data.get("effects", [])
-        if not isinstance(effects, list):
-            raise self.error("effects", "must be an array of tables: [[effects]]")
-        for i, effect in enumerate(effects):
-            key = f"effects[{i}]"
-            if not isinstance(effect, dict):
-                raise self.error(key, "must be a table")
-            self.check_keys(effect, key, EFFECT_KEYS)
-            b.effect(effect.get("kind"), effect.get("coordinate"), effect.get("values"), key=key)
+        if "trajectory" in data:
+            trajectory = data["trajectory"]
+            b.trajectory(trajectory["q"], t_start=trajectory.get("t_start", 0),
+                         t_end=trajectory.get("t_end", 10), samples=trajectory.get("samples", 200),
+                         key="trajectory")
+        for i, effect in enumerate(data.get("effects", [])):
+            b.effect(effect["kind"], effect["coordinate"], effect.get("values"), key=f"effects[{i}]")
         return b.build()

@@ -12,11 +12,20 @@ Values are exact: ``int``, :class:`~fractions.Fraction`, :class:`~decimal.Decima
 strings or expression strings in the geometry names (``"L/2"``), or sympy expressions in the
 geometry symbols. Binary floats are refused: ``0.1`` is not one tenth.
 
+Names: geometry and coordinate names are identifiers that are not reserved (``t``, ``pi``,
+the trajectory functions, Python keywords, names sympy reads as something else such as
+``E``, ``I`` or ``gamma``) and not inertial parameter names (``m2``, ``Izz1``), which would
+make the symbolic solver's expressions ambiguous. Inertia is checked for physical
+consistency (:mod:`baseparams.model.consistency`): a negative mass or an inertia that
+is not a mass distribution is refused, a zero-mass body with inertia gets a warning
+(``Mechanism.warnings``, printed by the command line).
+
 The mobility check (degrees of freedom, which coordinates may be independent) needs the
 kinematics; :func:`baseparams.io.loader.check_mobility` runs it, and every file loaded
 through :func:`baseparams.io.loader.load_mechanism` gets it.
 """
 
+import keyword
 import re
 from collections.abc import Mapping, Sequence
 from decimal import Decimal
@@ -28,13 +37,17 @@ import sympy
 from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.model.expressions import ExpressionError, parse_decimal, parse_expression, to_fraction
+from baseparams.model.expressions import NON_FINITE
+from baseparams.model.consistency import check_body
 from baseparams.model.joints import JointType
-from baseparams.model.mechanism import Body, EffectSpec, Frame, Joint, Mechanism, TrajectorySpec, TreeEdge
+from baseparams.model.mechanism import (MAX_SAMPLES, Body, EffectSpec, Frame, Joint, Mechanism, TrajectorySpec,
+                                        TreeEdge)
 from baseparams.model.params import PARAMETER_KINDS, from_mass_properties
 
 NAME_RE = re.compile(r"^[a-z0-9_]+$")
 IDENT_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 RESERVED = frozenset({"t", "pi", "sin", "cos", "exp", "sqrt"})
+PARAMETER_NAME_RE = re.compile(rf"^(?:{'|'.join(sorted(PARAMETER_KINDS, key=len, reverse=True))})[0-9]+$")
 DEFAULT_GRAVITY = ("0", "0", "-9.81")
 FRAME_KEYS = ("point", "axis", "ref")
 INERTIA_COM_KEYS = ("Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")
@@ -77,11 +90,16 @@ class MechanismBuilder:
         self._independent: tuple[tuple[str, ...], str] | None = None
         self._trajectory: tuple[TrajectorySpec, str] | None = None
         self._effects: list[tuple[EffectSpec, str]] = []
+        self._warnings: list[str] = []
 
     # ----- errors and values ---------------------------------------------------------
     def error(self, key: str | None, reason: str) -> InputError:
         """The error to raise for a bad value at ``key`` (readers use it for their own checks)."""
         return InputError(reason, file=self.path, key=key)
+
+    def warn(self, key: str | None, text: str) -> None:
+        """Record a remark that does not stop the build (``Mechanism.warnings``)."""
+        self._warnings.append(InputError(text, file=self.path, key=key).message)
 
     @property
     def geometry_subs(self) -> dict:
@@ -98,7 +116,7 @@ class MechanismBuilder:
         if isinstance(value, sympy.Basic):
             return self._sympy_expression(value, key, time)
         if not isinstance(value, (str, int, Decimal)) or isinstance(value, bool):
-            raise self.error(key, f"{value!r} is not a number or expression")
+            raise self.error(key, f"{_type_word(value)} is not a number or expression")
         try:
             return parse_expression(value, tuple(self._geometry), time=time)
         except ExpressionError as exc:
@@ -122,7 +140,8 @@ class MechanismBuilder:
     def vector(self, value: Sequence[Value], key: str) -> tuple:
         """Three exact expressions."""
         if not isinstance(value, (list, tuple)) or len(value) != 3:
-            raise self.error(key, f"must be a list of 3 numbers or expressions, got {value!r}")
+            got = f"{len(value)} items" if isinstance(value, (list, tuple)) else _type_word(value)
+            raise self.error(key, f"must be a list of 3 numbers or expressions, got {got}")
         return tuple(self.expression(v, f"{key}[{i}]") for i, v in enumerate(value))
 
     def rational(self, value: Value, key: str) -> Fraction:
@@ -138,9 +157,9 @@ class MechanismBuilder:
         """Declare a named geometric length or angle with an exact rational value; returns its
         symbol, usable in later expressions (as the text ``name`` or the symbol itself)."""
         key = key or f"geometry.{name}"
-        if (not isinstance(name, str) or not IDENT_RE.match(name) or name in RESERVED
-                or name in PARAMETER_KINDS):
-            raise self.error(key, "not a usable name (identifier, not t, pi or a function)")
+        problem = name_problem(name)
+        if problem or name in PARAMETER_KINDS:
+            raise self.error(key, problem or f"{name!r} is an inertial parameter kind: not a usable name")
         if name in self._geometry or name in self._coordinates:
             raise self.error(key, f"the name {name!r} is already used")
         if isinstance(value, (float, sympy.Float)):
@@ -172,7 +191,17 @@ class MechanismBuilder:
             raise self.error(f"{key}.label", f"duplicate body label {label}")
         if not isinstance(name, str):
             raise self.error(f"{key}.name", "must be a string")
-        body = Body(label, name, self._inertia(key, mass, com, inertia_com, inertia))
+        params = self._inertia(key, mass, com, inertia_com, inertia)
+        if params is not None:
+            verdict = check_body(params)
+            where = f"{key}.inertia" if inertia is not None else (
+                f"{key}.mass" if Fraction(params[0]) < 0 else f"{key}.inertia_com")
+            who = f"body {label}" + (f" ({name})" if name else "")
+            if verdict.error:
+                raise self.error(where, f"{who}: {verdict.error}: not a physical body")
+            if verdict.warning:
+                self.warn(where, f"{who}: {verdict.warning}")
+        body = Body(label, name, params)
         self._bodies.append(body)
         return body
 
@@ -279,7 +308,11 @@ class MechanismBuilder:
         else:
             cnames = tuple(coordinates)
         for c in cnames:
-            if c in self._coordinates or c in self._geometry or c in RESERVED or cnames.count(c) > 1:
+            problem = name_problem(c)
+            if problem:
+                raise self.error(key, f"coordinate {problem}" + (" (the joint's name is its coordinate's "
+                                                                 "by default)" if coordinates is None else ""))
+            if c in self._coordinates or c in self._geometry or cnames.count(c) > 1:
                 raise self.error(key, f"coordinate name {c!r} is already used")
         return cnames
 
@@ -316,8 +349,9 @@ class MechanismBuilder:
         t1 = self.rational(t_end, f"{key}.t_end")
         if not t1 > t0:
             raise self.error(f"{key}.t_end", "must be after t_start")
-        if not isinstance(samples, int) or isinstance(samples, bool) or samples < 2:
-            raise self.error(f"{key}.samples", "must be an integer >= 2")
+        if not isinstance(samples, int) or isinstance(samples, bool) or not 2 <= samples <= MAX_SAMPLES:
+            shown = samples if isinstance(samples, int) and abs(samples) < 10 ** 12 else "out of range"
+            raise self.error(f"{key}.samples", f"must be an integer from 2 to {MAX_SAMPLES:,} ({shown})")
         if not isinstance(q, Mapping):
             raise self.error(f"{key}.q", f"must be a table, not {type(q).__name__}")
         subs = self.geometry_subs
@@ -373,7 +407,8 @@ class MechanismBuilder:
             loops=tuple(loops), coordinates=coordinates, independent=independent,
             geometry=dict(self._geometry), gravity=self._gravity, trajectory=trajectory,
             title=self.title, description=self.description, source=self.source, path=self.path,
-            gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects))
+            gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects),
+            warnings=tuple(self._warnings))
 
     def _spanning_tree(self, bodies):
         """Joints in declaration order; one joining two placed bodies closes a loop."""
@@ -422,3 +457,28 @@ class MechanismBuilder:
             if independent and name not in independent:
                 raise self.error(f"{key}.q.{name}", f"not an independent coordinate ({', '.join(independent)})")
         return spec
+
+
+def name_problem(name: object) -> str | None:
+    """Why ``name`` cannot name a geometry value or a coordinate (None: it can): not an
+    identifier, reserved (``t``, ``pi``, a function, a Python keyword, a name sympy reads as
+    something else), or an inertial parameter's name (``m2``, ``Izz1``)."""
+    if not isinstance(name, str) or not IDENT_RE.match(name):
+        shown = repr(name) if isinstance(name, str) and len(name) < 40 else f"this {_type_word(name)}"
+        return f"name {shown} is not an identifier (letters, digits, _; not starting with a digit)"
+    if name in RESERVED or keyword.iskeyword(name) or name.lower() in NON_FINITE:
+        return f"name {name!r} is reserved (t, pi, sin, cos, exp, sqrt, nan, inf and Python keywords)"
+    if PARAMETER_NAME_RE.match(name):
+        return f"name {name!r} is an inertial parameter's name: choose another"
+    if sympy.parse_expr(name) != sympy.Symbol(name):
+        return f"name {name!r} means something else to sympy (the symbolic results would be ambiguous)"
+    return None
+
+
+def _type_word(value: object) -> str:
+    """A value's kind in words, for messages (never a Python repr)."""
+    if isinstance(value, bool):
+        return "a boolean"
+    return {str: "a string", int: "an integer", list: "a list", tuple: "a list", dict: "a table",
+            type(None): "a missing value", Decimal: "a number", float: "a float"}.get(
+        type(value), "a table" if isinstance(value, Mapping) else f"a {type(value).__name__}")

@@ -63,6 +63,8 @@ _NUMBER_RE = re.compile(
     rf"|(?=[0-9]|\.[0-9])(?P<int>(?:{_DIGITS})?)(?:\.(?P<frac>(?:{_DIGITS})?))?"
     rf"(?:[eE](?P<exp>[-+]?{_DIGITS}))?)")
 _NON_FINITE = {"nan", "inf", "infinity", "snan", "-nan", "+nan", "-inf", "+inf", "-infinity", "+infinity"}
+NON_FINITE = frozenset(_NON_FINITE)
+"""Words (lower case) that name a non-finite number: never a value, nor a name."""
 _OPERATORS = {ast.FloorDiv: "//", ast.Mod: "%", ast.MatMult: "@", ast.LShift: "<<", ast.RShift: ">>",
               ast.BitOr: "|", ast.BitXor: "^", ast.BitAnd: "&"}
 _T = sympy.Symbol("t")

@@ -59,6 +59,12 @@ class TreeEdge:
         return self.joint.parent if self.reversed else self.joint.child
 
 
+MAX_SAMPLES = 1_000_000
+"""The most samples a trajectory may ask for (``trajectory.samples``, ``--samples``): W has
+a row per sample and independent coordinate, and the float64 working memory is estimated
+(and refused above a limit) before the samples are made (baseparams.dynamics.trajectory)."""
+
+
 @dataclass(frozen=True)
 class TrajectorySpec:
     """Default exciting trajectory: one expression of t per independent coordinate."""
@@ -95,6 +101,7 @@ class Mechanism:
     path: str | None = None
     gruebler: int = 0
     effects: tuple = ()               # EffectSpec, file order
+    warnings: tuple = ()              # remarks on the input that did not stop the build (text)
 
     # ----- names and counts -------------------------------------------------
     @property
@@ -142,9 +149,10 @@ class Mechanism:
         """(R, p): rotation (rows; columns are the frame's x, y, z) and origin in ``backend``."""
         env = self.geometry_env(backend, symbolic)
         p = [backend.evaluate(c, env) for c in frame.point]
-        z = _normalize(backend, [backend.evaluate(c, env) for c in frame.axis])
+        subs = self.geometry_subs
+        z = _normalize(backend, [backend.evaluate(c, env) for c in _rescaled(frame.axis, subs)])
         if frame.ref is not None:
-            x_raw = [backend.evaluate(c, env) for c in frame.ref]
+            x_raw = [backend.evaluate(c, env) for c in _rescaled(frame.ref, subs)]
         else:
             x_raw = _default_ref(frame.axis, self.geometry_subs, backend)
         d = x_raw[0] * z[0] + x_raw[1] * z[1] + x_raw[2] * z[2]
@@ -156,6 +164,25 @@ class Mechanism:
     def numeric_gravity(self, backend, symbolic=False):
         env = self.geometry_env(backend, symbolic)
         return [backend.evaluate(c, env) for c in self.gravity]
+
+
+def _rescaled(vector, subs, spread=20):
+    """``vector`` (exact expressions) times an exact power of two that brings its largest
+    component into [1, 2), when that component lies outside [2^-spread, 2^spread]: a
+    direction does not depend on its length, and an axis such as (1e-300, 0, 0) would
+    otherwise square to zero (or an axis of 1e200 to infinity) in double precision. Axes
+    of ordinary lengths are left exactly as written."""
+    values = [sympy.sympify(c).subs(subs) for c in vector]
+    if not all(v.is_Rational for v in values):
+        return vector
+    largest = max(abs(Fraction(int(v.p), int(v.q))) for v in values)
+    if largest == 0:
+        return vector
+    k = largest.numerator.bit_length() - largest.denominator.bit_length()
+    if abs(k) <= spread:
+        return vector
+    scale = sympy.Integer(2) ** (-k)
+    return tuple(sympy.sympify(c) * scale for c in vector)
 
 
 def _normalize(backend, v):
