@@ -201,7 +201,7 @@ def test_open_chain_with_a_subset_of_independent_coordinates_is_rejected():
 
 def test_a_trajectory_needs_two_samples():
     from baseparams.errors import InputError
-    with pytest.raises(InputError, match="at least 2 samples"):
+    with pytest.raises(InputError, match="from 2 to 1,000,000 are accepted"):
         Trajectory.default(parse_mechanism(PENDULUM), samples=1)
 
 
@@ -252,3 +252,17 @@ def test_half_integer_powers_evaluate_in_every_backend():
     with backend.activate():
         got = backend.evaluate(expr, {"x": backend.rational(Fraction(7, 3))})
         assert abs(got - arb(str(sympy.N(expr.subs(x, sympy.Rational(7, 3)), 45)))) < arb(10) ** -35
+
+
+def test_singular_configuration_names_the_joints():
+    """The closure Jacobian's weakest direction names the joints the loops no longer fix
+    (issue 13: a singular configuration names the joint); in a batch, at the worst state."""
+    mech = resolve("four_bar")
+    ev = Evaluator(mech, Float64())
+    names = [mech.coordinates[i] for i in ev.structure.dependent]
+    joints = [mech.joint_of_coordinate(c).name for c in names]
+    assert len(names) == 2
+    # rows x dependent; state 0 regular, state 1 singular along the second coordinate only
+    jd = [[np.array([1.0, 1.0]), np.array([0.0, 0.0])],
+          [np.array([0.0, 0.0]), np.array([1.0, 1e-14])]]
+    assert ev.singular_joints(jd) == f"joints at the singularity: {joints[1]} ({names[1]}); "

@@ -122,3 +122,4 @@ def test_effects_table_errors_name_the_key(table, key, reason):
     with pytest.raises(InputError) as info:
         parse_mechanism(text)
     assert key in str(info.value) and reason in str(info.value)
+

@@ -203,7 +203,7 @@ class Evaluator:
                 step = self.backend.solve(jd, [[v] for v in res])
             except KinematicsError as exc:
                 raise KinematicsError(f"{where}singular configuration while closing the loops ({exc}); "
-                                      f"{self.describe(q)}") from None
+                                      f"{self.singular_joints(jd)}{self.describe(q)}") from None
             for (s,), j in zip(step, st.dependent):
                 q[j] = self.backend.point(q[j] - s)
         else:
@@ -226,6 +226,31 @@ class Evaluator:
             return codegen.closure(self.mechanism, q)
         values, rows, _ = self.kin.closure(self.kin.forward(q))
         return values, rows
+
+    def singular_joints(self, jd) -> str:
+        """Names the joints whose dependent coordinates move along the closure Jacobian's
+        weakest direction (the motion the loops no longer fix), e.g. "joints at the
+        singularity: J6_7 (damper_s); ". In a batch, at the worst state."""
+        try:
+            a = np.array([[np.atleast_1d(self.backend.to_float(v)) for v in row] for row in jd], dtype=float)
+        except (TypeError, ValueError):
+            return ""
+        a = np.moveaxis(a, -1, 0)                                  # (states, rows, dependent)
+        if not a.size or not np.all(np.isfinite(a)):
+            return ""
+        _, sv, vt = np.linalg.svd(a)
+        worst = int(np.argmin(sv[:, -1]))
+        v = np.abs(vt[worst, -1])
+        names = [self.mechanism.coordinates[self.structure.dependent[k]]
+                 for k in np.nonzero(v >= 0.3 * v.max())[0]]
+        joints = []
+        for name in names:
+            joint = self.mechanism.joint_of_coordinate(name).name
+            if joint not in joints:
+                joints.append(joint)
+        labels = ", ".join(f"{j} ({', '.join(c for c in names if self.mechanism.joint_of_coordinate(c).name == j)})"
+                           for j in joints)
+        return f"joints at the singularity: {labels}; "
 
     def describe(self, q, only=None):
         parts = []
@@ -261,7 +286,8 @@ class Evaluator:
         try:
             x = self.backend.solve(jd, jz)
         except KinematicsError as exc:
-            raise KinematicsError(f"{where}singular configuration ({exc}); {self.describe(q)}") from None
+            raise KinematicsError(f"{where}singular configuration ({exc}); {self.singular_joints(jd)}"
+                                  f"{self.describe(q)}") from None
         r = [[zero] * len(st.independent) for _ in range(self.n)]
         for j, i in enumerate(st.independent):
             r[i][j] = one

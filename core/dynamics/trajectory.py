@@ -19,6 +19,7 @@ is what the float64 stage every solver runs (dp's W and SVD; vp's starting posit
 measured on the built-in mechanisms (benchmarks/sample_memory.py), rounded up.
 """
 
+import functools
 import os
 import re
 from dataclasses import dataclass
@@ -113,12 +114,7 @@ class Trajectory:
 
     def derivatives(self, names):
         """For each coordinate name: (q, qd, qdd) as sympy expressions of t."""
-        out = []
-        for name in names:
-            e = self.expressions[name]
-            d1 = sympy.diff(e, T)
-            out.append((e, d1, sympy.diff(d1, T)))
-        return out
+        return [_derivatives(self.expressions[name]) for name in names]
 
     def independent_values(self, mechanism, backend, t):
         """(z, zd, zdd) at time ``t`` (backend number or, for float64, an array of times)."""
@@ -159,6 +155,14 @@ class Trajectory:
         sample, t = samples_float64(mechanism, self)
         columns = [np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in sample.q]
         return [[float(v[k]) for v in columns] for k in range(len(t))]
+
+
+@functools.lru_cache(maxsize=1024)
+def _derivatives(expression: sympy.Expr) -> tuple:
+    """(q, qd, qdd) of one expression of t, differentiated once per process: the per-state
+    arithmetics ask for them at every sample (sympy took 3.5 s of a 12-body chain's dp run)."""
+    d1 = sympy.diff(expression, T)
+    return expression, d1, sympy.diff(d1, T)
 
 
 def samples_float64(mechanism, trajectory):
