@@ -6,7 +6,6 @@ from pathlib import Path
 
 import click
 
-from baseparams import registry
 from baseparams.cli.commands import _progress, emit, format_option, get_solver, load, main
 from baseparams.errors import InputError
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -28,15 +27,11 @@ def parse_effect(text: str, mechanism: Mechanism, *, values: bool) -> EffectSpec
         form = "KIND:COORD=VALUE[,VALUE] or KIND:COORD:NAME=VALUE[,NAME=VALUE]" if values else "KIND:COORD"
         raise InputError(f"expected {form}", key=key)
     kind, coordinate = parts[0].strip(), parts[1].strip()
-    effects = registry.effects()
-    if kind not in effects:
-        raise InputError(f"unknown effect {kind!r}; registered: {', '.join(sorted(effects))}", key=key)
-    if coordinate not in mechanism.coordinates:
-        raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
-                         f"(coordinates: {', '.join(mechanism.coordinates)})", key=key)
+    from baseparams.identify.model import checked_effect    # on use, like the verbs: fast --help
+    effect = checked_effect(mechanism, kind, coordinate, key)
     if not values:
         return EffectSpec(kind, coordinate)
-    coefficients = effects[kind].item.coefficients
+    coefficients = effect.coefficients
     if len(parts) == 3:                          # KIND:COORD:NAME=V,NAME=V (head holds NAME)
         pairs = (parts[2] + "=" + given).split(",")
         out = {}

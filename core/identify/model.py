@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baseparams import registry
+from baseparams.dynamics.effects import Effect
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.dynamics.trajectory import check_limits
 from baseparams.errors import InputError, KinematicsError
@@ -76,16 +77,22 @@ def inertial_columns(sample: Sample, n: int) -> np.ndarray:
     return np.broadcast_to(k, (n,) + k.shape[-2:]) if k.ndim == 2 else k
 
 
-def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
-                   key: str = "effect") -> tuple[list[str], np.ndarray]:
-    """An effect's coefficient names and columns (N, f, c) on the independent coordinates."""
+def checked_effect(mechanism: Mechanism, kind: str, coordinate: str, key: str = "effect") -> Effect:
+    """The registered effect ``kind``, once ``coordinate`` is known to be a tree coordinate
+    of ``mechanism`` (InputError naming ``key`` otherwise)."""
     effects = registry.effects()
     if kind not in effects:
-        raise InputError(f"unknown effect {kind!r}; known: {', '.join(sorted(effects))}", key=key)
+        raise InputError(f"unknown effect {kind!r}; registered: {', '.join(sorted(effects))}", key=key)
     if coordinate not in mechanism.coordinates:
         raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
                          f"(coordinates: {', '.join(mechanism.coordinates)})", key=key)
-    effect = effects[kind].item
+    return effects[kind].item
+
+
+def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
+                   key: str = "effect") -> tuple[list[str], np.ndarray]:
+    """An effect's coefficient names and columns (N, f, c) on the independent coordinates."""
+    effect = checked_effect(mechanism, kind, coordinate, key)
     i = mechanism.coordinates.index(coordinate)
     q, qd, qdd = (_as_batch(values[i], n) for values in (sample.q, sample.qd, sample.qdd))
     with np.errstate(all="ignore"):
