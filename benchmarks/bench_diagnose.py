@@ -34,7 +34,6 @@ from collections import Counter, defaultdict  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from baseparams import registry  # noqa: E402
 from baseparams.identify import selection as S  # noqa: E402
 from baseparams.identify.diagnose import WEAK, diagnose, prepare  # noqa: E402
 from baseparams.identify.model import evaluate  # noqa: E402

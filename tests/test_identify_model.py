@@ -9,7 +9,7 @@ dq_i/dz by finite differences of the loop-closed positions).
 import numpy as np
 import pytest
 
-from baseparams.dynamics.trajectory import Trajectory, samples_float64
+from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.errors import InputError
 from baseparams.identify.model import (Motion, design, effect_values, evaluate, independent_names,

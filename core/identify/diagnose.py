@@ -198,7 +198,6 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     for i, (values, stds) in zip(chosen.added, estimates):
         if i in ambiguous_idx:
             continue
-        cand = problem.candidates[i]
         effects.append(_effect_entry(problem.candidates, values, stds, chosen, i))
     ambiguous = [_ambiguous_entry(problem.candidates, chosen, i, estimates[chosen.added.index(i)])
                  for i in chosen.added if i in ambiguous_idx]
