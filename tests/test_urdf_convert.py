@@ -216,6 +216,7 @@ def test_inertia_json_missing_parameter(tmp_path):
 
 # ----- solve --format csv ---------------------------------------------------------------------------
 @pytest.mark.parametrize("mech, solver", [("planar_2r", "exact"), ("pendulum", "symbolic"),
+                                          ("four_bar", "symbolic"),   # -1/L3: a negative expression
                                           (str(DATA / "ur5.urdf"), "dp")])
 def test_solve_csv_one_row_per_base_parameter(mech, solver):
     result = run("solve", mech, "--solver", solver, "--format", "csv")

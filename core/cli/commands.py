@@ -378,8 +378,10 @@ def base_csv(result) -> str:
         terms = []
         for param, coeff in b["expression"].items():
             text = str(coeff).strip()
-            sign = "-" if text.startswith("-") else "+"
-            body = text.lstrip("+-") if _plain_number(text) else f"({text})"
+            if _plain_number(text):
+                sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
+            else:                               # an expression keeps its own signs
+                sign, body = "+", f"({text})"
             terms.append((sign, param if body == "1" else f"{body}*{param}"))
         expression = " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ")
         writer.writerow([b["name"], expression if expression else "0"])
