@@ -1,12 +1,14 @@
 """Measured data (baseparams.identify.data): the CSV layout read and written exactly, and the
 Savitzky-Golay derivatives checked against the trajectory's exact derivatives."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from baseparams.errors import InputError
-from baseparams.identify.data import (MIN_SAMPLES, MeasuredData, read_measured, savgol_derivatives,
-                                      savgol_window, write_measured)
+from baseparams.identify.data import (MIN_SAMPLES, MeasuredData, atomic_write, read_measured,
+                                      savgol_derivatives, savgol_window, write_measured)
 from baseparams.identify.model import Motion
 from baseparams.identify.simulate import simulate
 from baseparams.io.loader import parse_mechanism, resolve
@@ -109,3 +111,12 @@ def test_take_keeps_the_layout():
     part = data.take(slice(10, 20))
     assert part.count == 10 and part.coordinates == data.coordinates and part.sample is None
     np.testing.assert_array_equal(part.tau, data.tau[10:20])
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_writing_to_a_device_never_replaces_it():
+    """atomic_write renames a temporary file over its target; a device (/dev/full) must be
+    written in place, and its error reported, not replaced by a regular file."""
+    with pytest.raises(InputError, match="cannot write"):
+        atomic_write("/dev/full", "t,q_theta,tau_theta\n")
+    assert not Path("/dev/full").is_file()

@@ -229,3 +229,8 @@ def test_solve_csv_one_row_per_base_parameter(mech, solver):
         parsed = sympy.sympify(text, locals=symbols)
         for param, coeff in base["expression"].items():        # every coefficient, every digit
             assert sympy.simplify(parsed.coeff(symbols[param]) - sympy.sympify(coeff, locals=symbols)) == 0
+
+
+def test_convert_write_errors_are_bad_input_not_internal(tmp_path):
+    result = CliRunner().invoke(main, ["convert", "pendulum", "-o", str(tmp_path / "missing" / "p.toml")])
+    assert result.exit_code == 2 and "cannot write" in result.stderr

@@ -48,7 +48,10 @@ def convert(mech, output, merge_fixed, floating_base, inertia_file):
     if inertia_file is not None:
         mechanism = with_inertia(mechanism, load_physical(inertia_file), inertia_file)
     writer = writer_for(output)
-    notes += writer.write(mechanism, output) or []
+    try:
+        notes += writer.write(mechanism, output) or []
+    except OSError as exc:                  # every writer: a missing folder, a full disk
+        raise InputError(f"cannot write: {exc.strerror or exc}", file=output) from None
     for note in notes:
         click.echo(f"note: {note}", err=True)
     click.echo(f"wrote {output} ({writer.name}): {len(mechanism.bodies)} bodies, {len(mechanism.joints)} joints, "

@@ -366,6 +366,15 @@ def write_measured(path: str | os.PathLike, data: MeasuredData, *, derivatives: 
 def atomic_write(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
     path = Path(path)
+    if path.exists() and not path.is_file():
+        # a device or a pipe (/dev/stdout, /dev/full): written in place, never replaced by a
+        # regular file (a rename over /dev/full as root would turn it into one)
+        try:
+            with open(path, "w", encoding="utf-8", newline="") as fh:
+                fh.write(text)
+        except OSError as exc:
+            raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None
+        return
     directory = path.parent if str(path.parent) else Path(".")
     try:
         fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
