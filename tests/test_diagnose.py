@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import statsmodels.api as sm
 from click.testing import CliRunner
+from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.stats.multitest import multipletests
 
 from baseparams.cli import main
@@ -15,6 +16,7 @@ from baseparams.dynamics.effects import Effect
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
 from baseparams.identify import selection as S
+from baseparams.identify import whiteness
 from baseparams.identify.diagnose import decimal_text, diagnose, prepare, write_fixed
 from baseparams.identify.model import evaluate
 from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
@@ -87,6 +89,53 @@ def test_wald_size_on_white_noise_is_near_alpha():
         for cand in testable:
             rejections.append(S.wald(fit.residual, S.candidate_basis(cand, fit), (n, f), fit.rank).pvalue < 0.05)
     assert 0.02 <= np.mean(rejections) <= 0.085      # 900 tests: 5 % +- 2.5 SE
+
+
+def test_ljung_box_matches_statsmodels():
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((180, 3)).cumsum(axis=0) * 0.1 + rng.standard_normal((180, 3))
+    ours = whiteness.ljung_box(x, 10)
+    theirs = [float(acorr_ljungbox(x[:, j], lags=[10])["lb_stat"].iloc[0]) for j in range(3)]
+    assert np.allclose(ours, theirs, rtol=1e-12)
+
+
+def _smooth_model(n: int, p: int) -> np.ndarray:
+    """p smooth columns (low-frequency cosines) on one coordinate: the shape of a regressor
+    along a smooth trajectory."""
+    t = np.linspace(0.0, 1.0, n)
+    return np.stack([np.cos(np.pi * k * t) for k in range(p)], axis=1)[:, None, :]
+
+
+def test_whiteness_size_after_a_smooth_fit_where_chi_square_fails():
+    """Nothing but white noise, fitted by 24 smooth columns on 200 samples: the simulated
+    null keeps the test's size (about 5 %), the chi-square reference rejects far more often
+    (which is why the Monte Carlo null exists)."""
+    rng = np.random.default_rng(9)
+    model = _smooth_model(200, 24)
+    monte_carlo, chi_square = [], []
+    for _ in range(120):
+        fit = S.weighted_fit(model, rng.standard_normal((200, 1)))
+        residual = fit.residual.reshape(200, 1)
+        _, p = whiteness.monte_carlo_pvalues(residual, fit.basis, 10, 0.05, seed=int(rng.integers(1 << 30)))
+        monte_carlo.append(p[0] <= 0.05)
+        chi_square.append(float(acorr_ljungbox(residual[:, 0], lags=[10])["lb_pvalue"].iloc[0]) <= 0.05)
+    assert np.mean(monte_carlo) <= 0.1            # 120 datasets: 5 % + 2.5 SE
+    assert np.mean(chi_square) >= 2 * max(np.mean(monte_carlo), 0.05)
+
+
+def test_whiteness_detects_coloured_noise_after_the_same_fit():
+    rng = np.random.default_rng(10)
+    model = _smooth_model(200, 24)
+    rejected = 0
+    for _ in range(30):
+        e = rng.standard_normal(200)
+        coloured = e.copy()
+        for k in range(1, 200):
+            coloured[k] = 0.5 * coloured[k - 1] + e[k]
+        fit = S.weighted_fit(model, coloured[:, None])
+        _, p = whiteness.monte_carlo_pvalues(fit.residual.reshape(200, 1), fit.basis, 10, 0.05)
+        rejected += p[0] <= 0.05
+    assert rejected >= 27
 
 
 def test_hac_window_widens_for_correlated_residuals():

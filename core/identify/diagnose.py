@@ -24,7 +24,6 @@ from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
-from statsmodels.stats.diagnostic import acorr_ljungbox
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 from baseparams import registry
@@ -32,8 +31,9 @@ from baseparams.errors import InputError
 from baseparams.identify.candidates import library, parse_selection
 from baseparams.identify.data import MeasuredData, atomic_write
 from baseparams.identify.model import Motion, design, effect_values, evaluate, independent_names
-from baseparams.identify.selection import (MAX_STEPS, Candidate, Rival, Selection, hac_lags, project_out,
-                                           holm, select, weighted_fit)
+from baseparams.identify.selection import (MAX_STEPS, Candidate, Fit, Rival, Selection, hac_lags,
+                                           project_out, holm, select, weighted_fit)
+from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -181,9 +181,11 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     candidates = [Candidate(c.kind, c.coordinate, c.names, c.columns[rows]) for c in problem.candidates]
     chosen = select(problem.inertial[rows], y[rows], candidates, alpha, max_steps)
 
-    before = _predict(problem.inertial, [], y, train)
     added_full = [problem.candidates[i] for i in chosen.added]
-    after = _predict(problem.inertial, added_full, y, train)
+    last = chosen.steps[-1]
+    remaining = last.chosen is not None         # stopped at max_steps with something significant
+    before = _predict(problem.inertial, [], y, chosen.steps[0].fit)
+    after = _predict(problem.inertial, added_full, y, None if remaining else last.fit, train)
     gap = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
            "holdout_before": nrms(before.residual[train:], tau[train:]) if held else None,
@@ -193,7 +195,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                              for j, c in enumerate(problem.coordinates)}
 
     ambiguous_idx = set(chosen.ambiguous)
-    estimates = coefficients(problem.inertial[rows], candidates, chosen.added, y[rows])
+    estimates = coefficients(problem.inertial[rows], candidates, chosen.added, y[rows], after.fit.weights)
     effects = []
     for i, (values, stds) in zip(chosen.added, estimates):
         if i in ambiguous_idx:
@@ -201,14 +203,12 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         effects.append(_effect_entry(problem.candidates, values, stds, chosen, i))
     ambiguous = [_ambiguous_entry(problem.candidates, chosen, i, estimates[chosen.added.index(i)])
                  for i in chosen.added if i in ambiguous_idx]
-    last = chosen.steps[-1]
-    remaining = last.chosen is not None         # stopped at max_steps with something significant
-    unexplained = _unexplained(after.residual, train, problem.coordinates, alpha)
+    unexplained = _unexplained(after, train, problem.coordinates, alpha)
     closed = bool(unexplained["white"] and not remaining)
     unexplained["significant_candidates_left"] = remaining
     first = chosen.steps[0]
     untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
-    unexplained["confusable_with_model"] = _weak(problem.inertial[rows], y[rows], candidates, first)
+    unexplained["confusable_with_model"] = _weak(problem.inertial[rows], candidates, first)
     notes = list(problem.notes)
     if untestable:
         notes.append(f"{len(untestable)} candidates not testable on this data: 'absorbed' (no direction "
@@ -221,13 +221,17 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
 @dataclass
 class _Prediction:
     residual: np.ndarray          # (N, f), unweighted, every sample
+    fit: Fit                      # the weighted fit on the training rows
 
 
-def _predict(inertial: np.ndarray, added: list[Candidate], y: np.ndarray, train: int) -> _Prediction:
-    """Fit on the training rows (weighted), predict every row."""
+def _predict(inertial: np.ndarray, added: list[Candidate], y: np.ndarray, fit: Fit | None,
+             train: int = 0) -> _Prediction:
+    """Predict every row from the weighted ``fit`` on the training rows of the inertial
+    model plus ``added`` (the selection's own; None: fit it here)."""
     model = np.concatenate([inertial] + [c.columns for c in added], axis=-1)
-    fit = weighted_fit(model[:train], y[:train])
-    return _Prediction(y - model @ fit.coefficients)
+    if fit is None:
+        fit = weighted_fit(model[:train], y[:train])
+    return _Prediction(y - model @ fit.coefficients, fit)
 
 
 def nrms(residual: np.ndarray, tau: np.ndarray) -> float:
@@ -239,15 +243,16 @@ def nrms(residual: np.ndarray, tau: np.ndarray) -> float:
     return float(np.sqrt(np.mean(per ** 2)))
 
 
-def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[int], y: np.ndarray
-                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[int], y: np.ndarray,
+                 weights: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each added effect's coefficients and HAC standard deviations in the final model
-    (Frisch-Waugh-Lovell: the effect columns with the inertial model projected out)."""
+    (Frisch-Waugh-Lovell: the effect columns with the inertial model projected out), with
+    the final model's noise ``weights`` (None: estimated here)."""
     if not added:
         return []
     n, f, _ = inertial.shape
     blocks = [candidates[i].columns for i in added]
-    full = weighted_fit(np.concatenate([inertial] + blocks, axis=-1), y)
+    full = weighted_fit(np.concatenate([inertial] + blocks, axis=-1), y, weights)
     base = weighted_fit(inertial, y, full.weights)
     Z = np.concatenate(blocks, axis=-1) * full.weights[None, :, None]
     Z = project_out(Z.reshape(n * f, -1), base.basis)
@@ -327,9 +332,10 @@ def _steps_json(candidates: list[Candidate], chosen: Selection) -> list[dict]:
     return out
 
 
-def _weak(inertial: np.ndarray, y: np.ndarray, candidates: list[Candidate], first) -> list[dict]:
-    """Candidates nearly collinear with the inertial model: what fraction of them survives."""
-    fit = weighted_fit(inertial, y)
+def _weak(inertial: np.ndarray, candidates: list[Candidate], first) -> list[dict]:
+    """Candidates nearly collinear with the inertial model: what fraction of them survives
+    beyond the first step's (inertial-only) weighted fit."""
+    fit = first.fit
     n, f, _ = inertial.shape
     out = []
     for cand, test in zip(candidates, first.tests):
@@ -351,21 +357,21 @@ def noise_floor(residual: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(d2 ** 2, axis=0) / 6.0)
 
 
-def _unexplained(residual: np.ndarray, train: int, coordinates, alpha: float) -> dict:
+def _unexplained(prediction: _Prediction, train: int, coordinates, alpha: float) -> dict:
+    """Whiteness of the final fit's residual per coordinate (Ljung-Box, its null simulated
+    through the fit: :mod:`.whiteness`; Holm over the coordinates) and the residual against
+    the noise level."""
+    residual, fit = prediction.residual, prediction.fit
     fit_part, hold_part = residual[:train], residual[train:]
     sigma = noise_floor(fit_part)
     lags = min(LJUNG_BOX_LAGS, max(1, train // 5))
-    boxes = {}
-    pvalues = []
-    for j, c in enumerate(coordinates):
-        column = fit_part[:, j]
-        if np.std(column) == 0:
-            stat, p = 0.0, 1.0
-        else:
-            table = acorr_ljungbox(column, lags=[lags])
-            stat, p = float(table["lb_stat"].iloc[0]), float(table["lb_pvalue"].iloc[0])
-        boxes[c] = {"stat": stat, "pvalue": p, "lags": lags}
-        pvalues.append(p)
+    weighted = fit.residual.reshape(train, len(coordinates))
+    stats, pvalues = monte_carlo_pvalues(weighted, fit.basis, lags, alpha)
+    flat = np.std(weighted, axis=0) == 0
+    pvalues[flat] = 1.0
+    count = replicates(len(coordinates), alpha)
+    boxes = {c: {"stat": float(stats[j]), "pvalue": float(pvalues[j]), "lags": lags, "replicates": count}
+             for j, c in enumerate(coordinates)}
     reject = holm(pvalues) <= alpha
     rms = np.sqrt(np.mean(fit_part ** 2, axis=0))
     hold_rms = np.sqrt(np.mean(hold_part ** 2, axis=0)) if len(hold_part) else None

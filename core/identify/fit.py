@@ -6,7 +6,7 @@ noise weighting: an ordinary least-squares fit gives each coordinate's residual,
 variance (over its own degrees of freedom, N minus the sum of the leverages of that
 coordinate's rows) estimates the coordinate's noise SD sigma_j; each coordinate's rows are
 then divided by sigma_j and refitted; the SDs are re-estimated from each weighted fit until
-they settle (WEIGHTING_PASSES, WEIGHTING_TOL) before the final fit. The covariance of the estimates is
+they settle (:mod:`.weighting`, shared with diagnosis) before the final fit. The covariance of the estimates is
 s^2 (X_w^T X_w)^-1, s^2 the weighted residual variance (about 1 when the noise model holds),
 computed from a QR factorisation of the column-scaled weighted matrix (no normal equations).
 """
@@ -23,6 +23,7 @@ from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData, kinematics
 from baseparams.identify.model import design, effect_values
+from baseparams.identify.weighting import fixed_point
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # Unit-norm columns whose pivoted-QR diagonal falls below this fraction of the largest are
@@ -35,10 +36,6 @@ ABSORB = 1e-9
 # Above this relative distance of K from the base model's row space the fit says the base
 # model is inexact (dp's coefficients on a badly conditioned mechanism).
 BASE_MODEL_TOLERANCE = 1e-8
-# Fits that estimate the noise SDs (the first one unweighted) before the final weighted fit:
-# at most this many, until no SD changes by more than WEIGHTING_TOL (relative).
-WEIGHTING_PASSES = 12
-WEIGHTING_TOL = 1e-3
 # A coordinate's noise SD is taken at least this fraction of its RMS force (noise-free data).
 NOISE_FLOOR = 1e-13
 
@@ -238,25 +235,14 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     p = len(kept)
     rms_force = np.sqrt(np.mean(y ** 2, axis=0))
     floor = NOISE_FLOOR * max(float(rms_force.max()), np.finfo(float).tiny)
-    # Gautier: an ordinary fit, each coordinate's noise SD from its residual, a weighted refit.
-    # Then again from each weighted fit's residual: the ordinary residual of a quiet
-    # coordinate carries some of a noisy one's noise (through the shared parameters), so the
-    # first SDs are biased when the coordinates' noise levels differ much.
-    # Iterated to the fixed point (at most WEIGHTING_PASSES fits): diagnosis measured one pass
-    # leaving a quiet PUMA coordinate's SD 16 times too large (docs/diagnosis.md).
-    sigma = np.ones(f)
-    for _ in range(WEIGHTING_PASSES):
-        weights = np.tile(1 / sigma, n)
+    def fit_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        weights = np.tile(coordinate_weights, n)
         weighted = stacked * weights[:, None]
         wscale = np.linalg.norm(weighted, axis=0)
         theta_w, q_factor = _solve(weighted / wscale, target * weights, names, data.path)
-        residual = ((target - stacked @ (theta_w / wscale))).reshape(n, f)
-        leverage = np.sum(q_factor ** 2, axis=1).reshape(n, f).sum(axis=0)
-        dof = np.maximum(n - leverage, 1.0)
-        previous = sigma
-        sigma = np.maximum(np.sqrt(np.sum(residual ** 2, axis=0) / dof), floor)
-        if np.max(np.abs(sigma / previous - 1.0)) < WEIGHTING_TOL:
-            break
+        return (target - stacked @ (theta_w / wscale)).reshape(n, f), q_factor
+
+    sigma = fixed_point(fit_at, f, floor)     # Gautier's weighting (:mod:`.weighting`)
     weights = np.tile(1 / sigma, n)
     weighted = stacked * weights[:, None]
     wscale = np.linalg.norm(weighted, axis=0)

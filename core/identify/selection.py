@@ -38,12 +38,11 @@ from scipy import stats
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 from statsmodels.tsa.stattools import acf
 
+from baseparams.identify.weighting import fixed_point
+
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
 RANK_TOL = 1e-6
-# Noise weighting: at most this many fits, until no weight changes by more than the tolerance.
-REWEIGHTING_PASSES = 12
-REWEIGHTING_TOL = 1e-3
 # A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
 # current model is projected out is absorbed by the model.
 ABSORB_TOL = 1e-7
@@ -103,6 +102,7 @@ class Step:
     candidate (None when nothing is significant) and the rivals it cannot be told from."""
     tests: list[Test]
     adjusted: np.ndarray
+    fit: "Fit"                    # the weighted fit of the model this step tests against
     chosen: int | None = None
     confusable: list[Rival] = field(default_factory=list)
     beaten: list[Rival] = field(default_factory=list)
@@ -231,32 +231,17 @@ class Fit:
     rank: int
 
 
-def noise_levels(residual: np.ndarray, dof: int) -> np.ndarray:
-    """Per-coordinate noise level of a residual (N, f), with the degrees of freedom spent."""
-    n, f = residual.shape
-    level = np.sqrt(np.sum(residual ** 2, axis=0) / max(n * f - dof, 1) * f)
-    positive = level[level > 0]
-    floor = (positive.min() if positive.size else 1.0) * 1e-12 or 1e-300
-    return np.maximum(level, floor)
-
-
-def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> Fit:
-    """Least squares of y on ``model``; ``weights`` None: estimated from an unweighted fit
-    (Gautier's per-coordinate noise weighting, iterated)."""
+def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None,
+                 start: np.ndarray | None = None) -> Fit:
+    """Least squares of y on ``model``; ``weights`` None: Gautier's per-coordinate noise
+    weighting at its fixed point (:mod:`.weighting`), iterated from the weights ``start``."""
     n, f, p = model.shape
     if weights is None:
-        # Gautier's weighting, iterated to its fixed point: one pass from the ordinary fit
-        # leaves a quiet coordinate's SD many times too large when the coordinates' forces
-        # differ by orders of magnitude (its residual then carries the loud ones' misfit,
-        # which a whiteness test reads as structure)
-        weights = np.ones(f)
-        for _ in range(REWEIGHTING_PASSES):
-            fit = weighted_fit(model, y, weights)
-            new = 1.0 / noise_levels(fit.residual.reshape(n, f) / weights, fit.rank)
-            converged = np.max(np.abs(new / weights - 1.0)) < REWEIGHTING_TOL
-            weights = new
-            if converged:
-                break
+        def fit_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            fit = weighted_fit(model, y, coordinate_weights)
+            return fit.residual.reshape(n, f) / coordinate_weights, fit.basis
+
+        weights = 1.0 / fixed_point(fit_at, f, start=None if start is None else 1.0 / start)
     A = (model * weights[None, :, None]).reshape(n * f, p)
     b = (y * weights[None, :]).reshape(n * f)
     scale = np.linalg.norm(A, axis=0)
@@ -312,9 +297,11 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     added: list[int] = []
     steps: list[Step] = []
     ambiguous: dict = {}
+    previous = None
     for _ in range(max_steps):
         current = np.concatenate([model] + [candidates[i].columns for i in added], axis=-1)
-        fit = weighted_fit(current, y)
+        fit = weighted_fit(current, y, start=previous)
+        previous = fit.weights
         dof = fit.rank
         bases, tests = {}, []
         for i, cand in enumerate(candidates):
@@ -327,14 +314,15 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         adjusted = np.ones(len(candidates))
         if tested:
             adjusted[tested] = holm([tests[i].pvalue for i in tested])
-        step = Step(tests, adjusted)
+        step = Step(tests, adjusted, fit)
         steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
         if not significant:
             break
         winner = max(significant, key=lambda i: tests[i].z)
         rivals = [i for i in tested if tests[i].pvalue <= alpha and i != winner]
-        winner, confusable, beaten = resolve(winner, rivals, bases, fit, (n, f), dof, alpha)
+        winner, confusable, beaten = resolve(winner, rivals, bases, fit, (n, f), dof, alpha,
+                                             nested_level=alpha / len(tested))
         step.chosen, step.confusable, step.beaten = winner, confusable, beaten
         added.append(winner)
         if confusable:
@@ -343,14 +331,20 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
 
 
 def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[int, int], dof: int,
-            alpha: float) -> tuple[int, list[Rival], list[Rival]]:
+            alpha: float, nested_level: float | None = None) -> tuple[int, list[Rival], list[Rival]]:
     """Compare the winner with each rival by encompassing tests (does each add significantly
     to the other?). A rival nested in the winner (an offset inside a spring on the same
-    independent coordinate) replaces it when the winner's extra directions are not
-    significant: the simpler effect explains the data. A rival that adds over the winner
+    independent coordinate) replaces it unless the winner's extra directions are significant
+    at ``nested_level`` (default ``alpha``; ``select`` passes Bonferroni's alpha / m, the bar
+    the most significant of m candidates clears to enter the model under Holm): those extra
+    directions are a further effect and must clear the same bar as any other, or the larger
+    effect would be named whenever its extra directions fluctuate past alpha (an offset named
+    a spring in 12-15 % of datasets at alpha = 0.05, benchmarks/bench_diagnose.py, where
+    low-frequency directions make the HAC test somewhat liberal). A rival that adds over the winner
     while the winner adds nothing over it replaces the winner. Rivals over which the winner
     adds nothing, and that add nothing over the winner, are confusable with it: the data
     cannot tell them apart."""
+    nested_level = alpha if nested_level is None else nested_level
     seen = {winner}
     rivals = [winner] + list(rivals)       # after a switch the first winner is a rival too
     while True:
@@ -369,9 +363,9 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
             a_adds = t_ab.tested and t_ab.pvalue <= alpha
             b_adds = t_ba.tested and t_ba.pvalue <= alpha
             if not t_ba.tested:                 # rival nested in the winner
-                (beaten if a_adds else switch).append(rival)
+                (beaten if t_ab.tested and t_ab.pvalue <= nested_level else switch).append(rival)
             elif not t_ab.tested:               # winner nested in the rival
-                (switch if b_adds else beaten).append(rival)
+                (switch if t_ba.pvalue <= nested_level else beaten).append(rival)
             elif a_adds and not b_adds:
                 beaten.append(rival)
             elif not a_adds and b_adds:
