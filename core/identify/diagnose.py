@@ -181,7 +181,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     candidates = [Candidate(c.kind, c.coordinate, c.names, c.columns[rows]) for c in problem.candidates]
     chosen = select(problem.inertial[rows], y[rows], candidates, alpha, max_steps)
 
-    added_full = [problem.candidates[i] for i in chosen.added]
+    added_full = [problem.candidates[i] for i in chosen.in_model]
     last = chosen.steps[-1]
     remaining = last.chosen is not None         # stopped at max_steps with something significant
     before = _predict(problem.inertial, [], y, chosen.steps[0].fit)
@@ -195,7 +195,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                              for j, c in enumerate(problem.coordinates)}
 
     ambiguous_idx = set(chosen.ambiguous)
-    estimates = coefficients(problem.inertial[rows], candidates, chosen.added, y[rows], after.fit.weights)
+    estimates = coefficients(problem.inertial[rows], candidates, chosen.in_model, y[rows], after.fit.weights)
     effects = []
     for i, (values, stds) in zip(chosen.added, estimates):
         if i in ambiguous_idx:

@@ -113,6 +113,12 @@ class Selection:
     steps: list[Step]
     added: list[int]              # candidate indices, in the order they entered the model
     ambiguous: dict               # added index -> the confusable rivals of that step
+    companions: list[int] = field(default_factory=list)   # those rivals: in the model, never named
+
+    @property
+    def in_model(self) -> list[int]:
+        """Every candidate in the final model, in the order of its columns after the model's."""
+        return self.added + self.companions
 
 
 # ----- linear algebra --------------------------------------------------------------------
@@ -292,20 +298,26 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
            max_steps: int = MAX_STEPS) -> Selection:
     """Forward selection: test every candidate against the current model, Holm-correct, add
     the most significant (or, for a confusable group, its strongest member, reported as
-    ambiguous), refit and repeat until no candidate is significant."""
+    ambiguous), refit and repeat until no candidate is significant.
+
+    A confusable group enters the working model whole (its strongest member among ``added``,
+    the others as ``companions``): with only one member in, what the hidden member adds over
+    it, a small but sharp remainder, was chased by further candidates (the SLA, viscous
+    friction on the upper arm hidden, named four wrong effects after its group)."""
     n, f, _ = model.shape
     added: list[int] = []
     steps: list[Step] = []
     ambiguous: dict = {}
+    companions: list[int] = []
     previous = None
     for _ in range(max_steps):
-        current = np.concatenate([model] + [candidates[i].columns for i in added], axis=-1)
+        current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
         fit = weighted_fit(current, y, start=previous)
         previous = fit.weights
         dof = fit.rank
         bases, tests = {}, []
         for i, cand in enumerate(candidates):
-            if i in added:
+            if i in added or i in companions:
                 tests.append(NOT_TESTED)
                 continue
             bases[i] = candidate_basis(cand, fit)
@@ -327,7 +339,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         added.append(winner)
         if confusable:
             ambiguous[winner] = confusable
-    return Selection(steps, added, ambiguous)
+            companions.extend(r.index for r in confusable)
+    return Selection(steps, added, ambiguous, companions)
 
 
 def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[int, int], dof: int,
