@@ -7,7 +7,10 @@
    ``computeJointTorqueRegressor`` called sample after sample into one preallocated array
    (the way a Python user batches it). Target: ours / Pinocchio <= 1.0.
 2. SLA suspension W (200 samples, loop closure included): float64, cold (first call in the
-   process: generates the code) and warm; arb at 30, 100 and 500 digits.
+   process: generates the code) and warm; warm through the general per-stage Newton
+   (``evaluator.BATCHED_NEWTON = False``, the method the batched continuation replaced) in
+   the same run, as the yardstick, with the ratio; the kinematics frames computed afresh
+   (what every W paid before they were cached); arb at 30, 100 and 500 digits.
 
 Pinocchio is optional (``import pinocchio``); without it the yardstick column says so.
 
@@ -21,11 +24,12 @@ import tracemalloc
 
 import numpy as np
 
-from baseparams.dynamics import codegen
+from baseparams.dynamics import codegen, evaluator
 from baseparams.dynamics.evaluator import Evaluator
 from baseparams.dynamics.regressor import tree_regressor_array
 from baseparams.dynamics.trajectory import observation_matrix
 from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.kinematics import tree
 from baseparams.model import generate
 from baseparams.numeric.backends import Arb, Float64
 
@@ -44,6 +48,17 @@ def best_of(repeat, fn):
         result = fn()
         times.append(time.perf_counter() - start)
     return min(times), result
+
+
+def best_cpu_of(repeat, fn):
+    """Best process CPU time of ``repeat`` calls: on a loaded machine the wall time also
+    counts the other jobs' share of the cores."""
+    times = []
+    for _ in range(repeat):
+        start = time.process_time()
+        fn()
+        times.append(time.process_time() - start)
+    return min(times)
 
 
 def peak_memory_mb(fn):
@@ -168,9 +183,31 @@ def main():
     print(f"{'arithmetic':>16} {'time (s)':>10} {'peak MB':>8}  closure residual")
     start = time.perf_counter()
     observation_matrix(sla, Float64())
-    print(f"{'float64 (cold)':>16} {time.perf_counter() - start:10.3f}")
-    t, _ = best_of(args.repeat, lambda: observation_matrix(sla, Float64()))
-    print(f"{'float64 (warm)':>16} {t:10.3f} {peak_memory_mb(lambda: observation_matrix(sla, Float64())):8.1f}")
+    print(f"{'float64 (cold)':>16} {time.perf_counter() - start:10.3f}  (generates the closure code)")
+    start = time.perf_counter()
+    codegen.compiled(sla, "regressor")      # 200 samples alone would not generate it (GENERATE_AT)
+    print(f"{'regressor code':>16} {time.perf_counter() - start:10.3f}  (generated; warm = both compiled)")
+    t, (w, _) = best_of(args.repeat, lambda: observation_matrix(sla, Float64()))
+    cpu = best_cpu_of(args.repeat, lambda: observation_matrix(sla, Float64()))
+    print(f"{'float64 (warm)':>16} {t:10.3f} {peak_memory_mb(lambda: observation_matrix(sla, Float64())):8.1f}"
+          f"  (CPU {cpu:.3f} s)")
+    evaluator.BATCHED_NEWTON = False
+    t_general, (w_general, _) = best_of(args.repeat, lambda: observation_matrix(sla, Float64()))
+    cpu_general = best_cpu_of(args.repeat, lambda: observation_matrix(sla, Float64()))
+    evaluator.BATCHED_NEWTON = True
+    assert np.abs(w - w_general).max() <= 1e-10 * np.abs(w_general).max()
+    print(f"{'general Newton':>16} {t_general:10.3f}           (CPU {cpu_general:.3f} s; yardstick, same run; the "
+          f"same W to {np.abs(w - w_general).max() / np.abs(w_general).max():.1e} relative)")
+    print(f"{'ratio':>16} {t / t_general:10.3f}           (CPU {cpu / cpu_general:.3f}) batched continuation / "
+          f"general Newton")
+
+    def fresh_frames():
+        tree._PREPARED.pop(sla, None)
+        return tree.TreeKinematics(sla, Float64())
+
+    t_frames, _ = best_of(args.repeat, fresh_frames)
+    print(f"{'frames afresh':>16} {t_frames:10.3f}  (the kinematics frames through sympy: once per "
+          f"mechanism and process now, at every W before)")
     if args.quick:
         return
     for digits in (30, 100, 500):

@@ -539,6 +539,15 @@ def closure(mechanism, q) -> tuple[list, list]:
     return [phi[..., i] for i in range(m)], [[jac[..., i, j] for j in range(n)] for i in range(m)]
 
 
+def closure_arrays(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closure values (samples, m) and Jacobian (samples, m, n) at tree coordinates ``q``
+    given as one (n, samples) array: the batched Newton's form, without per-coordinate lists."""
+    module = compiled(mechanism, "closure")
+    phi, jac = module["_evaluate"](module["_closure"], module["_LAYOUTS"]["_closure"],
+                                   [np.ascontiguousarray(q, dtype=float)])
+    return phi, jac
+
+
 def closure_bias(mechanism, q, qd) -> list:
     """The closure bias terms (list of per-sample arrays) at positions and velocities q, qd."""
     gamma = _run(mechanism, "closure", "_closure_bias", (q, qd))[0]

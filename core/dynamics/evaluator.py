@@ -86,13 +86,23 @@ def independent_rows(matrix, tol):
 
 @dataclass
 class Sample:
-    """One evaluated state (or a batch of them, for float64): everything the regressor needs."""
+    """One evaluated state (or a batch of them, for float64): everything the regressor needs.
+
+    ``states`` (the body states of the generic kinematics) may be given as None: they are
+    then computed when first read (the generated float64 regressor does not need them)."""
     q: list
     qd: list
     qdd: list
-    states: dict
+    _states: dict | None
     projection: list     # R: n rows x f columns, qd = R zd
     kin: TreeKinematics
+
+    @property
+    def states(self) -> dict:
+        if self._states is None:
+            with self.kin.backend.activate():
+                self._states = self.kin.forward(self.q, self.qd)
+        return self._states
 
     @in_backend_precision
     def regressor(self):
@@ -151,6 +161,7 @@ class Evaluator:
         self.kin = TreeKinematics(mechanism, backend, symbolic_geometry)
         self.structure = closure_structure(mechanism)
         self.n = self.kin.n
+        self._solved = None      # (q, closure Jacobian at q) of the last batched assembly
 
     # ----- positions ------------------------------------------------------
     def tolerance(self):
@@ -170,6 +181,10 @@ class Evaluator:
         if self.backend.exact:
             raise KinematicsError("exact and symbolic arithmetic cannot solve loop closure; "
                                   "give all tree coordinates or use float64 / arb")
+        if self._batched(z):
+            solved = self._assemble_batch(z, guess)
+            if solved is not None:
+                return solved
         if guess is None:
             # continuation from the reference configuration (q = 0 closes the loops), in steps
             # of at most 0.25 in every independent coordinate
@@ -219,6 +234,125 @@ class Evaluator:
             raise KinematicsError(f"{where}a redundant closure equation is violated (residual "
                                   f"{worst:.3g}): the geometry is inconsistent; {self.describe(q)}")
         return q
+
+    # ----- float64 batches: continuation on arrays ---------------------------------------
+    def _batched(self, values) -> bool:
+        """A float64 batch that runs the generated closure code (see :meth:`_closure`)."""
+        return (BATCHED_NEWTON and isinstance(self.backend, Float64) and bool(self.mechanism.loops)
+                and codegen.worthwhile(self.mechanism, "closure", values))
+
+    def _assemble_batch(self, z, guess):
+        """:meth:`assemble` for a float64 batch, on (coordinates, samples) arrays; None when
+        anything is unusual, and the general path then runs (and reports) as before.
+
+        The same continuation stages lam = k/steps, the same tolerances (1e-6 on the way,
+        then 1e-12 and one more polishing step per sample) and the same condition bound on
+        every Jacobian inverted; what differs is where each stage starts: extrapolated along
+        the path from the solved stages with its tangent dq_d/dlam = -Phi_d^-1 Phi_z z
+        (:func:`_predict`: Euler from q = 0, then cubic Hermite), so a stage needs two or
+        three closure evaluations instead of five to seven, and Newton steps only the
+        samples not yet converged. The tangent reuses the inverse the condition check needs
+        anyway (an inverse is the step, no separate solve). Both paths follow the same
+        homotopy to the same root at every stage, hence the same branch
+        (tests/test_closure_speed_paths.py compares positions and W with the general path)."""
+        st = self.structure
+        try:
+            shape = np.broadcast_shapes(*(np.shape(v) for v in list(z) + list(guess or [])))
+        except ValueError:
+            return None
+        if len(shape) != 1:
+            # one state at a time (the excitation check's random draws) keeps the general
+            # path: on draws near the edge of the reachable range its four Newton stages can
+            # land on another assembly mode than the followed path, and the draws must not change
+            return None
+        dep, ind, rows = list(st.dependent), list(st.independent), list(st.rows)
+        zs = np.array([np.broadcast_to(np.asarray(v, dtype=float), shape) for v in z])    # (f, samples)
+        if guess is None:
+            q = np.zeros((self.n,) + shape)
+            reach = float(np.max(np.abs(zs))) if zs.size else 0.0
+            if not np.isfinite(reach):
+                return None
+            steps = max(4, int(np.ceil(reach / 0.25)))
+            stages = [(self.backend.rational(Fraction(k, steps)), -6) for k in range(1, steps)]
+        else:
+            q = np.array([np.broadcast_to(np.asarray(v, dtype=float), shape) for v in guess])
+            stages = []
+        stages.append((1.0, self.tolerance()))
+        inverse = jac = phi = None
+        path = []                  # (lam, dependent coordinates, tangent) at the solved stages
+        lam_solved = 0.0
+        for lam, tol in stages:
+            if guess is None:
+                if inverse is None:                 # the reference configuration's Jacobian
+                    phi, jac = codegen.closure_arrays(self.mechanism, q)
+                    inverse = self._checked_inverse(jac, rows, dep)
+                    if inverse is None:
+                        return None
+                tangent = -np.einsum("sij,sjk,ks->is", inverse, jac[:, rows][:, :, ind], zs, optimize=True)
+                path.append((lam_solved, q[dep].copy(), tangent))
+                q[dep] = _predict(path[-2:], lam)
+            q[ind] = lam * zs
+            lam_solved = lam
+            solved = self._newton_batch(q, tol, phi, jac, inverse)
+            if solved is None:
+                return None
+            phi, jac, inverse = solved
+        if not np.all(np.abs(phi) <= 10.0 ** (stages[-1][1] + 3)):     # the redundant equations too
+            return None
+        solved = [zs[ind.index(i)] if i in ind else q[i] for i in range(self.n)]
+        self._solved = (solved, jac)
+        return solved
+
+    def _newton_batch(self, q, tol, phi, jac, inverse):
+        """Newton on the (n, samples) array ``q`` (in place) until every sample's closure
+        residual is within 10^tol (below 1e-12: and then one more step for that sample, as
+        :meth:`_newton` polishes), stepping only the samples not yet there. Returns the
+        closure values, Jacobians and Phi_d inverses per sample (the last ones computed),
+        or None (not converged within NEWTON_BUDGET steps, or a Jacobian failing the
+        condition bound)."""
+        st = self.structure
+        dep, rows = list(st.dependent), list(st.rows)
+        count = q.shape[1]
+        limit = 10.0 ** tol
+        polish = tol <= -12
+        polished = np.zeros(count, dtype=bool)
+        active = np.arange(count)
+        for _ in range(NEWTON_BUDGET + 1):
+            phi_a, jac_a = codegen.closure_arrays(self.mechanism, q[:, active])
+            if phi is None:
+                phi, jac = phi_a, jac_a
+            else:
+                phi[active], jac[active] = phi_a, jac_a
+            res = phi_a[:, rows]
+            within = np.all(np.abs(res) <= limit, axis=1)
+            done = within & polished[active] if polish else within
+            polished[active] |= within
+            stepping = ~done
+            if not stepping.any():
+                return phi, jac, inverse
+            active, res = active[stepping], res[stepping]
+            inv_a = self._checked_inverse(jac_a[stepping], rows, dep)
+            if inv_a is None:
+                return None
+            if inverse is None:
+                inverse = np.empty((count, len(dep), len(dep)))
+            inverse[active] = inv_a
+            q[np.ix_(dep, active)] -= np.einsum("sij,sj->is", inv_a, res)
+        return None
+
+    @staticmethod
+    def _checked_inverse(jac, rows, dep):
+        """Phi_d^-1 per sample if every Phi_d passes Float64.solve's condition bound
+        (cond_2 <= n cond_1 <= 1e13), else None."""
+        jd = jac[:, rows][:, :, dep]
+        try:
+            with np.errstate(all="ignore"):
+                inverse = np.linalg.inv(jd)
+                bound = (len(dep) * np.abs(jd).sum(axis=-2).max(axis=-1)
+                         * np.abs(inverse).sum(axis=-2).max(axis=-1))
+        except np.linalg.LinAlgError:
+            return None
+        return inverse if np.all(bound <= 1e13) else None
 
     def _closure(self, q):
         """Closure values and Jacobian rows at q (float64 batches: generated code once it pays)."""
@@ -278,6 +412,9 @@ class Evaluator:
 
     def _closed_sample(self, q, zd, zdd, where):
         """qd = R zd with R = [I; -Phi_d^-1 Phi_z]; qdd = R zdd - [0; Phi_d^-1 gamma]."""
+        solved, self._solved = self._solved, None
+        if solved is not None and solved[0] is q:
+            return self._closed_batch(q, solved[1], zd, zdd, where)
         st = self.structure
         zero, one = self.kin.zero, self.kin.one
         _, rows = self._closure(q)
@@ -305,6 +442,61 @@ class Evaluator:
             extra[i] = -s[a][0]
         qdd = [_dot(r[i], zdd, zero) + extra[i] for i in range(self.n)]
         return Sample(q, qd, qdd, states, r, self.kin)
+
+    def _closed_batch(self, q, jac, zd, zdd, where):
+        """:meth:`_closed_sample` for a float64 batch that :meth:`_assemble_batch` solved:
+        the Jacobian at q is the one its last evaluation gave, the products are array ones,
+        the solves :meth:`Float64.solve_arrays` (the same condition check and messages)."""
+        st = self.structure
+        dep, ind, rows = list(st.dependent), list(st.independent), list(st.rows)
+        shape = np.shape(q[dep[0]])
+        jr = jac[:, rows]
+        jd = jr[:, :, dep]
+        try:
+            x = Float64.solve_arrays(jd, jr[:, :, ind])                  # (samples, d, f)
+        except KinematicsError as exc:
+            jd_rows = [[jd[:, i, j] for j in range(len(dep))] for i in range(len(rows))]
+            raise KinematicsError(f"{where}singular configuration ({exc}); {self.singular_joints(jd_rows)}"
+                                  f"{self.describe(q)}") from None
+        zero, one = self.kin.zero, self.kin.one
+        zds = np.array([np.broadcast_to(np.asarray(v, dtype=float), shape) for v in zd])      # (f, samples)
+        zdds = np.array([np.broadcast_to(np.asarray(v, dtype=float), shape) for v in zdd])
+        qd_dep = -np.einsum("sdf,fs->ds", x, zds)
+        r = [[zero] * len(ind) for _ in range(self.n)]
+        qd = [None] * self.n
+        for j, i in enumerate(ind):
+            r[i][j] = one
+            qd[i] = zds[j]
+        for a, i in enumerate(dep):
+            r[i] = [-x[:, a, j] for j in range(len(ind))]
+            qd[i] = qd_dep[a]
+        bias = codegen.closure_bias(self.mechanism, q, qd)
+        s = Float64.solve_arrays(jd, np.stack([bias[i] for i in rows], axis=-1)[..., None])[..., 0]
+        qdd = [None] * self.n
+        for j, i in enumerate(ind):
+            qdd[i] = zdds[j]
+        qdd_dep = -np.einsum("sdf,fs->ds", x, zdds) - s.T
+        for a, i in enumerate(dep):
+            qdd[i] = qdd_dep[a]
+        return Sample(q, qd, qdd, None, r, self.kin)
+
+
+def _predict(path, lam):
+    """The dependent coordinates at ``lam`` extrapolated from the last solved stages: cubic
+    Hermite through the last two (values and tangents), Euler from a single one."""
+    if len(path) == 1:
+        lam0, q0, t0 = path[0]
+        return q0 + (lam - lam0) * t0
+    (lam0, q0, t0), (lam1, q1, t1) = path
+    h = lam1 - lam0
+    s = (lam - lam0) / h
+    s2, s3 = s * s, s * s * s
+    return ((2 * s3 - 3 * s2 + 1) * q0 + (s3 - 2 * s2 + s) * h * t0
+            + (-2 * s3 + 3 * s2) * q1 + (s3 - s2) * h * t1)
+
+
+NEWTON_BUDGET = 12     # Newton iterations per stage before a batch falls back to the general path
+BATCHED_NEWTON = True  # False: float64 batches take the general path too (the reference in tests and benchmarks)
 
 
 def _dot(row, values, zero):

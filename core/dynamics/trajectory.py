@@ -1,7 +1,12 @@
 """Exciting trajectories: the samples at which W is usually built.
 
 A trajectory gives each independent coordinate as an expression of time (a finite
-Fourier series by default); velocities and accelerations are its exact derivatives.
+Fourier series by default); velocities and accelerations are its exact derivatives,
+evaluated by forward-mode differentiation (:class:`Jet`: value, first and second
+derivative carried through each operation of the expression, in the backend's own
+arithmetic): no symbolic derivative is built, which cost sympy about 0.1 s per expression
+(most of dp's time on a generated chain), and every operation is still the backend's, so
+arb balls contain the exact derivatives and rationals are exact.
 Sample times are exact rationals, so at D digits every sample is computed at D digits
 from the start. Positions on the constraint manifold: in float64 all samples at once, by
 continuation from the reference configuration (or, if that fails, sample after sample
@@ -30,7 +35,7 @@ import sympy
 
 from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator
-from baseparams.numeric.backends import Float64
+from baseparams.numeric.backends import Backend, Float64
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.mechanism import MAX_SAMPLES
 
@@ -109,24 +114,24 @@ class Trajectory:
         check_sample_count(mechanism, n, None if samples else "trajectory.samples")
         t0 = spec.t_start if t_start is None else Fraction(t_start)
         t1 = spec.t_end if t_end is None else Fraction(t_end)
-        times = tuple(t0 + (t1 - t0) * k / (n - 1) for k in range(n))
-        return cls(dict(spec.expressions), times)
+        return cls(dict(spec.expressions), even_times(t0, t1, n))
 
     def derivatives(self, names):
-        """For each coordinate name: (q, qd, qdd) as sympy expressions of t."""
+        """For each coordinate name: (q, qd, qdd) as sympy expressions of t (symbolic
+        differentiation, slow: for display; values come from :func:`values_at`)."""
         return [_derivatives(self.expressions[name]) for name in names]
 
     def independent_values(self, mechanism, backend, t):
         """(z, zd, zdd) at time ``t`` (backend number or, for float64, an array of times)."""
         names = mechanism.independent
-        env = {"t": t}
         values = []
-        for name, derivatives in zip(names, self.derivatives(names)):
+        for name in names:
+            expression = self.expressions[name]
             try:
                 with np.errstate(all="ignore"):          # non-finite values are reported below
-                    values.append([backend.evaluate(e, env) for e in derivatives])
+                    values.append(list(values_at(expression, backend, t)))
             except (ValueError, ZeroDivisionError) as exc:
-                raise InputError(f"cannot evaluate {derivatives[0]} or its derivatives: {exc}",
+                raise InputError(f"cannot evaluate {expression} or its derivatives: {exc}",
                                  file=mechanism.path, key=f"trajectory.q.{name}") from None
             if isinstance(backend, Float64) and not all(np.all(np.isfinite(v)) for v in values[-1]):
                 bad = np.atleast_1d(t)[~np.all([np.isfinite(np.broadcast_to(v, np.shape(t)))
@@ -155,6 +160,102 @@ class Trajectory:
         sample, t = samples_float64(mechanism, self)
         columns = [np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in sample.q]
         return [[float(v[k]) for v in columns] for k in range(len(t))]
+
+
+def even_times(t0: Fraction, t1: Fraction, n: int) -> tuple:
+    """``n`` exact times evenly spaced from ``t0`` to ``t1``: t0 + (t1 - t0) k / (n - 1),
+    over one common denominator (a Fraction per sample, not four Fraction operations)."""
+    t0, t1 = Fraction(t0), Fraction(t1)
+    a, b, c, d = t0.numerator, t0.denominator, t1.numerator, t1.denominator
+    start, span, den = a * d * (n - 1), c * b - a * d, b * d * (n - 1)
+    return tuple(Fraction(start + span * k, den) for k in range(n))
+
+
+def values_at(expression: sympy.Expr, backend: Backend, t) -> tuple:
+    """(q, qd, qdd) of an expression of t at ``t`` (a backend number; float64: an array of
+    times), in ``backend``'s arithmetic, by forward-mode differentiation: exact in
+    rationals and sympy, enclosing in arb, as evaluating the symbolic derivatives would be."""
+    jet = _JetBackend(backend).evaluate(expression, {"t": Jet(t, backend.rational(Fraction(1)))})
+    zero = backend.rational(Fraction(0))
+    return jet.v, zero if jet.d1 is None else jet.d1, zero if jet.d2 is None else jet.d2
+
+
+def _plus(a, b):
+    return b if a is None else a if b is None else a + b
+
+
+def _times(a, b):
+    return None if a is None or b is None else a * b
+
+
+def _negative(a):
+    return None if a is None else -a
+
+
+class Jet:
+    """A value with its first and second derivatives in t (None: identically zero), in any
+    backend's numbers; arithmetic applies the product and quotient rules."""
+
+    __slots__ = ("v", "d1", "d2")
+
+    def __init__(self, v, d1=None, d2=None):
+        self.v, self.d1, self.d2 = v, d1, d2
+
+    def __add__(self, other: "Jet") -> "Jet":
+        return Jet(self.v + other.v, _plus(self.d1, other.d1), _plus(self.d2, other.d2))
+
+    def __mul__(self, other: "Jet") -> "Jet":
+        cross = _times(self.d1, other.d1)
+        return Jet(self.v * other.v, _plus(_times(self.d1, other.v), _times(self.v, other.d1)),
+                   _plus(_plus(_times(self.d2, other.v), None if cross is None else cross + cross),
+                         _times(self.v, other.d2)))
+
+    def __truediv__(self, other: "Jet") -> "Jet":
+        # w = u / v: w' = (u' - w v') / v, w'' = (u'' - 2 w' v' - w v'') / v
+        w = self.v / other.v
+        d1 = _plus(self.d1, _negative(_times(w, other.d1)))
+        d1 = None if d1 is None else d1 / other.v
+        cross = _times(d1, other.d1)
+        d2 = _plus(self.d2, _plus(_negative(_plus(cross, cross)), _negative(_times(w, other.d2))))
+        return Jet(w, d1, None if d2 is None else d2 / other.v)
+
+
+class _JetBackend(Backend):
+    """The functions of an expression (sin, cos, exp, sqrt) on jets, computed by ``base``:
+    :meth:`Backend.evaluate` then differentiates while it evaluates."""
+
+    def __init__(self, base: Backend):
+        self.base = base
+
+    def rational(self, value):
+        return Jet(self.base.rational(value))
+
+    def pi(self):
+        return Jet(self.base.pi())
+
+    def cos_sin(self, x: Jet):
+        c, s = self.base.cos_sin(x.v)
+        if x.d1 is None:
+            return Jet(c), Jet(s)
+        u1 = x.d1
+        u1u1 = u1 * u1
+        return (Jet(c, -(s * u1), _plus(-(c * u1u1), _times(-s, x.d2))),
+                Jet(s, c * u1, _plus(-(s * u1u1), _times(c, x.d2))))
+
+    def sqrt(self, x: Jet):
+        r = self.base.sqrt(x.v)
+        if x.d1 is None:
+            return Jet(r)
+        # r^2 = u: r' = u' / (2 r), r'' = (u'' - 2 r'^2) / (2 r)
+        d1 = x.d1 / (r + r)
+        d1d1 = d1 * d1
+        return Jet(r, d1, _plus(x.d2, -(d1d1 + d1d1)) / (r + r))
+
+    def exp(self, x: Jet):
+        e = self.base.exp(x.v)
+        if x.d1 is None:
+            return Jet(e)
+        return Jet(e, e * x.d1, e * _plus(x.d2, x.d1 * x.d1))
 
 
 @functools.lru_cache(maxsize=1024)

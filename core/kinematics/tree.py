@@ -7,6 +7,7 @@ velocities are given, the acceleration terms that do not depend on the accelerat
 ``omega_dot = Jw qdd + bias_w`` and ``a = Jv qdd + bias_a``.
 """
 
+import weakref
 from dataclasses import dataclass
 
 from baseparams.numeric import vec
@@ -25,8 +26,16 @@ class BodyState:
     ba: list = None    # bias origin acceleration (qdd = 0)
 
 
+# mechanism -> {(backend type, digits, symbolic geometry): (edges, loops, gravity, zero, one)}
+_PREPARED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 class TreeKinematics:
-    """Precomputed numeric frames of a mechanism in one backend; evaluates states."""
+    """Precomputed numeric frames of a mechanism in one backend; evaluates states.
+
+    The frames are computed once per mechanism, backend kind and precision and then shared
+    (read only): evaluating them goes through sympy (about 0.2 s for the SLA, which was most
+    of its warm float64 W). A backend's numbers depend on nothing but its kind and digits."""
 
     def __init__(self, mechanism, backend, symbolic_geometry=False):
         self.mechanism = mechanism
@@ -34,8 +43,13 @@ class TreeKinematics:
         self.n = len(mechanism.coordinates)
         index = {name: i for i, name in enumerate(mechanism.coordinates)}
         self.index = index
-        with backend.activate():
-            self._prepare(mechanism, backend, symbolic_geometry, index)
+        key = (type(backend), getattr(backend, "digits", None), bool(symbolic_geometry))
+        cached = _PREPARED.setdefault(mechanism, {})
+        if key not in cached:
+            with backend.activate():
+                self._prepare(mechanism, backend, symbolic_geometry, index)
+            cached[key] = (self.edges, self.loops, self.gravity, self.zero, self.one)
+        self.edges, self.loops, self.gravity, self.zero, self.one = cached[key]
 
     def _prepare(self, mechanism, backend, symbolic_geometry, index):
         frame = lambda f: mechanism.numeric_frame(f, backend, symbolic_geometry)  # noqa: E731

@@ -233,13 +233,18 @@ class Float64(Backend):
         A = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in a], axis=-2)
         B = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in b], axis=-2)
         shape = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
-        A = np.broadcast_to(A, shape + (n, n))
-        B = np.broadcast_to(B, shape + (n, k))
+        X = self.solve_arrays(np.broadcast_to(A, shape + (n, n)), np.broadcast_to(B, shape + (n, k)))
+        return [[X[..., i, j] for j in range(k)] for i in range(n)]
+
+    @staticmethod
+    def solve_arrays(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """:meth:`solve` on stacked arrays, A (..., n, n) and B (..., n, k): the batched
+        closed-loop paths call it without building per-entry lists. Refuses (KinematicsError)
+        a system whose 2-norm condition number exceeds 1e13."""
         cond = _condition_numbers(A)
         if np.any(~np.isfinite(cond)) or np.any(cond > 1e13):
             raise KinematicsError(f"singular linear system (condition number {np.max(cond):.3g})")
-        X = np.linalg.solve(A, B)
-        return [[X[..., i, j] for j in range(k)] for i in range(n)]
+        return np.linalg.solve(A, B)
 
     def to_float(self, x):
         return np.asarray(x, dtype=float)
@@ -291,7 +296,8 @@ class Arb(Backend):
     def matrix(self, rows, columns=None):
         if not rows:
             return arb_mat(0, columns or 0)
-        return arb_mat(len(rows), len(rows[0]), [arb(v) for row in rows for v in row])
+        # arb entries are copied as they are (no conversion call per entry: W has 10^6)
+        return arb_mat(len(rows), len(rows[0]), [v if type(v) is arb else arb(v) for row in rows for v in row])
 
     def stack(self, *mats):
         return stack_flint(mats)
