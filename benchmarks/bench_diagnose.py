@@ -188,8 +188,8 @@ def run_mechanism(name, args, report):
                     report["shrink"][name].append((d.gap["before"], d.gap["after"], d.gap["holdout_before"],
                                                    d.gap["holdout_after"], floor))
     # pairs
-    for _ in range(args.pairs):
-        a, b = rng.choice(pool, size=2, replace=False)
+    for _ in range(args.pairs if len(distinguishable) >= 2 else 0):
+        a, b = rng.choice(distinguishable, size=2, replace=False)
         ca, cb = problem.candidates[a], problem.candidates[b]
         if ca.coordinate == cb.coordinate and {ca.kind, cb.kind} == {"spring", "offset"}:
             continue                       # one spring with another rest position: not two effects
@@ -261,21 +261,24 @@ def print_report(report, args):
         print(f"  {name:18s} n={len(values):4d}  false {np.mean(values):6.1%}  ambiguous "
               f"{np.mean(report['null_ambiguous'][name]):6.1%}  closed {np.mean(report['null_closed'][name]):6.1%}")
     kinds = sorted({k for k, _ in report["single"]})
-    print("\none hidden effect: right kind and coordinate (nothing else named) / right or ambiguous, by ratio")
-    print("  " + "kind".ljust(20) + "".join(f"{r:>14d}" for r in RATIOS))
+    print("\none hidden effect, by ratio: right kind and coordinate named and nothing else / named "
+          "(other names too) / named or in an ambiguous group")
+    print("  " + "kind".ljust(20) + "".join(f"{r:>18d}" for r in RATIOS))
+    named = {'right', 'right+extra'}
     for kind in kinds:
         cells = []
         for r in RATIOS:
             v = report["single"][(kind, r)]
-            cells.append(f"{rate(v, {'right'}):5.0%}/{rate(v, {'right', 'right+extra', 'ambiguous'}):4.0%} n{len(v):<2d}"
-                         if v else " " * 14)
-        print("  " + kind.ljust(20) + "".join(f"{c:>14s}" for c in cells))
+            cells.append(f"{rate(v, {'right'}):4.0%}/{rate(v, named):4.0%}/{rate(v, named | {'ambiguous'}):4.0%} n{len(v):<2d}"
+                         if v else " " * 18)
+        print("  " + kind.ljust(20) + "".join(f"{c:>18s}" for c in cells))
     at3 = [o for (k, r), v in report["single"].items() if r >= 3 for o in v]
-    print(f"  all kinds, ratio >= 3: right {rate(at3, {'right'}):.1%}, right+extra {rate(at3, {'right+extra'}):.1%}, "
+    print(f"  all kinds, ratio >= 3: named {rate(at3, {'right', 'right+extra'}):.1%} = right {rate(at3, {'right'}):.1%} "
+          f"+ right+extra {rate(at3, {'right+extra'}):.1%}, "
           f"ambiguous {rate(at3, {'ambiguous'}):.1%}, wrong {rate(at3, {'wrong'}):.1%}, "
           f"none {rate(at3, {'none', 'partial'}):.1%} (n={len(at3)})")
     print("\nthe same datasets by identifiable ratio (RMS of the effect's part beyond the inertial model / "
-          "noise SD, the largest over the coordinates): right / right or ambiguous")
+          "noise SD, the largest over the coordinates): right, nothing else / named or ambiguous")
     bins = [0] + IDENTIFIABLE_BINS
     print("  " + "kind".ljust(20) + "".join(f"{('<1' if b == 0 else f'>={b}'):>14s}" for b in bins))
     for kind in kinds:
@@ -293,7 +296,7 @@ def print_report(report, args):
     print("  " + " " * 18 + "".join(f"{lab[:10]:>11s}" for lab in labels))
     for kind in kinds:
         print("  " + kind[:18].ljust(18) + "".join(f"{report['confusion'][(kind, lab)]:11d}" for lab in labels))
-    print("\npairs at ratio 5: both named / both named or ambiguous / a wrong name")
+    print("\npairs at ratio 5 (two distinguishable effects): both named / both named or ambiguous / a wrong name")
     for name, values in report["pairs"].items():
         print(f"  {name:18s} n={len(values):3d}  {rate(values, {'right', 'right+extra'}):6.1%}  "
               f"{rate(values, {'right', 'right+extra', 'ambiguous'}):6.1%}  {rate(values, {'wrong'}):6.1%}")
