@@ -7,7 +7,8 @@ Here the same generic code runs once on *tracing* numbers (:class:`Sym`) that re
 operation instead of computing it; zeros and ones fold away, repeated subexpressions are
 shared (hash-consing, the common subexpression elimination sympy.cse would do, without
 sympy's cost on large chains), dead terms are dropped, and what is left is written out as
-one Python function of numpy arrays, evaluated in cache-sized chunks of the batch.
+one Python function of numpy arrays, each operation writing into a preallocated row
+(:func:`_numpy_kernel` says why), evaluated over chunks of the batch.
 
 Because the recorded operations are the generic code's own, in the same order, the
 generated regressor equals the generic one to the last bit except where a folded ``x * 1``
@@ -32,7 +33,8 @@ from baseparams.dynamics.regressor import generic_tree_regressor, tree_regressor
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Arb, Exact, Symbolic
 
-CHUNK = 2000          # samples per pass of the numpy code: its temporaries stay in cache
+CHUNK = 8192          # samples per pass of the numpy code at most, ...
+BUDGET = 2 ** 26      # ... its buffers and temporaries within 64 MB (fewer samples per pass on a big mechanism)
 
 
 # ----- tracing numbers ------------------------------------------------------------------------
@@ -289,19 +291,63 @@ class Constants:
 def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bool = False) -> str:
     """``def name(<inputs>, C, <buffers>)``: straight-line code of the kernel.
 
-    numpy flavour: inputs are (coordinates, chunk) arrays and row j of each buffer receives
-    its layout's slot j (computed straight into the row, ``out=``). ``scalar`` flavour (ball
-    or rational arithmetic, one state per call): inputs are sequences of numbers, buffers
-    are lists, ``F`` is the backend's (cos, sin). ``C``: the constants' values in the
-    arithmetic of the call.
+    numpy flavour (:func:`_numpy_kernel`): inputs are (coordinates, chunk) arrays, row j of
+    each buffer receives its layout's slot j, and one more argument ``W``, a (work rows,
+    chunk) array, holds the temporaries. ``scalar`` flavour (ball or rational arithmetic,
+    one state per call): inputs are sequences of numbers, buffers are lists, ``F`` is the
+    backend's (cos, sin). ``C``: the constants' values in the arithmetic of the call.
 
     Only nodes an output needs are written; a register is reused once its value's last
-    reader has run, so a long chain does not keep every temporary of the chunk alive."""
+    reader has run, so a long chain does not keep every temporary alive."""
+    if not scalar:
+        return _numpy_kernel(graph, kernel, constants)[0]
+    ops = graph.ops
+    writes, live, last = _liveness(graph, kernel)
+    lines = [f"def {kernel.name}({', '.join(kernel.inputs + ('C', 'F') + tuple(kernel.outputs))}):"]
+    free: list[str] = []
+    reg: dict[int, str] = {}
+    count = 0
+    for i, op in enumerate(ops):
+        if not live[i]:
+            continue
+        kind, a, b = op
+        rows = [f"{name}[{row}]" for name, row in writes.get(i, [])]
+        if kind == "in":
+            expr = f"{a[1][0]}[{a[1][1]}]"
+        else:
+            ra = reg[a] if isinstance(a, int) else constants.ref(a[1])
+            rb = reg[b] if isinstance(b, int) else constants.ref(b[1]) if b is not None else None
+            if kind in _BINARY:
+                expr = f"{ra} {_BINARY[kind][0]} {rb}"
+            elif kind == "neg":
+                expr = f"-{ra}"
+            else:
+                expr = f"F[{('cos', 'sin').index(kind)}]({ra})"
+            for x in set(_operands(op)):
+                if last[x] == i:
+                    free.append(reg.pop(x))
+        if free:
+            target = free.pop()
+        else:
+            target, count = f"r{count}", count + 1
+        reg[i] = target
+        lines.append(f"    {target} = {expr}")
+        lines.extend(f"    {row} = {target}" for row in rows)
+        if i not in last:
+            free.append(reg.pop(i))
+    if len(lines) == 1:
+        lines.append("    pass")
+    return "\n".join(lines) + "\n"
+
+
+def _liveness(graph: Graph, kernel: Kernel):
+    """Which buffer rows each node fills (``node -> [(buffer, row)]``), which nodes an
+    output needs, and each needed node's last reader."""
     ops = graph.ops
     writes: dict[int, list] = {}
     for name, layout in layouts(kernel).items():
         for row, node in enumerate(layout.nodes):
-            writes.setdefault(node, []).append(f"{name}[{row}]")
+            writes.setdefault(node, []).append((name, row))
     live = [False] * len(ops)
     stack = list(writes)
     while stack:
@@ -315,52 +361,71 @@ def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bo
         if live[i]:
             for x in _operands(op):
                 last[x] = i
-    lines = [f"def {kernel.name}({', '.join(kernel.inputs + (('C', 'F') if scalar else ('C',)) + tuple(kernel.outputs))}):"]
+    return writes, live, last
+
+
+def _numpy_kernel(graph: Graph, kernel: Kernel, constants: Constants) -> tuple[str, int]:
+    """The numpy flavour's source and its number of work rows.
+
+    Why this form: at a thousand samples a numpy operation costs about 1 us of dispatch
+    for 0.5 us of arithmetic, so the call itself matters. Every operation writes into a
+    preallocated row (``_multiply(a, b, w3)``: a ufunc with a positional ``out``) instead of
+    allocating its result; every value an output needs is computed straight into its row
+    of the output buffer; constants are 0-d arrays (numpy's slower path for a Python
+    float scalar is skipped). Rows of ``W`` (temporaries), of the buffers and the inputs
+    are bound to local names once per call. A work row is reused once its value's last
+    reader has run; an input or output row never is. The values are bit for bit those of
+    the allocating form (the same operations on the same operands).
+
+    Measured and not kept (``benchmarks/bench_regressor.py --levels``): grouping independent
+    operations of one kind into one call on stacked rows (level scheduling: 78 calls and
+    118 gathers instead of 1 800 calls for the PUMA 560) was 1.6-3.4x slower than this form,
+    since most operands must be gathered (a copy per row, as dear as the call it saves);
+    writing the outputs straight into the samples-first result
+    (strided rows) gained 1-13% up to 1 000 samples and lost 1.3-1.6x beyond."""
+    ops = graph.ops
+    writes, live, last = _liveness(graph, kernel)
+    body: list[str] = []
     free: list[str] = []
-    reg: dict[int, str] = {}
-    count = 0
+    loc: dict[int, str] = {}
+    work = 0
     for i, op in enumerate(ops):
         if not live[i]:
             continue
         kind, a, b = op
-        rows = writes.get(i, [])
-        first = None                 # the buffer row the value was computed into
+        rows = [f"{name}_{row}" for name, row in writes.get(i, [])]
         if kind == "in":
-            expr = f"{a[1][0]}[{a[1][1]}]"
+            loc[i] = f"i{i}"
+            body.append(f"    i{i} = {a[1][0]}[{a[1][1]}]")
+            target = loc[i]
         else:
-            ra = reg[a] if isinstance(a, int) else constants.ref(a[1])
-            rb = reg[b] if isinstance(b, int) else constants.ref(b[1]) if b is not None else None
-            if rows and not scalar:
-                args = f"{ra}, {rb}" if kind in _BINARY else ra
-                name = _BINARY[kind][1] if kind in _BINARY else _UNARY[kind]
-                expr = f"_np.{name}({args}, out={rows[0]})"
-                first, rows = rows[0], rows[1:]
-            elif kind in _BINARY:
-                expr = f"{ra} {_BINARY[kind][0]} {rb}"
-            elif kind == "neg":
-                expr = f"-{ra}"
-            else:
-                expr = f"F[{('cos', 'sin').index(kind)}]({ra})" if scalar else f"_np.{kind}({ra})"
+            args = [loc[x] if isinstance(x, int) else constants.ref(x[1]) for x in (a, b) if x is not None]
             for x in set(_operands(op)):
-                if last[x] == i:
-                    free.append(reg.pop(x))
-        if i in last or first is None:
-            if free:
+                if last[x] == i and loc[x].startswith("w"):
+                    free.append(loc[x])
+            if rows:
+                target, rows = rows[0], rows[1:]
+            elif free:
                 target = free.pop()
             else:
-                target, count = f"r{count}", count + 1
-            reg[i] = target
-            lines.append(f"    {target} = {expr}")
-            source = target
-        else:
-            lines.append(f"    {expr}")
-            source = first
-        lines.extend(f"    {row} = {source}" for row in rows)
-        if i not in last and i in reg:
-            free.append(reg.pop(i))
+                target, work = f"w{work}", work + 1
+            loc[i] = target
+            name = _BINARY[kind][1] if kind in _BINARY else _UNARY[kind]
+            body.append(f"    _{name}({', '.join(args)}, {target})")
+        body.extend(f"    {row}[...] = {target}" for row in rows)
+        if i not in last and target.startswith("w"):
+            free.append(target)
+    head = [f"def {kernel.name}({', '.join(kernel.inputs + ('C',) + tuple(kernel.outputs) + ('W',))}):"]
+    for name, layout in layouts(kernel).items():
+        if layout.slots:
+            names = [f"{name}_{row}" for row in range(len(layout.slots))]
+            head.append(f"    {', '.join(names)}, = {name}")
+    if work:
+        head.append(f"    {', '.join(f'w{k}' for k in range(work))}, = W")
+    lines = head + body
     if len(lines) == 1:
         lines.append("    pass")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n", work
 
 
 def _operands(op):
@@ -376,6 +441,10 @@ def _float_literal(value) -> str:
 
 # ----- the module -----------------------------------------------------------------------------
 _RUNTIME = '''
+_add, _subtract, _multiply, _divide = _np.add, _np.subtract, _np.multiply, _np.divide
+_negative, _cos, _sin = _np.negative, _np.cos, _np.sin
+
+
 def _columns(x, n):
     """(..., n) -> ((n, samples) contiguous, leading shape)."""
     x = _np.asarray(x, dtype=float)
@@ -385,11 +454,22 @@ def _columns(x, n):
     return _np.ascontiguousarray(x.reshape(-1, n).T), lead
 
 
-def _evaluate(kernel, layouts, inputs):
-    """Run ``kernel`` over (coordinates, samples) ``inputs`` chunk by chunk; one array
-    (samples, *shape) per output, filled from the kernel's buffers."""
+def _evaluate(kernel, inputs):
+    """Run ``kernel`` (a name in _LAYOUTS) over (coordinates, samples) ``inputs`` chunk by
+    chunk; one array (samples, *shape) per output, filled from the kernel's buffers (rows of
+    one array with the temporaries).
+
+    A chunk is as many samples as fit the buffers and temporaries in _BUDGET bytes, at most
+    _CHUNK: each numpy call costs about 1 us whatever its length, so longer rows pay even
+    past the caches (measured: docs/performance.md)."""
+    layouts, work = _LAYOUTS[kernel], _WORK[kernel]
+    function = globals()[kernel]
     count = inputs[0].shape[1]
-    outs, buffers = [], []
+    rows = sum(len(slots) for _, slots, _ in layouts) + work
+    chunk = max(256, min(_CHUNK, _BUDGET // (8 * max(rows, 1))))
+    width = min(count, chunk)
+    space = _np.empty((rows, width))
+    outs, buffers, columns, at = [], [], [], 0
     for shape, slots, constants in layouts:
         size = 1
         for s in shape:
@@ -398,17 +478,20 @@ def _evaluate(kernel, layouts, inputs):
         for index, value in constants:
             out[:, index] = value
         outs.append(out)
-        buffers.append(_np.empty((len(slots), min(count, _CHUNK))))
-    for start in range(0, count, _CHUNK):
-        stop = min(start + _CHUNK, count)
+        buffers.append(space[at:at + len(slots)])
+        columns.append(_np.array(slots, dtype=_np.intp))
+        at += len(slots)
+    scratch = space[at:]
+    for start in range(0, count, chunk):
+        stop = min(start + chunk, count)
         views = [b[:, :stop - start] for b in buffers]
-        kernel(*[x[:, start:stop] for x in inputs], _C, *views)
-        for out, view, (_, slots, _) in zip(outs, views, layouts):
+        function(*[x[:, start:stop] for x in inputs], _C, *views, scratch[:, :stop - start])
+        for out, view, index in zip(outs, views, columns):
             # samples-last buffer to samples-first array, in blocks that stay in cache
-            for at in range(0, stop - start, 256):
-                end = min(at + 256, stop - start)
-                if slots:
-                    out[start + at:start + end, slots] = view[:, at:end].T
+            for block in range(0, stop - start, 256):
+                end = min(block + 256, stop - start)
+                if len(index):
+                    out[start + block:start + end, index] = view[:, block:end].T
     return [out.reshape((count,) + shape) for out, (shape, _, _) in zip(outs, layouts)]
 '''
 
@@ -418,7 +501,7 @@ def tree_regressor(q, qd, qdd):
     """K of the tree coordinates, (..., n, p), for positions, velocities, accelerations
     q, qd, qdd of shape (..., n) (coordinate order: COORDINATES)."""
     (x, lead), (xd, _), (xdd, _) = (_columns(v, len(COORDINATES)) for v in _np.broadcast_arrays(q, qd, qdd))
-    return _evaluate(_tree_regressor, _LAYOUTS["_tree_regressor"], [x, xd, xdd])[0].reshape(
+    return _evaluate("_tree_regressor", [x, xd, xdd])[0].reshape(
         lead + (len(COORDINATES), len(PARAMETERS)))
 '''
 
@@ -427,14 +510,14 @@ _CLOSED_API = '''
 def closure(q):
     """The loop-closure equations at tree coordinates q (..., n): (phi (..., m), jacobian (..., m, n))."""
     x, lead = _columns(q, len(COORDINATES))
-    phi, jac = _evaluate(_closure, _LAYOUTS["_closure"], [x])
+    phi, jac = _evaluate("_closure", [x])
     return phi.reshape(lead + phi.shape[1:]), jac.reshape(lead + jac.shape[1:])
 
 
 def closure_bias(q, qd):
     """gamma (..., m): on the constraint manifold the accelerations satisfy J qdd + gamma = 0."""
     (x, lead), (xd, _) = (_columns(v, len(COORDINATES)) for v in _np.broadcast_arrays(q, qd))
-    gamma, = _evaluate(_closure_bias, _LAYOUTS["_closure_bias"], [x, xd])
+    gamma, = _evaluate("_closure_bias", [x, xd])
     return gamma.reshape(lead + gamma.shape[1:])
 
 
@@ -467,14 +550,18 @@ def module_source(mechanism, parts=PARTS, header: str = "", extra: str = "") -> 
             f"INDEPENDENT = {tuple(structure.independent)!r}   # indices into COORDINATES",
             f"DEPENDENT = {tuple(structure.dependent)!r}",
             f"EQUATIONS = {tuple(structure.rows)!r}   # the independent closure equations",
-            f"_CHUNK = {CHUNK}", ""]
-    table = {}
+            f"_CHUNK, _BUDGET = {CHUNK}, {BUDGET}   # samples per pass at most; bytes of buffers and temporaries",
+            ""]
+    table, work = {}, {}
     for kernel in kernels:
-        text.append(kernel_source(graph, kernel, constants))
+        source, work[kernel.name] = _numpy_kernel(graph, kernel, constants)
+        text.append(source)
         table[kernel.name] = [(lay.shape, lay.slots, tuple((i, float(sympy.N(v, 30))) for i, v in lay.constants))
                               for lay in layouts(kernel).values()]
     text.append(f"_LAYOUTS = {table!r}")
-    text.append("_C = (" + "".join(f"{_float_literal(v)}, " for v in constants.values) + ")   # geometry constants")
+    text.append(f"_WORK = {work!r}   # rows of temporaries per kernel")
+    text.append("_C = tuple(_np.array(v) for v in ("
+                + "".join(f"{_float_literal(v)}, " for v in constants.values) + "))   # geometry constants, 0-d arrays")
     text.append(_RUNTIME)
     if "regressor" in parts:
         text.append(_OPEN_API)
@@ -543,8 +630,7 @@ def closure_arrays(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closure values (samples, m) and Jacobian (samples, m, n) at tree coordinates ``q``
     given as one (n, samples) array: the batched Newton's form, without per-coordinate lists."""
     module = compiled(mechanism, "closure")
-    phi, jac = module["_evaluate"](module["_closure"], module["_LAYOUTS"]["_closure"],
-                                   [np.ascontiguousarray(q, dtype=float)])
+    phi, jac = module["_evaluate"]("_closure", [np.ascontiguousarray(q, dtype=float)])
     return phi, jac
 
 
@@ -566,7 +652,7 @@ def _run(mechanism, part, kernel, groups):
         for i in range(n):
             block[i] = np.broadcast_to(values[g * n + i], shape).reshape(-1)
         inputs.append(block)
-    outs = module["_evaluate"](module[kernel], module["_LAYOUTS"][kernel], inputs)
+    outs = module["_evaluate"](kernel, inputs)
     return [out.reshape(shape + out.shape[1:]) for out in outs]
 
 
