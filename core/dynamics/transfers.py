@@ -18,6 +18,7 @@ a vector n = (acceptor's change) - (donor's change) with W n = 0: a *null genera
 Ground has no parameters, so a transfer with ground changes one body only.
 """
 
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -130,12 +131,27 @@ def add_vectors(a, b):
 
 
 # ----- rules at joints -------------------------------------------------------------------
+_FRAMES = weakref.WeakKeyDictionary()      # mechanism -> {id(frame): (R, p)}
+
+
+def symbolic_frame(mechanism, frame):
+    """Exact (R, p) of one of ``mechanism``'s frames in its body's axes (geometry symbols):
+    ``mechanism.numeric_frame(frame, Symbolic(), symbolic=True)``, computed once per frame
+    (each joint's rules, the sampled transfers and every body's candidate directions ask
+    for the same frames; the sympy substitutions cost about 10 ms each). A Mechanism and
+    its frames are immutable and live together, so the frame's id is a key. Callers must
+    not change the lists returned."""
+    known = _FRAMES.setdefault(mechanism, {})
+    key = id(frame)
+    if key not in known:
+        known[key] = mechanism.numeric_frame(frame, Symbolic(), symbolic=True)
+    return known[key]
+
+
 def joint_frames(mechanism, joint):
     """Exact (R, p) of the joint frame in the parent's and the child's body axes (symbols)."""
-    backend = Symbolic()
-    parent = mechanism.numeric_frame(joint.parent_frame, backend, symbolic=True)
-    child = mechanism.numeric_frame(joint.child_frame, backend, symbolic=True)
-    return {joint.parent: parent, joint.child: child}
+    return {joint.parent: symbolic_frame(mechanism, joint.parent_frame),
+            joint.child: symbolic_frame(mechanism, joint.child_frame)}
 
 
 def map_point(frame, x):

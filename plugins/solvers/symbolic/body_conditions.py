@@ -27,21 +27,23 @@ across joints use the same states: :mod:`baseparams.plugins.solvers.symbolic.sam
 """
 
 import random
+import weakref
 from dataclasses import dataclass, field
 from fractions import Fraction
 
 import mpmath
 import numpy as np
 import sympy
+from flint import fmpq, fmpq_mat
 
-from baseparams.numeric.backends import Arb, Float64, Symbolic
+from baseparams.numeric.backends import Arb, Float64
 from baseparams.dynamics.evaluator import Evaluator, independent_rows
 from baseparams.dynamics.observation import RationalStates, evaluate_states
 from baseparams.errors import InputError
 from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import (INERTIA_KINDS, TENSOR_INDEX, Generator, as_vector, dipole_params,
-                        monopole_params, quadrupole_params)
+                        monopole_params, quadrupole_params, symbolic_frame)
 
 NULL_TOL = mpmath.mpf(10) ** -14      # relative size of a null singular value / residual
 INDEPENDENCE_TOL = 1e-10              # relative norm left after projecting out a basis
@@ -119,26 +121,121 @@ def to_mpf(x):
 
 
 # ----- numeric helpers -------------------------------------------------------------------
+class Rows(list):
+    """Rows of mpmath numbers (a list) that also keep their exact rational copy, built once:
+    every mpf is a dyadic rational, so products and sums of them can be made exactly in C
+    (python-flint ``fmpq_mat``) instead of one mpmath operation at a time."""
+
+    _exact = None
+
+    def exact(self):
+        if self._exact is None:
+            self._exact = exact_matrix(self)
+        return self._exact
+
+
+def to_fmpq(x) -> fmpq:
+    """An mpmath number, int or Fraction as the exact rational it is (an mpf is m 2^e)."""
+    if isinstance(x, int):
+        return fmpq(x)
+    if isinstance(x, Fraction):
+        return fmpq(x.numerator, x.denominator)
+    sign, man, exp, _ = mpmath.mpf(x)._mpf_
+    if not man:
+        if exp:
+            raise ValueError(f"{x} is not a finite number")
+        return fmpq(0)
+    man = -man if sign else man
+    return fmpq(man << exp) if exp >= 0 else fmpq(man, 1 << -exp)
+
+
+def exact_matrix(rows) -> fmpq_mat:
+    if not rows:
+        return fmpq_mat(0, 0)
+    return fmpq_mat(len(rows), len(rows[0]), [to_fmpq(v) for row in rows for v in row])
+
+
 def _normalized_rows(rows):
     """Rows scaled to unit max-norm; rows that are zero to working precision are dropped."""
-    scale = max((abs(v) for row in rows for v in row), default=mpmath.mpf(0))
+    peaks = [max(abs(v) for v in row) for row in rows]
+    scale = max(peaks, default=mpmath.mpf(0))
     if scale == 0:
-        return []
-    out = []
-    for row in rows:
-        m = max(abs(v) for v in row)
-        if m > scale * mpmath.mpf(10) ** (-(mpmath.mp.dps - 8)):
+        return Rows()
+    out = Rows()
+    floor = scale * mpmath.mpf(10) ** (-(mpmath.mp.dps - 8))
+    for row, m in zip(rows, peaks):
+        if m > floor:
             out.append([v / m for v in row])
     return out
 
 
 def numeric_rank(rows, tol=NULL_TOL):
+    """The number of singular values of ``rows`` above ``tol`` times the largest.
+
+    Decided in exact arithmetic on the Gram matrix when the margin is clear
+    (:func:`pivot_rank`, the usual case: a few ms), else by mpmath's SVD (0.1-0.2 s)."""
     if not rows:
         return 0
+    count = pivot_rank(rows, tol)
+    return svd_rank(rows, tol) if count is None else count
+
+
+def svd_rank(rows, tol=NULL_TOL):
     s = mpmath.svd_r(mpmath.matrix(rows), compute_uv=False)
     s = [abs(x) for x in s]
     top = max(s)
     return sum(1 for x in s if x > tol * top) if top > 0 else 0
+
+
+def pivot_rank(rows, tol=NULL_TOL):
+    """The SVD's count of singular values above ``tol`` s_max, decided in exact rational
+    arithmetic (``rows`` taken as the exact rationals they are), or None when the margin
+    is too thin to be sure of agreeing with the SVD.
+
+    G = A^T A, LDL^T with complete pivoting (largest remaining diagonal first) until a
+    pivot d < tol^2 d_max / (100 n), d_max the largest diagonal entry (d_max <= s_max^2):
+
+    - every singular value from there on is below tol s_max / 10 (the remaining Schur
+      complement S has s^2 <= trace S <= n d);
+    - for the r pivots kept, the principal block G_KK bounds s_r^2 >= lambda_min(G_KK)
+      (interlacing) >= 1 / ||G_KK^-1||_F (exact inverse): the count is returned only if
+      that is >= 100 tol^2 trace G >= 100 tol^2 s_max^2, i.e. s_r >= 10 tol s_max.
+
+    Either way the count is the SVD's, with a margin of 10 in s."""
+    a = rows.exact() if isinstance(rows, Rows) else exact_matrix(rows)
+    n = a.ncols()
+    g = a.transpose() * a
+    G = [[g[i, j] for j in range(n)] for i in range(n)]
+    trace = sum((G[i][i] for i in range(n)), fmpq(0))
+    dmax = max((G[i][i] for i in range(n)), default=fmpq(0))
+    if dmax == 0:
+        return 0
+    tol2 = to_fmpq(tol) ** 2
+    low = tol2 * dmax / (100 * n)
+    open_, kept = list(range(n)), []
+    while open_:
+        j = max(open_, key=lambda k: G[k][k])
+        d = G[j][j]
+        if d < low:
+            break
+        open_.remove(j)
+        kept.append(j)
+        for i in open_:
+            f = G[i][j] / d
+            if f:
+                row_i, row_j = G[i], G[j]
+                for k in open_:
+                    row_i[k] -= f * row_j[k]
+    if not kept:
+        return 0
+    try:
+        inverse = fmpq_mat(len(kept), len(kept), [g[i, j] for i in kept for j in kept]).inv()
+    except ZeroDivisionError:
+        return None
+    flat = fmpq_mat(1, len(kept) ** 2, inverse.entries())
+    frobenius2 = (flat * flat.transpose())[0, 0]
+    bound = 100 * tol2 * trace
+    return len(kept) if bound * bound * frobenius2 <= 1 else None
 
 
 def null_basis(rows, ncols, tol=NULL_TOL):
@@ -155,12 +252,15 @@ def null_basis(rows, ncols, tol=NULL_TOL):
 
 
 def residual(rows, n):
-    """max |row . n| / |n| over ``rows`` (each scaled to unit max-norm): how far n is from null."""
+    """max |row . n| / |n| over ``rows`` (each scaled to unit max-norm): how far n is from null.
+    The dot products are exact (rationals, in C), then rounded once to working precision."""
     norm = mpmath.sqrt(sum(x * x for x in n))
-    if norm == 0:
+    if norm == 0 or not rows:
         return mpmath.mpf(0)
-    return max((abs(mpmath.fsum(a * b for a, b in zip(row, n))) for row in rows),
-               default=mpmath.mpf(0)) / norm
+    a = rows.exact() if isinstance(rows, Rows) else exact_matrix(rows)
+    products = a * fmpq_mat(len(n), 1, [to_fmpq(x) for x in n])
+    top = max(abs(products[i, 0]) for i in range(products.nrows()))
+    return mpmath.mpf(int(top.p)) / int(top.q) / norm
 
 
 def independent(vectors):
@@ -178,11 +278,33 @@ def independent(vectors):
 
 # ----- exact candidates ------------------------------------------------------------------
 def to_number(expr, subs):
-    """An exact expression at the geometry ``subs``, as an mpmath number (working precision)."""
+    """An exact expression at the geometry ``subs``, as an mpmath number (working precision).
+    A rational (int, Fraction, sympy Rational: most entries) is divided out directly,
+    without sympy's substitution and evaluation."""
+    if isinstance(expr, int):
+        return mpmath.mpf(expr)
+    if isinstance(expr, Fraction):
+        return mpmath.mpf(expr.numerator) / expr.denominator
+    if isinstance(expr, sympy.Rational):
+        return mpmath.mpf(int(expr.p)) / int(expr.q)
     return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), mpmath.mp.dps + 5))
 
 
+_CANDIDATES = weakref.WeakKeyDictionary()      # mechanism -> {label: (points, dirs)}
+
+
 def body_candidates(mechanism, label):
+    """Exact candidate points and unit directions of a body (body axes), as tuples: computed
+    once per mechanism and body (the body conditions and every sampled transfer across the
+    body's joints ask for them; a Mechanism is immutable)."""
+    known = _CANDIDATES.setdefault(mechanism, {})
+    if label not in known:
+        points, dirs = _body_candidates(mechanism, label)
+        known[label] = (tuple(points), tuple(dirs))
+    return known[label]
+
+
+def _body_candidates(mechanism, label):
     """Exact candidate points and unit directions of a body (body axes).
 
     Points: the origin and the body's joint points. Directions: the body axes, its joint
@@ -192,7 +314,6 @@ def body_candidates(mechanism, label):
     zero = sympy.Integer(0)
     points = [("origin", [zero, zero, zero])]
     dirs = []
-    backend = Symbolic()
     for other, rot in same_rotation(mechanism, label):
         via = "" if other == label else f" (body {other}'s, carried over)"
         dirs += [(f"{a}{other}{via}", [rot[i][k] for i in range(3)]) for k, a in enumerate("xyz")]
@@ -200,7 +321,7 @@ def body_candidates(mechanism, label):
             for side, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
                 if side != other:
                     continue
-                r, p = mechanism.numeric_frame(frame, backend, symbolic=True)
+                r, p = symbolic_frame(mechanism, frame)
                 if other == label:
                     points.append((f"{joint.name} point", [sympy.sympify(c) for c in p]))
                 for k, a in enumerate("xyz"):
@@ -218,7 +339,6 @@ def same_rotation(mechanism, label: int) -> list:
     identity = [[one if i == j else zero for j in range(3)] for i in range(3)]
     found = {label: identity}
     frontier = [label]
-    backend = Symbolic()
     while frontier:
         body = frontier.pop()
         for joint in mechanism.joints:
@@ -229,8 +349,8 @@ def same_rotation(mechanism, label: int) -> list:
             other = joint.child if body == joint.parent else joint.parent
             if other == 0 or other in found:
                 continue
-            r_mine, _ = mechanism.numeric_frame(mine, backend, symbolic=True)
-            r_theirs, _ = mechanism.numeric_frame(theirs, backend, symbolic=True)
+            r_mine, _ = symbolic_frame(mechanism, mine)
+            r_theirs, _ = symbolic_frame(mechanism, theirs)
             # other's axes -> joint frame (R_theirs^T) -> body's axes (R_mine) -> label's (found)
             step = [[sum(r_mine[i][k] * r_theirs[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
             m = found[body]
@@ -242,8 +362,13 @@ def same_rotation(mechanism, label: int) -> list:
 
 def dedupe(items, subs, directions: bool = False) -> list:
     """(name, exact vector, numeric vector) for the items whose vector (or, for
-    ``directions``, its line) at the geometry ``subs`` differs from every earlier one."""
-    out, seen = [], []
+    ``directions``, its line) at the geometry ``subs`` differs from every earlier one.
+
+    Duplicates are decided at working precision (1e-20); a float64 copy of the keys only
+    spares that comparison for the pairs it shows far apart (by more than 1e-8, a thousand
+    million times float64's error), so the decisions are the working-precision ones."""
+    out, seen, seen_float = [], [], []
+    tiny = mpmath.mpf(10) ** -20
     for name, vec in items:
         num = [to_number(c, subs) for c in vec]
         key = num
@@ -252,17 +377,28 @@ def dedupe(items, subs, directions: bool = False) -> list:
             if norm == 0:
                 continue
             key = [x / norm for x in num]
+        key_float = np.array([float(x) for x in key])
+        if seen_float:
+            others = np.array(seen_float)
+            if directions:
+                near = np.abs(np.abs(others @ key_float) - 1) <= 1e-8
+            else:
+                near = np.max(np.abs(others - key_float), axis=1) <= 1e-8 * (1 + np.max(np.abs(key_float)))
+            candidates = [seen[k] for k in np.flatnonzero(near)]
+        else:
+            candidates = []
         dup = False
-        for other in seen:
+        for other in candidates:
             if directions:
                 dot = mpmath.fsum(a * b for a, b in zip(key, other))
-                dup = abs(abs(dot) - 1) < mpmath.mpf(10) ** -20
+                dup = abs(abs(dot) - 1) < tiny
             else:
-                dup = max(abs(a - b) for a, b in zip(key, other)) < mpmath.mpf(10) ** -20
+                dup = max(abs(a - b) for a, b in zip(key, other)) < tiny
             if dup:
                 break
         if not dup:
             seen.append(key)
+            seen_float.append(key_float)
             out.append((name, vec, num))
     return out
 

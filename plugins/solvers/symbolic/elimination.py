@@ -47,6 +47,7 @@ import time
 from dataclasses import dataclass, field
 from fractions import Fraction
 
+import numpy as np
 import sympy
 from flint import arb, arb_mat, fmpq
 from sympy import QQ
@@ -56,13 +57,14 @@ from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import transfer_generators
-from baseparams.errors import InputError
+from baseparams.errors import InputError, KinematicsError
 from baseparams.model.params import PARAMETER_KINDS, split_name
-from baseparams.numeric.backends import Arb
+from baseparams.numeric.backends import Arb, Float64
 from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
 
 from .body_conditions import analyse_bodies
+from .rank_bound import columns_independent
 from .sampled_transfers import sampled_joint_transfers
 
 DIAGONAL = ("Ixx", "Iyy", "Izz")
@@ -78,13 +80,27 @@ class ExactField:
     A mechanism whose generators use no geometry symbol and no radical (no ``[geometry]``,
     numbers written inline) still gets a one-generator field: a placeholder symbol that
     occurs in no expression (sympy's zero-generator fields cannot evaluate elements). It is
-    a :class:`sympy.Dummy`, as are the radicals, so no geometry name can clash with them."""
+    a :class:`sympy.Dummy`, as are the radicals, so no geometry name can clash with them.
 
-    def __init__(self, mechanism, expressions):
+    When every generator entry is a rational number (no symbol, no radical: generated
+    mechanisms, numbers written inline) the field is *constant*: its elements are
+    python-flint ``fmpq`` rationals rather than sympy fractions of the placeholder, the same
+    values with the same printed forms, and arithmetic in C instead of a polynomial gcd per
+    operation (most of the elimination's time on a 48-body chain went to sympy's ``cancel``)."""
+
+    def __init__(self, mechanism, expressions, rationals: bool = True):
+        """``rationals=False`` keeps sympy's field even when it could be constant (the
+        reference the constant path is tested against)."""
         self.mechanism = mechanism
         self.radicals = {}          # sympy Pow (b**(1/q)) -> Dummy
         atoms = set()
         converted = [self._replace(sympy.sympify(e)) for e in expressions]
+        self.constant = rationals and all(e.is_Rational for e in converted)
+        self.values = mechanism.geometry_subs
+        self.exact = True
+        if self.constant:
+            self.symbols, self.K, self.pairs, self.one = [], None, [], fmpq(1)
+            return
         for e in converted:
             atoms |= e.free_symbols
         names = sorted(mechanism.geometry)
@@ -94,10 +110,9 @@ class ExactField:
             symbols = [sympy.Dummy("unit")]
         self.symbols = symbols
         self.K = QQ.frac_field(*symbols)
+        self.one = self.K.one
         ring = self.K.field.ring
-        values = mechanism.geometry_subs
-        self.values = values
-        self.exact = True
+        values = self.values
         radical_of = {sym: root for root, sym in self.radicals.items()}
         pairs = []
         for gen, sym in zip(ring.gens, symbols):
@@ -112,6 +127,7 @@ class ExactField:
                 v = sympy.Rational(0)
             pairs.append((gen, QQ(v.p, v.q)))
         self.pairs = pairs
+        self.points = [Fraction(int(v.numerator), int(v.denominator)) for _, v in pairs]
 
     def _replace(self, e):
         def repl(p):
@@ -125,9 +141,16 @@ class ExactField:
         return e.replace(lambda p: p.is_Pow, repl) if e.has(sympy.Pow) else e
 
     def convert(self, expr):
-        return self.K.from_sympy(self._replace(sympy.sympify(expr)))
+        expr = sympy.sympify(expr)
+        if self.constant:
+            if not expr.is_Rational:
+                raise ValueError(f"{expr} is not a rational number (the field is constant)")
+            return fmpq(int(expr.p), int(expr.q))
+        return self.K.from_sympy(self._replace(expr))
 
     def to_sympy(self, elem):
+        if self.constant:
+            return sympy.Rational(int(elem.p), int(elem.q))
         expr = self.K.to_sympy(elem)
         if self.radicals:
             expr = expr.subs({v: k for k, v in self.radicals.items()})
@@ -135,12 +158,23 @@ class ExactField:
 
     def value(self, elem):
         """Exact value at the mechanism's geometry: Fraction (or sympy number with radicals)."""
+        if self.constant:
+            return Fraction(int(elem.p), int(elem.q))
         if self.exact:
-            num = elem.numer.evaluate(self.pairs) if self.pairs else elem.numer
-            den = elem.denom.evaluate(self.pairs) if self.pairs else elem.denom
-            q = QQ.to_sympy(QQ.convert(num) / QQ.convert(den))
-            return Fraction(int(q.p), int(q.q))
+            return self._at_geometry(elem.numer) / self._at_geometry(elem.denom)
         return sympy.simplify(self.to_sympy(elem).subs(self.values))
+
+    def _at_geometry(self, poly):
+        """A polynomial of the field's ring at the geometry, exactly (a Fraction): term by term
+        over its monomials (sympy's ``evaluate`` builds a ring per variable: 40 times slower)."""
+        total = Fraction(0)
+        for monomial, c in poly.items():
+            term = Fraction(int(c.numerator), int(c.denominator))
+            for x, k in zip(self.points, monomial):
+                if k:
+                    term *= x ** k
+            total += term
+        return total
 
     def nonzero_at_geometry(self, elem):
         return bool(elem) and self.value(elem) != 0
@@ -322,7 +356,7 @@ def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
             choice = ranked[0]
             warnings.append(f"{describe(gen)} can only eliminate kept parameters; {choice} eliminated")
         steps.append(Step(gen, g, choice))
-    base = apply_steps(steps, params, field_.K.one)
+    base = apply_steps(steps, params, field_.one)
     eliminated = [s.pivot for s in steps]
     derivation = Derivation(mechanism, field_, bodies, steps, redundant, missing,
                             {p: base[p] for p in params if p not in set(eliminated)},
@@ -405,36 +439,56 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     """Check the symbolic count on W computed in ball arithmetic at ``digits`` (a
     :class:`Certificate`).
 
-    W is the trajectory's observation matrix stacked with rows at independent random states.
+    W is the trajectory's observation matrix stacked with rows at independent random states
+    (kept as two blocks: nothing needs them copied into one matrix).
 
-    - Lower bound (a proof): ``baseparams.numeric.certify.analyse`` with the kept columns imposed
-      proves them independent, so rank(W) >= their number; if it cannot, its own
-      analysis gives the rank it can prove.
+    - Lower bound (a proof): the kept columns are proven independent, so rank(W) >= their
+      number: by :func:`.rank_bound.columns_independent` (rows and a preconditioner chosen
+      on the same W in float64, the claim ||I - W_RK X|| < 1 made in balls), else by
+      ``baseparams.numeric.certify.analyse`` with the kept columns imposed; if neither can,
+      that analysis without them gives the rank it can prove.
     - Generators (evidence): every accepted generator, reduced as in the elimination, is
       evaluated at the geometry in balls (exact rationals, or balls around square roots
       of non-squares) and passes when every entry of W n contains 0 and
-      |W n| <= 10^-(digits/2) max|W| max|n|. W's balls enclose the exact W at the states,
-      so a true null vector always passes; passing on N states is not a proof that n is one.
+      |W n| <= 10^-(digits/2) max|W| max|n| (max|W| from the float64 copy of W, a scale
+      only). W's balls enclose the exact W at the states, so a true null vector always passes;
+      passing on N states is not a proof that n is one.
     """
     backend = Arb(digits)
     trajectory = trajectory or Trajectory.default(mechanism)
     W, info = observation_matrix(mechanism, backend, trajectory)
     # rows at random states independent of the trajectory, so that a trajectory which does
-    # not excite the mechanism cannot lower the proven rank (core/excitation.py)
-    W = backend.stack(W, observation_matrix(mechanism, backend, random_batch(mechanism, trajectory, seed=7919))[0])
+    # not excite the mechanism cannot lower the proven rank (core/excitation.py). In this
+    # order: a closed loop's W in balls depends, in the last bits of its radii, on the
+    # float64 positions the mechanism has cached when it is computed
+    batch = random_batch(mechanism, trajectory, seed=7919)
+    blocks = [W, observation_matrix(mechanism, backend, batch)[0]]     # W's rows: both, stacked
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}
+    rows = sum(b.nrows() for b in blocks)
+    # the same rows in float64: choices (rows, preconditioner) and max|W|, never claims;
+    # without it (float64 refused, e.g. over the memory limit) the shared analysis decides
+    try:
+        wf = np.vstack([observation_matrix(mechanism, Float64(), states)[0] for states in (trajectory, batch)])
+    except (InputError, KinematicsError, MemoryError):
+        wf = np.zeros((0, 0))
+    same_shape = wf.shape == (rows, len(params))
     with backend.activate():
-        try:
-            lower, kept_proven = analyse(W, digits, kept=kept, approximate_spectrum=False).rank, True
-        except ValueError:          # not proven independent: what can be proven instead
-            lower, kept_proven = analyse(W, digits, approximate_spectrum=False).rank, False
-        cert = Certificate(digits, info.get("samples"), W.nrows(), lower, kept_proven,
+        if same_shape and columns_independent(blocks, wf, kept):
+            lower, kept_proven = len(kept), True
+        else:
+            stacked = backend.stack(*blocks)
+            try:
+                lower, kept_proven = analyse(stacked, digits, kept=kept, approximate_spectrum=False).rank, True
+            except ValueError:      # not proven independent: what can be proven instead
+                lower, kept_proven = analyse(stacked, digits, approximate_spectrum=False).rank, False
+        cert = Certificate(digits, info.get("samples"), rows, lower, kept_proven,
                            generators=len(derivation.steps))
-        rows = W.nrows()
-        wmax = max((abs(float(W[i, j].mid())) for i in range(rows) for j in range(W.ncols())),
-                   default=0.0) or 1.0
+        if same_shape:
+            wmax = float(np.max(np.abs(wf), initial=0.0)) or 1.0
+        else:
+            wmax = max((abs(float(x.mid())) for b in blocks for x in b.entries()), default=0.0) or 1.0
         tolerance = 10.0 ** (-(digits // 2))
         for step in derivation.steps:
             n = arb_mat(len(params), 1)
@@ -446,18 +500,22 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
             except ValueError as exc:       # a radical the backend cannot evaluate
                 cert.untested.append((describe(step.generator), str(exc)))
                 continue
-            res = W * n
-            nmax = max(abs(float(n[i, 0].mid())) for i in range(len(params))) or 1.0
-            r = max((float(abs(res[i, 0]).upper()) for i in range(rows)), default=0.0) / (wmax * nmax)
+            res = [x for block in blocks for x in (block * n).entries()]
+            nmax = max(abs(float(n[index[p], 0].mid())) for p in step.vector) if step.vector else 0.0
+            r = max((float(x.abs_upper()) for x in res), default=0.0) / (wmax * (nmax or 1.0))
             cert.tested += 1
             cert.residual = max(cert.residual or 0.0, r)
-            if r > tolerance or not all(res[i, 0].contains(0) for i in range(rows)):
+            if r > tolerance or not all(x.contains(0) for x in res):
                 cert.failed.append((describe(step.generator), r))
     return cert
 
 
 # ----- result -------------------------------------------------------------------------------
 def coefficient_text(field_, elem):
+    """The coefficient as text: sympy's factored form (a rational number prints as itself,
+    which python-flint's ``str`` of an fmpq gives without sympy)."""
+    if field_.constant:
+        return str(elem)
     return str(sympy.factor(field_.to_sympy(elem)))
 
 
@@ -478,9 +536,16 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
     base, values, coefficients = [], [], []
     for k, (kept, form) in enumerate(der.base.items(), start=1):
         terms = sorted(form.items(), key=lambda t: (t[0] != kept, order[t[0]]))
-        base.append({"name": f"phi_b{k:02d}", "expression": {p: coefficient_text(f, c) for p, c in terms}})
-        values.append({p: value_text(f, c) for p, c in terms})
-        coefficients.append({p: _coefficient(base[-1]["expression"][p], values[-1][p]) for p, _ in terms})
+        texts, value_texts, coefficient_row = {}, {}, {}
+        for p, c in terms:
+            texts[p], v = coefficient_text(f, c), f.value(c)
+            value_texts[p] = str(v)
+            # an exact value is kept as it is (not printed and parsed back)
+            coefficient_row[p] = Coefficient.of_exact(v, texts[p]) if isinstance(v, Fraction) \
+                else _coefficient(texts[p], value_texts[p])
+        base.append({"name": f"phi_b{k:02d}", "expression": texts})
+        values.append(value_texts)
+        coefficients.append(coefficient_row)
     rank = len(der.base)
     warnings = list(der.warnings)
     diagnostics = {"conditions": [_step_json(s, f) for s in der.conditions],

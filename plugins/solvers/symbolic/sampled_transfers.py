@@ -12,6 +12,10 @@ reference configuration), on the two bodies' sampled Lagrangian rows (:func:`bas
 Those that pass (relative residual below 1e-14 on the sampled states) are generators of
 condition 0, accepted on numerical evidence like the body conditions and re-checked in
 ball arithmetic by the solver.
+
+Each try is first made in working-precision numbers (the joint frames evaluated once):
+most are far from null, and only those whose residual is below ``PREFILTER`` (1e3 times
+the tolerance, far beyond any rounding) are built exactly in sympy and tested as before.
 """
 
 import mpmath
@@ -21,6 +25,8 @@ from baseparams.plugins.solvers.symbolic.body_conditions import (NULL_TOL, body_
 from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.transfers import (Generator, as_vector, dipole_params, joint_frames, map_direction, map_point,
                         monopole_params)
+
+PREFILTER = NULL_TOL * 1000     # a try whose numeric residual is above this is not null
 
 
 def sampled_joint_transfers(mechanism, joint, forms, known, digits=30):
@@ -36,14 +42,26 @@ def sampled_joint_transfers(mechanism, joint, forms, known, digits=30):
         frames = joint_frames(mechanism, joint)
         subs = mechanism.geometry_subs
         zero = [0, 0, 0]
+        # each try: its exact vector's maker, and the same in working-precision numbers on
+        # the numeric frames (rotation rows, point): most tries are far from null (residual
+        # >= 1e3 NULL_TOL, beyond any rounding) and need no exact vector at all
         tries = []
         if "monopole" not in known:
-            tries.append(("monopole", None, lambda fr: monopole_params(map_point(fr, zero))))
-        for text, u, _ in joint_directions(mechanism, joint, frames):
-            tries.append(("dipole", (text, u), lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u))))
+            tries.append(("monopole", None, lambda fr: monopole_params(map_point(fr, zero)),
+                          lambda fr: monopole_params(fr[1])))
+        for text, u, u_num in joint_directions(mechanism, joint, frames):
+            tries.append(("dipole", (text, u),
+                          lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u)),
+                          lambda fr, u=u_num: dipole_params(fr[1], [mpmath.fsum(fr[0][i][k] * u[k] for k in range(3))
+                                                                     for i in range(3)])))
         names = body_parameter_names(joint.parent) + body_parameter_names(joint.child)
+        numeric = {b: ([[to_number(c, subs) for c in row] for row in frames[b][0]],
+                       [to_number(c, subs) for c in frames[b][1]]) for b in (joint.parent, joint.child)}
         out = []
-        for multipole, axis, make in tries:
+        for multipole, axis, make, make_num in tries:
+            num = [v * sign for body, sign in ((joint.parent, 1), (joint.child, -1)) for v in make_num(numeric[body])]
+            if residual(rows, num) >= PREFILTER:
+                continue
             vector = {}
             for body, sign in ((joint.parent, 1), (joint.child, -1)):
                 for name, v in as_vector(body, make(frames[body]), sign).items():

@@ -1,0 +1,217 @@
+"""The symbolic solver's fast paths (issue 12) against the paths they replace.
+
+- Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar:
+  every fast path on (rationals as fmpq, the float64-chosen rank proof, exact pivot ranks,
+  the numeric prefilter of sampled transfers) gives the same JSON result and the same
+  derivation report, text for text, as every one off (sympy's field, the shared ball
+  analysis, mpmath's SVD, every try built exactly).
+- Pieces, each against an independent computation: pivot_rank against mpmath's SVD on
+  matrices of known rank; columns_independent against dependent columns (it must refuse)
+  and against the shared analysis; residual against mpmath's dot products; dedupe against
+  the pairwise working-precision comparison it abbreviates; to_fmpq exactly.
+"""
+
+import json
+import random
+
+import mpmath
+import numpy as np
+import pytest
+from flint import arb_mat
+
+from baseparams.cli.report import render
+from baseparams.dynamics.excitation import random_batch
+from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.io.loader import parse_mechanism
+from baseparams.model import generate
+from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric.certify import analyse
+from baseparams.plugins.solvers.symbolic import body_conditions, elimination, sampled_transfers
+from baseparams.plugins.solvers.symbolic.rank_bound import columns_independent
+
+CASES = {
+    "chain": lambda: generate.serial_chain(2),
+    "tree": lambda: generate.tree(4),
+    "spherical-irrational chain": lambda: generate.serial_chain(3, spherical=0.3, irrational=0.3),
+    "four-bar": lambda: generate.four_bar(1),
+}
+
+
+def _mechanism(case):
+    return parse_mechanism(CASES[case](), f"{case}.toml")
+
+
+def _canonical(result):
+    data = result.to_json()
+    data.pop("elapsed_s", None)
+    return json.dumps(data, sort_keys=True, default=str), render(result, "text")
+
+
+class _Reference(elimination.ExactField):
+    """The reference field: sympy's even when the generators are all rational."""
+
+    def __init__(self, mechanism, expressions):
+        super().__init__(mechanism, expressions, rationals=False)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_fast_paths_give_the_reference_result(monkeypatch, case):
+    # a fresh mechanism for each run: a closed loop's W in balls depends (in the last digit
+    # of its radii, hence of the generator residual) on the float64 positions a mechanism
+    # object has already cached
+    fast = _canonical(elimination.solve(_mechanism(case)))
+    mech = _mechanism(case)
+    with monkeypatch.context() as m:
+        m.setattr(elimination, "ExactField", _Reference)
+        m.setattr(elimination, "columns_independent", lambda *args: False)
+        m.setattr(body_conditions, "pivot_rank", lambda *args, **kwargs: None)
+        m.setattr(sampled_transfers, "PREFILTER", mpmath.inf)
+        reference = _canonical(elimination.solve(mech))
+    assert fast[0] == reference[0]
+    assert fast[1] == reference[1]
+
+
+def test_the_reference_field_is_sympys_and_the_fast_one_rational():
+    mech = _mechanism("chain")
+    der = elimination.eliminate(mech)
+    assert der.field.constant and der.field.K is None
+    exprs = [v for s in der.steps for v in s.generator.vector.values()]
+    assert not _Reference(mech, exprs).constant
+
+
+# ----- pieces ------------------------------------------------------------------------------
+def _low_rank(rows, cols, singular, seed):
+    """rows x cols with the given singular values (the rest exactly 0 before rounding)."""
+    rng = random.Random(seed)
+    with mpmath.workdps(60):
+        u, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(rows)] for _ in range(rows)]))
+        v, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(cols)] for _ in range(cols)]))
+        s = mpmath.zeros(rows, cols)
+        for k, x in enumerate(singular):
+            s[k, k] = x
+        a = u * s * v.T
+    return body_conditions.Rows([[+a[i, j] for j in range(cols)] for i in range(rows)])
+
+
+@pytest.mark.parametrize("singular,expected", [
+    ([1, 0.5, 0.1], 3),
+    ([1, 1e-3, 1e-8, 1e-12], 4),                       # 1e-12 > 1e-14: counted
+    ([1, 1e-2] + [mpmath.mpf(10) ** -24] * 3, 2),      # 1e-24: noise
+    ([1] * 10, 10),
+    ([], 0),
+])
+def test_pivot_rank_is_the_svd_count(singular, expected):
+    with mpmath.workdps(28):
+        rows = _low_rank(23, 10, singular, seed=len(singular))
+        assert body_conditions.svd_rank(rows) == expected
+        assert body_conditions.pivot_rank(rows) == expected
+        assert body_conditions.numeric_rank(rows) == expected
+
+
+def test_pivot_rank_declines_near_the_threshold():
+    with mpmath.workdps(28):
+        rows = _low_rank(23, 10, [1, 0.3, mpmath.mpf(10) ** -14], seed=5)     # at the tolerance
+        assert body_conditions.pivot_rank(rows) is None
+        assert body_conditions.numeric_rank(rows) == body_conditions.svd_rank(rows)
+
+
+def test_residual_is_the_dot_products_rounded_once():
+    rng = random.Random(3)
+    with mpmath.workdps(28):
+        rows = body_conditions.Rows([[mpmath.mpf(rng.uniform(-1, 1)) for _ in range(20)] for _ in range(23)])
+        for _ in range(20):
+            n = [mpmath.mpf(rng.uniform(-1, 1)) for _ in range(20)]
+            with mpmath.workdps(80):
+                ref = max(abs(mpmath.fsum(a * b for a, b in zip(row, n))) for row in rows) / \
+                    mpmath.sqrt(mpmath.fsum(x * x for x in n))
+            got = body_conditions.residual(rows, n)
+            assert abs(got - ref) <= mpmath.mpf(10) ** -26 * ref
+
+
+def test_to_fmpq_is_exact():
+    with mpmath.workdps(40):
+        for x in [mpmath.mpf(1) / 3, -mpmath.mpf(2) ** -200 * 7, mpmath.mpf(10) ** 30, mpmath.mpf(0)]:
+            q = body_conditions.to_fmpq(x)
+            with mpmath.workdps(400):
+                assert mpmath.mpf(int(q.p)) / int(q.q) == x
+
+
+def _dedupe_reference(items, subs, directions):
+    """The pairwise comparison at working precision, without the float64 shortcut."""
+    out, seen = [], []
+    for name, vec in items:
+        num = [body_conditions.to_number(c, subs) for c in vec]
+        key = num
+        if directions:
+            norm = mpmath.sqrt(sum(x * x for x in num))
+            if norm == 0:
+                continue
+            key = [x / norm for x in num]
+        dup = any(abs(abs(mpmath.fsum(a * b for a, b in zip(key, o))) - 1) < mpmath.mpf(10) ** -20 if directions
+                  else max(abs(a - b) for a, b in zip(key, o)) < mpmath.mpf(10) ** -20 for o in seen)
+        if not dup:
+            seen.append(key)
+            out.append(name)
+    return out
+
+
+@pytest.mark.parametrize("directions", [True, False])
+def test_dedupe_keeps_what_the_pairwise_comparison_keeps(directions):
+    import sympy
+    rng = random.Random(11)
+    base = [[sympy.Rational(rng.randint(-9, 9), rng.randint(1, 9)) for _ in range(3)] for _ in range(8)]
+    items = []
+    for k, v in enumerate(base):
+        items.append((f"v{k}", v))
+        items.append((f"v{k} again", [c * (-2 if directions else 1) for c in v]))              # same line / point
+        items.append((f"v{k} nudged", [v[0] + sympy.Rational(1, 10 ** 15)] + v[1:]))         # different at 1e-20
+    items.append(("zero", [sympy.Integer(0)] * 3))
+    rng.shuffle(items)
+    with mpmath.workdps(28):
+        got = [name for name, _, _ in body_conditions.dedupe(items, {}, directions=directions)]
+        assert got == _dedupe_reference(items, {}, directions)
+    assert any("nudged" in n for n in got) and not all("again" in n for n in got)
+
+
+def _arb_w(mech, digits=40):
+    backend = Arb(digits)
+    trajectory = Trajectory.default(mech)
+    batch = random_batch(mech, trajectory, seed=7919)
+    blocks = [observation_matrix(mech, backend, s)[0] for s in (trajectory, batch)]
+    wf = np.vstack([observation_matrix(mech, Float64(), s)[0] for s in (trajectory, batch)])
+    return backend, blocks, wf
+
+
+@pytest.mark.parametrize("case", ["tree", "four-bar"])
+def test_rank_proof_proves_kept_columns_and_refuses_dependent_ones(case):
+    mech = _mechanism(case)
+    der = elimination.eliminate(mech)
+    params = list(mech.parameters)
+    kept = [params.index(p) for p in der.base]
+    backend, blocks, wf = _arb_w(mech)
+    stacked = backend.stack(*blocks)
+    with backend.activate():
+        assert columns_independent(blocks, wf, kept)
+        assert analyse(stacked, 40, kept=kept, approximate_spectrum=False).rank == len(kept)
+        # one eliminated column more: dependent on the kept ones (a generator says so)
+        extra = params.index(der.eliminated[0])
+        assert not columns_independent(blocks, wf, sorted(kept + [extra]))
+        # a column twice is dependent whatever the rows
+        assert not columns_independent(blocks, wf, kept + [kept[0]])
+    # the float64 copy is W's midpoints (it only chooses rows and scales the residual)
+    mids = np.array([[float(stacked[i, j].mid()) for j in range(stacked.ncols())] for i in range(stacked.nrows())])
+    assert np.max(np.abs(mids - wf)) <= 1e-9 * np.max(np.abs(mids))
+
+
+def test_rank_proof_refuses_a_wrong_float_copy():
+    """The float64 copy only guides: a copy of another W gives no proof, never a false one."""
+    mech = _mechanism("chain")
+    der = elimination.eliminate(mech)
+    params = list(mech.parameters)
+    kept = [params.index(p) for p in der.base]
+    backend, blocks, wf = _arb_w(mech)
+    zero = [arb_mat(b.nrows(), b.ncols()) for b in blocks]
+    with backend.activate():
+        assert not columns_independent(zero, wf, kept)
+        assert not columns_independent(blocks, wf[:-1], kept)
