@@ -35,6 +35,19 @@ verified solve (python-flint's preconditioned one) and a residual bound stay tig
 Eigenvalues of G (``acb_mat.eig``) are rigorous only when isolated and fail on the
 cluster of zero eigenvalues; they serve only for the approximate singular values that
 are plotted.
+
+Speed (docs/performance.md). python-flint reads or writes one entry in about half a
+microsecond but multiplies matrices in C, so W's entries are read once and every
+elimination, norm and solve is a matrix operation: the eliminations are blocked
+(PANEL pivots, then one product updates the Schur complement of the still-open columns),
+the Frobenius bounds are one dot product, ``beta_s`` and ``Ws_RK^-1`` come from one
+solve. Beyond FAST_DECISIONS_ABOVE parameters (no built-in mechanism: theirs are
+decided exactly as before, to the last digit) some *decisions* are made more cheaply:
+G from W rounded 32 bits beyond the working precision, the rows R chosen in float64
+when the Cholesky factor of G_KK is well conditioned (else as above), the rows of an
+earlier precision tried first, and the least-squares refinement of B skipped when the
+residual is dominated by the balls' radii (and kept only when it lowers the bound). No
+claim changes: each is still verified in ball arithmetic as in 2.
 """
 
 import math
@@ -42,14 +55,18 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
-from flint import acb_mat, arb, arb_mat
+import scipy.linalg
+from flint import acb_mat, arb, arb_mat, ctx
 
 from baseparams.numeric.backends import precision
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
 SPECTRUM_IN_ARB_UP_TO = 80  # parameters: approximate spectra by an eig at D digits up to here
+FAST_DECISIONS_ABOVE = 80  # parameters: beyond, the cheaper decisions (module docstring)
 FLOAT_BITS = 53           # precision of the helpers whose result is a float or an integer
+GRID_EXTRA_BITS = 32      # grids (_on_grid) 32 bits finer than the working precision
+LOG10_2 = math.log10(2)
 
 
 @dataclass
@@ -70,6 +87,8 @@ class BallAnalysis:
     singular_values: list         # approximate singular values of Ws (strings), largest first
     refined: object = None        # exact (midpoint) B used for tail_bound
     notes: list = field(default_factory=list)
+    rows: list = field(default_factory=list)  # the rows R of the square block Ws_RK
+    _residual: object = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
 
     @property
     def ridge_log10(self):
@@ -82,8 +101,14 @@ class BallAnalysis:
 
 
 def log10(x):
-    """log10 |midpoint| as a float (-inf for zero); fine for 10^-100000. Computed at
-    FLOAT_BITS whatever the caller's precision: the result is a float anyway."""
+    """log10 |midpoint| as a float (-inf for zero); fine for 10^-100000. From the
+    midpoint's exact mantissa and binary exponent (no precision involved: called tens of
+    thousands of times per analysis); a non-finite midpoint at FLOAT_BITS."""
+    m = arb(x).mid()
+    if m.is_finite():
+        man, exp = m.man_exp()
+        man = int(man)
+        return math.log10(abs(man)) + int(exp) * LOG10_2 if man else -math.inf
     with precision(bits=FLOAT_BITS):
         x = abs(arb(x).mid())
         if x == 0:
@@ -91,8 +116,17 @@ def log10(x):
         return float(x.log() / arb(10).log())
 
 
-# ----- decisions (midpoints) ---------------------------------------------------
-def _column_exponents(W):
+# ----- reading W ----------------------------------------------------------------
+# python-flint reads or writes a matrix entry in about half a microsecond and multiplies
+# matrices in C: W's entries are read once (``entries()``), every submatrix is built from
+# that list, and every loop over entries that can be a matrix product is one.
+
+def _float_mids(entries, rows, cols):
+    """The midpoints as a float64 array (rows x cols): 0 or inf where out of float range."""
+    return np.array([float(x) for x in entries]).reshape(rows, cols)
+
+
+def _column_exponents(W, entries=None, mids=None):
     """Per column: round(log2(norm)) from the midpoints, and the zero columns.
 
     A column is zero when every entry's ball contains 0: nothing proves it nonzero, and
@@ -100,12 +134,34 @@ def _column_exponents(W):
     is such a column: exactly zero, but its balls have midpoints ~1e-31 at 30 digits).
     Zero columns are eliminated with zero coefficients; if one is in fact tiny and
     nonzero, a higher precision shows it (and the ``vp`` solver's ranks then differ).
+
+    Fast path, same result: the midpoints as floats give each column's largest entry,
+    whose ball excluding 0 proves the column nonzero, and the norm, whose rounded log2
+    is the exponent unless the floats under- or overflow or log2 lies within 1e-6 of a
+    half-integer; those columns (and every column whose largest entry contains 0) are
+    decided entry by entry in arb, as they always were.
     """
     rows, cols = W.nrows(), W.ncols()
-    entries = W.entries()
+    if entries is None:
+        entries = W.entries()
+    if not rows:
+        return power_of_two_exponents([None] * cols), list(range(cols))
+    if mids is None:
+        mids = _float_mids(entries, rows, cols)
+    with np.errstate(all="ignore"):
+        largest = np.abs(mids).max(axis=0)
+        where = np.abs(mids).argmax(axis=0)
+        safe = np.isfinite(largest) & (largest > 1e-290) & (largest < 1e290)
+        norms = largest * np.sqrt(np.sum((mids / np.where(safe, largest, 1.0)) ** 2, axis=0))
+        logs = np.log2(np.where(safe, norms, 1.0))
     log2_norms, zero = [], []
     for j in range(cols):
-        column = entries[j::cols] if rows else []
+        if safe[j] and not entries[int(where[j]) * cols + j].contains(0):
+            x = float(logs[j])
+            if abs(x - math.floor(x) - 0.5) > 1e-6:
+                log2_norms.append(x)
+                continue
+        column = entries[j::cols]
         if all(x.contains(0) for x in column):
             zero.append(j)
             log2_norms.append(None)
@@ -118,55 +174,148 @@ def _column_exponents(W):
     return power_of_two_exponents(log2_norms), zero
 
 
-PANEL = 16                 # pivots per block update of the Schur complement
+def _scaled_entries(entries, cols, exponents):
+    """W's entries (row-major) with column j divided by 2^exponents[j]: exact."""
+    two = arb(2)
+    powers = [two ** (-e) for e in exponents]
+    if not cols:
+        return []
+    repeated = powers * (len(entries) // cols)
+    return [x * p for x, p in zip(entries, repeated)]
+
+
+def _block(entries, cols, rows, picked):
+    """The submatrix (``rows`` x ``picked`` columns) of the row-major ``entries`` of a
+    matrix with ``cols`` columns, as an arb_mat (copied, not rounded)."""
+    if not rows or not picked:
+        return arb_mat(len(rows), len(picked))
+    return arb_mat(len(rows), len(picked), [entries[i * cols + j] for i in rows for j in picked])
+
+
+def _on_grid(M, extra_bits=GRID_EXTRA_BITS, four=None):
+    """A ball matrix containing M whose midpoints are multiples of one power of two:
+    ``(M + 4) - 4`` at the working precision plus ``extra_bits`` (each addition's
+    rounding error joins the radius, so every exact matrix inside M is inside the result).
+    For matrices with entries of magnitude at most about 1 (the column-scaled W), the
+    midpoints then share one exponent range and python-flint's block product runs on one
+    integer matrix instead of many (W's midpoints reach 1e-96 where an entry is noise)."""
+    if not M.nrows() or not M.ncols():
+        return M
+    with precision(bits=ctx.prec + extra_bits):
+        if four is None:            # the matrix of 4s of M's shape (callers may pass it)
+            four = arb_mat(M.nrows(), 1, [1] * M.nrows()) * arb_mat(1, M.ncols(), [4] * M.ncols())
+        return (M + four) - four
+
+
+def _gram(Ws):
+    """Midpoints of ``Ws^T Ws`` (decisions only): one product, in C. Beyond
+    FAST_DECISIONS_ABOVE columns from Ws on a grid (:func:`_on_grid`: 1.5-2x faster);
+    up to there (every built-in mechanism) from Ws itself, so that the approximate
+    spectrum, which is read from G, stays what it was to the last printed digit."""
+    Y = _on_grid(Ws).mid() if Ws.ncols() > FAST_DECISIONS_ABOVE else Ws
+    return (Y.transpose() * Y).mid()
+
+
+def _frobenius_upper(M):
+    """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits):
+    the entries as one row vector v, ``v v^T`` in ball arithmetic (one dot product, in C)
+    encloses the sum of squares of every matrix inside M."""
+    if not M.nrows() or not M.ncols():
+        return arb(0)
+    v = arb_mat(1, M.nrows() * M.ncols(), M.entries())
+    total = arb((v * v.transpose())[0, 0].upper())       # >= the sum of squares, exact
+    return arb(total.sqrt().upper())
+
+
+def _mid(M):
+    return M.mid()
+
+
+# ----- decisions (midpoints) ---------------------------------------------------
+PANEL = 64                 # pivots per block update of the Schur complement
 
 
 def _eliminations(G, threshold, complete=True, skip=(), target=None):
-    """Symmetric Gaussian elimination (LDL^T) on the midpoints of G, one pivot at a time:
-    yields (column, pivot, Schur column) for each pivot above ``threshold``.
+    """Symmetric Gaussian elimination (Cholesky, ``G = L^T L``) on the midpoints of G, one
+    pivot at a time: yields (column, pivot, row of L) for each pivot above ``threshold``;
+    the row of L is the pivot's Schur column divided by the square root of the pivot.
 
     ``complete``: the largest remaining diagonal next (complete pivoting), until none
     exceeds the threshold; else the columns in order, those at or below the threshold
-    skipped (the leftmost basis), until ``target`` pivots. Blocked: a pivot's column is
-    the panel-start matrix's minus the panel's earlier pivots (n x PANEL work in Python),
-    the matrix itself is updated once per panel by one arb_mat product (in C); the
-    diagonal is kept current. Every result is rounded to its midpoint (decisions only).
+    skipped (the leftmost basis), until ``target`` pivots. Blocked, with the arithmetic in
+    C: a pivot's column is its column of the panel-start matrix minus one vector-matrix
+    product with the panel's earlier rows of L, and the matrix is updated once per PANEL
+    pivots by one matrix product; Python touches O(n) numbers per pivot (the column, and
+    the diagonal that complete pivoting chooses from). The rows of L are bounded by
+    sqrt(max G_jj) (G is positive semidefinite) and put on a grid 32 bits finer than the
+    working precision (:func:`_on_grid`), so the products run on one exponent range.
+    Every result is rounded to its midpoint (decisions only).
     """
-    A = G.mid()
-    n = A.nrows()
-    entries = A.entries()
-    diag = [entries[j * n + j] for j in range(n)]
-    open_ = [j for j in range(n) if j not in set(skip)]
-    cols, scaled = [], []
+    n = G.nrows()
+    skipped = set(skip)
+    open_ = [j for j in range(n) if j not in skipped]
+    A = _submatrix(G.mid(), open_) if skipped else G.mid()
+    cols = list(open_)              # the columns A holds (the open ones at the panel's start)
+    place = {j: i for i, j in enumerate(cols)}
+    diag = [A[i, i] for i in range(len(cols))] if complete else None
+    cap = len(open_) if target is None else min(len(open_), target)
+    L = arb_mat(PANEL, len(cols))   # the panel's rows of L, over ``cols``
+    rows = []                       # the same, as lists
+    zeros = [0] * PANEL
+    four = arb_mat(1, len(cols), [4] * len(cols)) if cols else None
     count = 0
-    while open_ and (target is None or count < target):
+    while open_ and count < cap:
         if complete:
-            j = max(open_, key=lambda k: (diag[k], -k))
+            j = max(open_, key=lambda k: (diag[place[k]], -k))
         else:
             j = open_[0]
-        p = diag[j]
         open_.remove(j)
-        if not p > threshold:
-            if complete:
-                return
-            continue
-        col = entries[j::n]
-        for c, sc in zip(cols, scaled):
-            f = sc[j]
-            col = [(x - y * f).mid() for x, y in zip(col, c)]
-        inv = 1 / p
-        sc = [(x * inv).mid() for x in col]
-        for k in open_:
-            diag[k] = (diag[k] - col[k] * sc[k]).mid()
-        cols.append(col)
-        scaled.append(sc)
+        a = place[j]
+        p = diag[a] if complete else None
+        if complete and not p > threshold:
+            return
+        width = len(cols)
+        row = arb_mat(1, width, [A[a, k] for k in range(width)])
+        if rows:
+            row = row - arb_mat(1, PANEL, [r[a] for r in rows] + zeros[len(rows):]) * L
+        row = row.mid()
+        if not complete:
+            p = row[0, a]
+            if not p > threshold:
+                continue
+        ell = _on_grid((row * (1 / p.sqrt())).mid(), four=four).mid().entries()
+        if complete:
+            for k in open_:
+                b = place[k]
+                diag[b] = (diag[b] - ell[b] * ell[b]).mid()
+        c = len(rows)
+        for k in range(width):
+            L[c, k] = ell[k]
+        rows.append(ell)
         count += 1
-        yield j, p, col
-        if len(cols) == PANEL:
-            A = (A - arb_mat(len(cols), n, [x for c in cols for x in c]).transpose()
-                 * arb_mat(len(cols), n, [x for c in scaled for x in c])).mid()
-            entries = A.entries()
-            cols, scaled = [], []
+        full = [0] * n
+        for k, x in zip(cols, ell):
+            full[k] = x
+        yield j, p, full
+        if len(rows) == PANEL and open_ and count < cap:
+            # the Schur complement on the columns still open only
+            keep = [place[k] for k in sorted(open_)]
+            Lk = arb_mat(PANEL, len(keep), [r[b] for r in rows for b in keep])
+            A = (_submatrix(A, keep) - Lk.transpose() * Lk).mid()
+            if complete:
+                diag = [diag[b] for b in keep]
+            cols = sorted(open_)
+            place = {k: i for i, k in enumerate(cols)}
+            L = arb_mat(PANEL, len(cols))
+            four = arb_mat(1, len(cols), [4] * len(cols))
+            rows = []
+
+
+def _submatrix(A, index):
+    """The symmetric submatrix A[index, index] (copied, not rounded)."""
+    n = A.ncols()
+    e = A.entries()
+    return arb_mat(len(index), len(index), [e[i * n + j] for i in index for j in index])
 
 
 def _approximate_pivots(G, threshold, skip=()):
@@ -182,11 +331,51 @@ def _approximate_pivots(G, threshold, skip=()):
 
 
 def _natural_basis(G, threshold, target, skip=()):
-    """Leftmost columns (parameter order) whose midpoint Schur pivot exceeds ``threshold``."""
-    return [j for j, _, _ in _eliminations(G, threshold, complete=False, skip=skip, target=target)]
+    """Leftmost columns (parameter order) whose midpoint Schur pivot exceeds ``threshold``,
+    and the Cholesky factor of G restricted to them, from the same elimination (the
+    columns passed over take no part in it): (columns, R)."""
+    found = list(_eliminations(G, threshold, complete=False, skip=skip, target=target))
+    return [j for j, _, _ in found], _factor(found)
 
 
-def _select_rows(Wk, Gkk):
+def _cholesky_mid(G, kept):
+    """Upper-triangular R with R^T R = G_KK (midpoints), or None if a pivot is not positive."""
+    others = set(range(G.nrows())) - set(kept)
+    found = list(_eliminations(G, arb(0), complete=False, skip=others))
+    if [j for j, _, _ in found] != sorted(kept):
+        return None
+    return _factor(found)
+
+
+def _factor(found):
+    """R (upper triangular, R^T R = G_KK) from the elimination's (column, pivot, row of L)
+    of the kept columns K, in order."""
+    kept = [j for j, _, _ in found]
+    r = len(kept)
+    values = []
+    for i, (_, _, ell) in enumerate(found):
+        values += [0] * i + [ell[j] for j in kept[i:]]
+    return arb_mat(r, r, values) if r else arb_mat(0, 0)
+
+
+def _select_rows_float64(Wk, R, W64=None):
+    """The rows of :func:`_select_rows` chosen in float64 when R is well conditioned
+    (cond(R) <= 1e8, so ``Q = W_K R^-1`` has float accuracy to 1e-8), by LAPACK's QR with
+    column pivoting; None when it is not. A choice only, as the other's."""
+    r = Wk.ncols()
+    if R is None or not r or Wk.nrows() < r:
+        return None
+    R64 = np.array([float(x) for x in R.entries()]).reshape(r, r)
+    if not np.all(np.isfinite(R64)) or np.linalg.cond(R64) > 1e8:
+        return None
+    if W64 is None:
+        W64 = _float_mids(Wk.entries(), Wk.nrows(), r)
+    Qt = scipy.linalg.solve_triangular(R64, W64.T, trans="T")
+    _, perm = scipy.linalg.qr(Qt, mode="r", pivoting=True)
+    return sorted(int(i) for i in perm[:r])
+
+
+def _select_rows(Wk, R):
     """r rows of W_K making a well-conditioned square block (a choice only: what is claimed
     is verified in arb).
 
@@ -197,139 +386,127 @@ def _select_rows(Wk, Gkk):
     rows whose block of Q, hence of W_K, is as well conditioned as a greedy choice can.
     """
     r = Wk.ncols()
-    R = _cholesky_mid(Gkk)
     Q = Wk
     if R is not None:
         try:
             Q = _mid(Wk) * _mid(R.inv())
         except ZeroDivisionError:
             Q = Wk
-    a = np.array([[float(Q[i, j].mid()) for i in range(Q.nrows())] for j in range(r)])
+    a = np.array([float(x) for x in Q.entries()]).reshape(Q.nrows(), r).T
     return sorted(pivoted_qr_columns(a, r))
 
 
-def _cholesky_mid(G):
-    """Upper-triangular R with R^T R = G (midpoints), or None if a pivot is not positive."""
-    n = G.nrows()
-    R = arb_mat(n, n)
-    done = 0
-    for i, p, col in _eliminations(G, arb(0), complete=False):
-        if i != done:                    # an earlier pivot was not positive
-            return None
-        root = p.sqrt().mid()
-        for j in range(i, n):
-            R[i, j] = (col[j] / root).mid()
-        done += 1
-    return R if done == n else None
+def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
+    """(rows, beta_s, Ws_K, Ws_RK^-1) with Ws_RK beta_s = Ws_RE and the inverse solved in
+    ball arithmetic (one solve, right-hand side [Ws_RE, I]), or None when Ws_RK is not
+    proven nonsingular. ``scaled``: the row-major entries of the column-scaled W of
+    ``shape``; ``R``: the Cholesky factor of G_KK if known; ``hint``: (kept, rows) of an
+    earlier analysis, whose rows are tried first if it kept these columns.
 
-
-# ----- matrices ------------------------------------------------------------------
-def _columns(W, cols, exponents):
-    """The scaled columns ``cols`` of W as an arb_mat (exact power-of-two scaling)."""
-    two = arb(2)
-    powers = [two ** (-exponents[j]) for j in cols]
-    rows, n = W.nrows(), W.ncols()
-    if not cols or not rows:
-        return arb_mat(rows, len(cols))
-    e = W.entries()
-    return arb_mat(rows, len(cols), [e[i * n + j] * p for i in range(rows) for j, p in zip(cols, powers)])
-
-
-def _pick(M, cols):
-    """Columns ``cols`` of M (copied, not rounded)."""
-    return _submatrix(M, list(range(M.nrows())), cols) if M.nrows() else arb_mat(0, len(cols))
-
-
-def _rows(M, rows):
-    n = M.ncols()
-    if not rows or not n:
-        return arb_mat(len(rows), n)
-    e = M.entries()
-    return arb_mat(len(rows), n, [x for i in rows for x in e[i * n:(i + 1) * n]])
-
-
-def _submatrix(G, rows, cols):
-    if not rows or not cols:
-        return arb_mat(len(rows), len(cols))
-    n = G.ncols()
-    e = G.entries()
-    return arb_mat(len(rows), len(cols), [e[i * n + j] for i in rows for j in cols])
-
-
-def _mid(M):
-    return M.mid()
-
-
-def _frobenius_upper(M):
-    """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits)."""
-    total = arb(0)
-    for x in M.entries():
-        total += arb(abs(x).upper()) ** 2
-    return arb(total.sqrt().upper())
-
-
-def _verify(Ws, G, kept):
-    """(rows, beta_s) with Ws_RK beta_s = Ws_RE solved in ball arithmetic, or None when
-    Ws_RK is not proven nonsingular."""
-    eliminated = [j for j in range(Ws.ncols()) if j not in set(kept)]
-    Wk = _pick(Ws, kept)
+    The rows are a choice: beyond FAST_DECISIONS_ABOVE columns the hint, then rows chosen
+    in float64 (:func:`_select_rows_float64`) are tried first; whichever block fails to
+    be proven nonsingular, the working-precision choice is made and tried as always."""
+    m, n = shape
+    eliminated = [j for j in range(n) if j not in set(kept)]
     if not kept:
-        return [], arb_mat(0, len(eliminated))
-    rows = _select_rows(Wk, _submatrix(G, kept, kept))
-    if len(rows) < len(kept):
+        return [], arb_mat(0, len(eliminated)), arb_mat(m, 0), arb_mat(0, 0)
+    Wk = _block(scaled, n, range(m), kept)
+    fast = n > FAST_DECISIONS_ABOVE
+    tried = []
+    if fast and hint is not None and hint[0] == list(kept) and all(0 <= i < m for i in hint[1]):
+        tried.append(list(hint[1]))
+        found = _solve_block(scaled, n, tried[-1], kept, eliminated)
+        if found is not None:
+            return (tried[-1], found[0], Wk, found[1])
+    if R is None:
+        R = _cholesky_mid(G, kept)
+    if fast:
+        rows = _select_rows_float64(Wk, R, None if scaled64 is None else scaled64[:, kept])
+        if rows is not None and rows not in tried:
+            tried.append(rows)
+            found = _solve_block(scaled, n, rows, kept, eliminated)
+            if found is not None:
+                return (rows, found[0], Wk, found[1])
+    rows = _select_rows(Wk, R)
+    if len(rows) < len(kept) or rows in tried:
         return None
-    Wrk = _rows(Wk, rows)
+    found = _solve_block(scaled, n, rows, kept, eliminated)
+    return None if found is None else (rows, found[0], Wk, found[1])
+
+
+def _solve_block(scaled, n, rows, kept, eliminated):
+    """(beta_s, Ws_RK^-1) by one verified solve, or None when Ws_RK is not proven nonsingular."""
+    r, e = len(kept), len(eliminated)
+    Wrk = _block(scaled, n, rows, kept)
+    identity = [0] * r
+    right = []
+    for a, i in enumerate(rows):
+        right += [scaled[i * n + j] for j in eliminated]
+        identity[a] = 1
+        right += identity
+        identity[a] = 0
     try:
-        if eliminated:
-            beta_s = Wrk.solve(_rows(_pick(Ws, eliminated), rows))
-        else:
-            Wrk.inv()
-            beta_s = arb_mat(len(kept), 0)
+        X = Wrk.solve(arb_mat(r, e + r, right))
     except ZeroDivisionError:
         return None
-    return rows, beta_s
+    x = X.entries()
+    beta_s = arb_mat(r, e, [x[a * (e + r) + b] for a in range(r) for b in range(e)]) if e else arb_mat(r, 0)
+    inverse = arb_mat(r, r, [x[a * (e + r) + e + b] for a in range(r) for b in range(r)])
+    return beta_s, inverse
 
 
 # ----- the analysis --------------------------------------------------------------
-def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True):
+def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True, earlier=None):
     """Rank, permutation and beta of an ``arb_mat`` W, computed at ``digits`` (whatever
     precision the caller has set; it is restored on return).
 
     ``kept``: impose the kept columns (to compare two precisions, or another solver's
-    permutation); ValueError if they are not proven independent.
+    permutation); ValueError if they are not proven independent. ``earlier``: an
+    analysis of W at the same states (another precision): when it kept the same columns,
+    its rows are tried first for the square block (a choice only; beyond
+    FAST_DECISIONS_ABOVE columns).
     """
+    hint = None if earlier is None else (list(earlier.kept), list(earlier.rows))
     with precision(digits):
-        return _analyse(W, digits, kept, pivoting, approximate_spectrum)
+        return _analyse(W, digits, kept, pivoting, approximate_spectrum, hint)
 
 
-def _analyse(W, digits, kept, pivoting, approximate_spectrum):
-    n = W.ncols()
-    exponents, zero = _column_exponents(W)
-    everything = _columns(W, list(range(n)), exponents)
-    G = everything.transpose() * everything
-    gmax = max((float(abs(G[i, i].mid())) for i in range(n)), default=0.0)
+def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
+    m, n = W.nrows(), W.ncols()
+    entries = W.entries()
+    mids = _float_mids(entries, m, n) if m else None
+    exponents, zero = _column_exponents(W, entries, mids)
+    scaled = _scaled_entries(entries, n, exponents)
+    # the scaled midpoints in float64 (for choices and the approximate spectrum only)
+    scaled64 = np.ldexp(mids, -np.array(exponents, dtype=int)) if m else np.zeros((0, n))
+    del entries, mids
+    everything = arb_mat(m, n, scaled) if m and n else arb_mat(m, n)
+    G = _gram(everything)
+    del everything
+    gm = G.entries()
+    gmax = max((float(abs(gm[i * n + i])) for i in range(n)), default=0.0)
     threshold = arb(NOISE_FACTOR * n * max(gmax, 1e-300)) * arb(10) ** (-digits)
     order, pivots = _approximate_pivots(G, threshold, skip=zero)
     notes = []
     candidates = []
     if kept is not None:
-        candidates.append((sorted(kept), "imposed"))
+        candidates.append((sorted(kept), "imposed", None))
     else:
         if pivoting == "natural":
             # a dependent column's pivot is noise amplified by cond(W_K), which can be huge
             # for this basis: demand 10^(-D/2), which noise cannot reach while cond < 10^(D/2)
             strict = max(threshold, arb(max(gmax, 1e-300)) * arb(10) ** (-(digits // 2)))
-            natural = _natural_basis(G, strict, len(order), skip=zero)
+            natural, R = _natural_basis(G, strict, len(order), skip=zero)
             if len(natural) == len(order):
-                candidates.append((natural, "natural"))
+                candidates.append((natural, "natural", R))
             else:
                 notes.append(f"the parameter-order basis found {len(natural)} of {len(order)} columns "
                              f"at {digits} digits; the complete-pivoting columns are kept instead")
-        candidates.append((sorted(order), "complete"))
+        candidates.append((sorted(order), "complete", None))
     verified = None
     while verified is None:
-        for cand, how in candidates:
-            verified = _verify(everything, G, cand)
+        for cand, how, R in candidates:
+            verified = _verify(scaled, (m, n), G, cand, R, hint, scaled64)
             if verified is not None:
                 kept, used = cand, how
                 break
@@ -339,25 +516,30 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
                          f"at {digits} digits")
         if verified is None:            # a smaller rank that can be proven
             order, pivots = order[:-1], pivots[:-1]
-            candidates = [(sorted(order), "complete")]
+            candidates = [(sorted(order), "complete", None)]
             notes.append(f"rank lowered to {len(order)}: the last pivot is not provable at {digits} digits")
-    rows, beta_s = verified
+    rows, beta_s, Wk, inverse = verified
     eliminated = [j for j in range(n) if j not in set(kept)]
 
     # s_{r+1} <= ||Ws_E - Ws_K B||_F for any exact B (Weyl: [Ws_K, Ws_K B] has rank r)
-    Wk = _pick(everything, kept)
-    if eliminated and kept:
-        We = _pick(everything, eliminated)
+    residual = None
+    if eliminated and kept and n > FAST_DECISIONS_ABOVE:
+        B, residual, tail = _refined_fast(scaled, (m, n), gm, kept, eliminated, Wk, beta_s)
+    elif eliminated and kept:
+        We = _block(scaled, n, range(m), eliminated)
         B = _mid(beta_s)
         try:                            # one least-squares refinement of B on all rows
             E = _mid(We - Wk * B)
-            B = _mid(B + _mid(_submatrix(G, kept, kept)).solve(_mid(Wk.transpose() * E)))
+            Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
+            B = _mid(B + Gkk.solve(_mid(Wk.transpose() * E)))
         except ZeroDivisionError:
             pass
-        tail = _frobenius_upper(We - Wk * B)
+        residual = We - Wk * B
+        tail = _frobenius_upper(residual)
     elif eliminated:
         B = arb_mat(0, len(eliminated))
-        tail = _frobenius_upper(_pick(everything, eliminated))
+        residual = _block(scaled, n, range(m), eliminated)
+        tail = _frobenius_upper(residual)
     else:
         B = arb_mat(len(kept), 0)
         tail = arb(0)
@@ -365,21 +547,73 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum):
     # s_r >= s_min(Ws_K) >= s_min(Ws_RK) >= 1 / ||Ws_RK^-1||_F
     sigma_lower = arb(0)
     if kept:
+        f = _frobenius_upper(inverse)
+        sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
+
+    beta = _unscaled(beta_s, kept, eliminated, exponents)
+
+    svals = _approximate_singular_values(G, scaled64) if approximate_spectrum else []
+    analysis = BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
+                            exponents, zero, tail, sigma_lower, svals, B, notes)
+    analysis.rows = list(rows)
+    if residual is not None:
+        analysis._residual = (W, _mid(residual))
+    return analysis
+
+
+def _refined_fast(scaled, shape, gm, kept, eliminated, Wk, beta_s):
+    """(B, Ws_E - Ws_K B, its Frobenius bound) beyond FAST_DECISIONS_ABOVE columns.
+
+    B starts as the midpoint of beta_s. The least-squares refinement (as for small W,
+    with an approximate solve of the normal equations) is tried only where it can pay:
+    when the residual's midpoints make up more than a quarter of its bound (when the
+    balls' radii dominate, no B does better), and kept only if its bound is smaller. Both
+    bounds are rigorous for their own exact B, so the smaller one is a valid claim."""
+    m, n = shape
+    We = _block(scaled, n, range(m), eliminated)
+    B = _mid(beta_s)
+    residual = We - Wk * B
+    tail = _frobenius_upper(residual)
+    E = _mid(residual)
+    if 4 * _frobenius_upper(E) > tail:
+        Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
         try:
-            f = _frobenius_upper(_rows(Wk, rows).inv())
-            sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
+            B1 = _mid(B + Gkk.solve(_mid(Wk.transpose() * E), algorithm="approx"))
         except ZeroDivisionError:
-            pass
+            return B, residual, tail
+        other = We - Wk * B1
+        bound = _frobenius_upper(other)
+        if bound < tail:
+            return B1, other, bound
+    return B, residual, tail
 
+
+def block_beta(Wr, digits, kept, rows, exponents):
+    """beta (unscaled, ``arb_mat``) from the square block of the rows ``rows`` of ``Wr``:
+    ``Ws_RK beta_s = Ws_RE`` solved in ball arithmetic at ``digits``, columns scaled by
+    ``2^exponents`` as in the analysis that chose K and R. For W of rank r = |K| this
+    encloses W's beta (every nonsingular r x r block of W_K gives the same one); the rank
+    is the analysis' claim. ValueError if the block is not proven nonsingular."""
+    with precision(digits):
+        n = Wr.ncols()
+        eliminated = [j for j in range(n) if j not in set(kept)]
+        scaled = _scaled_entries(Wr.entries(), n, exponents)
+        found = _solve_block(scaled, n, list(rows), list(kept), eliminated) if kept else None
+        if kept and found is None:
+            raise ValueError(f"the square block of W is not proven nonsingular at {digits} digits")
+        beta_s = found[0] if kept else arb_mat(0, len(eliminated))
+        return _unscaled(beta_s, kept, eliminated, exponents)
+
+
+def _unscaled(beta_s, kept, eliminated, exponents):
+    """beta = D_K^-1 beta_s D_E entry by entry (powers of two: exact)."""
     two = arb(2)
-    beta = arb_mat(len(kept), len(eliminated))
-    for a, i in enumerate(kept):
-        for b, j in enumerate(eliminated):
-            beta[a, b] = beta_s[a, b] * two ** (exponents[j] - exponents[i])
-
-    svals = _approximate_singular_values(G, everything) if approximate_spectrum else []
-    return BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
-                        exponents, zero, tail, sigma_lower, svals, B, notes)
+    values = beta_s.entries()
+    ne = len(eliminated)
+    if not kept or not ne:
+        return arb_mat(len(kept), ne)
+    return arb_mat(len(kept), ne, [values[a * ne + b] * two ** (exponents[j] - exponents[i])
+                                   for a, i in enumerate(kept) for b, j in enumerate(eliminated)])
 
 
 def excitation_check(Wc, a):
@@ -405,14 +639,16 @@ def excitation_check(Wc, a):
 def _excitation_check(Wc, a):
     if not a.eliminated:
         return arb(0), 0, math.inf
-    We = _columns(Wc, a.eliminated, a.exponents)
+    m, n = Wc.nrows(), Wc.ncols()
+    scaled = _scaled_entries(Wc.entries(), n, a.exponents)
+    We = _block(scaled, n, range(m), a.eliminated)
     if a.kept:
-        Wk = _columns(Wc, a.kept, a.exponents)
+        Wk = _block(scaled, n, range(m), a.kept)
         bound = _frobenius_upper(We - Wk * a.refined)
         E = We - Wk * a.beta_s
     else:
         bound, E = _frobenius_upper(We), We
-    nonzero = sum(1 for i in range(E.nrows()) for j in range(E.ncols()) if not E[i, j].contains(0))
+    nonzero = sum(1 for x in E.entries() if not x.contains(0))
     combined = arb((a.tail_bound ** 2 + bound ** 2).sqrt().upper())
     if a.rank == 0 or not a.sigma_r_lower > 0:
         decades = math.inf if combined == 0 else -math.inf
@@ -427,7 +663,7 @@ def tail_singular_values(W, a):
     """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
     largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
     singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
-    Computed at the analysis' digits."""
+    Computed at the analysis' digits (E is the analysis' own when W is the matrix analysed)."""
     with precision(a.digits):
         return _tail_singular_values(W, a)
 
@@ -435,51 +671,57 @@ def tail_singular_values(W, a):
 def _tail_singular_values(W, a):
     if not a.eliminated:
         return []
-    We = _columns(W, a.eliminated, a.exponents)
-    E = _mid(We - _columns(W, a.kept, a.exponents) * a.refined) if a.kept else _mid(We)
-    live = [j for j in range(E.ncols()) if any(E[i, j] != 0 for i in range(E.nrows()))]
-    values = []
+    source, E = a._residual if a._residual is not None else (None, None)
+    if source is not W:
+        m, n = W.nrows(), W.ncols()
+        scaled = _scaled_entries(W.entries(), n, a.exponents)
+        We = _block(scaled, n, range(m), a.eliminated)
+        E = _mid(We - _block(scaled, n, range(m), a.kept) * a.refined) if a.kept else _mid(We)
+    rows, cols = E.nrows(), E.ncols()
+    values = E.entries()
+    live = [j for j in range(cols) if any(values[i * cols + j] != 0 for i in range(rows))]
+    out = []
     if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
-        Ml = _submatrix(E, list(range(E.nrows())), live)
-        biggest = max(abs(x) for x in Ml.entries())
-        exponent = int(math.floor(log10(biggest) / math.log10(2)))
-        values = np.linalg.svd(_float_matrix(Ml, exponent), compute_uv=False)
+        picked = [values[i * cols + j] for i in range(rows) for j in live]
+        a64 = np.array([float(x) for x in picked]).reshape(rows, len(live))
+        exponent = 0
+        biggest64 = float(np.max(np.abs(a64)))
+        if not 1e-280 < biggest64 < 1e280:      # out of float range: scaled by 2^-exponent first
+            biggest = max(abs(x) for x in picked)
+            exponent = int(math.floor(log10(biggest) / math.log10(2)))
+            scale = arb(2) ** (-exponent)
+            a64 = np.array([float(x * scale) for x in picked]).reshape(rows, len(live))
+        out = np.linalg.svd(a64, compute_uv=False)
         two = arb(2) ** exponent
-        values = [arb(float(v)) * two for v in values] + [arb(0)] * (len(live) - len(values))
+        out = [arb(float(v)) * two for v in out] + [arb(0)] * (len(live) - len(out))
     elif live:
-        Ml = arb_mat(E.nrows(), len(live), [E[i, j] for i in range(E.nrows()) for j in live])
+        Ml = _block(values, cols, range(rows), live)
         M = Ml.transpose() * Ml
-        values = [abs(e.real.mid()).sqrt() for e in acb_mat(M).eig(algorithm="approx")]
-        values.sort(key=lambda v: -log10(v))
-    return [v.str(6, radius=False) for v in values] + ["0"] * (E.ncols() - len(live))
+        out = [abs(e.real.mid()).sqrt() for e in acb_mat(M).eig(algorithm="approx")]
+        out.sort(key=lambda v: -log10(v))
+    return [v.str(6, radius=False) for v in out] + ["0"] * (cols - len(live))
 
 
-def _approximate_singular_values(G, Ws):
+def _approximate_singular_values(G, scaled64):
     """sqrt(|eigenvalues|) of the scaled Gram matrix, largest first, as decimal strings.
 
     ``acb_mat.eig(algorithm="approx")``: no error bounds (the cluster of zero eigenvalues
     defeats rigorous isolation); the values after the ridge are the working precision's
     noise, and ``BallAnalysis.tail_bound`` bounds them rigorously. Beyond
     ``SPECTRUM_IN_ARB_UP_TO`` parameters (an eig at D digits costs tens of seconds there)
-    they are the float64 singular values of Ws's midpoints: the same values to float
-    accuracy (absolute 1e-16 of the largest), nothing proven either way.
+    they are the float64 singular values of Ws's midpoints (``scaled64``): the same values
+    to float accuracy (absolute 1e-16 of the largest), nothing proven either way.
     """
-    n = G.nrows()
+    m, n = scaled64.shape
     if n == 0:
         return []
     if n > SPECTRUM_IN_ARB_UP_TO:
-        values = np.linalg.svd(_float_matrix(Ws), compute_uv=False) if Ws.nrows() else np.zeros(0)
+        values = np.linalg.svd(scaled64, compute_uv=False) if m else np.zeros(0)
         return [arb(float(v)).str(12, radius=False) for v in values] + ["0"] * (n - len(values))
     M = acb_mat(G)
     values = [abs(e.real.mid()).sqrt() for e in M.eig(algorithm="approx")]
     values.sort(key=lambda v: -log10(v))
     return [v.str(12, radius=False) for v in values]
-
-
-def _float_matrix(M, exponent=0):
-    """The midpoints of M times 2^-exponent (exact) as a float64 array."""
-    scale = arb(2) ** (-exponent)
-    return np.array([float((x.mid() * scale).mid()) for x in M.entries()]).reshape(M.nrows(), M.ncols())
 
 
 # ----- digits, agreement, rationals ------------------------------------------------

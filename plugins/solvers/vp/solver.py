@@ -1,9 +1,11 @@
 """The ``vp`` solver: Gautier's method in python-flint ball arithmetic
 (:mod:`baseparams.numeric.certify`), the precision raised along a ladder until two
 precisions agree, checked against independent random batches, and exact rationals
-recovered from the balls and confirmed at twice the digits."""
+recovered from the balls and confirmed at twice the digits (from the final analysis'
+square block: W evaluated again only at the states its rows come from)."""
 
 import copy
+import functools
 import math
 import sys
 import time
@@ -31,23 +33,34 @@ LADDER = (30, 60, 120, 240, 500)
 CHECK_SEED = 7919          # seed of the first independent excitation batch (then +1, +2)
 CHECK_ROUNDS = 2           # independent batches that may be added to W before giving up
 ROWS_PER_PARAMETER = 4     # default W when the file's trajectory gives more than MAX_ROWS_PER_PARAMETER
+LARGE_ROWS_PER_PARAMETER = 3  # the same beyond certify.FAST_DECISIONS_ABOVE parameters
 MAX_ROWS_PER_PARAMETER = 6
 MIN_SAMPLES = 10
 
 
 def default_samples(mechanism):
     """Samples of the file's trajectory for W: the file's, unless they give more than 6 rows
-    per parameter; then 4 rows per parameter (the rank is at most the number of
-    parameters: 4 per parameter leave a wide margin). More rows only cost time (the
-    analysis grows as rows x parameters^2); an excitation too poor for the rank is caught
-    by the independent random batch, which then joins W."""
+    per parameter; then 4 rows per parameter, 3 beyond certify.FAST_DECISIONS_ABOVE
+    parameters (the rank is at most the number of parameters: either leaves a wide
+    margin; random chains of 24 bodies keep their rank and ridge down to 2). More rows
+    only cost time (W and the analysis grow as rows x parameters^2), most on large
+    mechanisms; an excitation too poor for the rank is caught by the independent random
+    batch, which then joins W."""
     if mechanism.trajectory is None:
         return None
     f = max(1, len(mechanism.independent))
     samples, params = mechanism.trajectory.samples, len(mechanism.parameters)
     if samples * f <= MAX_ROWS_PER_PARAMETER * params:
         return samples
-    return max(MIN_SAMPLES, math.ceil(ROWS_PER_PARAMETER * params / f))
+    per = LARGE_ROWS_PER_PARAMETER if params > certify.FAST_DECISIONS_ABOVE else ROWS_PER_PARAMETER
+    return max(MIN_SAMPLES, math.ceil(per * params / f))
+
+
+def _digits_of(beta):
+    """Per entry of beta (rows of lists): the digits its ball proves (radius_digits)."""
+    cols = beta.ncols()
+    values = beta.entries()
+    return [[certify.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
 
 
 def peak_memory_mb():
@@ -62,7 +75,7 @@ class BallRun:
     """One precision: W at D digits and its certified analysis."""
 
     def __init__(self, mechanism, digits, trajectory, kept=None, pivoting="natural", progress=None,
-                 batches=()):
+                 batches=(), earlier=None):
 
         self.digits = digits
         start = time.perf_counter()
@@ -78,26 +91,27 @@ class BallRun:
         if batches:             # independent random states added after a failed excitation check
             self.W = backend.stack(self.W, *(observation_matrix(mechanism, backend, b)[0] for b in batches))
         self.info["random_states"] = sum(b.states for b in batches)
-        self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting)
-        self.tail_values = certify.tail_singular_values(self.W, self.analysis)
+        self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier)
         self.seconds = time.perf_counter() - start
-        a = self.analysis
-        self.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
-                          for i in range(a.beta.nrows())]
+        self.digits_of = _digits_of(self.analysis.beta)
 
-    def reanalyse(self, kept):
+    def reanalyse(self, kept, earlier=None):
         """This run's W analysed with imposed kept columns (a copy), or None if they are not
-        proven independent at this precision."""
+        proven independent at this precision. ``earlier``: an analysis that kept them (its
+        rows are tried first)."""
         other = copy.copy(self)
+        other.__dict__.pop("tail_values", None)
         try:
-            other.analysis = certify.analyse(self.W, self.digits, kept=kept)
+            other.analysis = certify.analyse(self.W, self.digits, kept=kept, earlier=earlier)
         except ValueError:
             return None
-        other.tail_values = certify.tail_singular_values(self.W, other.analysis)
-        a = other.analysis
-        other.digits_of = [[certify.radius_digits(a.beta[i, j]) for j in range(a.beta.ncols())]
-                           for i in range(a.beta.nrows())]
+        other.digits_of = _digits_of(other.analysis.beta)
         return other
+
+    @functools.cached_property
+    def tail_values(self):
+        """Approximate singular values after the ridge (only the final run's are reported)."""
+        return certify.tail_singular_values(self.W, self.analysis)
 
     @property
     def rank(self):
@@ -115,6 +129,66 @@ class BallRun:
                 "ridge_decades": _finite(a.ridge_log10), "sigma_r_lower": a.sigma_r_lower.str(4, radius=False),
                 "tail_bound": a.tail_bound.str(4, radius=False), "min_beta_digits": _finite(self.min_digits()),
                 "closure_residual": self.info.get("closure_residual"), "seconds": round(self.seconds, 3)}
+
+
+class _Subset:
+    """Some states of a source of states (:class:`baseparams.dynamics.observation.States`),
+    in order: each is computed as the source computes it (closed loops: from the source's
+    own float64 start), so its rows of W are the rows the whole source gives."""
+
+    reports_closure = False
+
+    def __init__(self, states, indices):
+        self.states, self.indices, self.label = states, list(indices), states.label
+
+    @property
+    def count(self):
+        return len(self.indices)
+
+    def where(self, index):
+        return self.states.where(None if index is None else self.indices[index])
+
+    def values(self, mechanism, backend, index):
+        return self.states.values(mechanism, backend, self.indices[index])
+
+    def float64_sample(self, mechanism):
+        raise NotImplementedError("a subset of states is evaluated state by state")
+
+    def starts(self, mechanism):
+        starts = self.states.starts(mechanism)
+        return None if starts is None else [starts[i] for i in self.indices]
+
+
+def _beta_from_rows(mechanism, digits, trajectory, batches, a):
+    """beta at ``digits`` from the square block of the analysis ``a``: W evaluated only at
+    the states its rows R come from, then ``W_RK beta = W_RE`` solved in ball arithmetic
+    (:func:`baseparams.numeric.certify.block_beta`). For W of rank r every nonsingular
+    r x r block gives the same beta, so these balls enclose the beta that the whole W at
+    ``digits`` would give; the rank itself was proven at the final precision."""
+    f = max(1, len(mechanism.independent) or len(mechanism.coordinates))
+    sources = [trajectory, *batches]
+    starts = [0]
+    for source in sources:
+        starts.append(starts[-1] + source.count * f)
+    wanted = [set() for _ in sources]
+    located = []
+    for row in a.rows:
+        k = next(k for k in range(len(sources)) if row < starts[k + 1])
+        state, within = divmod(row - starts[k], f)
+        wanted[k].add(state)
+        located.append((k, state, within))
+    backend = Arb(digits)
+    blocks, position = [], {}
+    for k, source in enumerate(sources):
+        picked = sorted(wanted[k])
+        if not picked:
+            continue
+        for i, state in enumerate(picked):
+            position[k, state] = sum(b.nrows() for b in blocks) // f + i
+        blocks.append(observation_matrix(mechanism, backend, _Subset(source, picked))[0])
+    W = backend.stack(*blocks) if blocks else backend.matrix([], len(mechanism.parameters))
+    rows = [position[k, state] * f + within for k, state, within in located]
+    return certify.block_beta(W, digits, a.kept, rows, a.exponents)
 
 
 def _finite(x):
@@ -177,11 +251,13 @@ def _vp_coefficients(final, prev, params):
     a = final.analysis
     same = prev is not None and prev.analysis.kept == a.kept and prev.rank == a.rank
     trusted, untrusted = {}, []
+    cols = a.beta.ncols()
+    mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same else None
     for i in range(a.beta.nrows()):
-        for j in range(a.beta.ncols()):
+        for j in range(cols):
             d = final.digits_of[i][j]
-            if same:
-                d = min(d, certify.agreement_digits(prev.analysis.beta[i, j], a.beta[i, j]))
+            if same and d > 0:          # (a ball containing 0 has no digit to cap)
+                d = min(d, certify.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
             trusted[i, j] = max(0, min(d, final.digits))
 
     def coefficient(i, j):
@@ -350,7 +426,7 @@ class VariablePrecisionSolver:
             say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples"
                            + (f" + {sum(b.states for b in batches)} random states" if batches else "") + ")")
             run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress,
-                          batches=batches)
+                          batches=batches, earlier=runs[-1].analysis if runs else None)
             runs.append(run)
             a = run.analysis
             say(progress, f"vp: {D} digits: rank {a.rank} ({a.pivoting} order), proven ridge "
@@ -361,7 +437,7 @@ class VariablePrecisionSolver:
                 prev = runs[-2]
                 if prev.rank == run.rank and prev.analysis.kept != run.analysis.kept:
                     # same rank, other basis choice: the previous W with this run's kept columns
-                    redone = prev.reanalyse(run.analysis.kept)
+                    redone = prev.reanalyse(run.analysis.kept, run.analysis)
                     if redone is not None:
                         runs[-2] = prev = redone
                 accepted, agreement, reasons = compare_runs(prev, run)
@@ -391,7 +467,7 @@ class VariablePrecisionSolver:
 
     def _recover(self, mechanism, final, trajectory, batches, params, progress):
         """Exact rationals for beta from the digits its balls prove, then confirmed: each
-        must lie inside its ball at twice the digits."""
+        must lie inside its ball at twice the digits (:func:`_beta_from_rows`)."""
         a = final.analysis
         values = {}
         for i in range(a.beta.nrows()):
@@ -412,10 +488,9 @@ class VariablePrecisionSolver:
         D2 = 2 * final.digits
         say(progress, f"vp: confirming {len(values)} recovered rationals at {D2} digits")
         try:
-            check = BallRun(mechanism, D2, trajectory, kept=a.kept, progress=progress, batches=batches)
+            b = _beta_from_rows(mechanism, D2, trajectory, batches, a)
         except (ValueError, KinematicsError) as exc:     # the result stands; only the recovery fails
             return {"attempted": True, "succeeded": False, "reason": str(exc)}
-        b = check.analysis.beta
         return self._confirm(values, b, final, D2, a, params)      # exact containment: no precision
 
     @staticmethod
