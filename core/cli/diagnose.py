@@ -3,13 +3,17 @@ data, add it, and show the gap shrink (registered on ``main``; the statistics li
 :mod:`baseparams.identify.diagnose`)."""
 
 import sys
+from typing import TYPE_CHECKING
 
 import click
 
 from baseparams.cli.commands import emit, format_option, load, main
 from baseparams.cli.plots import _figure, _save
-from baseparams.identify.data import read_measured
-from baseparams.identify.diagnose import Diagnosis, diagnose_data, write_fixed
+
+# The statistics (scipy.signal, scipy.stats, statsmodels: 2 s of imports) are imported by
+# the verb when it runs, as in identify.py: every other command starts without them.
+if TYPE_CHECKING:
+    from baseparams.identify.diagnose import Diagnosis
 
 
 @main.command()
@@ -41,6 +45,9 @@ def diagnose(mech, data, selection, alpha, holdout, plot_path, write_path, fmt):
     "value", "std"}], "ambiguous": [...], "gap": {"before", "after", "holdout_before",
     "holdout_after"}, "unexplained": {...}} (docs/diagnosis.md).
     """
+    from baseparams.identify.data import read_measured
+    from baseparams.identify.diagnose import diagnose_data, write_fixed
+
     mechanism = load(mech)
     measured = read_measured(data, mechanism)
     result = diagnose_data(mechanism, measured, selection=list(selection) or None, alpha=alpha,
@@ -65,7 +72,7 @@ def _value_text(entry: dict) -> str:
     return ", ".join(f"{name} = {c['value']:.6g} +- {c['std']:.2g}" for name, c in entry["coefficients"].items())
 
 
-def render_text(result: Diagnosis, written: str | None = None) -> str:
+def render_text(result: "Diagnosis", written: str | None = None) -> str:
     """The diagnosis for a reader."""
     lines = [f"diagnose {result.mechanism}: {result.training} samples fitted, {result.held_out} held out "
              f"(the last block); alpha {result.alpha:g}"]
@@ -102,7 +109,7 @@ def render_text(result: Diagnosis, written: str | None = None) -> str:
     return "\n".join(lines)
 
 
-def plot_diagnosis(result: Diagnosis, path, fmt=None):
+def plot_diagnosis(result: "Diagnosis", path, fmt=None):
     """Residuals before and after per coordinate (holdout shaded), and the first step's
     candidate statistics (normal-equivalent z) with the Holm threshold."""
     f = len(result.coordinates)
