@@ -249,6 +249,20 @@ def main():
     print(f"campaign: {time.perf_counter() - started:.0f} s")
 
 
+def rate_table(outcomes, kinds, columns, headers, measures, width, first=4):
+    """One row per kind, one cell per column: the rate of each set of outcomes in
+    ``measures``, separated by '/' (the first ``first`` characters wide, the others 4),
+    and the number of datasets."""
+    print("  " + "kind".ljust(20) + "".join(f"{h:>{width}s}" for h in headers))
+    for kind in kinds:
+        cells = []
+        for column in columns:
+            v = outcomes[(kind, column)]
+            rates = "/".join(f"{rate(v, m):{first if k == 0 else 4}.0%}" for k, m in enumerate(measures))
+            cells.append(f"{rates} n{len(v):<2d}" if v else " " * width)
+        print("  " + kind.ljust(20) + "".join(f"{c:>{width}s}" for c in cells))
+
+
 def print_report(report, args):
     print(f"\nsamples {args.samples} per dataset, noise SD {NOISE:.0%} of each coordinate's RMS inertial "
           f"torque, holdout 0.3, alpha 0.05, seed {args.seed}")
@@ -263,15 +277,9 @@ def print_report(report, args):
     kinds = sorted({k for k, _ in report["single"]})
     print("\none hidden effect, by ratio: right kind and coordinate named and nothing else / named "
           "(other names too) / named or in an ambiguous group")
-    print("  " + "kind".ljust(20) + "".join(f"{r:>18d}" for r in RATIOS))
     named = {'right', 'right+extra'}
-    for kind in kinds:
-        cells = []
-        for r in RATIOS:
-            v = report["single"][(kind, r)]
-            cells.append(f"{rate(v, {'right'}):4.0%}/{rate(v, named):4.0%}/{rate(v, named | {'ambiguous'}):4.0%} n{len(v):<2d}"
-                         if v else " " * 18)
-        print("  " + kind.ljust(20) + "".join(f"{c:>18s}" for c in cells))
+    rate_table(report["single"], kinds, RATIOS, [str(r) for r in RATIOS],
+               [{'right'}, named, named | {'ambiguous'}], 18)
     at3 = [o for (k, r), v in report["single"].items() if r >= 3 for o in v]
     print(f"  all kinds, ratio >= 3: named {rate(at3, {'right', 'right+extra'}):.1%} = right {rate(at3, {'right'}):.1%} "
           f"+ right+extra {rate(at3, {'right+extra'}):.1%}, "
@@ -280,14 +288,8 @@ def print_report(report, args):
     print("\nthe same datasets by identifiable ratio (RMS of the effect's part beyond the inertial model / "
           "noise SD, the largest over the coordinates): right, nothing else / named or ambiguous")
     bins = [0] + IDENTIFIABLE_BINS
-    print("  " + "kind".ljust(20) + "".join(f"{('<1' if b == 0 else f'>={b}'):>14s}" for b in bins))
-    for kind in kinds:
-        cells = []
-        for b in bins:
-            v = report["identifiable"][(kind, b)]
-            cells.append(f"{rate(v, {'right'}):5.0%}/{rate(v, {'right', 'right+extra', 'ambiguous'}):4.0%} n{len(v):<2d}"
-                         if v else " " * 14)
-        print("  " + kind.ljust(20) + "".join(f"{c:>14s}" for c in cells))
+    rate_table(report["identifiable"], kinds, bins, ['<1' if b == 0 else f'>={b}' for b in bins],
+               [{'right'}, {'right', 'right+extra', 'ambiguous'}], 14, first=5)
     seen3 = [o for (k, b), v in report["identifiable"].items() if b >= 3 for o in v]
     print(f"  all kinds, identifiable ratio >= 3: right {rate(seen3, {'right'}):.1%}, "
           f"right or ambiguous {rate(seen3, {'right', 'right+extra', 'ambiguous'}):.1%} (n={len(seen3)})")
