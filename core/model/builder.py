@@ -146,7 +146,7 @@ class MechanismBuilder:
 
     def rational(self, value: Value, key: str) -> Fraction:
         """An exact rational number (an expression in the geometry is evaluated at it)."""
-        expr = self.expression(value, key).subs(self.geometry_subs)
+        expr = self.expression(value, key).xreplace(self.geometry_subs)
         try:
             return to_fraction(expr)
         except ExpressionError as exc:
@@ -218,7 +218,7 @@ class MechanismBuilder:
         if mass is None:
             raise self.error(f"{key}.mass", "required with com and inertia_com")
         m = self.rational(mass, f"{key}.mass")
-        c = [to_fraction(v.subs(self.geometry_subs)) for v in self.vector(com, f"{key}.com")]
+        c = [to_fraction(v.xreplace(self.geometry_subs)) for v in self.vector(com, f"{key}.com")]
         if not isinstance(inertia_com, (list, tuple)) or len(inertia_com) != 6:
             raise self.error(f"{key}.inertia_com", f"needs 6 entries: {' '.join(INERTIA_COM_KEYS)}")
         tensor = [self.rational(v, f"{key}.inertia_com[{i}]") for i, v in enumerate(inertia_com)]
@@ -239,13 +239,13 @@ class MechanismBuilder:
         point = self.vector(raw.get("point"), f"{key}.point")
         axis = self.vector(raw["axis"] if raw.get("axis") is not None else ("0", "0", "1"), f"{key}.axis")
         subs = self.geometry_subs
-        axis_values = [c.subs(subs) for c in axis]
+        axis_values = [c.xreplace(subs) for c in axis]
         if all(v == 0 for v in axis_values):
             raise self.error(f"{key}.axis", "zero-length axis")
         ref = None
         if raw.get("ref") is not None:
             ref = self.vector(raw["ref"], f"{key}.ref")
-            ref_values = [c.subs(subs) for c in ref]
+            ref_values = [c.xreplace(subs) for c in ref]
             if all(v == 0 for v in ref_values):
                 raise self.error(f"{key}.ref", "zero-length ref axis")
             if sum(a * r for a, r in zip(axis_values, ref_values)) != 0:
@@ -325,7 +325,7 @@ class MechanismBuilder:
                 raise self.error(f"{key}.{c}", f"not a coordinate of this joint ({', '.join(cnames)})")
             if not isinstance(pair, (list, tuple)) or len(pair) != 2:
                 raise self.error(f"{key}.{c}", "must be [low, high]")
-            values = [self.expression(v, f"{key}.{c}", time=True).subs(self.geometry_subs) for v in pair]
+            values = [self.expression(v, f"{key}.{c}", time=True).xreplace(self.geometry_subs) for v in pair]
             if any(v.free_symbols for v in values):
                 raise self.error(f"{key}.{c}", "must be numbers (t is not allowed here)")
             lo, hi = (float(sympy.N(v)) for v in values)
