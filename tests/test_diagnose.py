@@ -168,6 +168,18 @@ def test_nothing_hidden_names_nothing_on_generated_mechanisms(text):
     assert false <= 2          # target 5 %; 12 datasets: <= 2 allows for chance (P(>2) < 2 % at 5 %)
 
 
+@pytest.mark.parametrize("text", [generate.serial_chain(4), generate.tree(1)], ids=["chain4", "tree1"])
+def test_nothing_hidden_closes_the_gap_on_generated_mechanisms(text):
+    """With nothing hidden the whiteness test (its null simulated through the fit) says
+    'closed' (exit 0) in about 95 % of datasets: 30 of 30 and 29 of 30 measured here; the
+    chi-square null said 'structure remains' in 20-25 % on the PUMA and Stewart platform."""
+    mech = parse_mechanism(text)
+    problem = _problem(mech, 300)
+    rng = np.random.default_rng(11)
+    closed = sum(diagnose(problem, _data(problem, mech, rng)).closed for _ in range(12))
+    assert closed >= 10        # 12 datasets at a 5 % rejection rate: P(< 10) < 2 %
+
+
 @pytest.mark.parametrize("name, hidden", [
     ("planar_2r", [("viscous_friction:q2", [0.8])]),
     ("planar_2r", [("coulomb_friction:q1", [1.0]), ("viscous_friction:q2", [0.5])]),
