@@ -7,6 +7,9 @@
   four-bars; errors read as before.
 - Trajectory derivatives by forward-mode jets against sympy's symbolic derivatives, in
   float64, arb (balls overlap), rationals (equal) and sympy (identical after simplify).
+- One state at a time (arb, and float64 single states such as the excitation check's
+  draws): the generated scalar closure code (evaluator.SCALAR_CLOSURE) against the generic
+  kinematics -- arb balls overlap, W's balls overlap, the draws land where they did.
 - Cached kinematics frames and the evenly spaced exact sample times.
 """
 
@@ -18,7 +21,7 @@ import pytest
 import sympy
 from flint import arb, fmpq
 
-from baseparams.dynamics import evaluator, trajectory
+from baseparams.dynamics import codegen, evaluator, trajectory
 from baseparams.dynamics.evaluator import Evaluator
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import observation_matrix as build
@@ -78,7 +81,7 @@ def test_batched_continuation_keeps_the_branch_and_w(make, monkeypatch):
     ev = Evaluator(mech, Float64())
     z, _, _ = traj.independent_values(mech, Float64(), np.array([float(t) for t in traj.times]))
     q = ev.assemble(z)
-    values, _ = ev._closure(q)
+    values, _ = ev.closure(q)
     assert max(np.abs(v).max() for v in values) <= 1e-12       # the closure tolerance still holds
 
 
@@ -152,6 +155,61 @@ def test_unreachable_trajectory_reports_as_before(monkeypatch):
     assert re.sub(r"residual [^ ]+", "residual *", messages[True]) == re.sub(r"residual [^ ]+", "residual *",
                                                                              messages[False])
     assert "at t = " in messages[True]
+
+
+# ----- one state: the generated scalar closure -----------------------------------------------
+def _random_state(mech, seed):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-0.4, 0.4, len(mech.coordinates)), rng.uniform(-1, 1, len(mech.coordinates))
+
+
+@pytest.mark.parametrize("make", _mechanisms())
+def test_scalar_closure_encloses_what_the_generic_kinematics_gives(make):
+    """Closure values, Jacobian and bias at one state: arb balls overlap the generic
+    kinematics' balls (both contain the exact values) and are as tight; on Python floats
+    equal to the numpy code to rounding."""
+    mech = make()
+    backend = Arb(40)
+    kin = TreeKinematics(mech, backend)
+    q, qd = _random_state(mech, 3)
+    with backend.activate():
+        qa, qda = [arb(v) for v in q], [arb(v) for v in qd]
+        values, rows, bias = kin.closure(kin.forward(qa, qda), want_bias=True)
+        s_values, s_rows = codegen.scalar_closure(mech, backend, qa)
+        s_bias = codegen.scalar_closure_bias(mech, backend, qa, qda)
+        pairs = list(zip(values, s_values)) + list(zip(bias, s_bias)) + [
+            (a, b) for r, t in zip(rows, s_rows) for a, b in zip(r, t)]
+        for generic, generated in pairs:
+            generic, generated = arb(generic), arb(generated)
+            assert generic.overlaps(generated)
+            assert generated.rad() <= 16 * generic.rad() + arb(10) ** -35
+    codegen.compiled(mech, "closure")
+    f_values, f_rows = codegen.scalar_closure(mech, Float64(), [float(v) for v in q])
+    n_values, n_rows = codegen.closure(mech, [float(v) for v in q])
+    scale = max(1.0, max(abs(float(v)) for row in n_rows for v in row))
+    assert np.allclose(np.array(f_values, dtype=float), np.array(n_values, dtype=float), rtol=0, atol=1e-13 * scale)
+    assert np.allclose(np.array(f_rows, dtype=float), np.array(n_rows, dtype=float), rtol=0, atol=1e-13 * scale)
+
+
+@pytest.mark.parametrize("name", ["sla_suspension", "four_bar", "stewart_platform"])
+def test_random_draws_and_arb_w_by_the_scalar_closure(name, monkeypatch):
+    """The excitation check's draws (one float64 state each, continuation) land on the same
+    positions with the generated scalar code as with the numpy code; W at 30 digits at those
+    states, positions enclosed by Krawczyk's test, overlaps entry by entry."""
+    mech = resolve(name)
+    traj = Trajectory.default(mech)
+    codegen.compiled(mech, "closure")
+    results = {}
+    for scalar in (True, False):
+        monkeypatch.setattr(evaluator, "SCALAR_CLOSURE", scalar)
+        batch = random_batch(mech, traj, seed=2)
+        w, _ = build(mech, Arb(30), batch)
+        results[scalar] = (np.array(batch.start, dtype=float), w)
+    (start_new, w_new), (start_old, w_old) = results[True], results[False]
+    assert np.abs(start_new - start_old).max() <= 1e-10
+    assert w_new.nrows() == w_old.nrows() and w_new.ncols() == w_old.ncols()
+    for a, b in zip(w_new.entries(), w_old.entries()):
+        assert a.overlaps(b)
 
 
 # ----- trajectory derivatives ----------------------------------------------------------------

@@ -107,7 +107,7 @@ class Sample:
     @in_backend_precision
     def regressor(self):
         """K in the independent coordinates: f rows of 10 * bodies entries."""
-        k_tree = codegen.regressor_rows(self.kin, self.q, self.qd, self.qdd, self.states)
+        k_tree = codegen.regressor_rows(self.kin, self.q, self.qd, self.qdd, lambda: self.states)
         if not self.kin.mechanism.loops:
             return k_tree
         return project(self.projection, k_tree, self.kin.zero)
@@ -129,6 +129,12 @@ class Sample:
     @in_backend_precision
     def energies(self):
         return energy_forms(self.kin, self.states)
+
+
+def _one_state(values) -> bool:
+    """float64 values of one state (Python floats or numpy float64 scalars, a subclass),
+    not arrays over samples."""
+    return all(isinstance(v, float) for v in values)
 
 
 def project(r, k_tree, zero):
@@ -159,6 +165,8 @@ class Evaluator:
         self.backend = backend
         self.certify = certify and isinstance(backend, Arb)
         self.kin = TreeKinematics(mechanism, backend, symbolic_geometry)
+        # arb: the closure terms by generated straight-line ball arithmetic (codegen.scalar_closure)
+        self._generated_balls = SCALAR_CLOSURE and isinstance(backend, Arb) and not symbolic_geometry
         self.structure = closure_structure(mechanism)
         self.n = self.kin.n
         self._solved = None      # (q, closure Jacobian at q) of the last batched assembly
@@ -206,7 +214,7 @@ class Evaluator:
         # positions are as exact as double precision allows, not merely below 1e-12
         polish = isinstance(self.backend, Float64) and tol <= -12
         for _ in range(60):
-            values, rows = self._closure(q)
+            values, rows = self.closure(q)
             res = [values[i] for i in st.rows]
             if all(self.backend.small(v, tol) for v in res):
                 if not polish:
@@ -226,9 +234,9 @@ class Evaluator:
                                   f"Newton iterations): out of the reachable range? independent "
                                   f"{self.describe(q, self.structure.independent)}")
         # every equation, the redundant ones included, must now hold, to 1000 times the Newton
-        # tolerance: the redundant ones were not solved for, they follow
+        # tolerance: the redundant ones were not solved for, they follow (``values``: the
+        # loop's last evaluation, at this q)
         slack = tol + 3
-        values, _ = self._closure(q)
         if not all(self.backend.small(v, slack) for v in values):
             worst = max(self.backend.magnitude(v) for v in values)
             raise KinematicsError(f"{where}a redundant closure equation is violated (residual "
@@ -354,9 +362,14 @@ class Evaluator:
             return None
         return inverse if np.all(bound <= 1e13) else None
 
-    def _closure(self, q):
-        """Closure values and Jacobian rows at q (float64 batches: generated code once it pays)."""
+    def closure(self, q):
+        """Closure values and Jacobian rows at q (float64: generated code once it pays, over
+        arrays for a batch, on Python floats for one state; arb: generated ball arithmetic)."""
+        if self._generated_balls:
+            return codegen.scalar_closure(self.mechanism, self.backend, q)
         if isinstance(self.backend, Float64) and codegen.worthwhile(self.mechanism, "closure", q):
+            if SCALAR_CLOSURE and _one_state(q):
+                return codegen.scalar_closure(self.mechanism, self.backend, [float(v) for v in q])
             return codegen.closure(self.mechanism, q)
         values, rows, _ = self.kin.closure(self.kin.forward(q))
         return values, rows
@@ -417,7 +430,7 @@ class Evaluator:
             return self._closed_batch(q, solved[1], zd, zdd, where)
         st = self.structure
         zero, one = self.kin.zero, self.kin.one
-        _, rows = self._closure(q)
+        _, rows = self.closure(q)
         jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
         jz = [[rows[i][j] for j in st.independent] for i in st.rows]
         try:
@@ -431,10 +444,17 @@ class Evaluator:
         for a, i in enumerate(st.dependent):
             r[i] = [-v for v in x[a]]
         qd = [_dot(r[i], zd, zero) for i in range(self.n)]
-        states = self.kin.forward(q, qd)
-        if isinstance(self.backend, Float64) and codegen.worthwhile(self.mechanism, "closure", q):
-            bias = codegen.closure_bias(self.mechanism, q, qd)
+        states = None                  # body states: computed when first read (Sample.states)
+        if self._generated_balls:
+            bias = codegen.scalar_closure_bias(self.mechanism, self.backend, q, qd)
+        elif isinstance(self.backend, Float64) and codegen.worthwhile(self.mechanism, "closure", q):
+            if SCALAR_CLOSURE and _one_state(q) and _one_state(qd):
+                bias = codegen.scalar_closure_bias(self.mechanism, self.backend, [float(v) for v in q],
+                                                   [float(v) for v in qd])
+            else:
+                bias = codegen.closure_bias(self.mechanism, q, qd)
         else:
+            states = self.kin.forward(q, qd)
             _, _, bias = self.kin.closure(states, want_bias=True)
         s = self.backend.solve(jd, [[bias[i]] for i in st.rows])
         extra = [zero] * self.n
@@ -497,6 +517,9 @@ def _predict(path, lam):
 
 NEWTON_BUDGET = 12     # Newton iterations per stage before a batch falls back to the general path
 BATCHED_NEWTON = True  # False: float64 batches take the general path too (the reference in tests and benchmarks)
+# One state (arb; float64 once the closure code is compiled): the closure terms by the generated
+# scalar code. False: the generic kinematics (arb) and numpy code (float64), the reference in tests.
+SCALAR_CLOSURE = True
 
 
 def _dot(row, values, zero):

@@ -153,7 +153,7 @@ def _per_state(mechanism, backend, states, progress):
         for index, sample in enumerate(_each_sample(ev, states)):
             rows.extend(sample.regressor())
             if residual and mechanism.loops:
-                values, _, _ = ev.kin.closure(sample.states)
+                values, _ = ev.closure(sample.q)
                 for v in values:
                     bound = abs(arb(v)).upper()
                     if bound > worst:

@@ -19,9 +19,9 @@ from baseparams.errors import KinematicsError
 
 def enclose(evaluator, q, where=""):
     """Tree coordinates with the dependent ones replaced by proven enclosures (arb balls)."""
-    kin, st = evaluator.kin, evaluator.structure
+    st = evaluator.structure
     dep = st.dependent
-    values, rows, _ = kin.closure(kin.forward(q))
+    values, rows = evaluator.closure(q)
     residual = [arb(values[i]) for i in st.rows]
     m = len(dep)
     jac_mid = arb_mat(m, m, [arb(rows[i][j]).mid() for i in st.rows for j in dep])
@@ -39,7 +39,7 @@ def enclose(evaluator, q, where=""):
         box = list(q)
         for j, c in zip(dep, centre):
             box[j] = arb(c, radius)
-        _, box_rows, _ = kin.closure(kin.forward(box))
+        _, box_rows = evaluator.closure(box)
         jac_box = arb_mat(m, m, [arb(box_rows[i][j]) for i in st.rows for j in dep])
         spread = arb_mat(m, 1, [arb(0, radius)] * m)
         k = arb_mat(m, 1, centre) - step + (_identity(m) - y * jac_box) * spread

@@ -172,7 +172,7 @@ def _rescaled(vector, subs, spread=20):
     direction does not depend on its length, and an axis such as (1e-300, 0, 0) would
     otherwise square to zero (or an axis of 1e200 to infinity) in double precision. Axes
     of ordinary lengths are left exactly as written."""
-    values = [sympy.sympify(c).subs(subs) for c in vector]
+    values = [sympy.sympify(c).xreplace(subs) for c in vector]
     if not all(v.is_Rational for v in values):
         return vector
     largest = max(abs(Fraction(int(v.p), int(v.q))) for v in values)
@@ -194,7 +194,7 @@ def _normalize(backend, v):
 
 def _default_ref(axis, subs, backend):
     """The body axis least aligned with ``axis`` (first in x, y, z order on ties)."""
-    values = [abs(sympy.sympify(c).subs(subs)) for c in axis]
+    values = [abs(sympy.sympify(c).xreplace(subs)) for c in axis]
     k = min(range(3), key=lambda i: (values[i], i))
     e = [backend.rational(Fraction(int(i == k))) for i in range(3)]
     return e

@@ -230,6 +230,9 @@ class Float64(Backend):
     def solve(self, a, b):
         n = len(a)
         k = len(b[0])
+        if all(isinstance(v, float) for row in a for v in row) and all(isinstance(v, float) for row in b for v in row):
+            X = self.solve_arrays(np.array(a, dtype=float), np.array(b, dtype=float))    # one state
+            return [[X[i, j] for j in range(k)] for i in range(n)]
         A = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in a], axis=-2)
         B = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in b], axis=-2)
         shape = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
@@ -248,6 +251,12 @@ class Float64(Backend):
 
     def to_float(self, x):
         return np.asarray(x, dtype=float)
+
+    def magnitude(self, x):
+        return abs(x) if isinstance(x, float) else super().magnitude(x)
+
+    def small(self, x, exponent):
+        return abs(x) <= 10.0 ** exponent if isinstance(x, float) else super().small(x, exponent)
 
 
 class Arb(Backend):

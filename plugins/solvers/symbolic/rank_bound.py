@@ -21,7 +21,6 @@ fail (``False``), and the solver then falls back to the shared analysis.
 """
 
 import numpy as np
-import scipy.linalg
 from flint import arb_mat
 
 def _powers_of_two(norms):
@@ -45,6 +44,7 @@ def choose_rows(wf_kept: np.ndarray) -> list[int] | None:
     if np.any(norms == 0):
         return None
     scaled = wf_kept * _powers_of_two(norms)
+    import scipy.linalg      # here, not at the top: loading the plugins must not cost every command 0.4 s
     _, _, perm = scipy.linalg.qr(scaled.T, mode="economic", pivoting=True, check_finite=False)
     return sorted(int(i) for i in perm[:r])
 
