@@ -332,10 +332,17 @@ def main():
           f"mechanism and process now, at every W before)")
     if args.quick:
         return
+    print(f"{'':>16} {'':>10} {'':>8}  yardstick (same run): the generic kinematics for the closure terms "
+          f"(evaluator.SCALAR_CLOSURE = False)")
     for digits in (30, 100, 500):
-        t, (_, info) = best_of(args.repeat if digits < 500 else 1, lambda: observation_matrix(sla, Arb(digits)))
+        repeat = args.repeat if digits < 500 else 1
+        t, (_, info) = best_of(repeat, lambda: observation_matrix(sla, Arb(digits)))
         mem = peak_memory_mb(lambda: observation_matrix(sla, Arb(digits)))
-        print(f"{f'arb {digits}':>16} {t:10.3f} {mem:8.1f}  {info['closure_residual']}")
+        evaluator.SCALAR_CLOSURE = False
+        t_generic, _ = best_of(repeat, lambda: observation_matrix(sla, Arb(digits)))
+        evaluator.SCALAR_CLOSURE = True
+        print(f"{f'arb {digits}':>16} {t:10.3f} {mem:8.1f}  {info['closure_residual']}; generic closure "
+              f"{t_generic:.3f} s, ratio {t / t_generic:.2f}")
 
 
 if __name__ == "__main__":

@@ -718,16 +718,34 @@ def _scalar_run(mechanism, part, kernel, backend, inputs) -> list:
     outputs = lays[kernel]
     buffers = [[None] * len(layout.slots) for layout in outputs.values()]
     namespace[kernel](*inputs, constants, _trig(backend), *buffers)
-    zero = backend.rational(Fraction(0))
     flats = []
-    for layout, buffer in zip(outputs.values(), buffers):
-        flat = [zero] * math.prod(layout.shape)
+    for template, layout, buffer in zip(_fixed_entries(mechanism, part, kernel, backend), outputs.values(), buffers):
+        flat = list(template)
         for slot, v in zip(layout.slots, buffer):
             flat[slot] = v
-        for slot, v in layout.constants:
-            flat[slot] = backend.evaluate(v)
         flats.append(flat)
     return flats
+
+
+def _fixed_entries(mechanism, part, kernel, backend) -> list[list]:
+    """Per output of ``kernel``: its flat entries with the state-independent ones (exact
+    zeros, constants of the geometry) in ``backend``'s numbers, computed once per precision."""
+    key = (mechanism, part, kernel, backend.name, getattr(backend, "digits", None))
+    found = _SCALAR_CONSTANTS.get(key)
+    if found is None:
+        _, lays, _ = _scalar_module(mechanism, part)
+        found = []
+        with backend.activate():
+            zero = backend.rational(Fraction(0))
+            for layout in lays[kernel].values():
+                flat = [zero] * math.prod(layout.shape)
+                for slot, v in layout.constants:
+                    flat[slot] = backend.evaluate(v)
+                found.append(flat)
+        if len(_SCALAR_CONSTANTS) >= 4 * _CACHE_SIZE:
+            _SCALAR_CONSTANTS.pop(next(iter(_SCALAR_CONSTANTS)))
+        _SCALAR_CONSTANTS[key] = found
+    return found
 
 
 def scalar_tree_regressor(mechanism, backend, q, qd, qdd) -> list:
