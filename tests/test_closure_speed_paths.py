@@ -212,6 +212,27 @@ def test_random_draws_and_arb_w_by_the_scalar_closure(name, monkeypatch):
         assert a.overlaps(b)
 
 
+@pytest.mark.parametrize("make", _mechanisms())
+def test_projection_skipping_exact_zeros_gives_the_same_balls(make):
+    """R^T K_tree over the columns the generated code can fill equals the full product,
+    ball for ball (what is skipped is exact zeros)."""
+    mech = make()
+    backend = Arb(30)
+    ev = Evaluator(mech, backend, certify=True)
+    traj = Trajectory.default(mech)
+    index = len(traj.times) // 3
+    with backend.activate():
+        z, zd, zdd = traj.values(mech, backend, index)
+        sample = ev.sample(z, zd, zdd, [backend.number(v) for v in traj.starts(mech)[index]])
+        k_tree = codegen.regressor_rows(ev.kin, sample.q, sample.qd, sample.qdd, None)
+        columns = codegen.regressor_columns(ev.kin)
+        sparse = evaluator.project(sample.projection, k_tree, ev.kin.zero, columns)
+        full = evaluator.project(sample.projection, k_tree, ev.kin.zero)
+    assert sum(len(c) for c in columns) < len(k_tree) * len(k_tree[0])
+    for a, b in zip((x for row in sparse for x in row), (x for row in full for x in row)):
+        assert arb(a).mid() == arb(b).mid() and arb(a).rad() == arb(b).rad()
+
+
 # ----- trajectory derivatives ----------------------------------------------------------------
 EXPRESSIONS = ["3/10*sin(2*t + 1) - cos(t/3)**2 + 1/(2 + sin(t)) + sqrt(3 + t**2)*exp(-t/5)",
                "sqrt(1 + t)**3/(1 + t**2)**2 - 7", "5/4", "t**3/2 - 2*t + 1/(3 + t)", "exp(sin(pi*t))"]

@@ -775,6 +775,25 @@ def scalar_closure_bias(mechanism, backend, q, qd) -> list:
     return gamma
 
 
+def regressor_columns(kin) -> list[tuple] | None:
+    """Per row of :func:`regressor_rows`: the columns that can be nonzero (the others are
+    exact zeros in every state), when the generated code gives the rows; else None."""
+    if not isinstance(kin.backend, (Arb, Exact)):
+        return None
+    return _nonzero_columns(kin.mechanism)
+
+
+@functools.lru_cache(maxsize=_CACHE_SIZE)
+def _nonzero_columns(mechanism) -> list[tuple]:
+    _, lays, _ = _scalar_module(mechanism, "regressor")
+    layout = lays["_tree_regressor"]["K"]
+    n, p = layout.shape
+    columns: list[set] = [set() for _ in range(n)]
+    for flat in list(layout.slots) + [slot for slot, _ in layout.constants]:
+        columns[flat // p].add(flat % p)
+    return [tuple(sorted(c)) for c in columns]
+
+
 def regressor_rows(kin, q, qd, qdd, states) -> list:
     """K_tree's rows at one state: generated code in arb and rationals, the generic
     recursion otherwise (float64 and sympy keep :func:`~.regressor.tree_regressor`).

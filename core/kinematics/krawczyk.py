@@ -17,11 +17,12 @@ from flint import arb, arb_mat
 from baseparams.errors import KinematicsError
 
 
-def enclose(evaluator, q, where=""):
-    """Tree coordinates with the dependent ones replaced by proven enclosures (arb balls)."""
+def enclose(evaluator, q, where="", at=None):
+    """Tree coordinates with the dependent ones replaced by proven enclosures (arb balls).
+    ``at``: the closure values and Jacobian rows at ``q`` when already computed (Newton's last)."""
     st = evaluator.structure
     dep = st.dependent
-    values, rows = evaluator.closure(q)
+    values, rows = at if at is not None else evaluator.closure(q)
     residual = [arb(values[i]) for i in st.rows]
     m = len(dep)
     jac_mid = arb_mat(m, m, [arb(rows[i][j]).mid() for i in st.rows for j in dep])
