@@ -210,6 +210,17 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
     unexplained["confusable_with_model"] = _weak(problem.inertial[rows], candidates, first)
     notes = list(problem.notes)
+    for old, new in chosen.regrouped:
+        notes.append(f"{candidates[old].label} and its rivals were ambiguous when they entered (their "
+                     "difference acts on too few samples to test while other effects were missing from "
+                     f"the residual); compared again in the complete model: {candidates[new].label} "
+                     + ("leads a smaller group" if new in chosen.ambiguous else
+                        "is named" if new in chosen.added else "won, and was later taken out"))
+    for i, test, bar in chosen.removed:
+        given = (f"p = {test.pvalue:.3g} > {bar:.3g}, the bar it entered by" if test.tested else
+                 f"nothing testable of it is left ({test.reason})")
+        notes.append(f"{candidates[i].label} was named, then taken out: once the effects named after it "
+                     f"are in, it adds nothing significant ({given})")
     if untestable:
         notes.append(f"{len(untestable)} candidates not testable on this data: 'absorbed' (no direction "
                      "beyond the inertial model: not identifiable) or 'support' (acting on too few samples)")
@@ -317,7 +328,8 @@ def _ambiguous_entry(all_candidates: list[Candidate], chosen: Selection, index: 
             "evidence": evidence,
             "separate_by": separation([c.kind for c in cands], False),
             "reason": "the data cannot tell these apart: none adds significantly to what the "
-                      "strongest explains, and it adds nothing significant over them"}
+                      "strongest explains, and it adds nothing significant over them (at the bar a "
+                      "further effect must clear when each adds at alpha)"}
 
 
 def _steps_json(candidates: list[Candidate], chosen: Selection) -> list[dict]:
