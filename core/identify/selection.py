@@ -472,6 +472,14 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     return None if worst is None else (worst[1], worst[2], bars[worst[1]])
 
 
+def _verdict(winner_adds: bool, rival_adds: bool) -> str | None:
+    """Encompassing: 'beaten' (only the winner adds over the other), 'switch' (only the
+    rival does), 'confusable' (neither), None (both)."""
+    if winner_adds != rival_adds:
+        return "beaten" if winner_adds else "switch"
+    return None if winner_adds else "confusable"
+
+
 def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[int, int], dof: int,
             alpha: float, nested_level: float | None = None) -> tuple[int, list[Rival], list[Rival]]:
     """Compare the winner with each rival by encompassing tests (does each add significantly
@@ -514,23 +522,14 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
                 (beaten if t_ab.tested and t_ab.pvalue <= nested_level else switch).append(rival)
             elif not t_ab.tested:               # winner nested in the rival
                 (switch if t_ba.pvalue <= nested_level else beaten).append(rival)
-            elif a_adds and not b_adds:
-                beaten.append(rival)
-            elif not a_adds and b_adds:
-                switch.append(rival)
-            elif not a_adds and not b_adds:
-                confusable.append(rival)
             else:
-                # both add at alpha: two distinct effects only if each adds at the bar of a
-                # further effect (nested_level), else one of them is a fluke of alpha
-                a_strong, b_strong = t_ab.pvalue <= nested_level, t_ba.pvalue <= nested_level
-                if a_strong and not b_strong:
-                    beaten.append(rival)
-                elif b_strong and not a_strong:
-                    switch.append(rival)
-                elif not a_strong and not b_strong:
-                    confusable.append(rival)
-                # both at the bar: two distinct effects; the rival competes again next step
+                # who adds over whom at alpha decides; when both do, two distinct effects only
+                # if each adds at the bar of a further effect (nested_level), else one of them
+                # is a fluke of alpha; both at that bar: the rival competes again next step
+                verdict = _verdict(a_adds, b_adds) or _verdict(t_ab.pvalue <= nested_level,
+                                                               t_ba.pvalue <= nested_level)
+                if verdict is not None:
+                    {"beaten": beaten, "switch": switch, "confusable": confusable}[verdict].append(rival)
         fresh = [r for r in switch if r.index not in seen]
         if not fresh:
             confusable += [r for r in switch if r.index in seen]
