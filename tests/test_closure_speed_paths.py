@@ -191,12 +191,15 @@ def test_scalar_closure_encloses_what_the_generic_kinematics_gives(make):
     assert np.allclose(np.array(f_rows, dtype=float), np.array(n_rows, dtype=float), rtol=0, atol=1e-13 * scale)
 
 
-@pytest.mark.parametrize("name", ["sla_suspension", "four_bar", "stewart_platform"])
-def test_random_draws_and_arb_w_by_the_scalar_closure(name, monkeypatch):
+@pytest.mark.parametrize("make", [pytest.param(lambda name=name: resolve(name), id=name)
+                                  for name in ("sla_suspension", "four_bar", "stewart_platform")] + [
+    pytest.param(lambda seed=seed: parse_mechanism(generate.four_bar(seed)), id=f"four_bar({seed})")
+    for seed in range(3)])
+def test_random_draws_and_arb_w_by_the_scalar_closure(make, monkeypatch):
     """The excitation check's draws (one float64 state each, continuation) land on the same
     positions with the generated scalar code as with the numpy code; W at 30 digits at those
     states, positions enclosed by Krawczyk's test, overlaps entry by entry."""
-    mech = resolve(name)
+    mech = make()
     traj = Trajectory.default(mech)
     codegen.compiled(mech, "closure")
     results = {}
