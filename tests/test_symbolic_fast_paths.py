@@ -13,6 +13,7 @@
 
 import json
 import random
+import re
 
 import mpmath
 import numpy as np
@@ -21,7 +22,7 @@ from flint import arb_mat
 
 from baseparams.cli.report import render
 from baseparams.dynamics.excitation import random_batch
-from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
@@ -42,10 +43,22 @@ def _mechanism(case):
     return parse_mechanism(CASES[case](), f"{case}.toml")
 
 
+# where the certificate's balls are computed: at the rank proof's states (fast) or at every
+# state (the shared analysis); what it concludes is compared, these are not
+_WHERE = ("samples", "rows", "generator_residual")
+
+
 def _canonical(result):
-    data = result.to_json()
+    data = json.loads(json.dumps(result.to_json(), default=str))        # a copy
     data.pop("elapsed_s", None)
-    return json.dumps(data, sort_keys=True, default=str), render(result, "text")
+    certificate = data["diagnostics"]["certificate"]
+    where = {key: certificate.pop(key) for key in _WHERE}
+    text, count = re.subn(r"on \d+ states \(\d+ rows\)", "on N states (N rows)", render(result, "text"))
+    text, residuals = re.subn(r"\|W n\| <= \S+ max", "|W n| <= R max", text)
+    assert count == residuals == 1
+    data["diagnostics"]["summary"] = [re.sub(r"on \d+ states proves", "on N states proves", line)
+                                      for line in data["diagnostics"]["summary"]]
+    return json.dumps(data, sort_keys=True), text, where
 
 
 class _Reference(elimination.ExactField):
@@ -70,6 +83,9 @@ def test_fast_paths_give_the_reference_result(monkeypatch, case):
         reference = _canonical(elimination.solve(mech))
     assert fast[0] == reference[0]
     assert fast[1] == reference[1]
+    # balls at the random states and the proof's trajectory states only, not at all of them
+    assert fast[2]["samples"] < reference[2]["samples"] and fast[2]["rows"] < reference[2]["rows"]
+    assert float(fast[2]["generator_residual"]) < 1e-30 and float(reference[2]["generator_residual"]) < 1e-30
 
 
 def test_the_reference_field_is_sympys_and_the_fast_one_rational():
@@ -215,3 +231,60 @@ def test_rank_proof_refuses_a_wrong_float_copy():
     with backend.activate():
         assert not columns_independent(zero, wf, kept)
         assert not columns_independent(blocks, wf[:-1], kept)
+
+
+@pytest.mark.parametrize("case", ["four-bar", "spherical-irrational chain"])
+def test_balls_at_some_states_are_the_rows_of_balls_at_all(case):
+    """The certificate computes W in balls at the proof's trajectory states only (Subset):
+    the same balls, digit for digit, as those rows of W at the whole trajectory."""
+    mech = _mechanism(case)
+    backend, trajectory = Arb(40), Trajectory.default(mech)
+    whole = observation_matrix(mech, backend, trajectory)[0]
+    states = (0, 3, trajectory.count - 1)
+    some = observation_matrix(mech, backend, Subset(trajectory, states))[0]
+    width = whole.nrows() // trajectory.count
+    rows = [s * width + k for s in states for k in range(width)]
+    assert some.nrows() == len(rows) and some.ncols() == whole.ncols()
+    for a, i in enumerate(rows):
+        for j in range(whole.ncols()):
+            assert some[a, j].str(45, radius=True) == whole[i, j].str(45, radius=True)
+    floats = observation_matrix(mech, Float64(), Subset(trajectory, states))[0]
+    assert np.array_equal(floats, observation_matrix(mech, Float64(), trajectory)[0][rows])
+
+
+def _steady_pendulum():
+    """The pendulum turning at constant speed along its trajectory: no acceleration, so
+    the trajectory's W cannot see Izz1 (a single fixed axis: no velocity terms either)."""
+    from pathlib import Path
+
+    from baseparams import registry
+    text = Path(registry.mechanisms()["pendulum"].item.path).read_text()
+    old = 'q = { theta = "0.8*sin(1.3*t) + 0.4*sin(3.1*t)" }'
+    assert text.count(old) == 1
+    return parse_mechanism(text.replace(old, 'q = { theta = "0.3*t" }'), "steady_pendulum.toml")
+
+
+def test_a_generator_null_on_the_trajectory_only_fails_at_the_random_states(monkeypatch):
+    """The generators' evidence comes from the random states: a vector that W of a
+    non-exciting trajectory annihilates, but the mechanism's W does not, is caught."""
+    mech = _steady_pendulum()
+    trajectory = Trajectory.default(mech)
+    izz = list(mech.parameters).index("Izz1")
+    assert not np.any(observation_matrix(mech, Float64(), trajectory)[0][:, izz])
+    original = elimination.eliminate
+
+    def eliminate(*args, **kwargs):            # the monopole at the pivot, plus Izz1
+        der = original(*args, **kwargs)
+        step = next(s for s in der.steps if s.pivot == "m1")
+        step.vector["Izz1"] = der.field.convert(1)
+        return der
+
+    monkeypatch.setattr(elimination, "eliminate", eliminate)
+    r = elimination.solve(mech)
+    cert = r.diagnostics["certificate"]
+    assert [g["source"] for g in cert["generators_failed"]] == ["body 1 condition 1 (monopole at origin)"]
+    assert cert["generators_passed"] == cert["generators"] - 1 and not r.certified
+    # without the corruption: the same trajectory, certified by the random states
+    monkeypatch.setattr(elimination, "eliminate", original)
+    clean = elimination.solve(_steady_pendulum())
+    assert clean.rank == 3 and clean.certified

@@ -96,6 +96,40 @@ class RationalStates:
         return None if self.start is None else [[float(v) for v in s] for s in self.start]
 
 
+@dataclass(frozen=True)
+class Subset:
+    """Some states of another source, in its order: W at them is the rows of W at the
+    whole source that belong to those states, to the last bit of every ball (the same exact
+    values and the same float64 Newton starts). For a proof that needs balls at a few
+    states only, where the float64 W of every state chose them; in float64,
+    :func:`observation_matrix` takes the source's rows."""
+
+    source: States
+    indices: tuple
+
+    @property
+    def label(self) -> str:
+        return self.source.label
+
+    @property
+    def reports_closure(self) -> bool:
+        return self.source.reports_closure
+
+    @property
+    def count(self) -> int:
+        return len(self.indices)
+
+    def where(self, index):
+        return self.source.where(None if index is None else self.indices[index])
+
+    def values(self, mechanism, backend, index):
+        return self.source.values(mechanism, backend, self.indices[index])
+
+    def starts(self, mechanism):
+        starts = self.source.starts(mechanism)
+        return None if starts is None else [starts[i] for i in self.indices]
+
+
 def observation_matrix(mechanism, backend: Backend, states: States,
                        progress: Progress | None = None) -> tuple[object, dict]:
     """W at ``states`` in ``backend``'s arithmetic and matrix type: (W, info).
@@ -129,6 +163,10 @@ def _width(mechanism):
 
 
 def _vectorised(mechanism, states):
+    if isinstance(states, Subset):
+        f = _width(mechanism)
+        rows = [index * f + k for index in states.indices for k in range(f)]
+        return _vectorised(mechanism, states.source)[0][rows], {"samples": states.count}
     k = states.float64_sample(mechanism).regressor_array()        # (states, f, parameters)
     return k.reshape(states.count * _width(mechanism), len(mechanism.parameters)), {"samples": states.count}
 

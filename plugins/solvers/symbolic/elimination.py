@@ -54,7 +54,7 @@ from sympy import QQ
 
 from baseparams import registry
 from baseparams.dynamics.excitation import random_batch
-from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import transfer_generators
 from baseparams.errors import InputError, KinematicsError
@@ -64,7 +64,7 @@ from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
 
 from .body_conditions import analyse_bodies
-from .rank_bound import columns_independent
+from .rank_bound import choose_rows, columns_independent
 from .sampled_transfers import sampled_joint_transfers
 
 DIAGONAL = ("Ixx", "Iyy", "Izz")
@@ -400,8 +400,9 @@ def describe(gen):
 # ----- certification ----------------------------------------------------------------------
 @dataclass
 class Certificate:
-    """What :func:`certify` established on W (``rows`` x parameters, ``samples`` states,
-    ball arithmetic at ``digits``).
+    """What :func:`certify` established on W in balls (``rows`` x parameters at ``samples``
+    states: the random states and the trajectory states of the proof, or every state when
+    the shared analysis decided; ball arithmetic at ``digits``).
 
     Proven: ``rank(W) >= lower`` (``kept_proven``: the solver's kept columns themselves are
     proven independent; otherwise ``lower`` is the shared ball analysis's own rank).
@@ -440,52 +441,77 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     :class:`Certificate`).
 
     W is the trajectory's observation matrix stacked with rows at independent random states
-    (kept as two blocks: nothing needs them copied into one matrix).
+    (kept as blocks: nothing needs them copied into one matrix). It is computed in float64
+    at every state, to choose, and in balls where claims are made:
 
     - Lower bound (a proof): the kept columns are proven independent, so rank(W) >= their
       number: by :func:`.rank_bound.columns_independent` (rows and a preconditioner chosen
-      on the same W in float64, the claim ||I - W_RK X|| < 1 made in balls), else by
-      ``baseparams.numeric.certify.analyse`` with the kept columns imposed; if neither can,
-      that analysis without them gives the rank it can prove.
+      on the float64 W, the claim ||I - W_RK X|| < 1 made in balls). Balls are needed only
+      at the states holding the chosen rows: every random state, and the trajectory states
+      among the chosen rows (:class:`~baseparams.dynamics.observation.Subset`, the same balls
+      as in W at the whole trajectory). Should that fail, W in balls at every state and
+      ``baseparams.numeric.certify.analyse`` with the kept columns imposed decide; if it
+      cannot either, that analysis without them gives the rank it can prove.
     - Generators (evidence): every accepted generator, reduced as in the elimination, is
       evaluated at the geometry in balls (exact rationals, or balls around square roots
       of non-squares) and passes when every entry of W n contains 0 and
-      |W n| <= 10^-(digits/2) max|W| max|n| (max|W| from the float64 copy of W, a scale
-      only). W's balls enclose the exact W at the states, so a true null vector always passes;
-      passing on N states is not a proof that n is one.
+      |W n| <= 10^-(digits/2) max|W| max|n| (max|W| from the float64 W, a scale only),
+      on every state W has in balls: all the random states (ceil(parameters / dof) of them,
+      drawn independently of the trajectory: a vector that is not a null vector of the
+      mechanism gives W n != 0 at almost every state, so these generic states are the
+      evidence; the trajectory's states lie on one curve of the state space and add no
+      power of their own) and the trajectory states of the proof. W's balls enclose the
+      exact W at the states, so a true null vector always passes; passing on N states is
+      not a proof that n is one.
     """
     backend = Arb(digits)
     trajectory = trajectory or Trajectory.default(mechanism)
-    W, info = observation_matrix(mechanism, backend, trajectory)
+    # float64 first: a closed loop's balls depend, in the last bits of their radii, on the
+    # float64 positions the mechanism has cached when they are computed (the same order as
+    # when the balls were computed at every state: trajectory, then the random states)
+    try:
+        wf_trajectory = observation_matrix(mechanism, Float64(), trajectory)[0]
+    except (InputError, KinematicsError, MemoryError):
+        wf_trajectory = None
     # rows at random states independent of the trajectory, so that a trajectory which does
-    # not excite the mechanism cannot lower the proven rank (core/excitation.py). In this
-    # order: a closed loop's W in balls depends, in the last bits of its radii, on the
-    # float64 positions the mechanism has cached when it is computed
+    # not excite the mechanism cannot lower the proven rank (core/excitation.py)
     batch = random_batch(mechanism, trajectory, seed=7919)
-    blocks = [W, observation_matrix(mechanism, backend, batch)[0]]     # W's rows: both, stacked
+    random_block = observation_matrix(mechanism, backend, batch)[0]
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}
-    rows = sum(b.nrows() for b in blocks)
     # the same rows in float64: choices (rows, preconditioner) and max|W|, never claims;
     # without it (float64 refused, e.g. over the memory limit) the shared analysis decides
     try:
-        wf = np.vstack([observation_matrix(mechanism, Float64(), states)[0] for states in (trajectory, batch)])
+        wf_random = observation_matrix(mechanism, Float64(), batch)[0] if wf_trajectory is not None else None
     except (InputError, KinematicsError, MemoryError):
-        wf = np.zeros((0, 0))
-    same_shape = wf.shape == (rows, len(params))
+        wf_random = None
+    usable = wf_random is not None and wf_trajectory.shape[1] == wf_random.shape[1] == len(params)
+    wf = np.vstack([wf_trajectory, wf_random]) if usable else np.zeros((0, 0))
+    width = random_block.nrows() // max(1, batch.count)
+    chosen = choose_rows(wf[:, kept]) if usable else None
+    lower = None
     with backend.activate():
-        if same_shape and columns_independent(blocks, wf, kept):
-            lower, kept_proven = len(kept), True
-        else:
+        if chosen is not None:
+            states = tuple(sorted({i // width for i in chosen if i < wf_trajectory.shape[0]}))
+            blocks = [observation_matrix(mechanism, backend, Subset(trajectory, states))[0]] if states else []
+            blocks.append(random_block)
+            rows_used = [s * width + k for s in states for k in range(width)]
+            if columns_independent(blocks, np.vstack([wf_trajectory[rows_used], wf_random]), kept):
+                lower, kept_proven, samples = len(kept), True, len(states) + batch.count
+        if lower is None:           # every state in balls, and the shared analysis
+            W, info = observation_matrix(mechanism, backend, trajectory)
+            blocks = [W, random_block]
+            samples = info.get("samples") + batch.count
             stacked = backend.stack(*blocks)
             try:
                 lower, kept_proven = analyse(stacked, digits, kept=kept, approximate_spectrum=False).rank, True
             except ValueError:      # not proven independent: what can be proven instead
                 lower, kept_proven = analyse(stacked, digits, approximate_spectrum=False).rank, False
-        cert = Certificate(digits, info.get("samples"), rows, lower, kept_proven,
+        rows = sum(b.nrows() for b in blocks)
+        cert = Certificate(digits, samples, rows, lower, kept_proven,
                            generators=len(derivation.steps))
-        if same_shape:
+        if usable:
             wmax = float(np.max(np.abs(wf), initial=0.0)) or 1.0
         else:
             wmax = max((abs(float(x.mid())) for b in blocks for x in b.entries()), default=0.0) or 1.0

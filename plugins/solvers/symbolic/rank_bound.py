@@ -6,7 +6,9 @@ Gram matrix, pivots, beta, a tail bound), which costs O(rows n^2) Python-level b
 operations: 160 of 320 s on a 48-body chain. Here the *choices* are made in float64 on a
 copy of W (the same states in the Float64 backend) and only the *claim* is made in balls:
 
-1. r = |K| rows R of W_K, by QR with column pivoting on the column-scaled W_K^T (scipy);
+1. r = |K| rows R of W_K, by QR with column pivoting on the column-scaled W_K^T (the
+   shared :func:`baseparams.numeric.linalg.pivoted_qr_columns`, numpy only: importing
+   scipy.linalg would cost this one call 0.25-0.6 s of a command's whole process);
 2. an approximate inverse X of the r x r block M = W_RK, computed in float64 with rows and
    columns scaled by powers of two (exact), so X's entries are exact binary numbers;
 3. in ball arithmetic at the caller's precision: E = I - M X, and the upper bound of
@@ -22,6 +24,8 @@ fail (``False``), and the solver then falls back to the shared analysis.
 
 import numpy as np
 from flint import arb_mat
+
+from baseparams.numeric.linalg import pivoted_qr_columns
 
 def _powers_of_two(norms):
     """2^-round(log2 x) per entry (1 where x is 0): exact scalings toward unit norm."""
@@ -44,9 +48,7 @@ def choose_rows(wf_kept: np.ndarray) -> list[int] | None:
     if np.any(norms == 0):
         return None
     scaled = wf_kept * _powers_of_two(norms)
-    import scipy.linalg      # here, not at the top: loading the plugins must not cost every command 0.4 s
-    _, _, perm = scipy.linalg.qr(scaled.T, mode="economic", pivoting=True, check_finite=False)
-    return sorted(int(i) for i in perm[:r])
+    return sorted(int(i) for i in pivoted_qr_columns(scaled.T, r))
 
 
 def approximate_inverse(block: np.ndarray) -> np.ndarray | None:
