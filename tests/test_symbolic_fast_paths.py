@@ -53,7 +53,8 @@ def _canonical(result):
     data.pop("elapsed_s", None)
     certificate = data["diagnostics"]["certificate"]
     where = {key: certificate.pop(key) for key in _WHERE}
-    text, count = re.subn(r"on \d+ states \(\d+ rows\)", "on N states (N rows)", render(result, "text"))
+    text, count = re.subn(r"on \d+ states \((\d+) drawn at random, \d+ of the trajectory; \d+ rows\)",
+                          r"on N states (\1 drawn at random, N of the trajectory; N rows)", render(result, "text"))
     text, residuals = re.subn(r"\|W n\| <= \S+ max", "|W n| <= R max", text)
     assert count == residuals == 1
     data["diagnostics"]["summary"] = [re.sub(r"on \d+ states proves", "on N states proves", line)

@@ -306,8 +306,11 @@ def check_text(result):
         return ("No numeric check was made. The count rests on the generators alone (joint-type rules, "
                 "and body conditions accepted on sampled numerical evidence); nothing bounds the rank "
                 "from below.")
-    text = (f"W was computed in ball arithmetic at {cert['digits']} digits on {cert['samples']} states "
-            f"({cert['rows']} rows). Proven: rank >= {cert['rank_lower_bound']}")
+    drawn = cert.get("random_states")
+    states = (f"{cert['samples']} states ({drawn} drawn at random, {cert['samples'] - drawn} of the trajectory; "
+              f"{cert['rows']} rows)" if drawn else f"{cert['samples']} states ({cert['rows']} rows)")
+    text = (f"W was computed in ball arithmetic at {cert['digits']} digits on {states}. "
+            f"Proven: rank >= {cert['rank_lower_bound']}")
     text += (" (the kept columns are independent). " if cert["kept_columns_proven"] else
              " (the shared ball analysis's rank; the kept columns themselves are not proven independent). ")
     total, passed = cert["generators"], cert["generators_passed"]

@@ -417,6 +417,7 @@ class Certificate:
     lower: int
     kept_proven: bool
     generators: int = 0
+    random_states: int = 0          # of ``samples``: drawn independently of the trajectory
     tested: int = 0
     residual: float | None = None
     failed: list = field(default_factory=list)      # (description, relative residual)
@@ -428,7 +429,8 @@ class Certificate:
 
     def info(self):
         """The ``diagnostics.certificate`` entry of the result (JSON-ready)."""
-        return {"digits": self.digits, "samples": self.samples, "rows": self.rows,
+        return {"digits": self.digits, "samples": self.samples, "random_states": self.random_states,
+                "rows": self.rows,
                 "rank_lower_bound": self.lower, "kept_columns_proven": self.kept_proven,
                 "generators": self.generators, "generators_tested": self.tested,
                 "generators_passed": self.passed,
@@ -511,7 +513,7 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
                 lower, kept_proven = analyse(stacked, digits, approximate_spectrum=False).rank, False
         rows = sum(b.nrows() for b in blocks)
         cert = Certificate(digits, samples, rows, lower, kept_proven,
-                           generators=len(derivation.steps))
+                           generators=len(derivation.steps), random_states=batch.count)
         if usable:
             wmax = float(np.max(np.abs(wf), initial=0.0)) or 1.0
         else:
