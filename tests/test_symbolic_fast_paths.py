@@ -1,6 +1,8 @@
 """The symbolic solver's fast paths (issue 12) against the paths they replace.
 
-- Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar:
+- Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar
+  (the certificate's balls at the proof's states against balls at every state: the same
+  verdicts; where they were computed, and the residual, differ):
   every fast path on (rationals as fmpq, the float64-chosen rank proof, exact pivot ranks,
   the numeric prefilter of sampled transfers) gives the same JSON result and the same
   derivation report, text for text, as every one off (sympy's field, the shared ball
@@ -289,3 +291,22 @@ def test_a_generator_null_on_the_trajectory_only_fails_at_the_random_states(monk
     monkeypatch.setattr(elimination, "eliminate", original)
     clean = elimination.solve(_steady_pendulum())
     assert clean.rank == 3 and clean.certified
+
+
+def test_without_float64_the_shared_analysis_certifies(monkeypatch):
+    """Float64 W refused (e.g. over the memory limit): balls at every state, and the
+    shared ball analysis proves the rank; the same verdicts."""
+    mech = _mechanism("four-bar")
+    fast = elimination.solve(mech).diagnostics["certificate"]
+    original = elimination.observation_matrix
+
+    def no_float64(mechanism, backend, states):
+        if isinstance(backend, Float64):
+            raise MemoryError("refused")
+        return original(mechanism, backend, states)
+
+    monkeypatch.setattr(elimination, "observation_matrix", no_float64)
+    slow = elimination.solve(_mechanism("four-bar")).diagnostics["certificate"]
+    assert slow["samples"] == Trajectory.default(mech).count + slow["random_states"] > fast["samples"]
+    for key in ("rank_lower_bound", "kept_columns_proven", "generators_tested", "generators_passed"):
+        assert slow[key] == fast[key]

@@ -469,13 +469,13 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     """
     backend = Arb(digits)
     trajectory = trajectory or Trajectory.default(mechanism)
-    # float64 first: a closed loop's balls depend, in the last bits of their radii, on the
-    # float64 positions the mechanism has cached when they are computed (the same order as
-    # when the balls were computed at every state: trajectory, then the random states)
+    # W in float64 at every state: choices (rows, preconditioner) and max|W|, never claims;
+    # without it (float64 refused, e.g. over the memory limit) the shared analysis decides
+    wf_trajectory = wf_random = None
     try:
         wf_trajectory = observation_matrix(mechanism, Float64(), trajectory)[0]
     except (InputError, KinematicsError, MemoryError):
-        wf_trajectory = None
+        pass
     # rows at random states independent of the trajectory, so that a trajectory which does
     # not excite the mechanism cannot lower the proven rank (core/excitation.py)
     batch = random_batch(mechanism, trajectory, seed=7919)
@@ -483,12 +483,11 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}
-    # the same rows in float64: choices (rows, preconditioner) and max|W|, never claims;
-    # without it (float64 refused, e.g. over the memory limit) the shared analysis decides
     try:
-        wf_random = observation_matrix(mechanism, Float64(), batch)[0] if wf_trajectory is not None else None
+        if wf_trajectory is not None:
+            wf_random = observation_matrix(mechanism, Float64(), batch)[0]
     except (InputError, KinematicsError, MemoryError):
-        wf_random = None
+        pass
     usable = wf_random is not None and wf_trajectory.shape[1] == wf_random.shape[1] == len(params)
     wf = np.vstack([wf_trajectory, wf_random]) if usable else np.zeros((0, 0))
     width = random_block.nrows() // max(1, batch.count)
