@@ -1,12 +1,12 @@
 """The symbolic solver's fast paths (issue 12) against the paths they replace.
 
-- Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar
-  (the certificate's balls at the proof's states against balls at every state: the same
-  verdicts; where they were computed, and the residual, differ):
-  every fast path on (rationals as fmpq, the float64-chosen rank proof, exact pivot ranks,
-  the numeric prefilter of sampled transfers) gives the same JSON result and the same
-  derivation report, text for text, as every one off (sympy's field, the shared ball
-  analysis, mpmath's SVD, every try built exactly).
+- Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar:
+  every fast path on (rationals as fmpq, the float64-chosen rank proof with balls only at
+  its states, exact pivot ranks, the numeric prefilter of sampled transfers) gives the
+  same JSON result and the same derivation report, text for text, as every one off
+  (sympy's field, balls at every state and the shared ball analysis, mpmath's SVD, every
+  try built exactly), except where the certificate's balls were computed (states, rows)
+  and the residual they give.
 - Pieces, each against an independent computation: pivot_rank against mpmath's SVD on
   matrices of known rank; columns_independent against dependent columns (it must refuse)
   and against the shared analysis; residual against mpmath's dot products; dedupe against
