@@ -29,7 +29,11 @@ has its own yardstick: the holdout NRMS of the true model (the inertial model pl
 the hidden effect) fitted on the same training part. On the SLA the held-out block contains
 the arms' near-toggle sample (t = 16.2 s, theta1 = -0.596), where the prediction of any
 model fitted on the first 70 % carries its coefficients' error amplified; what the true
-model misses there no selection can recover.
+model misses there no selection can recover. So the holdout is compared with two floors:
+the noise floor (the true noise SD) and the prediction floor (``gap.holdout_floor``: noise
+plus the fitted coefficients' error propagated to the held-out rows, sigma_c^2 + x^T Cov x,
+computed from the fit alone), for diagnosis (its final model's floor) and for the true model
+(its own fit's floor).
 
     python benchmarks/bench_diagnose.py            # full campaign (about 20-40 min on 2 cores)
     python benchmarks/bench_diagnose.py --quick    # a small run (a few minutes)
@@ -47,7 +51,7 @@ from collections import Counter, defaultdict  # noqa: E402
 import numpy as np  # noqa: E402
 
 from baseparams.identify import selection as S  # noqa: E402
-from baseparams.identify.diagnose import WEAK, diagnose, nrms, prepare  # noqa: E402
+from baseparams.identify.diagnose import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
 from baseparams.identify.model import evaluate  # noqa: E402
 from baseparams.identify.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
 from baseparams.io.loader import resolve  # noqa: E402
@@ -115,13 +119,15 @@ def identifiable_ratio(problem, force, sd, train):
 
 
 def oracle_holdout(problem, hidden, tau, train):
-    """The holdout NRMS of the true model (the inertial model plus exactly the hidden
-    effects' columns) fitted on the same training part with the same weighting: the yardstick
-    for diagnosis's 'holdout after'. What it misses, no selection can recover: the
-    coefficients' own error, extrapolated to the held-out samples."""
+    """(holdout NRMS, its prediction floor) of the true model (the inertial model plus exactly
+    the hidden effects' columns) fitted on the same training part with the same weighting:
+    the yardstick for diagnosis's 'holdout after'. What it misses, no selection can recover:
+    the coefficients' own error, extrapolated to the held-out samples; its prediction floor
+    (:func:`holdout_floor`, from the fit alone) is what that error is expected to add."""
     model = np.concatenate([problem.inertial] + [problem.candidates[i].columns for i in hidden], axis=-1)
     fit = S.weighted_fit(model[:train], tau[:train])
-    return nrms((tau - model @ fit.coefficients)[train:], tau[train:])
+    return (nrms((tau - model @ fit.coefficients)[train:], tau[train:]),
+            holdout_floor(fit, model[train:], tau[train:])[0])
 
 
 def outcome(d, truth):
@@ -175,7 +181,7 @@ def run_mechanism(name, args, report):
         started = time.perf_counter()
         d = diagnose(problem, tau + noise)
         report["time"][name].append(time.perf_counter() - started)
-        truth_holdout = oracle_holdout(problem, hidden, tau + noise, motion.count - held) if hidden else None
+        truth_holdout = oracle_holdout(problem, hidden, tau + noise, motion.count - held) if hidden else (None, None)
         return d, floor, seen, truth_holdout
 
     # nothing hidden
@@ -202,7 +208,8 @@ def run_mechanism(name, args, report):
                         named[0] if named else ("ambiguous" if d.ambiguous else "none"))
                     report["confusion"][(kind, label)] += 1
                     report["shrink"][name].append((d.gap["before"], d.gap["after"], d.gap["holdout_before"],
-                                                   d.gap["holdout_after"], floor, truth_holdout))
+                                                   d.gap["holdout_after"], floor, *truth_holdout,
+                                                   d.gap["holdout_floor"]))
     # pairs
     for _ in range(args.pairs if len(distinguishable) >= 2 else 0):
         a, b = rng.choice(distinguishable, size=2, replace=False)
@@ -325,15 +332,26 @@ def print_report(report, args):
               f"{rate(values, {'wrong'}):6.1%}  ambiguous {rate(values, {'ambiguous'}):6.1%}  right "
               f"{rate(values, {'right', 'right+extra'}):6.1%}")
     print("\ngap shrink, one effect at ratio >= 3 (medians): fit before -> after; holdout before -> after; "
-          "holdout noise floor; holdout after within 10 % of the floor; the same for the true model "
-          "fitted on the same training part (the yardstick: what the coefficients' own error allows)")
-    for name, rows in report["shrink"].items():
-        a = np.array(rows, dtype=float)
+          "holdout noise floor (the true noise SD); holdout after within 10 % of it; the same for the true "
+          "model fitted on the same training part (the yardstick: what the coefficients' own error allows)")
+    shrink = {name: np.array(rows, dtype=float) for name, rows in report["shrink"].items()}
+    for name, a in shrink.items():
         within = np.mean(a[:, 3] <= 1.1 * a[:, 4])
         true_within = np.mean(a[:, 5] <= 1.1 * a[:, 4])
         print(f"  {name:18s} {np.median(a[:, 0]):.4f} -> {np.median(a[:, 1]):.4f};  {np.median(a[:, 2]):.4f} -> "
               f"{np.median(a[:, 3]):.4f};  floor {np.median(a[:, 4]):.4f};  within {within:.0%};  "
               f"true model within {true_within:.0%}")
+    print("\nthe same against the prediction floor (gap.holdout_floor: noise plus the fitted coefficients' "
+          "error propagated to the held-out rows, from each fit's own noise levels and covariance): "
+          "diagnosis's floor (median, and / the noise floor), holdout after within 10 % of it, mean "
+          "(after / floor)^2 (1 when the floor is the expected holdout MSE), 95th percentile of after / "
+          "floor (the tolerance 95 % of datasets meet); the same for the true model and its own floor")
+    for name, a in shrink.items():
+        ratio, true_ratio = a[:, 3] / a[:, 7], a[:, 5] / a[:, 6]
+        print(f"  {name:18s} floor {np.median(a[:, 7]):.4f} ({np.median(a[:, 7] / a[:, 4]):.2f} x noise);  "
+              f"within {np.mean(ratio <= 1.1):.0%};  mean^2 {np.mean(ratio ** 2):.3f};  p95 "
+              f"{np.quantile(ratio, 0.95):.3f};  true model within {np.mean(true_ratio <= 1.1):.0%};  mean^2 "
+              f"{np.mean(true_ratio ** 2):.3f};  p95 {np.quantile(true_ratio, 0.95):.3f}")
     print("\ndiagnose time per dataset (median, s):")
     for name, values in report["time"].items():
         print(f"  {name:18s} {np.median(values):.3f}")

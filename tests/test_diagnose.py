@@ -297,7 +297,9 @@ def test_verb_end_to_end(tmp_path):
     assert result.exit_code == 0, result.output + result.stderr
     report = json.loads(result.stdout)
     assert set(report) >= {"effects", "ambiguous", "gap", "unexplained"}
-    assert set(report["gap"]) >= {"before", "after", "holdout_before", "holdout_after"}
+    assert set(report["gap"]) >= {"before", "after", "holdout_before", "holdout_after", "holdout_floor",
+                                  "holdout_noise_floor"}
+    assert report["gap"]["holdout_floor"] >= report["gap"]["holdout_noise_floor"] > 0
     (effect,) = report["effects"]
     assert set(effect) >= {"kind", "coordinate", "value", "std"}
     assert (effect["kind"], effect["coordinate"]) == ("viscous_friction", "q1")

@@ -43,7 +43,8 @@ def diagnose(mech, data, selection, alpha, holdout, plot_path, write_path, fmt):
     Exit code 0 when the gap closed to the noise level (white residual), 1 when structure
     remains unexplained, 2 for bad input. JSON: {"effects": [{"kind", "coordinate",
     "value", "std"}], "ambiguous": [...], "gap": {"before", "after", "holdout_before",
-    "holdout_after"}, "unexplained": {...}} (docs/diagnosis.md).
+    "holdout_after", "holdout_floor", "holdout_noise_floor"}, "unexplained": {...}}
+    (docs/diagnosis.md).
     """
     from baseparams.identify.data import read_measured
     from baseparams.identify.diagnose import diagnose_data, write_fixed
@@ -79,7 +80,8 @@ def render_text(result: "Diagnosis", written: str | None = None) -> str:
     gap = result.gap
     line = f"gap (NRMS): fit {gap['before']:.4g} -> {gap['after']:.4g}"
     if gap["holdout_before"] is not None:
-        line += f"; holdout {gap['holdout_before']:.4g} -> {gap['holdout_after']:.4g}"
+        line += (f"; holdout {gap['holdout_before']:.4g} -> {gap['holdout_after']:.4g} (prediction floor "
+                 f"{gap['holdout_floor']:.4g}, noise alone {gap['holdout_noise_floor']:.4g})")
     lines.append(line)
     lines.append("named effects:" if result.effects else "named effects: none")
     for e in result.effects:

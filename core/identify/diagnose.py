@@ -8,9 +8,10 @@ effects (:mod:`.candidates`) are added one at a time by the tests of :mod:`.sele
 confusable candidates are reported together under ``ambiguous`` with the evidence and the
 excitation that would separate them, never named. The report gives each named effect's
 coefficients with HAC standard deviations, the gap (NRMS) before and after on the fit and
-the holdout, and what remains: a Ljung-Box whiteness test of the residual and the residual
-compared with the noise level estimated from its second differences (which a smooth
-missing force does not reach).
+the holdout (with the holdout's prediction floor, :func:`holdout_floor`: what a correct
+model fitted on the training part reaches there), and what remains: a Ljung-Box whiteness
+test of the residual and the residual compared with the noise level estimated from its
+second differences (which a smooth missing force does not reach).
 
 Effects the mechanism already has (``[[effects]]``): with every coefficient given they are
 known forces, subtracted from tau; otherwise their coefficients are fitted with the inertial
@@ -184,12 +185,14 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     added_full = [problem.candidates[i] for i in chosen.in_model]
     last = chosen.steps[-1]
     remaining = last.chosen is not None         # stopped at max_steps with something significant
-    before = _predict(problem.inertial, [], y, chosen.steps[0].fit)
+    before = _predict(problem.inertial, [], y, chosen.steps[0].fit, train)
     after = _predict(problem.inertial, added_full, y, None if remaining else last.fit, train)
+    floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
            "holdout_before": nrms(before.residual[train:], tau[train:]) if held else None,
-           "holdout_after": nrms(after.residual[train:], tau[train:]) if held else None}
+           "holdout_after": nrms(after.residual[train:], tau[train:]) if held else None,
+           "holdout_floor": floor, "holdout_noise_floor": noise_only}
     gap["per_coordinate"] = {c: {"before": nrms(before.residual[rows, j:j + 1], tau[rows, j:j + 1]),
                                  "after": nrms(after.residual[rows, j:j + 1], tau[rows, j:j + 1])}
                              for j, c in enumerate(problem.coordinates)}
@@ -233,16 +236,30 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
 class _Prediction:
     residual: np.ndarray          # (N, f), unweighted, every sample
     fit: Fit                      # the weighted fit on the training rows
+    model: np.ndarray             # (N, f, p): the fitted model's columns, every sample
 
 
 def _predict(inertial: np.ndarray, added: list[Candidate], y: np.ndarray, fit: Fit | None,
-             train: int = 0) -> _Prediction:
-    """Predict every row from the weighted ``fit`` on the training rows of the inertial
-    model plus ``added`` (the selection's own; None: fit it here)."""
+             train: int) -> _Prediction:
+    """Predict every row from the weighted ``fit`` on the first ``train`` rows of the
+    inertial model plus ``added`` (the selection's own; None: fit it here)."""
     model = np.concatenate([inertial] + [c.columns for c in added], axis=-1)
     if fit is None:
         fit = weighted_fit(model[:train], y[:train])
-    return _Prediction(y - model @ fit.coefficients, fit)
+    return _Prediction(y - model @ fit.coefficients, fit, model)
+
+
+def holdout_floor(fit: Fit, rows: np.ndarray, tau: np.ndarray) -> tuple[float, float]:
+    """(prediction floor, noise floor) on held-out model ``rows`` (m, f, p) with measured
+    ``tau`` (m, f), in the normalisation of :func:`nrms`, from the training ``fit``'s own
+    noise levels and coefficient covariance: the NRMS a correct model reaches there on
+    average (squared: the mean of sigma_c^2 + x^T Cov x over the rows,
+    :meth:`Fit.prediction_variance`), and the noise SD alone. The noise SD is the floor of a
+    fitted residual, not of a prediction: where a held-out row lies far from the fitted ones
+    (the SLA's arms next to their toggle, one sample holding half the inertial columns'
+    energy) the coefficients' error is amplified."""
+    sigma = np.broadcast_to(1.0 / fit.weights, tau.shape)
+    return nrms(np.sqrt(fit.prediction_variance(rows)), tau), nrms(sigma, tau)
 
 
 def nrms(residual: np.ndarray, tau: np.ndarray) -> float:

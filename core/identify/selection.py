@@ -260,6 +260,19 @@ class Fit:
     residual: np.ndarray          # weighted residual (N f,)
     coefficients: np.ndarray      # (p,), minimum-norm on the column-scaled model
     rank: int
+    # (p, rank): Cov(coefficients) = spread @ spread.T, each weighted row's noise variance 1
+    # (what the weighting makes it: s^2 = 1 at its fixed point, fit.py's s^2 (X_w^T X_w)^-1)
+    spread: np.ndarray | None = None
+
+    def prediction_variance(self, rows: np.ndarray) -> np.ndarray:
+        """The variance (m, f) of the error of predicting new measurements at model rows
+        (m, f, p) not in the fit: each coordinate's noise variance plus the coefficients'
+        error propagated to the row, sigma_c^2 + x^T Cov x (linear regression's prediction
+        variance). A held-out row far outside the fitted rows (the SLA's near-toggle sample)
+        amplifies the coefficients' error, so the noise SD alone understates what any fitted
+        model can reach there."""
+        propagated = rows @ self.spread
+        return (1.0 / self.weights ** 2)[None, :] + np.sum(propagated ** 2, axis=-1)
 
 
 def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None,
@@ -283,7 +296,7 @@ def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = 
     proj = u.T @ b
     coefficients = (vt.T @ (proj / s)) / scale
     residual = b - u @ proj
-    return Fit(weights, u, residual, coefficients, int(keep.sum()))
+    return Fit(weights, u, residual, coefficients, int(keep.sum()), (vt.T / s) / scale[:, None])
 
 
 def candidate_basis(candidate: Candidate, fit: Fit) -> np.ndarray:
