@@ -310,3 +310,25 @@ def test_without_float64_the_shared_analysis_certifies(monkeypatch):
     assert slow["samples"] == Trajectory.default(mech).count + slow["random_states"] > fast["samples"]
     for key in ("rank_lower_bound", "kept_columns_proven", "generators_tested", "generators_passed"):
         assert slow[key] == fast[key]
+
+
+@pytest.mark.parametrize("case", ["four-bar", "tree"])
+def test_rows_chosen_among_all_when_the_random_ones_alone_fail(monkeypatch, case):
+    """The certificate's second stage: when the random states' rows alone prove nothing,
+    rows are chosen among all states and balls computed at the trajectory states among
+    them; the verdicts are those of the first stage."""
+    first = elimination.solve(_mechanism(case)).diagnostics["certificate"]
+    assert first["samples"] == first["random_states"]          # the random rows sufficed
+    original = elimination.columns_independent
+    calls = []
+
+    def not_alone(blocks, wf, kept):
+        calls.append(len(blocks))
+        return False if len(blocks) == 1 else original(blocks, wf, kept)
+
+    monkeypatch.setattr(elimination, "columns_independent", not_alone)
+    second = elimination.solve(_mechanism(case)).diagnostics["certificate"]
+    assert calls == [1, 2]               # the random rows alone, then with trajectory states
+    assert first["samples"] < second["samples"] < Trajectory.default(_mechanism(case)).count
+    for key in ("rank_lower_bound", "kept_columns_proven", "generators_tested", "generators_passed"):
+        assert second[key] == first[key]

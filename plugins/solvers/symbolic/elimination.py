@@ -449,10 +449,11 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
 
     - Lower bound (a proof): the kept columns are proven independent, so rank(W) >= their
       number: by :func:`.rank_bound.columns_independent` (rows and a preconditioner chosen
-      on the float64 W, the claim ||I - W_RK X|| < 1 made in balls). Balls are needed only
-      at the states holding the chosen rows: every random state, and the trajectory states
-      among the chosen rows (:class:`~baseparams.dynamics.observation.Subset`, the same balls
-      as in W at the whole trajectory). Should that fail, W in balls at every state and
+      on the float64 W, the claim ||I - W_RK X|| < 1 made in balls), first on the random
+      states' rows alone (they are at least as many as the parameters), else on rows
+      chosen among all, with balls at the trajectory states holding some of them
+      (:class:`~baseparams.dynamics.observation.Subset`, the same balls as in W at the
+      whole trajectory). Should that fail too, W in balls at every state and
       ``baseparams.numeric.certify.analyse`` with the kept columns imposed decide; if it
       cannot either, that analysis without them gives the rank it can prove.
     - Generators (evidence): every accepted generator, reduced as in the elimination, is
@@ -463,7 +464,7 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
       drawn independently of the trajectory: a vector that is not a null vector of the
       mechanism gives W n != 0 at almost every state, so these generic states are the
       evidence; the trajectory's states lie on one curve of the state space and add no
-      power of their own) and the trajectory states of the proof. W's balls enclose the
+      power of their own) and any trajectory states of the proof. W's balls enclose the
       exact W at the states, so a true null vector always passes; passing on N states is
       not a proof that n is one.
     """
@@ -491,10 +492,14 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     usable = wf_random is not None and wf_trajectory.shape[1] == wf_random.shape[1] == len(params)
     wf = np.vstack([wf_trajectory, wf_random]) if usable else np.zeros((0, 0))
     width = random_block.nrows() // max(1, batch.count)
-    chosen = choose_rows(wf[:, kept]) if usable else None
     lower = None
     with backend.activate():
+        if usable and columns_independent([random_block], wf_random, kept):
+            # the random states' rows alone: no trajectory state in balls at all
+            blocks, lower, kept_proven, samples = [random_block], len(kept), True, batch.count
+        chosen = choose_rows(wf[:, kept]) if usable and lower is None else None
         if chosen is not None:
+            # rows chosen among all: balls at the trajectory states that hold some of them
             states = tuple(sorted({i // width for i in chosen if i < wf_trajectory.shape[0]}))
             blocks = [observation_matrix(mechanism, backend, Subset(trajectory, states))[0]] if states else []
             blocks.append(random_block)
