@@ -106,14 +106,11 @@ class Subset:
 
     source: States
     indices: tuple
+    reports_closure: bool = False      # no closure residual: one closure less per state
 
     @property
     def label(self) -> str:
         return self.source.label
-
-    @property
-    def reports_closure(self) -> bool:
-        return self.source.reports_closure
 
     @property
     def count(self) -> int:

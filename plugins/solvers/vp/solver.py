@@ -17,7 +17,7 @@ except ImportError:        # not on Windows: peak memory is then not reported
     resource = None
 
 from baseparams.dynamics.excitation import random_batch
-from baseparams.dynamics.observation import observation_matrix
+from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import KinematicsError
 from baseparams.model.expressions import exact_text
@@ -131,34 +131,6 @@ class BallRun:
                 "closure_residual": self.info.get("closure_residual"), "seconds": round(self.seconds, 3)}
 
 
-class _Subset:
-    """Some states of a source of states (:class:`baseparams.dynamics.observation.States`),
-    in order: each is computed as the source computes it (closed loops: from the source's
-    own float64 start), so its rows of W are the rows the whole source gives."""
-
-    reports_closure = False
-
-    def __init__(self, states, indices):
-        self.states, self.indices, self.label = states, list(indices), states.label
-
-    @property
-    def count(self):
-        return len(self.indices)
-
-    def where(self, index):
-        return self.states.where(None if index is None else self.indices[index])
-
-    def values(self, mechanism, backend, index):
-        return self.states.values(mechanism, backend, self.indices[index])
-
-    def float64_sample(self, mechanism):
-        raise NotImplementedError("a subset of states is evaluated state by state")
-
-    def starts(self, mechanism):
-        starts = self.states.starts(mechanism)
-        return None if starts is None else [starts[i] for i in self.indices]
-
-
 def _beta_from_rows(mechanism, digits, trajectory, batches, a):
     """beta at ``digits`` from the square block of the analysis ``a``: W evaluated only at
     the states its rows R come from, then ``W_RK beta = W_RE`` solved in ball arithmetic
@@ -185,7 +157,7 @@ def _beta_from_rows(mechanism, digits, trajectory, batches, a):
             continue
         for i, state in enumerate(picked):
             position[k, state] = sum(b.nrows() for b in blocks) // f + i
-        blocks.append(observation_matrix(mechanism, backend, _Subset(source, picked))[0])
+        blocks.append(observation_matrix(mechanism, backend, Subset(source, tuple(picked)))[0])
     W = backend.stack(*blocks) if blocks else backend.matrix([], len(mechanism.parameters))
     rows = [position[k, state] * f + within for k, state, within in located]
     return certify.block_beta(W, digits, a.kept, rows, a.exponents)
