@@ -22,7 +22,6 @@ Run: python benchmarks/bench_scaling.py [--limit S] [--solvers dp,vp,exact,symbo
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import time
@@ -39,40 +38,11 @@ CERTIFYING = ("vp", "exact")
 TARGETS = (("chain 24", "vp", 20, 400), ("chain 48", "vp", 120, None), ("chain 48", "symbolic", 30, None))
 
 
-def ladder(n: int, seed: int = 1) -> str:
-    """n random four-bars in series (TOML): four-bar k's ground is four-bar k-1's rocker."""
-    bodies, joints, trajectory = [], [], []
-    gravity = None
-    for k in range(n):
-        text = generate.four_bar(seed + k, samples=100)
-        gravity = gravity or re.search(r"^gravity = .*$", text, re.M).group(0)
-        base = 0 if k == 0 else 3 * k
-
-        def label(b, k=k, base=base):
-            return base if b == 0 else 3 * k + b
-
-        for block in re.findall(r"\[\[bodies\]\]\n(?:(?!\n\n).)*", text, re.S):
-            bodies.append(re.sub(r"label = (\d+)", lambda m: f"label = {label(int(m.group(1)))}", block))
-        for block in re.findall(r"\[\[joints\]\]\n(?:(?!\n\n).)*", text, re.S):
-            block = re.sub(r'name = "(\w+)"', lambda m: f'name = "{m.group(1)}{k}"', block)
-            block = re.sub(r"(parent|child) = (\d+)", lambda m: f"{m.group(1)} = {label(int(m.group(2)))}", block)
-            block = re.sub(r'coordinates = \["(\w+)"\]', lambda m: f'coordinates = ["{m.group(1)}{k}"]', block)
-            joints.append(block)
-        motion = re.search(r'qa = "([^"]*)"', text).group(1)
-        trajectory.append(f'qa{k} = "{motion}"')
-    independent = ", ".join(f'"qa{k}"' for k in range(n))
-    return "\n\n".join([f'[mechanism]\nname = "ladder_{n}"\ntitle = "{n} four-bars in series"\n{gravity}']
-                       + bodies + joints
-                       + [f"[coordinates]\nindependent = [{independent}]",
-                          f'[trajectory]\nt_start = "0"\nt_end = "10"\nsamples = 100\n'
-                          f"q = {{ {', '.join(trajectory)} }}"]) + "\n"
-
-
 def cases(quick: bool):
     sizes = (6, 12, 24) if quick else (6, 12, 24, 48)
     out = [(f"chain {n}", "chain", generate.serial_chain(CHAIN_SEED, bodies=n)) for n in sizes]
     out.append(("tree 12", "tree", generate.tree(TREE_SEED, bodies=12)))
-    out += [(f"ladder {n}", "ladder", ladder(n)) for n in ((1, 2) if quick else (1, 2, 4))]
+    out += [(f"ladder {n}", "ladder", generate.ladder(n)) for n in ((1, 2) if quick else (1, 2, 4))]
     out.append(("stewart", "stewart", (ROOT / "mechanisms" / "stewart_platform.toml").read_text()))
     return out
 

@@ -232,6 +232,10 @@ class _Writer:
                     where = f" at {self.math(self.vector(side['point']))}"
                 head = (f"Body {g.bodies[0]}, condition {g.condition}: {g.label}{where} has no effect; "
                         f"{self.math(self.param(s.pivot))} is removed.")
+            elif len(g.bodies) > 2:        # a loop's generator: spread over its bodies, not moved
+                head = (f"Loop closed by joint {g.joint_name} ({g.joint_type}), condition {g.condition}: "
+                        f"{g.label}, spread over its bodies, has no effect; "
+                        f"{self.math(self.param(s.pivot))} is removed.")
             else:
                 donor, acceptor = g.donor, g.acceptor
                 at = []

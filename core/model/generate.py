@@ -33,6 +33,7 @@ reference configuration, and a crank motion that stays well inside its assembly 
 
 import math
 import random
+import re
 from fractions import Fraction
 
 from baseparams.model.expressions import exact_text
@@ -413,3 +414,34 @@ def _random_turn_about_z(draw):
     a, b, c = draw.rng.choice(_PYTHAGOREAN)
     co, si = Fraction(a, c) * draw.sign(), Fraction(b, c) * draw.sign()
     return ((co, -si, 0), (si, co, 0), (0, 0, 1))
+
+
+def ladder(n: int, seed: int = 1, samples: int = 100) -> str:
+    """n random four-bars in series (TOML text): four-bar k is :func:`four_bar` (seed
+    ``seed + k``) with four-bar k-1's rocker as its ground, so every loop after the first
+    stands on a moving body; each crank angle is independent."""
+    bodies, joints, trajectory = [], [], []
+    gravity = None
+    for k in range(n):
+        text = four_bar(seed + k, samples=samples)
+        gravity = gravity or re.search(r"^gravity = .*$", text, re.M).group(0)
+        base = 0 if k == 0 else 3 * k
+
+        def label(b, k=k, base=base):
+            return base if b == 0 else 3 * k + b
+
+        for block in re.findall(r"\[\[bodies\]\]\n(?:(?!\n\n).)*", text, re.S):
+            bodies.append(re.sub(r"label = (\d+)", lambda m: f"label = {label(int(m.group(1)))}", block))
+        for block in re.findall(r"\[\[joints\]\]\n(?:(?!\n\n).)*", text, re.S):
+            block = re.sub(r'name = "(\w+)"', lambda m: f'name = "{m.group(1)}{k}"', block)
+            block = re.sub(r"(parent|child) = (\d+)", lambda m: f"{m.group(1)} = {label(int(m.group(2)))}", block)
+            block = re.sub(r'coordinates = \["(\w+)"\]', lambda m: f'coordinates = ["{m.group(1)}{k}"]', block)
+            joints.append(block)
+        motion = re.search(r'qa = "([^"]*)"', text).group(1)
+        trajectory.append(f'qa{k} = "{motion}"')
+    independent = ", ".join(f'"qa{k}"' for k in range(n))
+    return "\n\n".join([f'[mechanism]\nname = "ladder_{n}"\ntitle = "{n} four-bars in series"\n{gravity}']
+                       + bodies + joints
+                       + [f"[coordinates]\nindependent = [{independent}]",
+                          f'[trajectory]\nt_start = "0"\nt_end = "10"\nsamples = {samples}\n'
+                          f"q = {{ {', '.join(trajectory)} }}"]) + "\n"

@@ -37,6 +37,9 @@ Default order of generators and pivots (reproduces the paper's choice on the SLA
   removes the donor's first moment along its direction; an axisymmetric quadrupole the
   last diagonal entry of the donor it touches (the paper's Izz5); "any quadrupole" the
   donor's matching entry;
+- then the planar-loop generators (condition 7, :mod:`.loop_transfers`: one per cycle of
+  parallel R joints off ground), each removing a product of inertia of the closing joint's
+  donor;
 - then the remaining body conditions (monopoles at other points at rest), usually redundant.
 
 ``keep=[...]`` never eliminates the named parameters when another choice exists;
@@ -65,6 +68,7 @@ from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
 
 from .body_conditions import analyse_bodies
+from .loop_transfers import CONDITION as LOOP_CONDITION, planar_loop_generators
 from .rank_bound import choose_rows, columns_independent
 from .sampled_transfers import sampled_joint_transfers
 
@@ -237,6 +241,8 @@ def transfer_preference(gen, mechanism, field):
     if gen.multipole == "dipole":
         k = _largest_component(side["direction"], field)
         return names([FIRST_MOMENTS[k]]) + names(FIRST_MOMENTS) + names(reversed(DIAGONAL))
+    if gen.condition == LOOP_CONDITION:       # planar loop: the donor's products of inertia
+        return names(["Iyz", "Ixz", "Ixy"]) + names(reversed(DIAGONAL))
     if gen.label.startswith("quadrupole ") and gen.label.split()[-1] in PARAMETER_KINDS:
         own = gen.label.split()[-1]
         return names([own]) + names(["Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz"])
@@ -292,7 +298,7 @@ def _reduce(vector, steps):
     return g
 
 
-def _order_generators(mechanism, bodies, transfers):
+def _order_generators(mechanism, bodies, transfers, loops=()):
     root, dist = body_distances(mechanism)
     phase_a, phase_c = [], []
     for motion in bodies:
@@ -305,7 +311,9 @@ def _order_generators(mechanism, bodies, transfers):
     transfers = sorted(transfers, key=lambda g: (g.condition == 0,
                                                  -(dist[g.donor] if g.donor else dist[g.acceptor]),
                                                  joint_index[g.joint.name]))
-    return phase_a + transfers + phase_c, root, dist
+    for g in loops:                      # donor: the closing joint's (the report's grouping)
+        g.donor, g.acceptor = donor_acceptor(g.joint, dist)
+    return phase_a + transfers + list(loops) + phase_c, root, dist
 
 
 def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
@@ -322,7 +330,8 @@ def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
             continue
         known = {g.multipole for g in transfers if g.joint is joint and g.multipole != "quadrupole"}
         transfers += sampled_joint_transfers(mechanism, joint, forms, known)
-    ordered, root, dist = _order_generators(mechanism, bodies, transfers)
+    loops = planar_loop_generators(mechanism)
+    ordered, root, dist = _order_generators(mechanism, bodies, transfers, loops)
     field_ = ExactField(mechanism, [v for g in ordered for v in g.vector.values()])
     warnings = []
     for motion in bodies:
