@@ -1,8 +1,8 @@
 """Benchmark: the symbolic solver (not run by CI; prints its figures).
 
 - SLA suspension: the whole solver (body conditions by sampling, rule generators, exact
-  elimination, base expressions, and the ball-arithmetic rank check at 40 digits on the
-  default 200-sample trajectory). Goal: <= 5 s on the 2-core reference machine.
+  elimination, base expressions, and the ball-arithmetic rank check at 40 digits, at the
+  random states whose rows carry it). Goal: <= 5 s on the 2-core reference machine.
 - The same without the rank check, split into its stages.
 - Every built-in mechanism once, with the check: rank, certified, seconds.
 
