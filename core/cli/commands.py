@@ -350,8 +350,9 @@ def solve(mech, solver_name, digits, samples, extra, fmt):
             if name in given:
                 raise UserError(f"--{name} and -O {name}=... both given; give one")
             given[name] = value
-    options = check_options(solver, given)
+    check_options(solver, given)                 # the option's own range, before reading the file
     mechanism = load(mech)
+    options = check_options(solver, given, mechanism)       # bounds that depend on the mechanism
     require_applicable(solver, mechanism)
     result = solver.solve(mechanism, progress=_progress, **options)
     for warning in result.warnings:

@@ -20,12 +20,14 @@ Keyword options (not one dict) keep the library call short:
 ``solver.solve(mech, digits=30, recover=False)``.
 """
 
+import math
+import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from baseparams.errors import InputError
-from baseparams.model.mechanism import Mechanism
+from baseparams.model.mechanism import MAX_SAMPLES, Mechanism
 from baseparams.solvers.result import BaseParameterResult
 
 Progress = Callable[[str], None]
@@ -34,6 +36,11 @@ _TRUE = ("true", "yes", "on", "1")
 _FALSE = ("false", "no", "off", "0")
 _TYPE_WORDS = {int: "an integer", float: "a number", bool: "true or false", str: "a string",
                tuple: "a list"}
+# command-line numbers: ASCII digits only (int() would take "1_0" as 10 and Arabic-Indic digits)
+_INT_TEXT = re.compile(r"[+-]?[0-9]+")
+_FLOAT_TEXT = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+MAX_DIGITS = 20000          # the working precision's cap, as the CLI's --digits
+MAX_SEED = 2 ** 32 - 1       # seeds: 0 to 2^32 - 1 (numpy's range; Python's random takes them all)
 
 
 @dataclass(frozen=True)
@@ -63,8 +70,19 @@ class SolverOption:
 
     ``type``: int, float, bool, str or tuple (a sequence of ``item``; a str is split on
     commas and spaces). ``default`` None means "automatic" and is always accepted.
-    ``choices``: the allowed values of a str option (empty: any). ``minimum``: the least
-    value of a number option.
+    ``choices``: the allowed values of a str option (empty: any).
+
+    The range lives here, in the declaration, so that :func:`check_options` refuses a
+    degenerate value (a ladder step of 0 digits, a rank of 1000 on 10 parameters) before
+    any work, for every solver alike:
+
+    ``minimum``, ``maximum``: the least and greatest value of a number option, or of each
+    item of a tuple of numbers. ``maximum`` may be a function of the mechanism (e.g. its
+    number of parameters), checked when :func:`check_options` is given the mechanism;
+    ``maximum_text`` then says what it is ("the number of parameters").
+    ``length``: (least, greatest) number of items of a tuple option.
+    ``increasing``: a tuple's items must be strictly increasing (a precision ladder).
+    ``unique``: a tuple's items must be distinct.
     """
     name: str
     type: type
@@ -73,13 +91,33 @@ class SolverOption:
     item: type | None = None
     choices: tuple = ()
     minimum: int | float | None = None
+    maximum: int | float | Callable[[Mechanism], int | float] | None = None
+    maximum_text: str = ""
+    length: tuple[int, int] | None = None
+    increasing: bool = False
+    unique: bool = False
+
+    def bounds_text(self) -> str:
+        """``10 to 20000``-style range words for help texts ("" when unbounded)."""
+        low = "" if self.minimum is None else str(self.minimum)
+        if callable(self.maximum):
+            high = self.maximum_text or "a limit of the mechanism"
+        else:
+            high = "" if self.maximum is None else str(self.maximum)
+        if not low and not high:
+            return ""
+        if low and high:
+            return f"{low} to {high}"
+        return f"at least {low}" if low else f"at most {high}"
 
     def describe(self) -> str:
         """``type, default ...: help`` for help texts (an automatic default: in the help)."""
         kind = "|".join(self.choices) if self.choices else (
             f"list of {self.item.__name__}" if self.type is tuple and self.item else self.type.__name__)
         default = "" if self.default is None else f", default {_show(self.default) or 'none'}"
-        return f"{kind}{default}" + (f": {self.help}" if self.help else "")
+        bounds = self.bounds_text()
+        bounds = f", {'items ' if self.type is tuple else ''}{bounds}" if bounds else ""
+        return f"{kind}{bounds}{default}" + (f": {self.help}" if self.help else "")
 
 
 @runtime_checkable
@@ -114,12 +152,16 @@ def require_applicable(solver: Solver, mechanism: Mechanism) -> None:
         raise NotApplicable(solver.name, reason, file=mechanism.path)
 
 
-def check_options(solver: Solver, given: Mapping[str, Any]) -> dict[str, Any]:
+def check_options(solver: Solver, given: Mapping[str, Any],
+                  mechanism: Mechanism | None = None) -> dict[str, Any]:
     """Every declared option of ``solver``: the given values (checked, sequences as tuples)
     and the defaults for the rest.
 
     InputError (naming the solver, the option and the accepted ones) for an unknown
-    option, a value of the wrong type, a value outside its choices or below its minimum.
+    option, a value of the wrong type, a value outside its choices or its declared range
+    (:class:`SolverOption`). A maximum that depends on the mechanism is checked only when
+    ``mechanism`` is given (a solver's ``solve`` passes it), so a solver never starts on a
+    degenerate setting.
     """
     declared = {o.name: o for o in solver.options}
     out = {name: o.default for name, o in declared.items()}
@@ -127,7 +169,7 @@ def check_options(solver: Solver, given: Mapping[str, Any]) -> dict[str, Any]:
         if name not in declared:
             raise InputError(f"solver {solver.name!r} has no option {name!r}; its options: "
                              f"{', '.join(declared) or '(none)'}")
-        out[name] = _checked(solver.name, declared[name], value)
+        out[name] = _checked(solver.name, declared[name], value, mechanism)
     return out
 
 
@@ -151,12 +193,22 @@ def options_from_text(solver: Solver, pairs: Iterable[str]) -> dict[str, Any]:
     return out
 
 
+def parameter_count(mechanism: Mechanism) -> int:
+    """The number of inertial parameters: a rank's upper bound (``maximum=parameter_count``)."""
+    return len(mechanism.parameters)
+
+
+def last_parameter_index(mechanism: Mechanism) -> int:
+    """The largest column index of W (``maximum`` of an option holding column indices)."""
+    return len(mechanism.parameters) - 1
+
+
 def describe_solver(solver: Solver) -> dict[str, Any]:
     """Capabilities and options as plain data (``baseparams plugins --format json``)."""
     caps = solver.capabilities
     return {"capabilities": {k: bool(getattr(caps, k)) for k in Capabilities.__dataclass_fields__},
             "options": [{"name": o.name, "type": o.type.__name__, "default": _json_default(o.default),
-                         "help": o.help} for o in solver.options]}
+                         "help": o.help, **_json_range(o)} for o in solver.options]}
 
 
 # ----- values -----------------------------------------------------------------------
@@ -164,7 +216,7 @@ def _fail(solver, option, value, want):
     raise InputError(f"solver {solver!r}: option {option.name!r} must be {want}, got {value!r}")
 
 
-def _checked(solver, option, value):
+def _checked(solver, option, value, mechanism=None):
     if value is None:
         if option.default is None:
             return None
@@ -180,14 +232,45 @@ def _checked(solver, option, value):
             for v in value:
                 if not _is_a(v, item):
                     _fail(solver, option, value, f"a list of {item.__name__} values")
-        return tuple(value)
+        value = tuple(value)
+        if option.length is not None:
+            low, high = option.length
+            if not low <= len(value) <= high:
+                want = f"{low} item" + ("s" if low != 1 else "") if low == high else f"{low} to {high} items"
+                _fail(solver, option, _show(value) or "(empty)", f"a list of {want}")
+        if item in (int, float):
+            for v in value:
+                _in_range(solver, option, v, mechanism, value, " (every item)")
+        if option.increasing and any(b <= a for a, b in zip(value, value[1:])):
+            _fail(solver, option, _show(value), "strictly increasing")
+        if option.unique and len(set(value)) != len(value):
+            _fail(solver, option, _show(value), "a list without repeats")
+        return value
     if not _is_a(value, kind):
         _fail(solver, option, value, _TYPE_WORDS.get(kind, kind.__name__))
     if option.choices and value not in option.choices:
         _fail(solver, option, value, "one of " + ", ".join(map(str, option.choices)))
-    if option.minimum is not None and value < option.minimum:
-        _fail(solver, option, value, f"at least {option.minimum}")
+    if kind in (int, float):
+        _in_range(solver, option, value, mechanism, value)
     return float(value) if kind is float else value
+
+
+def _in_range(solver, option, v, mechanism, shown, each=""):
+    """Refuse a number outside the option's declared range (and any non-finite float)."""
+    if isinstance(v, float) and not math.isfinite(v):
+        _fail(solver, option, _show(shown), f"a finite number{each}")
+    if option.minimum is not None and v < option.minimum:
+        _fail(solver, option, _show(shown), f"at least {option.minimum}{each}")
+    high = option.maximum
+    if callable(high):
+        if mechanism is None:
+            return
+        high = high(mechanism)
+        if v > high:
+            what = f" ({option.maximum_text} of {mechanism.name})" if option.maximum_text else ""
+            _fail(solver, option, _show(shown), f"at most {high}{what}{each}")
+    elif high is not None and v > high:
+        _fail(solver, option, _show(shown), f"at most {high}{each}")
 
 
 def _is_a(value, kind):
@@ -216,10 +299,14 @@ def _parse(solver, option, text):
 
 def _parse_scalar(solver, option, kind, text):
     if kind in (int, float):
+        pattern = _INT_TEXT if kind is int else _FLOAT_TEXT
+        if not pattern.fullmatch(text) or len(text) > 400:
+            _fail(solver, option, text[:40], _TYPE_WORDS[kind]
+                  + (" (ASCII digits, no underscores)" if kind is int else " (finite, ASCII digits)"))
         try:
             return kind(text)
-        except ValueError:
-            _fail(solver, option, text, _TYPE_WORDS[kind])
+        except (ValueError, OverflowError):
+            _fail(solver, option, text[:40], _TYPE_WORDS[kind])
     return text
 
 
@@ -229,6 +316,18 @@ def _show(value):
     if isinstance(value, tuple):
         return ",".join(map(str, value))
     return str(value)
+
+
+def _json_range(option):
+    """minimum/maximum (a number, or the text of a mechanism-dependent bound) and length."""
+    out = {}
+    if option.minimum is not None:
+        out["minimum"] = option.minimum
+    if option.maximum is not None:
+        out["maximum"] = (option.maximum_text or "mechanism-dependent") if callable(option.maximum) else option.maximum
+    if option.length is not None:
+        out["length"] = list(option.length)
+    return out
 
 
 def _json_default(value):

@@ -11,10 +11,11 @@ from flint import arb
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
-from baseparams.errors import KinematicsError
+from baseparams.errors import InputError, KinematicsError
 from baseparams.numeric.backends import Float64
 from baseparams.numeric.certify import decimal_string
-from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
+                                         check_options, parameter_count, require_applicable)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
@@ -36,13 +37,14 @@ class DoublePrecisionSolver:
     capabilities = Capabilities(closed_loops=True)
     options = (
         SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
-                     "mechanism file's)", minimum=2),
+                     "mechanism file's)", minimum=2, maximum=MAX_SAMPLES),
         SolverOption("scale", bool, True, "scale W's columns by powers of two near their norms"),
         SolverOption("rank", int, None, "impose the rank (default: the tolerance rule; imposed, "
-                     "the excitation check is skipped)", minimum=0),
-        SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch"),
+                     "the excitation check is skipped)", minimum=1, maximum=parameter_count,
+                     maximum_text="the number of parameters"),
+        SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch", minimum=0, maximum=MAX_SEED),
         SolverOption("digits", int, None, "ignored (dp always works in double precision); "
-                     "a warning says so"),
+                     "a warning says so", minimum=10, maximum=MAX_DIGITS),
     )
 
     def applicable(self, mechanism):
@@ -51,7 +53,7 @@ class DoublePrecisionSolver:
 
     def solve(self, mechanism, progress=None, **options):
         """The base parameters in float64; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options)
+        chosen = check_options(self, options, mechanism)
         samples, scale, rank, seed = (chosen[k] for k in ("samples", "scale", "rank", "seed"))
         require_applicable(self, mechanism)
         start = time.perf_counter()
@@ -61,6 +63,11 @@ class DoublePrecisionSolver:
         trajectory = Trajectory.default(mechanism, samples=samples)
         W, info = observation_matrix(mechanism, Float64(), trajectory)
         say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
+        if rank is not None and rank > min(W.shape):
+            # W's row count depends on the samples: known only now (the option's declared
+            # maximum, the parameter count, was checked before W was built)
+            raise InputError(f"solver {self.name!r}: option 'rank' must be at most {min(W.shape)} (W is "
+                             f"{W.shape[0]} x {W.shape[1]}: its rank cannot be higher), got {rank}")
         res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters)
         check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
         if check.get("raised"):

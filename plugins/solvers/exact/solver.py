@@ -8,7 +8,8 @@ from baseparams.dynamics.exact_states import exact_observation_matrix, rref_base
 from baseparams.numeric.backends import Exact
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
+                                         check_options, require_applicable)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, exact_coefficients, say
 
@@ -24,9 +25,10 @@ class ExactSolver:
     capabilities = Capabilities(needs_rational_geometry=True, certifies=True, exact_coefficients=True)
     options = (
         SolverOption("samples", int, None, "random rational states of the first batch (default: "
-                     "enough for 1.5 rows per parameter)", minimum=1),
-        SolverOption("seed", int, 2024, "seed of the random rational states"),
-        SolverOption("digits", int, None, "ignored (the arithmetic is exact); a warning says so"),
+                     "enough for 1.5 rows per parameter)", minimum=1, maximum=MAX_SAMPLES),
+        SolverOption("seed", int, 2024, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
+        SolverOption("digits", int, None, "ignored (the arithmetic is exact); a warning says so",
+                     minimum=10, maximum=MAX_DIGITS),
     )
 
     def applicable(self, mechanism):
@@ -41,7 +43,7 @@ class ExactSolver:
 
     def solve(self, mechanism, progress=None, **options):
         """Exact rank and beta; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options)
+        chosen = check_options(self, options, mechanism)
         samples, seed = chosen["samples"], chosen["seed"]
         require_applicable(self, mechanism)
         start = time.perf_counter()

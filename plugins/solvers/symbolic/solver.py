@@ -1,7 +1,8 @@
 """The ``symbolic`` solver's plugin object: options in, :func:`.elimination.solve` out."""
 
 from baseparams.dynamics.trajectory import Trajectory
-from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
+                                         check_options, require_applicable)
 
 from .elimination import solve
 
@@ -20,10 +21,12 @@ class SymbolicSolver:
         SolverOption("eliminate_first", tuple, (), "parameters to eliminate whenever a transfer "
                      "allows it", item=str),
         SolverOption("certify", bool, True, "check the rank on W in ball arithmetic"),
-        SolverOption("digits", int, None, "precision of that check (default 40)", minimum=10),
+        SolverOption("digits", int, None, "precision of that check (default 40)", minimum=10,
+                     maximum=MAX_DIGITS),
         SolverOption("samples", int, None, "trajectory samples for that check (default: the "
-                     "mechanism file's)", minimum=2),
-        SolverOption("seed", int, 1, "seed of the sampled body conditions and transfers"),
+                     "mechanism file's)", minimum=2, maximum=MAX_SAMPLES),
+        SolverOption("seed", int, 1, "seed of the sampled body conditions and transfers", minimum=0,
+                     maximum=MAX_SEED),
     )
 
     def applicable(self, mechanism):
@@ -35,7 +38,7 @@ class SymbolicSolver:
         """Symbolic base parameters and their derivation; ``options`` as declared in
         ``options``. ``progress`` is accepted and not used (the solver has no long phase
         worth reporting)."""
-        chosen = check_options(self, options)
+        chosen = check_options(self, options, mechanism)
         require_applicable(self, mechanism)
         samples = chosen["samples"]
         trajectory = Trajectory.default(mechanism, samples=samples) if samples else None

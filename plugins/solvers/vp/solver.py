@@ -19,11 +19,12 @@ except ImportError:        # not on Windows: peak memory is then not reported
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
-from baseparams.errors import KinematicsError
+from baseparams.errors import InputError, KinematicsError
 from baseparams.model.expressions import exact_text
 from baseparams.numeric import certify
 from baseparams.numeric.backends import Arb
-from baseparams.solvers.protocol import Capabilities, SolverOption, check_options, require_applicable
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
+                                         check_options, last_parameter_index, require_applicable)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
@@ -36,6 +37,8 @@ ROWS_PER_PARAMETER = 4     # default W when the file's trajectory gives more tha
 LARGE_ROWS_PER_PARAMETER = 3  # the same beyond certify.FAST_DECISIONS_ABOVE parameters
 MAX_ROWS_PER_PARAMETER = 6
 MIN_SAMPLES = 10
+KEPT_RIDGE_DECADES = 1     # imposed kept columns with less than this ridge after them do not span W
+MIN_WORKING_DIGITS = 10    # fewer digits cannot give the 10 agreeing digits (MIN_DIGITS) asked for
 
 
 def default_samples(mechanism):
@@ -258,17 +261,20 @@ class VariablePrecisionSolver:
     capabilities = Capabilities(closed_loops=True, certifies=True)
     options = (
         SolverOption("digits", int, None, "fix the working precision (default: raised along the "
-                     "ladder until two precisions agree)", minimum=10),
+                     "ladder until two precisions agree)", minimum=MIN_WORKING_DIGITS, maximum=MAX_DIGITS),
         SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
-                     "mechanism file's)", minimum=2),
-        SolverOption("ladder", tuple, LADDER, "precisions tried in turn without digits", item=int),
+                     "mechanism file's)", minimum=2, maximum=MAX_SAMPLES),
+        SolverOption("ladder", tuple, LADDER, "precisions tried in turn without digits (increasing)",
+                     item=int, minimum=MIN_WORKING_DIGITS, maximum=MAX_DIGITS, length=(1, 12), increasing=True),
         SolverOption("pivoting", str, "natural", "the kept parameters: the leftmost independent "
                      "columns (natural) or complete pivoting's", choices=("natural", "complete")),
         SolverOption("recover", bool, True, "recover exact rationals from the balls and confirm "
                      "them at twice the digits"),
         SolverOption("kept", tuple, None, "impose the kept columns, as indices into the parameters "
-                     "(default: chosen by the pivoting)", item=int),
-        SolverOption("seed", int, CHECK_SEED, "seed of the first independent random batch"),
+                     "(default: chosen by the pivoting)", item=int, minimum=0, maximum=last_parameter_index,
+                     maximum_text="the last parameter's index", length=(1, 10 ** 6), unique=True),
+        SolverOption("seed", int, CHECK_SEED, "seed of the first independent random batch", minimum=0,
+                     maximum=MAX_SEED),
     )
 
     def applicable(self, mechanism):
@@ -277,7 +283,7 @@ class VariablePrecisionSolver:
 
     def solve(self, mechanism, progress=None, **options):
         """Certified base parameters; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options)
+        chosen = check_options(self, options, mechanism)
         digits, samples, ladder, pivoting, recover, kept, seed = (
             chosen[k] for k in ("digits", "samples", "ladder", "pivoting", "recover", "kept", "seed"))
         require_applicable(self, mechanism)
@@ -288,8 +294,14 @@ class VariablePrecisionSolver:
         steps = [int(digits)] if digits else [int(d) for d in ladder]
         batches, checks = [], []
         for round_ in range(CHECK_ROUNDS + 1):
-            runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
-                                                                kept, pivoting, progress)
+            try:
+                runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
+                                                                    kept, pivoting, progress)
+            except ValueError as exc:
+                if kept is None:
+                    raise
+                raise InputError(f"solver {self.name!r}: option 'kept': {exc}: impose columns that are "
+                                 f"independent in W (or leave kept to the pivoting)") from None
             check, batch = self._excitation_check(mechanism, trajectory, runs[-1], seed + round_, progress)
             checks.append(check)
             if check["passed"] or "error" in check or round_ == CHECK_ROUNDS:
@@ -299,6 +311,14 @@ class VariablePrecisionSolver:
             batches.append(batch)
         final = runs[-1]
         a = final.analysis
+        if kept is not None and a.ridge_log10 < KEPT_RIDGE_DECADES:
+            # too few imposed columns: the rest of W is not a combination of them, so the
+            # rank printed would be the number of columns imposed, not W's (a wrong answer)
+            raise InputError(f"solver {self.name!r}: option 'kept': the {len(kept)} imposed columns do not "
+                             f"span W at {final.digits} digits (after them a singular value up to "
+                             f"{a.tail_bound.str(3, radius=False)} remains, s_r >= "
+                             f"{a.sigma_r_lower.str(3, radius=False)}): impose as many independent columns "
+                             f"as W's rank")
         prev = runs[-2] if len(runs) >= 2 else None
         excited = checks[-1]["passed"]
         if batches:
