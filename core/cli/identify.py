@@ -130,40 +130,68 @@ def simulate(mech, output, effects, noise, seed, samples, truth, random_inertia,
 
 
 # ----- identify ---------------------------------------------------------------------------
+def parse_effects(texts, mechanism: Mechanism) -> list[EffectSpec]:
+    """``--effect`` values; ``KIND:*`` is the effect on every independent coordinate."""
+    from baseparams.identify.model import independent_names
+    out = []
+    for text in texts:
+        kind, sep, coordinate = text.partition(":")
+        if sep and coordinate.strip() == "*":
+            out += [parse_effect(f"{kind}:{c}", mechanism, values=False) for c in independent_names(mechanism)]
+        else:
+            out.append(parse_effect(text, mechanism, values=False))
+    return out
+
+
 @main.command()
 @click.argument("mech", metavar="MECH")
-@click.argument("data_path", metavar="DATA.csv")
+@click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
-              help="An effect to identify with the inertial parameters (any joint coordinate); repeatable.")
+              help="An effect to identify with the inertial parameters, on a joint coordinate or a "
+                   "motor; KIND:* on every independent coordinate; repeatable.")
 @click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
               help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
                    "carry too few digits on badly conditioned mechanisms, which the result notes).")
+@click.option("--validate", "validate_paths", multiple=True, metavar="OTHER",
+              help="Predict this recording (CSV or description) with the identified model and print "
+                   "the error per coordinate; repeatable.")
 @click.option("--physical", is_flag=True,
               help="Also physically consistent standard parameters reproducing the base estimates "
                    "(needs cvxpy: pip install 'baseparams[physical]').")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Measured and predicted forces per coordinate, fit and --validate data (png, pdf, svg).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Also write the JSON result to this file (atomically).")
 @format_option
-def identify(mech, data_path, effects, solver_name, physical, output, fmt):
-    """Least squares on MECH's base parameters (and named effects) from measured DATA.csv.
+def identify(mech, data_paths, effects, solver_name, validate_paths, physical, plot_path, output, fmt):
+    """Least squares on MECH's base parameters (and named effects) from measured DATA.
 
-    Weighted per coordinate (Gautier: each coordinate's noise SD from an ordinary fit, then
-    refitted with weights 1/SD). Prints every estimate with its standard deviation and
-    relative std (%), the condition number and the NRMS residual per coordinate. Effects
-    in the mechanism's [[effects]] without values are identified too; those with every
-    value are subtracted as known.
+    DATA: CSV files in the project's layout or recording descriptions (.toml: raw logs
+    with motor-side channels, gains, time stamps, filtering; docs/identification.md), one
+    or several; several runs are fitted together, each filtered on its own. Weighted per
+    coordinate (Gautier: each coordinate's noise SD from an ordinary fit, then refitted
+    with weights 1/SD). Prints every estimate with its standard deviation and relative
+    std (%), the condition number and the NRMS residual per coordinate, and with
+    --validate the prediction error on recordings the fit did not see. Effects in the
+    mechanism's [[effects]] without values are identified too; those with every value
+    are subtracted as known.
     """
     from baseparams.identify.base import BaseModel
-    from baseparams.identify.data import atomic_write, read_measured
-    from baseparams.identify.fit import identify as fit, split_effects
+    from baseparams.identify.data import atomic_write
+    from baseparams.identify.fit import identify as fit, predict, split_effects
     from baseparams.identify.model import standard_parameters
+    from baseparams.identify.recording import read_data
     if physical:
         from baseparams.identify import physical as consistency     # cvxpy: an optional extra
         consistency.require_cvxpy()
+    for path in (output, plot_path):
+        if path and any(_same_file(path, d) for d in data_paths + validate_paths):
+            raise InputError("would overwrite a data file", file=path)
     mechanism = load(mech)
-    named = [parse_effect(text, mechanism, values=False) for text in effects]
+    data, mechanism = read_data(list(data_paths), mechanism)
+    others = [read_data([path], mechanism)[0] for path in validate_paths]
+    named = parse_effects(effects, mechanism)
     to_identify, known = split_effects(mechanism, named)
-    data = read_measured(data_path, mechanism)
     solver = get_solver(solver_name)
     require_applicable(solver, mechanism)
     result = solver.solve(mechanism, progress=_progress, **check_options(solver, {}))
@@ -183,19 +211,57 @@ def identify(mech, data_path, effects, solver_name, physical, output, fmt):
             "status": found.status,
             "min_pseudo_inertia_eigenvalue": dict(zip(map(str, mechanism.body_labels),
                                                       map(float, found.min_eigenvalues)))}
+    fitted = predict(identification, mechanism, data)
+    predictions = [predict(identification, mechanism, other) for other in others]
+    identification.extras["rms"] = fitted.to_json()["rms"]
+    identification.extras["rms_overall"] = fitted.overall_rms
+    identification.extras["runs"] = list(data.runs)
+    if predictions:
+        identification.extras["validation"] = [p.to_json() for p in predictions]
     out = identification.to_json()
     if output:
         atomic_write(output, json.dumps(out, indent=2) + "\n")
+    if plot_path:
+        plot_predictions([fitted] + predictions, plot_path, title=f"{mechanism.name}: identified model")
 
     def text():
         lines = [identification.to_text()]
+        lines.append(f"  RMS residual overall {fitted.overall_rms:.4g}; per coordinate: "
+                     + ", ".join(f"{c} {r:.4g}" for c, r in zip(fitted.coordinates, fitted.rms)))
         if identification.physical is not None:
             info = identification.extras["physical_fit"]
             lines.append(f"  physically consistent parameters (prior: {info['prior']}; the base "
                          f"estimates reproduced within {info['max_deviation_std']:.3g} std):")
             lines += [f"    {k} = {v}" for k, v in identification.physical.items()]
+        lines += [p.to_text() for p in predictions]
         if output:
             lines.append(f"wrote {output}")
+        if plot_path:
+            lines.append(f"wrote {plot_path}")
         return "\n".join(lines)
 
     emit(fmt, out, text)
+
+
+def plot_predictions(predictions, path, title: str = "", fmt=None):
+    """Measured and predicted forces per coordinate: one column per recording (the fit's
+    data first, then each --validate recording), the RMS error in each panel's title."""
+    from baseparams.cli.plots import _figure, _save
+    f, columns = len(predictions[0].coordinates), len(predictions)
+    fig = _figure(figsize=(5 * columns + 1, 2.2 * f + 0.8))
+    for k, p in enumerate(predictions):
+        for j, c in enumerate(p.coordinates):
+            ax = fig.add_subplot(f, columns, j * columns + k + 1)
+            ax.plot(p.t, p.measured[:, j], lw=0.6, color="0.45", label="measured")
+            ax.plot(p.t, p.predicted[:, j], lw=0.8, color="tab:blue", label="predicted")
+            what = "fit" if k == 0 else "validation"
+            ax.set_title(f"{c} ({what}): RMS {p.rms[j]:.3g}, NRMS {p.nrms[j]:.2f}", fontsize=8)
+            ax.tick_params(labelsize=7)
+            if j == 0 and k == 0:
+                ax.legend(loc="upper right", fontsize=7)
+            if j == f - 1:
+                ax.set_xlabel("t (s)", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path, fmt)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter, sosfiltfilt
 
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import InputError, KinematicsError
@@ -43,16 +43,45 @@ BANDWIDTH_POWER = 0.9999
 MAX_FILE_BYTES = 2_000_000_000
 
 
+@dataclass(frozen=True)
+class Segment:
+    """One stretch of uniformly sampled rows of the model's rows (a run, or a piece of one
+    split at a gap), reduced to the fit's rows on its own, so no filter runs across a seam.
+
+    Gautier's parallel filtering: ``sos`` (a zero-phase low-pass, None for none) is applied
+    to the torques and to every model column alike, ``edge`` rows are dropped at each end
+    (the filters' transients), and every ``factor``-th row is kept."""
+    start: int
+    stop: int
+    run: int = 0
+    sos: np.ndarray | None = field(default=None, repr=False, compare=False)
+    factor: int = 1
+    edge: int = 0
+
+    def kept(self) -> np.ndarray:
+        """The model rows (absolute) this segment keeps."""
+        return np.arange(self.start + self.edge, self.stop - self.edge, self.factor)
+
+    def reduce(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (the segment's rows, ...) filtered and decimated to its kept rows."""
+        if self.sos is not None:
+            x = sosfiltfilt(self.sos, x, axis=0)
+        return x[self.edge: len(x) - self.edge: self.factor]
+
+
 @dataclass
 class MeasuredData:
     """Samples of the independent coordinates and their generalized forces.
 
-    ``motion``: t, q, qd, qdd (N, f); ``tau`` (N, f), columns in ``coordinates`` order (the
-    mechanism's independent coordinates); ``path``: the file read (None when simulated);
+    ``motion``: t, q, qd, qdd (N, f) at the model's rows, columns in ``coordinates`` order (the
+    mechanism's independent coordinates); ``tau`` (n, f) at the fit's rows: the model's rows
+    reduced by ``segments`` (filtered and decimated per segment; one identity segment when
+    nothing is reduced, so n = N); ``path``: the file read (None when simulated);
     ``notes``: what reading did that a user should know (ignored columns, estimated
-    derivatives and the window used); ``estimated``: which of "qd", "qdd" were estimated.
-    ``sample``: the kinematics at every sample (loops closed), kept so a fit need not
-    evaluate it again.
+    derivatives, filters, resampling); ``estimated``: which of "qd", "qdd" were estimated.
+    ``sample``: the kinematics at every model row (loops closed), kept so a fit need not
+    evaluate it again. ``runs``: the name of each run (file or experiment); ``payloads``:
+    (run, body label, ten inertial parameters) of known loads added to a run's mechanism.
     """
     motion: Motion
     tau: np.ndarray
@@ -61,15 +90,87 @@ class MeasuredData:
     notes: tuple[str, ...] = ()
     estimated: tuple[str, ...] = ()
     sample: Sample | None = field(default=None, repr=False, compare=False)
+    segments: tuple[Segment, ...] = ()
+    runs: tuple[str, ...] = ()
+    payloads: tuple = ()
+
+    def __post_init__(self):
+        if not self.segments:
+            self.segments = (Segment(0, self.motion.count),)
+        if not self.runs:
+            self.runs = (self.path or "data",)
 
     @property
     def count(self) -> int:
-        return self.motion.count
+        """Rows of the fit (after reduction)."""
+        return len(self.tau)
+
+    @property
+    def reduced(self) -> bool:
+        return any(s.sos is not None or s.factor != 1 or s.edge for s in self.segments)
+
+    def reduce(self, x: np.ndarray) -> np.ndarray:
+        """Model-row quantities (N, ...) at the fit's rows (n, ...), segment by segment."""
+        if not self.reduced:
+            return x
+        return np.concatenate([s.reduce(x[s.start:s.stop]) for s in self.segments], axis=0)
+
+    def kept_rows(self) -> np.ndarray:
+        """The model row of each fit row."""
+        return np.concatenate([s.kept() for s in self.segments])
+
+    @property
+    def t(self) -> np.ndarray:
+        """The time of each fit row."""
+        return self.motion.t[self.kept_rows()]
+
+    def run_of_row(self) -> np.ndarray:
+        """The run index of each fit row."""
+        return np.concatenate([np.full(len(s.kept()), s.run) for s in self.segments])
+
+    def payload_force(self, inertial: np.ndarray) -> np.ndarray:
+        """The known payloads' forces at the model rows (N, f), from the standard columns
+        K (N, f, P): each payload adds its parameters to its body's on its run's rows."""
+        force = np.zeros(inertial.shape[:2])
+        for run, label, phi in self.payloads:
+            columns = slice(10 * (label - 1), 10 * label)
+            for s in self.segments:
+                if s.run == run:
+                    force[s.start:s.stop] += inertial[s.start:s.stop, :, columns] @ phi
+        return force
 
     def take(self, rows: np.ndarray | slice) -> "MeasuredData":
-        """The samples ``rows`` (a training part, a holdout block); the kinematics are dropped."""
+        """The samples ``rows`` (a training part, a holdout block) of unreduced data; the
+        kinematics are dropped."""
+        if self.reduced or self.payloads or len(self.segments) > 1:
+            raise ValueError("take() needs unreduced data of one segment")
         return MeasuredData(self.motion.take(rows), self.tau[rows], self.coordinates, self.path,
                             self.notes, self.estimated)
+
+
+def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "MeasuredData":
+    """Several measured data (runs, files) as one: rows stacked, each part's segments and runs
+    kept apart (no filter crosses a seam); the kinematics are evaluated again when needed."""
+    if len(parts) == 1:
+        return parts[0]
+    coordinates = parts[0].coordinates
+    motions, segments, runs, payloads, notes, offset = [], [], [], [], [], 0
+    for part in parts:
+        if part.coordinates != coordinates:
+            raise InputError("the data files are for different coordinates", file=part.path)
+        motions.append(part.motion)
+        for s in part.segments:
+            segments.append(Segment(s.start + offset, s.stop + offset, s.run + len(runs), s.sos,
+                                    s.factor, s.edge))
+        payloads += [(run + len(runs), label, phi) for run, label, phi in part.payloads]
+        runs += list(part.runs)
+        notes += [f"{part.path}: {n}" if len(parts) > 1 and part.path else n for n in part.notes]
+        offset += part.motion.count
+    motion = Motion(*(np.concatenate([getattr(m, k) for m in motions]) for k in ("t", "q", "qd", "qdd")))
+    estimated = tuple(sorted({k for p in parts for k in p.estimated}))
+    return MeasuredData(motion, np.concatenate([p.tau for p in parts]), coordinates,
+                        path or ", ".join(str(p.path) for p in parts), tuple(notes), estimated,
+                        None, tuple(segments), tuple(runs), tuple(payloads))
 
 
 # ----- reading ----------------------------------------------------------------------------
@@ -288,6 +389,23 @@ def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], e
 
 
 # ----- smoothing differentiation ----------------------------------------------------------
+def bandwidth(q: np.ndarray, step: float) -> float:
+    """The positions' bandwidth (Hz): the frequency below which a fraction BANDWIDTH_POWER of
+    their power lies (detrended, Blackman-tapered so the ends leak no power to high
+    frequencies; the largest over the coordinates); 0 for constant positions."""
+    n = q.shape[0]
+    fb = 0.0
+    for column in np.atleast_2d(np.asarray(q).T):
+        detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
+        power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
+        if power.sum() <= 0:
+            continue
+        cumulative = np.cumsum(power) / power.sum()
+        index = int(np.searchsorted(cumulative, BANDWIDTH_POWER))
+        fb = max(fb, float(np.fft.rfftfreq(n, step)[min(index, len(power) - 1)]))
+    return fb
+
+
 def savgol_window(q: np.ndarray, step: float) -> int:
     """The Savitzky-Golay window (odd number of samples) for positions ``q`` (N, f).
 
@@ -300,15 +418,7 @@ def savgol_window(q: np.ndarray, step: float) -> int:
     window at each end, where the derivatives would be extrapolated).
     """
     n = q.shape[0]
-    fb = 0.0
-    for column in np.atleast_2d(q.T):
-        detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
-        power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
-        if power.sum() <= 0:
-            continue
-        cumulative = np.cumsum(power) / power.sum()
-        index = int(np.searchsorted(cumulative, BANDWIDTH_POWER))
-        fb = max(fb, np.fft.rfftfreq(n, step)[min(index, len(power) - 1)])
+    fb = bandwidth(q, step)
     smallest = (SG_ORDER + 2) // 2                        # half-widths: window = 2 half + 1
     largest = max(smallest, (n // 10 - 1) // 2)
     if fb <= 0:

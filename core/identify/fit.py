@@ -22,7 +22,7 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData, kinematics
-from baseparams.identify.model import design, effect_values
+from baseparams.identify.model import Design, design, effect_values
 from baseparams.identify.weighting import fixed_point
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
@@ -194,11 +194,9 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     exactly like gravity) cannot be identified: it is absorbed, like a grouped inertial
     parameter, and ``absorbed`` says what the remaining estimates then stand for."""
     effects, known = tuple(effects), tuple(known)
-    sample = data.sample if data.sample is not None else kinematics(mechanism, data)
-    inertial, columns = design(mechanism, data.motion, effects + known, sample)
     n, f = data.tau.shape
     identified_width = sum(len(registry.effects()[s.kind].item.coefficients) for s in effects)
-    y = data.tau.copy()
+    inertial, columns, y = _measured_design(mechanism, data, effects + known)
     if known:
         y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
     X = np.concatenate([base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
@@ -265,6 +263,69 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                           residual=final, condition_number=condition, samples=n, dof=n * f - p,
                           residual_variance=variance, notes=tuple(notes), absorbed=absorbed,
                           base_model_error=outside)
+
+
+def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec]
+                     ) -> tuple[Design, Design, np.ndarray]:
+    """(inertial, effects, tau less the known payloads' forces) at the fit's rows: the model's
+    columns at every model row, then filtered and decimated like the torques (parallel
+    filtering), so the model and the measurement see the same filter."""
+    sample = data.sample if data.sample is not None else kinematics(mechanism, data)
+    inertial, columns = design(mechanism, data.motion, effects, sample)
+    y = data.tau - data.reduce(data.payload_force(inertial.matrix)) if data.payloads else data.tau.copy()
+    return (Design(inertial.names, data.reduce(inertial.matrix)), Design(columns.names, data.reduce(columns.matrix)), y)
+
+
+@dataclass
+class Prediction:
+    """The identified model's forces on measured data it may not have seen: per coordinate the
+    RMS error and the NRMS (RMS error / RMS measured force), and the traces."""
+    data: str | None
+    coordinates: tuple[str, ...]
+    t: np.ndarray
+    measured: np.ndarray
+    predicted: np.ndarray
+
+    @property
+    def rms(self) -> np.ndarray:
+        return np.sqrt(np.mean((self.measured - self.predicted) ** 2, axis=0))
+
+    @property
+    def nrms(self) -> np.ndarray:
+        size = np.sqrt(np.mean(self.measured ** 2, axis=0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(size > 0, self.rms / size, 0.0)
+
+    @property
+    def overall_rms(self) -> float:
+        return float(np.sqrt(np.mean((self.measured - self.predicted) ** 2)))
+
+    def to_json(self) -> dict:
+        return {"data": self.data, "samples": int(len(self.t)),
+                "rms": dict(zip(self.coordinates, map(float, self.rms))),
+                "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
+                "rms_overall": self.overall_rms}
+
+    def to_text(self) -> str:
+        lines = [f"  prediction on {self.data} ({len(self.t)} samples): RMS error overall {self.overall_rms:.4g}"]
+        lines += [f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" for c, r, q in zip(self.coordinates, self.rms, self.nrms)]
+        return "\n".join(lines)
+
+
+def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) -> Prediction:
+    """The forces ``result`` predicts on ``data`` (identified and known effects, the data's
+    known payloads included), beside the measured ones."""
+    effects = tuple(result.effects) + tuple(result.known)
+    identified_width = sum(len(registry.effects()[s.kind].item.coefficients) for s in result.effects)
+    inertial, columns, y = _measured_design(mechanism, data, effects)
+    X = np.concatenate([result.base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
+    names = tuple(result.base.names) + tuple(columns.names[:identified_width])
+    kept = [names.index(name) for name in result.names]
+    predicted = X[:, :, kept] @ result.estimates
+    if result.known:
+        predicted = predicted + columns.matrix[:, :, identified_width:] @ effect_values(mechanism, result.known)
+    predicted = predicted + (data.tau - y)          # the known payloads' forces
+    return Prediction(data.path, data.coordinates, data.t, data.tau, predicted)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None

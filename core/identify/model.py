@@ -79,25 +79,49 @@ def inertial_columns(sample: Sample, n: int) -> np.ndarray:
 
 def checked_effect(mechanism: Mechanism, kind: str, coordinate: str, key: str = "effect") -> Effect:
     """The registered effect ``kind``, once ``coordinate`` is known to be a tree coordinate
-    of ``mechanism`` (InputError naming ``key`` otherwise)."""
+    or a motor of ``mechanism`` (InputError naming ``key`` otherwise)."""
     effects = registry.effects()
     if kind not in effects:
         raise InputError(f"unknown effect {kind!r}; registered: {', '.join(sorted(effects))}", key=key)
-    if coordinate not in mechanism.coordinates:
-        raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
-                         f"(coordinates: {', '.join(mechanism.coordinates)})", key=key)
+    if coordinate not in mechanism.coordinates and coordinate not in mechanism.motor_names:
+        motors = f"; motors: {', '.join(mechanism.motor_names)}" if mechanism.motors else ""
+        raise InputError(f"{coordinate!r} is not a joint coordinate or a motor of {mechanism.name} "
+                         f"(coordinates: {', '.join(mechanism.coordinates)}{motors})", key=key)
     return effects[kind].item
+
+
+def drive_rows(mechanism: Mechanism, names: Sequence[str]) -> np.ndarray:
+    """(len(names), tree coordinates): each name's position as a linear map of the tree
+    coordinates: a unit row for a joint coordinate, the gear ratios for a motor."""
+    out = np.zeros((len(names), len(mechanism.coordinates)))
+    for k, name in enumerate(names):
+        if name in mechanism.coordinates:
+            out[k, mechanism.coordinates.index(name)] = 1.0
+        else:
+            for coordinate, ratio in mechanism.motor(name).ratios:
+                out[k, mechanism.coordinates.index(coordinate)] += float(ratio)
+    return out
 
 
 def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
                    key: str = "effect") -> tuple[list[str], np.ndarray]:
-    """An effect's coefficient names and columns (N, f, c) on the independent coordinates."""
+    """An effect's coefficient names and columns (N, f, c) on the independent coordinates.
+
+    On a motor the effect sees the motor's position, velocity and acceleration (the gear
+    ratios times the joints'), and its force reaches each joint coordinate times that
+    joint's ratio (power balance), then the independent coordinates by R^T."""
     effect = checked_effect(mechanism, kind, coordinate, key)
-    i = mechanism.coordinates.index(coordinate)
-    q, qd, qdd = (_as_batch(values[i], n) for values in (sample.q, sample.qd, sample.qdd))
+    row = drive_rows(mechanism, [coordinate])[0]
+    used = np.nonzero(row)[0]
+
+    def combined(values):
+        return sum(row[i] * _as_batch(values[i], n) for i in used)
+
+    q, qd, qdd = (combined(values) for values in (sample.q, sample.qd, sample.qdd))
     with np.errstate(all="ignore"):
         columns = effect.columns(q, qd, qdd)
-    r_row = np.stack([_as_batch(v, n) for v in sample.projection[i]], axis=-1)     # (N, f)
+    r_row = sum(row[i] * np.stack([_as_batch(v, n) for v in sample.projection[i]], axis=-1)
+                for i in used)                                                    # (N, f)
     out = np.stack([r_row * c[:, None] for c in columns], axis=-1)               # (N, f, c)
     return effect.coefficient_names(coordinate), out
 

@@ -93,6 +93,9 @@ SCHEMA = Table({
         "t_start": (VALUE, False), "t_end": (VALUE, False), "samples": (INTEGER, False),
         "q": (Map(VALUE), True),
     }), False),
+    "motors": (ArrayOfTables(Table({
+        "name": (STRING, True), "ratios": (Map(VALUE), True),
+    })), False),
     "effects": (ArrayOfTables(Table({
         "kind": (STRING, True), "coordinate": (STRING, True), "values": (Map(VALUE), False),
     })), False),

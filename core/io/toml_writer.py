@@ -87,6 +87,9 @@ def mechanism_toml(mech: Mechanism) -> str:
         q = ", ".join(f"{name} = {_expr(e)}" for name, e in spec.expressions.items())
         out += ["", "[trajectory]", f"t_start = {_string(exact_text(spec.t_start))}",
                 f"t_end = {_string(exact_text(spec.t_end))}", f"samples = {spec.samples}", f"q = {{ {q} }}"]
+    for motor in getattr(mech, "motors", ()):
+        ratios = ", ".join(f"{c} = {_string(exact_text(r))}" for c, r in motor.ratios)
+        out += ["", "[[motors]]", f"name = {_string(motor.name)}", f"ratios = {{ {ratios} }}"]
     for effect in getattr(mech, "effects", ()):
         out += ["", "[[effects]]", f"kind = {_string(effect.kind)}", f"coordinate = {_string(effect.coordinate)}"]
         if effect.values:

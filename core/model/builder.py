@@ -40,8 +40,8 @@ from baseparams.model.expressions import ExpressionError, parse_decimal, parse_e
 from baseparams.model.expressions import NON_FINITE
 from baseparams.model.consistency import check_body
 from baseparams.model.joints import JointType
-from baseparams.model.mechanism import (MAX_SAMPLES, Body, EffectSpec, Frame, Joint, Mechanism, TrajectorySpec,
-                                        TreeEdge)
+from baseparams.model.mechanism import (MAX_SAMPLES, Body, EffectSpec, Frame, Joint, Mechanism, Motor,
+                                        TrajectorySpec, TreeEdge)
 from baseparams.model.params import PARAMETER_KINDS, from_mass_properties
 
 NAME_RE = re.compile(r"^[a-z0-9_]+$")
@@ -90,6 +90,7 @@ class MechanismBuilder:
         self._independent: tuple[tuple[str, ...], str] | None = None
         self._trajectory: tuple[TrajectorySpec, str] | None = None
         self._effects: list[tuple[EffectSpec, str]] = []
+        self._motors: list[tuple[Motor, str]] = []
         self._warnings: list[str] = []
 
     # ----- errors and values ---------------------------------------------------------
@@ -385,6 +386,29 @@ class MechanismBuilder:
         self._effects.append((spec, key))
         return spec
 
+    def motor(self, name: str, ratios: Mapping[str, Value], *, key: str | None = None) -> Motor:
+        """A motor-side coordinate of the drive chain: ``position = sum(ratio * q)`` over the
+        joint coordinates named in ``ratios`` (gear ratios of any sign, nonzero; several for a
+        coupled wrist or a differential). Coordinates are checked by :meth:`build`."""
+        key = key or f"motors[{len(self._motors)}]"
+        problem = name_problem(name)
+        if problem:
+            raise self.error(f"{key}.name", problem)
+        if any(m.name == name for m, _ in self._motors):
+            raise self.error(f"{key}.name", f"motor {name!r} is declared twice")
+        if not isinstance(ratios, Mapping) or not ratios:
+            raise self.error(f"{key}.ratios", "required: a table joint coordinate = gear ratio (at least one)")
+        exact = []
+        for coordinate, value in ratios.items():
+            ratio = self.rational(value, f"{key}.ratios.{coordinate}")
+            if ratio == 0:
+                raise self.error(f"{key}.ratios.{coordinate}", "a gear ratio of 0: the motor would not "
+                                 "move with the joint (leave the coordinate out instead)")
+            exact.append((coordinate, ratio))
+        motor = Motor(name, tuple(exact))
+        self._motors.append((motor, key))
+        return motor
+
     # ----- the whole -----------------------------------------------------------------
     def build(self) -> Mechanism:
         """Check the whole and return the Mechanism (the builder may be built again)."""
@@ -398,17 +422,26 @@ class MechanismBuilder:
         independent = self._checked_independent(coordinates, loops)
         trajectory = self._checked_trajectory(independent or coordinates)
         gruebler = 6 * len(bodies) - sum(6 - j.type.dof for j in self._joints)
+        for motor, key in self._motors:
+            if motor.name in coordinates:
+                raise self.error(f"{key}.name", f"{motor.name!r} is a joint coordinate: a motor needs its own name")
+            for coordinate, _ in motor.ratios:
+                if coordinate not in coordinates:
+                    raise self.error(f"{key}.ratios.{coordinate}", f"{coordinate!r} is not a tree coordinate "
+                                     f"(tree coordinates: {', '.join(coordinates)})")
+        motor_names = tuple(m.name for m, _ in self._motors)
         for spec, key in self._effects:
-            if spec.coordinate not in coordinates:
+            if spec.coordinate not in coordinates and spec.coordinate not in motor_names:
                 raise self.error(f"{key}.coordinate", f"{spec.coordinate!r} is not a tree coordinate "
-                                 f"(tree coordinates: {', '.join(coordinates)})")
+                                 f"or a motor (tree coordinates: {', '.join(coordinates)}"
+                                 + (f"; motors: {', '.join(motor_names)})" if motor_names else ")"))
         return Mechanism(
             name=self.name, bodies=tuple(bodies), joints=tuple(self._joints), tree=tuple(tree),
             loops=tuple(loops), coordinates=coordinates, independent=independent,
             geometry=dict(self._geometry), gravity=self._gravity, trajectory=trajectory,
             title=self.title, description=self.description, source=self.source, path=self.path,
             gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects),
-            warnings=tuple(self._warnings))
+            warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors))
 
     def _spanning_tree(self, bodies):
         """Joints in declaration order; one joining two placed bodies closes a loop."""

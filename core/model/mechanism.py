@@ -83,6 +83,17 @@ class EffectSpec:
     values: dict = field(default_factory=dict, compare=False)
 
 
+@dataclass(frozen=True)
+class Motor:
+    """A drive's motor-side coordinate: a fixed linear combination of joint coordinates,
+    ``position = sum(ratio * q)``, so gear ratios of any sign, a coupled wrist (the TX40's
+    motor 6 turns with ``32 (q5 + q6)``) and a differential are one form. Effects may act on
+    it (rotor inertia, friction), and a recording may measure it (motor encoders, motor
+    torques); its generalized force maps to the joints by the same ratios (power balance)."""
+    name: str
+    ratios: tuple                     # ((coordinate, Fraction), ...), file order
+
+
 @dataclass(frozen=True, eq=False)
 class Mechanism:
     name: str
@@ -102,6 +113,7 @@ class Mechanism:
     gruebler: int = 0
     effects: tuple = ()               # EffectSpec, file order
     warnings: tuple = ()              # remarks on the input that did not stop the build (text)
+    motors: tuple = ()                # Motor, file order: the drive chain (may be empty)
 
     # ----- names and counts -------------------------------------------------
     @property
@@ -115,6 +127,16 @@ class Mechanism:
     @property
     def closure_equation_count(self):
         return sum(len(j.type.closure) for j in self.loops)
+
+    @property
+    def motor_names(self) -> tuple:
+        return tuple(m.name for m in self.motors)
+
+    def motor(self, name: str) -> Motor:
+        for m in self.motors:
+            if m.name == name:
+                return m
+        raise KeyError(name)
 
     def joint_of_coordinate(self, name):
         for joint in self.joints:

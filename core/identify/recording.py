@@ -1,0 +1,513 @@
+"""Recordings as robots write them: a small TOML description maps raw logs onto the model.
+
+A robot logs motor or joint positions, torques or currents, with gear ratios, couplings,
+gains, sign conventions, zero offsets and clocks of its own. The description
+(docs/identification.md, "Recording descriptions") says which column is which coordinate
+(a joint coordinate or a motor of the drive chain), the units and gains, and where time comes
+from; :func:`read_recording` turns each run into :class:`~.data.MeasuredData` on the
+mechanism's independent coordinates:
+
+1. every channel scaled (``scale``, ``unit``, ``gain``) and shifted (``offset``);
+2. positions (and velocities) mapped through the drive chain: the channels' rows of gear
+   ratios must determine the independent coordinates (a square, nonsingular map); joint
+   zero offsets (``[zero]``) added; torques mapped to the joints by the transpose of the
+   torque channels' map (power balance: tau = N^T tau_motor);
+3. irregular time stamps resampled onto a uniform grid at the median step (cubic for
+   positions and velocities, linear for torques), runs split at gaps, each printed;
+4. positions low-passed by a zero-phase Butterworth filter whose cut-off is a multiple of
+   their bandwidth, differentiated by central differences (a measured velocity is
+   filtered and differentiated once), then torques and model columns alike filtered and
+   decimated (Gautier's parallel filtering, :class:`~.data.Segment`), each run on its own.
+
+Nothing here rewrites a raw file; every error names the description or the log, the key
+or the row and column, and the reason.
+"""
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, replace
+from decimal import Decimal
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.signal import butter, sosfiltfilt
+
+from baseparams.errors import InputError
+from baseparams.identify.data import (MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
+                                      _parse_rows, _read_text, bandwidth, concatenate, kinematics)
+from baseparams.identify.model import Motion, drive_rows, independent_names
+from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
+from baseparams.model.builder import MechanismBuilder
+from baseparams.model.expressions import ExpressionError, parse_expression
+from baseparams.model.mechanism import Mechanism
+
+# Default filter: the positions' cut-off is this multiple of their bandwidth (Gautier's rule
+# of thumb: 5 to 10 times the dynamics' band keeps the derivatives' phase and amplitude).
+CUTOFF_PER_BANDWIDTH = 10.0
+BUTTERWORTH_ORDER = 4
+# The parallel filter's cut-off sits at this fraction of the decimated Nyquist frequency.
+DECIMATION_BAND = 0.8
+# Rows dropped at each end of a segment: this many periods of the cut-off (filter transients).
+EDGE_PERIODS = 3.0
+# A time step longer than this many median steps splits a run (a gap in the log).
+GAP_STEPS = 10.0
+UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "m": 1.0, "mm": 1e-3},
+         "velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
+         "acceleration": {"rad/s2": 1.0, "deg/s2": math.pi / 180, "m/s2": 1.0, "mm/s2": 1e-3},
+         "torque": {"N m": 1.0, "N": 1.0, "mN m": 1e-3, "A": 1.0}}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+QUANTITIES = ("position", "velocity", "acceleration", "torque")
+
+CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
+                 "unit": (STRING, False), "gain": (VALUE, False)})
+SCHEMA = Table({
+    "recording": (Table({"name": (STRING, False), "time": (STRING, False), "time_unit": (STRING, False),
+                         "rate": (VALUE, False), "step": (VALUE, False)}), False),
+    "runs": (ArrayOfTables(Table({
+        "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
+        "payload": (Table({"body": (VALUE, True), "mass": (VALUE, True), "com": (Array(VALUE, 3), False),
+                           "inertia": (Array(VALUE, 6, what="a list of 6 numbers (Ixx, Ixy, Ixz, Iyy, "
+                                                              "Iyz, Izz) about the centre of mass"), False)}),
+                    False),
+    }), min_length=1), True),
+    "motors": (ArrayOfTables(Table({"name": (STRING, True), "ratios": (Map(VALUE), True)})), False),
+    "position": (Map(CHANNEL), True),
+    "velocity": (Map(CHANNEL), False),
+    "acceleration": (Map(CHANNEL), False),
+    "torque": (Map(CHANNEL), True),
+    "zero": (Map(VALUE), False),
+    "filter": (Table({"cutoff": (VALUE, False), "order": (INTEGER, False), "decimate": (INTEGER, False)}),
+               False),
+})
+"""The description's tables (docs/identification.md); a channel may also be a plain string,
+the column."""
+
+
+@dataclass(frozen=True)
+class Channel:
+    quantity: str
+    coordinate: str              # a joint coordinate or a motor
+    file: str | None             # the run's file alias (None: the run's only file)
+    column: str
+    scale: float
+    offset: float
+    key: str
+
+
+@dataclass(frozen=True)
+class Description:
+    path: str
+    data: dict
+    channels: dict               # quantity -> [Channel]
+    mechanism: Mechanism         # with the description's motors added
+
+
+# ----- the description ---------------------------------------------------------------------
+def is_description(path: str | os.PathLike) -> bool:
+    """A data argument names a recording description (TOML), not a CSV log."""
+    return Path(path).suffix.lower() == ".toml"
+
+
+def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Description:
+    """The description at ``path``, checked against ``mechanism`` (its motors added)."""
+    path = str(path)
+    text = _read_text(path)
+    try:
+        data = tomllib.loads(text, parse_float=Decimal)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"malformed TOML: {exc}", file=path) from None
+    for quantity in QUANTITIES:                # a plain string is the column
+        table = data.get(quantity)
+        if isinstance(table, dict):
+            data[quantity] = {k: {"column": v} if isinstance(v, str) else v for k, v in table.items()}
+    _Validator(path).check(SCHEMA, data, "")
+    mechanism = _with_motors(mechanism, data.get("motors", []), path)
+    channels = {q: [_channel(q, name, spec, mechanism, path) for name, spec in data.get(q, {}).items()]
+                for q in QUANTITIES}
+    if channels["acceleration"] and not channels["velocity"]:
+        raise InputError("acceleration channels need velocity channels too", file=path, key="acceleration")
+    for name in data.get("zero", {}):
+        if name not in independent_names(mechanism):
+            raise InputError(f"{name!r} is not an independent coordinate of {mechanism.name} "
+                             f"({', '.join(independent_names(mechanism))})", file=path, key=f"zero.{name}")
+    _check_time_source(data.get("recording", {}), path)
+    return Description(path, data, channels, mechanism)
+
+
+def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
+    """``mechanism`` with the description's ``[[motors]]`` (the drive chain, when the
+    mechanism file has none: a URDF without transmissions), checked by the builder's rules."""
+    if not motors:
+        return mechanism
+    builder = MechanismBuilder(mechanism.name, path)
+    added = []
+    for i, spec in enumerate(motors):
+        key = f"motors[{i}]"
+        if spec["name"] in mechanism.motor_names:
+            raise InputError(f"motor {spec['name']!r} is already in the mechanism file", file=path,
+                             key=f"{key}.name")
+        if spec["name"] in mechanism.coordinates:
+            raise InputError(f"{spec['name']!r} is a joint coordinate: a motor needs its own name",
+                             file=path, key=f"{key}.name")
+        motor = builder.motor(spec["name"], spec["ratios"], key=key)
+        for coordinate, _ in motor.ratios:
+            if coordinate not in mechanism.coordinates:
+                raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
+                                 f"({', '.join(mechanism.coordinates)})", file=path,
+                                 key=f"{key}.ratios.{coordinate}")
+        added.append(motor)
+    return replace(mechanism, motors=tuple(mechanism.motors) + tuple(added))
+
+
+def _number(value, path: str, key: str) -> float:
+    """A number or an expression such as ``-pi/2``, as a float."""
+    try:
+        expr = parse_expression(value, (), time=True)
+    except ExpressionError as exc:
+        raise InputError(str(exc), file=path, key=key) from None
+    if expr.free_symbols:
+        raise InputError(f"{value!r} is not a number", file=path, key=key)
+    result = float(expr)
+    if not math.isfinite(result):
+        raise InputError(f"{value!r} is not finite", file=path, key=key)
+    return result
+
+
+def _channel(quantity: str, name: str, spec: dict, mechanism: Mechanism, path: str) -> Channel:
+    key = f"{quantity}.{name}"
+    if name not in mechanism.coordinates and name not in mechanism.motor_names:
+        motors = f"; motors: {', '.join(mechanism.motor_names)}" if mechanism.motors else \
+            "; declare motors in [[motors]] for motor-side channels"
+        raise InputError(f"{name!r} is not a joint coordinate or a motor of {mechanism.name} "
+                         f"(coordinates: {', '.join(mechanism.coordinates)}{motors})", file=path, key=key)
+    scale = _number(spec.get("scale", 1), path, f"{key}.scale")
+    if "unit" in spec:
+        units = UNITS[quantity]
+        if spec["unit"] not in units:
+            raise InputError(f"unknown unit {spec['unit']!r}; known: {', '.join(units)}", file=path,
+                             key=f"{key}.unit")
+        scale *= units[spec["unit"]]
+    if "gain" in spec:
+        if quantity != "torque":
+            raise InputError("a gain converts a current to a torque: torque channels only", file=path,
+                             key=f"{key}.gain")
+        scale *= _number(spec["gain"], path, f"{key}.gain")
+    if scale == 0:
+        raise InputError("a scale (or gain) of 0 would erase the channel", file=path, key=key)
+    file, _, column = spec["column"].rpartition(":")
+    if not column:
+        raise InputError(f"{spec['column']!r}: expected COLUMN or FILE:COLUMN", file=path, key=f"{key}.column")
+    return Channel(quantity, name, file or None, column, scale,
+                   _number(spec.get("offset", 0), path, f"{key}.offset"), key)
+
+
+def _check_time_source(head: dict, path: str) -> None:
+    given = [k for k in ("time", "rate", "step") if k in head]
+    if len(given) != 1:
+        raise InputError("give exactly one of time (a column), rate (Hz) or step (s)"
+                         + (f"; found {', '.join(given)}" if given else ""), file=path, key="recording")
+    if "time_unit" in head and head["time_unit"] not in TIME_UNITS:
+        raise InputError(f"unknown time unit {head['time_unit']!r}; known: {', '.join(TIME_UNITS)}",
+                         file=path, key="recording.time_unit")
+    for k in ("rate", "step"):
+        if k in head and not _number(head[k], path, f"recording.{k}") > 0:
+            raise InputError("must be positive", file=path, key=f"recording.{k}")
+
+
+# ----- reading a description ---------------------------------------------------------------
+def read_recording(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True
+                   ) -> tuple[MeasuredData, Mechanism]:
+    """Every run of the description at ``path`` as one MeasuredData (runs kept apart), and
+    the mechanism with the description's motors."""
+    description = read_description(path, mechanism)
+    parts = [_read_run(description, i, run) for i, run in enumerate(description.data["runs"])]
+    data = concatenate(parts, path=description.path)
+    data.path = description.path
+    if check_kinematics:
+        try:
+            data.sample = kinematics(description.mechanism, data)
+        except InputError as exc:        # rows of the filtered data are not the log's rows
+            raise InputError(exc.reason, file=description.path) from None
+    return data, description.mechanism
+
+
+def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool = True
+              ) -> tuple[MeasuredData, Mechanism]:
+    """Measured data from CSV files in the project's layout and recording descriptions
+    (``.toml``), one run each or more, stacked with every run kept apart; and the mechanism
+    with the descriptions' motors (which must agree)."""
+    from baseparams.identify.data import read_measured
+    parts, model = [], None
+    for path in paths:
+        if is_description(path):
+            part, with_motors = read_recording(path, mechanism, check_kinematics=check_kinematics)
+            if model is not None and with_motors.motors != model.motors:
+                raise InputError("declares other motors than the descriptions before it", file=path,
+                                 key="motors")
+            model = with_motors
+        else:
+            part = read_measured(path, mechanism, check_kinematics=check_kinematics)
+        parts.append(part)
+    # each part's kinematics were checked with its own rows named; several parts are
+    # evaluated again, stacked, when a fit needs them
+    return concatenate(parts), model or mechanism
+
+
+def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
+    path, key = description.path, f"runs[{index}]"
+    mechanism = description.mechanism
+    coordinates = independent_names(mechanism)
+    folder = Path(path).parent
+    if ("file" in run) == ("files" in run):
+        raise InputError("give file (one log) or files (alias = log, read side by side)", file=path, key=key)
+    files = {None: run["file"]} if "file" in run else dict(run["files"])
+    tables = {alias: _table(str(folder / name)) for alias, name in files.items()}
+    lengths = {alias: len(values) for alias, (_, values, _) in tables.items()}
+    if len(set(lengths.values())) > 1:
+        shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
+        raise InputError(f"the files of one run must have the same rows ({shown})", file=path, key=key)
+    name = run.get("name", str(files[next(iter(files))]))
+    head = description.data.get("recording", {})
+    t, t_file = _times(head, tables, files, path)
+    rows = next(iter(tables.values()))[2]
+
+    def values(channel: Channel) -> np.ndarray:
+        alias = channel.file if channel.file is not None else (None if None in tables else
+                                                               _only(tables, channel, path))
+        if alias not in tables:
+            raise InputError(f"no file aliased {channel.file!r} in {key}.files ({', '.join(map(str, tables))})",
+                             file=path, key=f"{channel.key}.column")
+        header, table, _ = tables[alias]
+        if channel.column not in header:
+            raise InputError(f"no column {channel.column!r} (columns: {', '.join(header)})",
+                             file=str(folder / files[alias]), key="header")
+        return channel.scale * table[:, header.index(channel.column)] + channel.offset
+
+    def mapped(quantity: str, transpose: bool = False) -> np.ndarray | None:
+        chans = description.channels[quantity]
+        if not chans:
+            return None
+        names = [c.coordinate for c in chans]
+        matrix = _independent_rows(mechanism, names, coordinates, path, quantity)
+        raw = np.stack([values(c) for c in chans], axis=1)
+        if transpose:
+            return raw @ matrix                          # tau = N^T tau_channels
+        return np.linalg.solve(matrix, raw.T).T
+
+    q = mapped("position")
+    for coordinate, value in description.data.get("zero", {}).items():
+        q[:, coordinates.index(coordinate)] += _number(value, path, f"zero.{coordinate}")
+    qd, qdd, tau = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
+    notes = [_drive_note(description)] if any(c.coordinate in mechanism.motor_names
+                                              for chans in description.channels.values() for c in chans) else []
+    pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
+    notes += split_notes
+    settings = description.data.get("filter", {})
+    parts = []
+    for a, b in pieces:
+        part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
+                                     None if qdd is None else qdd[a:b], tau[a:b], settings, path)
+        parts.append(part)
+        if not parts[1:]:
+            notes += part_notes
+    payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
+    data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads)
+    data.runs = (name,)
+    return data
+
+
+def _table(path: str) -> tuple[list[str], np.ndarray, list[int]]:
+    header, rows = _parse_rows(path, _read_text(path))
+    return header, _numbers(path, header, rows), [line for line, _ in rows]
+
+
+def _only(tables: dict, channel: Channel, path: str):
+    owners = [alias for alias, (header, _, _) in tables.items() if channel.column in header]
+    if len(owners) != 1:
+        raise InputError(f"column {channel.column!r} is in {len(owners)} of the run's files: write "
+                         "FILE:COLUMN with the file's alias", file=path, key=f"{channel.key}.column")
+    return owners[0]
+
+
+def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray, str]:
+    count = len(next(iter(tables.values()))[1])
+    if "time" not in head:
+        step = 1 / _number(head["rate"], path, "recording.rate") if "rate" in head else \
+            _number(head["step"], path, "recording.step")
+        return np.arange(count) * step, str(files[next(iter(files))])
+    alias, _, column = head["time"].rpartition(":")
+    alias = alias or None
+    owners = [a for a, (header, _, _) in tables.items() if column in header and (alias is None or a == alias)]
+    if len(owners) != 1:
+        raise InputError(f"time column {head['time']!r} found in {len(owners)} files of the run",
+                         file=path, key="recording.time")
+    header, table, _ = tables[owners[0]]
+    return table[:, header.index(column)] * TIME_UNITS[head.get("time_unit", "s")], str(files[owners[0]])
+
+
+def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple, path: str,
+                      quantity: str) -> np.ndarray:
+    """The channels' map from the independent coordinates: square and nonsingular."""
+    rows = drive_rows(mechanism, names)
+    index = [mechanism.coordinates.index(c) for c in coordinates]
+    outside = [n for n, row in zip(names, rows) if np.any(np.delete(row, index) != 0)]
+    if outside:
+        raise InputError(f"{', '.join(outside)} move dependent coordinates: a {quantity} channel must be "
+                         f"a combination of the independent ones ({', '.join(coordinates)})",
+                         file=path, key=quantity)
+    matrix = rows[:, index]
+    if len(names) != len(coordinates):
+        raise InputError(f"{len(names)} {quantity} channels for {len(coordinates)} independent coordinates "
+                         f"({', '.join(coordinates)}): give one channel per coordinate", file=path, key=quantity)
+    singular = np.linalg.svd(matrix, compute_uv=False)
+    if singular[-1] <= 1e-12 * singular[0]:
+        raise InputError(f"the {quantity} channels {', '.join(names)} do not determine "
+                         f"{', '.join(coordinates)}: their transmission is singular", file=path, key=quantity)
+    return matrix
+
+
+def _drive_note(description: Description) -> str:
+    motors = ", ".join(f"{m.name} = " + " + ".join(f"{_ratio(r)} {c}" for c, r in m.ratios)
+                       for m in description.mechanism.motors)
+    return f"motor-side channels mapped through the drive chain ({motors}); torques to the joints by N^T"
+
+
+def _ratio(value: Fraction) -> str:
+    return str(value.numerator) if value.denominator == 1 else f"{float(value):g}"
+
+
+def _uniform_pieces(t: np.ndarray, t_file: str, rows: list[int], path: str
+                    ) -> tuple[list[tuple[int, int]], list[str]]:
+    """Row ranges of the run between gaps; times must increase."""
+    if not np.all(np.isfinite(t)):
+        k = int(np.nonzero(~np.isfinite(t))[0][0])
+        raise InputError("time is not finite", file=t_file, key=f"row {rows[k]}")
+    steps = np.diff(t)
+    bad = np.nonzero(steps <= 0)[0]
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise InputError(f"time {t[k]:.17g} s does not increase (previous row: {t[k - 1]:.17g} s)",
+                         file=t_file, key=f"row {rows[k]}")
+    if len(t) < MIN_SAMPLES:
+        raise InputError(f"{len(t)} samples; at least {MIN_SAMPLES} are needed", file=t_file)
+    median = float(np.median(steps))
+    gaps = np.nonzero(steps > GAP_STEPS * median)[0]
+    cuts = [0] + [int(g) + 1 for g in gaps] + [len(t)]
+    pieces = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= MIN_SAMPLES]
+    notes = []
+    if gaps.size:
+        notes.append(f"split at {gaps.size} gap(s) longer than {GAP_STEPS:g} median steps (first at row "
+                     f"{rows[int(gaps[0]) + 1]}): {len(pieces)} pieces filtered apart"
+                     + ("" if len(pieces) == len(cuts) - 1 else "; pieces too short to use dropped"))
+    return pieces, notes
+
+
+def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredData, list[str]]:
+    """One uniform piece: resampled if irregular, positions filtered and differentiated, the
+    parallel filter and decimation planned (:class:`Segment`)."""
+    notes = []
+    steps = np.diff(t)
+    step = float(np.median(steps))
+    if np.any(np.abs(steps - step) > UNIFORM_TOLERANCE * step):
+        grid = t[0] + step * np.arange(int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1)
+        notes.append(f"irregular time steps ({steps.min() * 1e3:.4g} to {steps.max() * 1e3:.4g} ms): resampled "
+                     f"to a uniform {step * 1e3:.4g} ms grid (cubic for positions and velocities, linear "
+                     "for torques)")
+        q = CubicSpline(t, q, axis=0)(grid)
+        qd = None if qd is None else CubicSpline(t, qd, axis=0)(grid)
+        qdd = None if qdd is None else CubicSpline(t, qdd, axis=0)(grid)
+        tau = np.stack([np.interp(grid, t, column) for column in tau.T], axis=1)
+        t = grid
+    fs = 1 / step
+    order = int(settings.get("order", BUTTERWORTH_ORDER))
+    if not 1 <= order <= 12:
+        raise InputError(f"order {order}: between 1 and 12", file=path, key="filter.order")
+    band = bandwidth(q if qd is None else qd, step)
+    if "cutoff" in settings:
+        cutoff = _number(settings["cutoff"], path, "filter.cutoff")
+        how = "as set"
+    else:
+        cutoff = CUTOFF_PER_BANDWIDTH * band if band > 0 else 0.2 * fs
+        how = f"{CUTOFF_PER_BANDWIDTH:g} x the {'velocities' if qd is not None else 'positions'}' bandwidth {band:.3g} Hz"
+    if not 0 < cutoff < 0.5 * fs:
+        raise InputError(f"cut-off {cutoff:.4g} Hz: must lie between 0 and the Nyquist frequency "
+                         f"{0.5 * fs:.4g} Hz", file=path, key="filter.cutoff")
+    if "decimate" in settings:
+        factor = int(settings["decimate"])
+        if factor < 1:
+            raise InputError("must be at least 1", file=path, key="filter.decimate")
+    else:
+        factor = max(1, int(DECIMATION_BAND * fs / (2 * cutoff)))
+    sos = butter(order, cutoff, fs=fs, output="sos")
+    parallel = butter(order, min(cutoff, DECIMATION_BAND * fs / (2 * factor)) if factor > 1 else cutoff,
+                      fs=fs, output="sos")
+    edge = int(math.ceil(EDGE_PERIODS * fs / cutoff))
+    if len(t) - 2 * edge < MIN_SAMPLES * factor:
+        raise InputError(f"{len(t)} samples at {fs:.4g} Hz: too short for a {cutoff:.3g} Hz filter "
+                         f"(it drops {edge} at each end) and decimation by {factor}", file=path)
+    if qd is None:
+        qf = sosfiltfilt(sos, q, axis=0)
+        qd = np.gradient(qf, step, axis=0)
+        qdd = np.gradient(qd, step, axis=0)
+        estimated = ("qd", "qdd")
+        what = "positions"
+    else:
+        qf = sosfiltfilt(sos, q, axis=0)
+        qd = sosfiltfilt(sos, qd, axis=0)
+        estimated = ("qdd",) if qdd is None else ()
+        qdd = np.gradient(qd, step, axis=0) if qdd is None else sosfiltfilt(sos, qdd, axis=0)
+        what = "measured velocities" + ("" if estimated else " and accelerations")
+    kept = len(range(edge, len(t) - edge, factor))
+    notes.append(f"{what} low-passed at {cutoff:.4g} Hz ({how}; Butterworth order {order}, zero-phase)"
+                 + (f", {' and '.join(estimated)} by central differences" if estimated else "")
+                 + f"; torques and model columns filtered alike and decimated by {factor} "
+                 f"({fs:.4g} -> {fs / factor:.4g} Hz; {edge} samples dropped at each end): {kept} samples")
+    segment = Segment(0, len(t), 0, parallel, factor, edge)
+    data = MeasuredData(Motion(t, qf, qd, qdd), segment.reduce(tau), (), None, (), estimated,
+                        segments=(segment,))
+    return data, notes
+
+
+def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads
+            ) -> MeasuredData:
+    parts = [MeasuredData(p.motion, p.tau, coordinates, path, (), p.estimated, segments=p.segments,
+                          runs=("run",)) for p in parts]
+    joined = concatenate(parts, path=path)
+    segments = tuple(replace(s, run=0) for s in joined.segments)
+    return MeasuredData(joined.motion, joined.tau, coordinates, path, tuple(notes), joined.estimated,
+                        segments=segments, runs=("run",),
+                        payloads=tuple((0, label, phi) for label, phi in payloads))
+
+
+def _payload(spec: dict | None, mechanism: Mechanism, path: str, key: str) -> list[tuple[int, np.ndarray]]:
+    """A known load fixed to a body: its ten parameters about the body's origin, in body axes
+    (mass, centre of mass in the body frame, inertia about the centre of mass)."""
+    if spec is None:
+        return []
+    body = spec["body"]
+    labels = {b.name: b.label for b in mechanism.bodies if b.name}
+    if isinstance(body, str) and body in labels:
+        label = labels[body]
+    elif isinstance(body, int) and not isinstance(body, bool) and body in mechanism.body_labels:
+        label = body
+    else:
+        raise InputError(f"no body {body!r} in {mechanism.name} (bodies: "
+                         f"{', '.join(b.name or str(b.label) for b in mechanism.bodies)})", file=path,
+                         key=f"{key}.body")
+    mass = _number(spec["mass"], path, f"{key}.mass")
+    if mass <= 0:
+        raise InputError("a payload's mass must be positive", file=path, key=f"{key}.mass")
+    c = np.array([_number(v, path, f"{key}.com[{i}]") for i, v in enumerate(spec.get("com", [0, 0, 0]))])
+    i6 = [_number(v, path, f"{key}.inertia[{i}]") for i, v in enumerate(spec.get("inertia", [0] * 6))]
+    inertia = np.array([[i6[0], i6[1], i6[2]], [i6[1], i6[3], i6[4]], [i6[2], i6[4], i6[5]]])
+    eigen = np.linalg.eigvalsh(inertia)
+    if eigen[0] < -1e-12 * max(1.0, abs(eigen[-1])) or eigen[-1] > eigen[0] + eigen[1] + 1e-12 * max(1, eigen[-1]):
+        raise InputError("the payload's inertia about its centre of mass is not a mass distribution's "
+                         "(positive, triangle inequality)", file=path, key=f"{key}.inertia")
+    at_origin = inertia + mass * (c @ c * np.eye(3) - np.outer(c, c))
+    phi = np.array([mass, *(mass * c), at_origin[0, 0], at_origin[0, 1], at_origin[0, 2],
+                    at_origin[1, 1], at_origin[1, 2], at_origin[2, 2]])
+    return [(label, phi)]
