@@ -502,15 +502,8 @@ def report(mech, solver_name, fmt, keep, first, no_certify, output):
         raise UserError(f"solver {solver_name!r} declares a derivation but its result has none")
     text = render(result, fmt)
     if output:
-        try:
-            fh = open(output, "w", encoding="utf-8")
-        except OSError as exc:
-            raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
-        try:
-            with fh:
-                fh.write(text)
-        except OSError as exc:           # a full disk, /dev/full
-            raise UserError(f"{output}: cannot write the report: {exc.strerror or exc}") from None
+        from baseparams.io.atomic import atomic_write
+        atomic_write(output, text, what="the report")     # a full disk keeps the old file whole
         click.echo(f"wrote {output}")
     else:
         click.echo(text, nl=False)

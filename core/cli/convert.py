@@ -17,6 +17,7 @@ import numpy as np
 from baseparams import registry
 from baseparams.cli.commands import UserError, main
 from baseparams.errors import InputError
+from baseparams.io.atomic import atomic_path
 from baseparams.io.loader import check_mobility, reader_for, resolve
 from baseparams.model.expressions import ExpressionError, parse_decimal
 from baseparams.model.mechanism import Mechanism
@@ -48,10 +49,10 @@ def convert(mech, output, merge_fixed, floating_base, inertia_file):
     if inertia_file is not None:
         mechanism = with_inertia(mechanism, load_physical(inertia_file), inertia_file)
     writer = writer_for(output)
-    try:
-        notes += writer.write(mechanism, output) or []
-    except OSError as exc:                  # every writer: a missing folder, a full disk
-        raise InputError(f"cannot write: {exc.strerror or exc}", file=output) from None
+    # every writer (a plugin's too) writes to a temporary file renamed over OUTPUT when it
+    # is complete: a missing folder, a full disk or a kill never leaves a partial file
+    with atomic_path(output) as temporary:
+        notes += writer.write(mechanism, str(temporary)) or []
     for note in notes:
         click.echo(f"note: {note}", err=True)
     click.echo(f"wrote {output} ({writer.name}): {len(mechanism.bodies)} bodies, {len(mechanism.joints)} joints, "

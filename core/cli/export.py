@@ -1,10 +1,9 @@
 """``baseparams export``: the regressor of a mechanism as a standalone Python module (registered on ``main``)."""
 
-from pathlib import Path
-
 import click
 
-from baseparams.cli.commands import UserError, get_solver, load, main
+from baseparams.cli.commands import get_solver, load, main
+from baseparams.io.atomic import atomic_write
 from baseparams.solvers.protocol import check_options, require_applicable
 
 
@@ -37,9 +36,6 @@ def export(mech, target, output, solver_name, samples):
     if output is None:
         click.echo(source, nl=False)
         return
-    try:
-        Path(output).write_text(source)
-    except OSError as exc:
-        raise UserError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    atomic_write(output, source)            # a full disk or a kill keeps the old module whole
     click.echo(f"wrote {output}: regressor and base_regressor of {mechanism.name} "
                f"({len(result.base)} base parameters, {result.solver})", err=True)

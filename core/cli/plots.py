@@ -4,6 +4,7 @@ Figures are made with :class:`matplotlib.figure.Figure` directly (the Agg canvas
 importing this module never changes matplotlib's global backend for a caller.
 """
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from baseparams.dynamics.trajectory import Trajectory, samples_float64
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError
+from baseparams.io.atomic import atomic_write
 
 IMAGE_FORMATS = ("png", "pdf", "svg")
 PIVOT = 0.07        # half-length of a ground joint's axis stub, relative to the mechanism's size
@@ -32,10 +34,9 @@ def _save(fig, path, fmt):
     fmt = fmt or (suffix if suffix in IMAGE_FORMATS else "png")
     if fmt not in IMAGE_FORMATS:
         raise InputError(f"unknown image format {fmt!r} (known: {', '.join(IMAGE_FORMATS)})", file=path)
-    try:
-        fig.savefig(path, format=fmt, dpi=150)
-    except OSError as exc:
-        raise InputError(f"cannot write the figure: {exc.strerror or exc}", file=path) from None
+    buffer = io.BytesIO()               # drawn in memory, then one atomic write: no partial image
+    fig.savefig(buffer, format=fmt, dpi=150)
+    atomic_write(path, buffer.getvalue(), what="the figure")
     return path
 
 
