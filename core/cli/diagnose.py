@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 @main.command()
 @click.argument("mech", metavar="MECH")
-@click.argument("data", metavar="DATA.csv", type=click.Path(dir_okay=True))
+@click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--candidates", "selection", multiple=True, metavar="KIND[:COORD]",
               help="Candidate effects to test (repeatable); KIND alone: on every coordinate "
                    "[default: every registered effect on every tree coordinate].")
@@ -31,8 +31,10 @@ if TYPE_CHECKING:
 @click.option("--write", "write_path", type=click.Path(dir_okay=False), default=None, metavar="FILE.toml",
               help="Save the mechanism with the named effects added as [[effects]] tables.")
 @format_option
-def diagnose(mech, data, selection, alpha, holdout, plot_path, write_path, fmt):
-    """Find where MECH's model and the measured DATA.csv disagree and name the missing effect.
+def diagnose(mech, data_paths, selection, alpha, holdout, plot_path, write_path, fmt):
+    """Find where MECH's model and measured DATA disagree and name the missing effect.
+
+    DATA: CSV files or recording descriptions (.toml), as for identify.
 
     The inertial model is fitted on the first part of the data (the last --holdout
     fraction is kept out); every candidate effect is tested against the residual (Wald
@@ -46,11 +48,12 @@ def diagnose(mech, data, selection, alpha, holdout, plot_path, write_path, fmt):
     "holdout_after", "holdout_floor", "holdout_noise_floor"}, "unexplained": {...}}
     (docs/diagnosis.md).
     """
-    from baseparams.identify.data import read_measured
     from baseparams.identify.diagnose import diagnose_data, write_fixed
+    from baseparams.identify.recording import read_data
 
     mechanism = load(mech)
-    measured = read_measured(data, mechanism)
+    measured, mechanism = read_data(list(data_paths), mechanism)
+    data = ", ".join(data_paths)
     result = diagnose_data(mechanism, measured, selection=list(selection) or None, alpha=alpha,
                            holdout=holdout)
     written = None

@@ -11,7 +11,7 @@ offset when the spring's q column adds nothing significant beyond it, and once e
 the model the other is tested only on what it still adds (an offset is then absorbed).
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -34,25 +34,28 @@ def parse_selection(mechanism: Mechanism, specs: Sequence[str]) -> list[tuple[st
         if kind not in effects:
             raise InputError(f"unknown effect {kind!r} in {spec!r}; known: {', '.join(sorted(effects))}",
                              key="--candidates")
-        if coordinate and coordinate not in mechanism.coordinates:
-            raise InputError(f"{coordinate!r} in {spec!r} is not a joint coordinate of {mechanism.name} "
-                             f"(coordinates: {', '.join(mechanism.coordinates)})", key="--candidates")
-        for c in ([coordinate] if coordinate else mechanism.coordinates):
+        places = tuple(mechanism.coordinates) + tuple(mechanism.motor_names)
+        if coordinate and coordinate not in places:
+            raise InputError(f"{coordinate!r} in {spec!r} is not a joint coordinate or a motor of "
+                             f"{mechanism.name} (coordinates: {', '.join(places)})", key="--candidates")
+        for c in ([coordinate] if coordinate else places):
             if (kind, c) not in out:
                 out.append((kind, c))
     return out
 
 
 def all_pairs(mechanism: Mechanism) -> list[tuple[str, str]]:
-    """Every registered effect on every tree coordinate."""
-    return [(kind, c) for kind in registry.effects() for c in mechanism.coordinates]
+    """Every registered effect on every tree coordinate and every motor."""
+    return [(kind, c) for kind in registry.effects()
+            for c in tuple(mechanism.coordinates) + tuple(mechanism.motor_names)]
 
 
-def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None
-            ) -> tuple[list[Candidate], list[str]]:
-    """(candidates, notes): the candidates' columns at ``n`` samples, without the mechanism's
-    own effects; an effect whose columns are not finite on this data (a plugin's bug) is
-    left out with a note rather than stopping the diagnosis."""
+def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None,
+            reduce: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[list[Candidate], list[str]]:
+    """(candidates, notes): the candidates' columns at ``n`` samples (then ``reduce``d to the
+    fit's rows, as measured data's parallel filter does), without the mechanism's own
+    effects; an effect whose columns are not finite on this data (a plugin's bug) is left
+    out with a note rather than stopping the diagnosis."""
     pairs = all_pairs(mechanism) if pairs is None else pairs
     present = {(e.kind, e.coordinate) for e in mechanism.effects}
     out, notes = [], []
@@ -64,5 +67,7 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
         if not np.all(np.isfinite(columns)):
             notes.append(f"candidate {kind}:{coordinate} left out: its columns are not finite on this data")
             continue
+        if reduce is not None:
+            columns = np.ascontiguousarray(reduce(columns))
         out.append(Candidate(kind, coordinate, tuple(names), columns))
     return out, notes

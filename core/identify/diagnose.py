@@ -31,7 +31,7 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify.candidates import library, parse_selection
 from baseparams.identify.data import MeasuredData, atomic_write
-from baseparams.identify.model import Motion, design, effect_values, evaluate, independent_names
+from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
 from baseparams.identify.selection import (MAX_STEPS, Candidate, Fit, Rival, Selection, hac_lags,
                                            project_out, holm, select, weighted_fit)
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
@@ -96,9 +96,11 @@ class Problem:
 
 
 def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
-            selection: Sequence[str] | None = None) -> Problem:
+            selection: Sequence[str] | None = None, data: MeasuredData | None = None) -> Problem:
     """The inertial and candidate columns along ``motion``; ``selection``: ``KIND[:COORD]``
-    strings restricting the candidates (None: every registered effect on every coordinate)."""
+    strings restricting the candidates (None: every registered effect on every coordinate
+    and motor). With measured ``data`` every column is reduced to the fit's rows as its
+    torques were (parallel filtering), and its known payloads' forces count as known."""
     sample = sample if sample is not None else evaluate(mechanism, motion)
     pairs = parse_selection(mechanism, selection) if selection else None
     known_specs = [e for e in mechanism.effects if _all_given(e)]
@@ -107,7 +109,16 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     _, known_cols = design(mechanism, motion, known_specs, sample)
     known = known_cols.matrix @ effect_values(mechanism, known_specs) if known_specs else \
         np.zeros(inertial.matrix.shape[:2])
-    candidates, notes = library(mechanism, sample, motion.count, pairs)
+    t = np.asarray(motion.t, float)
+    reduce = None
+    if data is not None:
+        if data.payloads:
+            known = known + data.payload_force(inertial.matrix)
+        reduce, t = data.reduce, data.t
+        inertial = Design(inertial.names, data.reduce(inertial.matrix))
+        fitted = Design(fitted.names, data.reduce(fitted.matrix))
+        known = data.reduce(known)
+    candidates, notes = library(mechanism, sample, motion.count, pairs, reduce)
     if known_specs:
         notes.append("known effects subtracted: " + ", ".join(f"{e.kind}:{e.coordinate}" for e in known_specs))
     if fitted_specs:
@@ -117,8 +128,7 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
         raise InputError("no candidate effects left to test (every selected effect is already "
                          "in the mechanism)", key="--candidates")
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
-    return Problem(mechanism, independent_names(mechanism), np.asarray(motion.t, float), model,
-                   known, candidates, notes)
+    return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes)
 
 
 def _all_given(spec: EffectSpec) -> bool:
@@ -422,7 +432,7 @@ def _finite(values: np.ndarray) -> list:
 def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequence[str] | None = None,
                   alpha: float = 0.05, holdout: float = 0.3) -> Diagnosis:
     """:func:`prepare` then :func:`diagnose` on measured data (the CSV's notes kept)."""
-    problem = prepare(mechanism, data.motion, data.sample, selection)
+    problem = prepare(mechanism, data.motion, data.sample, selection, data)
     problem.notes = list(data.notes) + problem.notes
     return diagnose(problem, data.tau, alpha=alpha, holdout=holdout)
 

@@ -430,8 +430,10 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
         cutoff = _number(settings["cutoff"], path, "filter.cutoff")
         how = "as set"
     else:
-        cutoff = CUTOFF_PER_BANDWIDTH * band if band > 0 else 0.2 * fs
+        cutoff = min(CUTOFF_PER_BANDWIDTH * band if band > 0 else fs, DECIMATION_BAND * fs / 2)
         how = f"{CUTOFF_PER_BANDWIDTH:g} x the {'velocities' if qd is not None else 'positions'}' bandwidth {band:.3g} Hz"
+        if cutoff < CUTOFF_PER_BANDWIDTH * band:
+            how += f", capped at {DECIMATION_BAND:g} x the Nyquist frequency"
     if not 0 < cutoff < 0.5 * fs:
         raise InputError(f"cut-off {cutoff:.4g} Hz: must lie between 0 and the Nyquist frequency "
                          f"{0.5 * fs:.4g} Hz", file=path, key="filter.cutoff")
