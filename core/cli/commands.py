@@ -11,10 +11,14 @@ To add a verb: write a function decorated with ``@main.command()`` (or ``@plot.c
 for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
 """
 
+import contextlib
 import csv
 import io
 import json
+import signal
 import textwrap
+import threading
+from collections.abc import Iterator
 
 import click
 
@@ -39,11 +43,24 @@ class Group(click.Group):
     group_class = type          # subgroups (``plot``) use this class too
 
     def invoke(self, ctx):
+        if ctx.parent is not None:          # a subgroup (plot): the root handles everything
+            return self._invoke(ctx)
+        with interrupt_signals():
+            try:
+                return self._invoke(ctx)
+            except KeyboardInterrupt:
+                # Ctrl-C, SIGTERM or SIGHUP: the runners have stopped their workers (their
+                # `finally`), an atomic write has removed its temporary file; one line, and
+                # 128 + the signal's number, as a shell reports a process the signal ended
+                click.echo("interrupted", err=True)
+                ctx.exit(128 + (_received[-1] if _received else signal.SIGINT))
+
+    def _invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except BaseparamsError as exc:
             raise UserError(getattr(exc, "message", str(exc))) from None
-        except (click.ClickException, click.exceptions.Exit, click.Abort):
+        except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
         except Exception as exc:
             if ctx.find_root().params.get("debug"):
@@ -54,6 +71,41 @@ class Group(click.Group):
 
 
 INTERNAL_ERROR = 3
+INTERRUPT_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+_received: list[int] = []
+
+
+@contextlib.contextmanager
+def interrupt_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise KeyboardInterrupt, as SIGINT does, while a verb runs, so
+    that every cleanup (``finally``: workers killed, temporary files removed) runs for
+    them too; the previous handlers come back afterwards. Only in the main thread (where
+    Python delivers signals); elsewhere nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        _received.append(signum)
+        raise KeyboardInterrupt
+
+    previous = {}
+    for name in INTERRUPT_SIGNALS:
+        number = getattr(signal, name, None)
+        if number is None:
+            continue
+        try:
+            if signal.getsignal(number) is signal.SIG_IGN:
+                continue                    # nohup, or started in the background: keep ignoring
+            previous[number] = signal.signal(number, interrupt)
+        except (OSError, ValueError):
+            pass
+    _received.clear()
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def format_option(function):

@@ -15,8 +15,11 @@ crashed) or passes its timeout is reported as such and the other jobs go on.
   until it ends (Dask needs the optional extra ``baseparams[distributed]``).
 """
 
+import ctypes
 import multiprocessing
+import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -110,7 +113,48 @@ class _Window:
         return outcomes
 
 
-def _child(job: Job, connection) -> None:
+PR_SET_PDEATHSIG = 1        # linux/prctl.h
+WATCHDOG_S = 0.5            # how often a worker checks that its parent still lives (no prctl)
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this worker process end when ``parent`` does, however the parent ends.
+
+    A parent killed by SIGKILL runs no cleanup, so the worker must notice by itself: on
+    Linux the kernel sends it SIGKILL (``prctl(PR_SET_PDEATHSIG)``); elsewhere, and as a
+    second line, a daemon thread polls ``os.getppid()``. The worker also leaves the
+    terminal's process group and ignores SIGINT: Ctrl-C is the parent's to handle (it
+    kills its workers and prints one line), not one KeyboardInterrupt traceback per worker.
+    """
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(os, "setpgid"):
+        try:
+            os.setpgid(0, 0)
+        except OSError:
+            pass
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:          # the parent died before the request took effect
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(WATCHDOG_S)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="baseparams-watchdog", daemon=True).start()
+
+
+def _child(job: Job, connection, parent: int | None = None) -> None:
+    die_with_parent(parent if parent is not None else os.getppid())
     connection.send(run_job(job))
     connection.close()
 
@@ -128,8 +172,13 @@ class Processes:
 
     def _start(self, job):
         receive, send = self.context.Pipe(duplex=False)
-        process = self.context.Process(target=_child, args=(job, send), daemon=True)
+        process = self.context.Process(target=_child, args=(job, send, os.getpid()), daemon=True)
         process.start()
+        if hasattr(os, "setpgid"):      # also here: no window where the terminal's Ctrl-C reaches it
+            try:
+                os.setpgid(process.pid, process.pid)
+            except OSError:
+                pass
         send.close()
         return process, receive, time.perf_counter()
 
