@@ -101,7 +101,8 @@ def simulate(mech, output, effects, noise, seed, samples, truth, random_inertia,
     trajectory's exact derivatives. The mechanism's own [[effects]] with every value given
     are simulated too. CSV layout: docs/design.md; files are written atomically.
     """
-    from baseparams.identify.data import MIN_SAMPLES, atomic_write, write_measured
+    from baseparams.identify.data import MIN_SAMPLES, write_measured
+    from baseparams.io.atomic import atomic_write
     from baseparams.identify.fit import split_effects
     from baseparams.identify.simulate import simulate as run_simulation
     if samples is not None and samples < MIN_SAMPLES:
@@ -177,7 +178,7 @@ def identify(mech, data_paths, effects, solver_name, validate_paths, physical, p
     are subtracted as known.
     """
     from baseparams.identify.base import BaseModel
-    from baseparams.identify.data import atomic_write
+    from baseparams.io.atomic import atomic_write
     from baseparams.identify.fit import identify as fit, predict, split_effects
     from baseparams.identify.model import standard_parameters
     from baseparams.identify.recording import read_data

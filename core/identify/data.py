@@ -17,7 +17,6 @@ import io
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from scipy.signal import savgol_coeffs, savgol_filter, sosfiltfilt
 
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import InputError, KinematicsError
+from baseparams.io.atomic import atomic_write  # noqa: F401  (re-exported: one atomic writer)
 from baseparams.identify.model import Motion, evaluate, independent_names
 from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Float64
@@ -471,29 +471,3 @@ def write_measured(path: str | os.PathLike, data: MeasuredData, *, derivatives: 
     buffer.write(",".join(header_for(data.coordinates, derivatives)) + "\n")
     np.savetxt(buffer, table, fmt="%.17g", delimiter=",")
     atomic_write(path, buffer.getvalue())
-
-
-def atomic_write(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
-    path = Path(path)
-    if path.exists() and not path.is_file():
-        # a device or a pipe (/dev/stdout, /dev/full): written in place, never replaced by a
-        # regular file (a rename over /dev/full as root would turn it into one)
-        try:
-            with open(path, "w", encoding="utf-8", newline="") as fh:
-                fh.write(text)
-        except OSError as exc:
-            raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None
-        return
-    directory = path.parent if str(path.parent) else Path(".")
-    try:
-        fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    except OSError as exc:
-        raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.replace(temporary, path)
-    except OSError as exc:
-        Path(temporary).unlink(missing_ok=True)
-        raise InputError(f"cannot write: {exc.strerror or exc}", file=str(path)) from None

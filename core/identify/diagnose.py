@@ -30,7 +30,8 @@ from statsmodels.stats.sandwich_covariance import S_hac_simple
 from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify.candidates import library, parse_selection
-from baseparams.identify.data import MeasuredData, atomic_write
+from baseparams.identify.data import MeasuredData
+from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
 from baseparams.identify.selection import (MAX_STEPS, Candidate, Fit, Rival, Selection, hac_lags,
                                            project_out, holm, select, weighted_fit)

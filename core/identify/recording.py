@@ -68,6 +68,7 @@ SCHEMA = Table({
                          "rate": (VALUE, False), "step": (VALUE, False)}), False),
     "runs": (ArrayOfTables(Table({
         "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
+        "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
         "payload": (Table({"body": (VALUE, True), "mass": (VALUE, True), "com": (Array(VALUE, 3), False),
                            "inertia": (Array(VALUE, 6, what="a list of 6 numbers (Ixx, Ixy, Ixz, Iyy, "
                                                               "Iyz, Izz) about the centre of mass"), False)}),
@@ -107,8 +108,9 @@ class Description:
 
 # ----- the description ---------------------------------------------------------------------
 def is_description(path: str | os.PathLike) -> bool:
-    """A data argument names a recording description (TOML), not a CSV log."""
-    return Path(path).suffix.lower() == ".toml"
+    """A data argument names a recording description (TOML, ``FILE.toml#RUN,RUN`` for some of
+    its runs), not a CSV log."""
+    return Path(str(path).partition("#")[0]).suffix.lower() == ".toml"
 
 
 def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Description:
@@ -146,13 +148,15 @@ def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
     added = []
     for i, spec in enumerate(motors):
         key = f"motors[{i}]"
-        if spec["name"] in mechanism.motor_names:
-            raise InputError(f"motor {spec['name']!r} is already in the mechanism file", file=path,
-                             key=f"{key}.name")
         if spec["name"] in mechanism.coordinates:
             raise InputError(f"{spec['name']!r} is a joint coordinate: a motor needs its own name",
                              file=path, key=f"{key}.name")
         motor = builder.motor(spec["name"], spec["ratios"], key=key)
+        if spec["name"] in mechanism.motor_names:
+            if mechanism.motor(spec["name"]) != motor:
+                raise InputError(f"motor {spec['name']!r} is in the mechanism with other ratios", file=path,
+                                 key=f"{key}.ratios")
+            continue
         for coordinate, _ in motor.ratios:
             if coordinate not in mechanism.coordinates:
                 raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
@@ -222,10 +226,20 @@ def read_recording(path: str | os.PathLike, mechanism: Mechanism, *, check_kinem
                    ) -> tuple[MeasuredData, Mechanism]:
     """Every run of the description at ``path`` as one MeasuredData (runs kept apart), and
     the mechanism with the description's motors."""
+    path, _, chosen = str(path).partition("#")
     description = read_description(path, mechanism)
-    parts = [_read_run(description, i, run) for i, run in enumerate(description.data["runs"])]
+    runs = list(enumerate(description.data["runs"]))
+    if chosen:
+        names = [run.get("name") for _, run in runs]
+        wanted = [name.strip() for name in chosen.split(",")]
+        unknown = [name for name in wanted if name not in names]
+        if unknown:
+            raise InputError(f"no run named {', '.join(map(repr, unknown))} (runs: "
+                             f"{', '.join(str(n) for n in names if n) or 'none named'})", file=path, key="runs")
+        runs = [(i, run) for i, run in runs if run.get("name") in wanted]
+    parts = [_read_run(description, i, run) for i, run in runs]
     data = concatenate(parts, path=description.path)
-    data.path = description.path
+    data.path = description.path + (f"#{chosen}" if chosen else "")
     if check_kinematics:
         try:
             data.sample = kinematics(description.mechanism, data)
@@ -273,6 +287,14 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     head = description.data.get("recording", {})
     t, t_file = _times(head, tables, files, path)
     rows = next(iter(tables.values()))[2]
+    if "window" in run:
+        start, end = (_number(v, path, f"{key}.window") for v in run["window"])
+        inside = (t >= start) & (t <= end)
+        if inside.sum() < MIN_SAMPLES:
+            raise InputError(f"{int(inside.sum())} samples between {start:g} and {end:g} s", file=path,
+                             key=f"{key}.window")
+        t, rows = t[inside], [line for line, keep in zip(rows, inside) if keep]
+        tables = {alias: (header, table[inside], rows) for alias, (header, table, _) in tables.items()}
 
     def values(channel: Channel) -> np.ndarray:
         alias = channel.file if channel.file is not None else (None if None in tables else
