@@ -415,3 +415,55 @@ def test_mechanism_file_motors_round_trip_and_errors(tmp_path):
         with pytest.raises(InputError) as info:
             parse_mechanism(_chain(0) + text)
         assert key in str(info.value)
+
+
+URDF_TRANSMISSIONS = """<robot name="two">
+  <link name="base"/>
+  <link name="l1"><inertial><mass value="1"/><origin xyz="0.1 0 0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <link name="l2"><inertial><mass value="1"/><origin xyz="0.1 0 0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <link name="tool"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.3 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <joint name="fix" type="fixed"><parent link="l2"/><child link="tool"/></joint>
+  <transmission name="t1"><type>transmission_interface/SimpleTransmission</type>
+    <joint name="j1"><hardwareInterface>EffortJointInterface</hardwareInterface></joint>
+    <actuator name="m1"><mechanicalReduction>-100.5</mechanicalReduction></actuator></transmission>
+  <transmission name="t2"><plugin>transmission_interface/DifferentialTransmission</plugin>
+    <actuator name="a1" role="actuator1"><mechanical_reduction>10</mechanical_reduction></actuator>
+    <actuator name="a2" role="actuator2"><mechanical_reduction>10</mechanical_reduction></actuator>
+    <joint name="j1" role="joint1"/>
+    <joint name="j2" role="joint2"><mechanical_reduction>2</mechanical_reduction></joint></transmission>
+  <transmission name="t3"><type>transmission_interface/FourBarLinkageTransmission</type>
+    <actuator name="w1"><mechanicalReduction>3</mechanicalReduction></actuator>
+    <actuator name="w2"><mechanicalReduction>5</mechanicalReduction></actuator>
+    <joint name="j1"/><joint name="j2"/></transmission>
+  <transmission name="t4"><type>transmission_interface/Weird</type><joint name="j2"/><actuator name="x"/></transmission>
+  <transmission name="t5"><type>transmission_interface/SimpleTransmission</type><joint name="fix"/>
+    <actuator name="y"/></transmission>
+</robot>
+"""
+
+
+def test_urdf_transmissions_become_motors(tmp_path):
+    """ros_control's simple (a negative, decimal reduction), differential and four-bar linkage
+    transmissions, in the ROS 1 and ros2_control forms, read exactly; others noted and skipped;
+    the motors survive a conversion to the TOML format."""
+    from fractions import Fraction
+
+    from baseparams.io.toml_writer import mechanism_toml
+    from baseparams.plugins.urdf.reader import read_urdf
+    path = tmp_path / "two.urdf"
+    path.write_text(URDF_TRANSMISSIONS)
+    result = read_urdf(path)
+    motors = {m.name: dict(m.ratios) for m in result.mechanism.motors}
+    assert motors == {"motor_m1": {"j1": Fraction(-201, 2)},            # m1 is a parameter's name
+                      "a1": {"j1": 10, "j2": 20}, "a2": {"j1": 10, "j2": -20},
+                      "w1": {"j1": 3}, "w2": {"j1": 5, "j2": 5}}
+    assert any("t4" in n and "ignored" in n for n in result.notes)
+    assert any("t5" in n and "not a moving joint" in n for n in result.notes)
+    back = parse_mechanism(mechanism_toml(result.mechanism))
+    assert back.motors == result.mechanism.motors

@@ -48,6 +48,17 @@ class UrdfJoint:
 
 
 @dataclass
+class UrdfTransmission:
+    """A ``<transmission>`` (ROS 1 or ros2_control form): its type's last word and the
+    reductions of its joints and actuators, in file order."""
+    name: str
+    type: str
+    joints: list                      # [(joint name, reduction Decimal)]
+    actuators: list                   # [(actuator name, reduction Decimal)]
+    key: str
+
+
+@dataclass
 class Urdf:
     """A parsed, checked URDF: links in file order, joints in file order, the root link."""
     path: str
@@ -56,6 +67,7 @@ class Urdf:
     joints: list                      # UrdfJoint (file order)
     root: str
     notes: list = field(default_factory=list)
+    transmissions: list = field(default_factory=list)
 
 
 class _Parser:
@@ -109,6 +121,27 @@ class _Parser:
         return rot, tuple(xyz)
 
     # ----- elements ------------------------------------------------------------------------
+    def transmission(self, elem, key):
+        """A ``<transmission>``: ``<type>`` (ROS 1) or ``<plugin>`` (ros2_control), and each
+        ``<joint>``/``<actuator>`` with its ``<mechanicalReduction>`` or
+        ``<mechanical_reduction>`` (default 1), on the element or inside it."""
+        kind = (elem.findtext("type") or elem.findtext("plugin") or "").strip()
+        parts = {"joint": [], "actuator": []}
+        for tag in parts:
+            for i, child in enumerate(elem.findall(tag)):
+                name = child.get("name")
+                ckey = f"{key}.{tag}[{i}]"
+                if not name:
+                    raise self.error(f"{ckey}.name", "missing (required)")
+                text = child.findtext("mechanicalReduction") or child.findtext("mechanical_reduction")
+                reduction = self.decimals(text, f"{ckey}.mechanicalReduction", 1)[0] if text else Decimal(1)
+                if reduction == 0:
+                    raise self.error(f"{ckey}.mechanicalReduction", "a reduction of 0: the actuator "
+                                     "would not move with the joint")
+                parts[tag].append((name, reduction))
+        return UrdfTransmission(elem.get("name") or "", kind.rsplit("/", 1)[-1].rsplit(":", 1)[-1],
+                                parts["joint"], parts["actuator"], key)
+
     def link(self, elem, key):
         name = elem.get("name")
         inertial = elem.find("inertial")
@@ -276,7 +309,10 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
     if not any(link.has_inertial for name, link in links.items() if name != roots[0]):
         raise p.error("robot", "no moving link has an <inertial> element: a visual or collision "
                       "(mesh-only) description has no dynamic model; add <inertial> elements")
-    return Urdf(path, robot, links, joints, roots[0], p.notes)
+    transmissions = [p.transmission(elem, f"transmission[name={elem.get('name')}]" if elem.get("name")
+                                    else f"transmission[{i}]")
+                     for i, elem in enumerate(root.findall("transmission"))]
+    return Urdf(path, robot, links, joints, roots[0], p.notes, transmissions)
 
 
 def _cycle(links, parent_of):

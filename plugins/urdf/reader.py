@@ -6,7 +6,9 @@ parent link is its ``<origin>`` turned so that z is the joint axis, and in the c
 the same axis through the link origin, so the child link frame moves exactly as URDF says.
 revolute/continuous -> ``R``, prismatic -> ``P``, fixed -> ``Fixed`` (or merged into its
 parent with ``merge_fixed``), floating -> ``Free``. Limits become coordinate limits;
-``<dynamics damping friction>`` become viscous and Coulomb friction effects; a default
+``<dynamics damping friction>`` become viscous and Coulomb friction effects;
+``<transmission>`` elements (simple, differential, four-bar linkage) become the motors of
+the drive chain (:func:`motor_ratios`); a default
 exciting trajectory (a Fourier series inside the limits) is added so that every verb
 works on a bare URDF.
 """
@@ -108,7 +110,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
         phi = inertia[name]
         b.body(label[name], name, inertia=dict(zip(PARAMETER_KINDS, phi)), key=urdf.links[name].key)
     used: set[str] = set()
-    motions = []
+    motions, names = [], {}
     for j in joints:
         jtype = TYPE_OF[j.type]
         cname = _identifier(j.name, used)
@@ -123,10 +125,55 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
                 coefficient = "fv" if name == "viscous_friction" else "fc"
                 b.effect(name, cname, {coefficient: value}, key=f"{j.key}.dynamics")
         motions.append((joint, jtype, j.limits))
+        if jtype in ("R", "P"):
+            names[j.name] = cname
+    _motors(b, urdf.transmissions, names, used, notes)
     b.trajectory(default_trajectory(urdf.robot, motions), t_start=0, t_end=T_END, samples=SAMPLES,
                  key="trajectory")
     mech = b.build()
     return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed)
+
+
+def motor_ratios(transmission) -> list[tuple[str, dict]] | str:
+    """Each actuator's position as gear ratios of its joints' positions, or why the
+    transmission is not understood. ros_control's conventions (actuator a, joint j,
+    reductions ar, jr): simple a = ar jr j (jr = 1 when not given); differential
+    a1 = ar1 (jr1 j1 + jr2 j2), a2 = ar2 (jr1 j1 - jr2 j2); four-bar linkage a1 = ar1 jr1 j1,
+    a2 = ar2 (jr1 j1 + jr2 j2)."""
+    kind, joints, actuators = transmission.type, transmission.joints, transmission.actuators
+    if kind == "SimpleTransmission" and len(joints) == 1 and len(actuators) == 1:
+        (j, jr), (a, ar) = joints[0], actuators[0]
+        return [(a, {j: ar * jr})]
+    if kind in ("DifferentialTransmission", "FourBarLinkageTransmission") and len(joints) == len(actuators) == 2:
+        (j1, jr1), (j2, jr2) = joints
+        (a1, ar1), (a2, ar2) = actuators
+        if kind == "DifferentialTransmission":
+            return [(a1, {j1: ar1 * jr1, j2: ar1 * jr2}), (a2, {j1: ar2 * jr1, j2: -ar2 * jr2})]
+        return [(a1, {j1: ar1 * jr1}), (a2, {j1: ar2 * jr1, j2: ar2 * jr2})]
+    return (f"type {kind or 'missing'!r} with {len(joints)} joint(s) and {len(actuators)} actuator(s) "
+            "is not one this reader maps (simple, differential, four-bar linkage)")
+
+
+def _motors(b, transmissions, names, used, notes) -> None:
+    """The transmissions' actuators as motors of the drive chain (docs/urdf.md)."""
+    from baseparams.model.builder import name_problem
+    for t in transmissions:
+        found = motor_ratios(t)
+        if isinstance(found, str):
+            notes.append(f"{t.key}: ignored: {found}")
+            continue
+        missing = [j for _, ratios in found for j in ratios if j not in names]
+        if missing:
+            notes.append(f"{t.key}: ignored: joint {missing[0]!r} is not a moving joint of the model")
+            continue
+        for actuator, ratios in found:
+            name = _identifier(actuator, used)
+            if name_problem(name):
+                name = _identifier(f"motor_{name}", used)
+            if name != actuator:
+                notes.append(f"{t.key}: actuator {actuator!r} named {name!r} (an identifier that is "
+                             "no parameter name)")
+            b.motor(name, {names[j]: r for j, r in ratios.items()}, key=t.key)
 
 
 def _copy(j):
