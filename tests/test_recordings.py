@@ -467,3 +467,40 @@ def test_urdf_transmissions_become_motors(tmp_path):
     assert any("t5" in n and "not a moving joint" in n for n in result.notes)
     back = parse_mechanism(mechanism_toml(result.mechanism))
     assert back.motors == result.mechanism.motors
+
+
+def test_unknown_current_gains_fixed_by_a_known_payload_run(tmp_path):
+    """Currents with unknown gains on every joint: the run with a known payload fixes their
+    scale, so the gains and the base parameters both come back; without it, an error says so."""
+    mech = parse_mechanism(_chain(9))
+    phi = random_physical_inertia(mech, np.random.default_rng(9))
+    load = np.zeros(10)
+    load[0], load[1:4] = 3.0, 3.0 * np.array([0.02, 0.03, 0.08])
+    load[[4, 7, 9]] = [0.01, 0.012, 0.008]
+    load[4:] += 3.0 * np.array([0.03 ** 2 + 0.08 ** 2, -0.02 * 0.03, -0.02 * 0.08,
+                                0.02 ** 2 + 0.08 ** 2, -0.03 * 0.08, 0.02 ** 2 + 0.03 ** 2])
+    loaded = phi.copy()
+    loaded[20:30] += load
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    _, tau_loaded = _truth(mech, t, loaded)
+    gains = np.array([0.7, 1.9, 0.35])
+    header = ["t", "a", "b", "c", "x", "y", "z"]
+    _write(tmp_path / "empty.csv", header, [t, *motion.q.T, *(tau / gains).T])
+    _write(tmp_path / "loaded.csv", header, [t, *motion.q.T, *(tau_loaded / gains).T])
+    com, inertia = [0.02, 0.03, 0.08], [0.01, 0, 0, 0.012, 0, 0.008]
+    payload = f"[runs.payload]\nbody = 3\nmass = 3\ncom = {com}\ninertia = {inertia}\n"
+    channels = ('[position]\nq1 = "a"\nq2 = "b"\nq3 = "c"\n[torque]\n'
+                + "".join(f'{q} = {{ column = "{c}", gain = "unknown" }}\n' for q, c in zip(("q1", "q2", "q3"), "xyz")))
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "empty.csv"\n'
+                                       '[[runs]]\nfile = "loaded.csv"\n' + payload + channels)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert data.gain_names == ("gain_q1", "gain_q2", "gain_q3")
+    result = identify(model, data, base=_base(mech))
+    np.testing.assert_allclose([result.value(g) for g in data.gain_names], gains, rtol=2e-3)
+    _check_base(result, _base(mech), phi, 3e-3)
+    assert [g["name"] for g in result.to_json()["gains"]] == list(data.gain_names)
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "empty.csv"\n' + channels)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    with pytest.raises(InputError, match="known payload"):
+        identify(model, data, base=_base(mech))

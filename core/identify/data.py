@@ -82,6 +82,8 @@ class MeasuredData:
     ``sample``: the kinematics at every model row (loops closed), kept so a fit need not
     evaluate it again. ``runs``: the name of each run (file or experiment); ``payloads``:
     (run, body label, ten inertial parameters) of known loads added to a run's mechanism.
+    ``gain_names``/``gain_columns`` (n, f, G): currents whose gains are unknown, each as the
+    force it makes per unit gain; the measured force is ``tau + gain_columns @ gains``.
     """
     motion: Motion
     tau: np.ndarray
@@ -93,12 +95,16 @@ class MeasuredData:
     segments: tuple[Segment, ...] = ()
     runs: tuple[str, ...] = ()
     payloads: tuple = ()
+    gain_names: tuple[str, ...] = ()
+    gain_columns: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if not self.segments:
             self.segments = (Segment(0, self.motion.count),)
         if not self.runs:
             self.runs = (self.path or "data",)
+        if self.gain_columns is None:
+            self.gain_columns = np.zeros(self.tau.shape + (len(self.gain_names),))
 
     @property
     def count(self) -> int:
@@ -155,7 +161,13 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
         return parts[0]
     coordinates = parts[0].coordinates
     motions, segments, runs, payloads, notes, offset = [], [], [], [], [], 0
+    gain_names = tuple(dict.fromkeys(name for part in parts for name in part.gain_names))
+    gains = []
     for part in parts:
+        block = np.zeros(part.tau.shape + (len(gain_names),))
+        for k, name in enumerate(part.gain_names):
+            block[:, :, gain_names.index(name)] = part.gain_columns[:, :, k]
+        gains.append(block)
         if part.coordinates != coordinates:
             raise InputError("the data files are for different coordinates", file=part.path)
         motions.append(part.motion)
@@ -170,7 +182,8 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
     estimated = tuple(sorted({k for p in parts for k in p.estimated}))
     return MeasuredData(motion, np.concatenate([p.tau for p in parts]), coordinates,
                         path or ", ".join(str(p.path) for p in parts), tuple(notes), estimated,
-                        None, tuple(segments), tuple(runs), tuple(payloads))
+                        None, tuple(segments), tuple(runs), tuple(payloads), gain_names,
+                        np.concatenate(gains))
 
 
 # ----- reading ----------------------------------------------------------------------------

@@ -137,6 +137,9 @@ class Identification:
             "residual_variance": float(self.residual_variance),
             "notes": list(self.notes),
         }
+        gains = [self._entry(k) for k, kind in enumerate(self.kinds) if kind == "gain"]
+        if gains:
+            out["gains"] = gains
         out.update(self.extras)
         if self.physical is not None:
             out["physical"] = dict(self.physical)
@@ -149,8 +152,10 @@ class Identification:
         width = max([len(n) for n in self.names] + [4])
         lines.append(f"  {'name':<{width}}  {'estimate':>13}  {'std':>10}  {'std %':>8}")
         for k, name in enumerate(self.names):
-            if k == self.base.rank and k:
+            if k == self.base.rank and k and self.kinds[k] == "effect":
                 lines.append("  effects:")
+            if self.kinds[k] == "gain" and (k == 0 or self.kinds[k - 1] != "gain"):
+                lines.append("  unknown gains (torque per unit of the logged current):")
             rel = self.relative_std[k]
             lines.append(f"  {name:<{width}}  {self.estimates[k]:>13.6g}  {self.std[k]:>10.3g}  "
                          + (f"{rel:>8.3g}" if math.isfinite(rel) else f"{'-':>8}"))
@@ -201,6 +206,13 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
         y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
     X = np.concatenate([base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
     all_names = tuple(base.names) + tuple(columns.names[:identified_width])
+    if data.gain_names:               # unknown current gains: model - sum(g c) = known forces
+        if not np.any(y):
+            raise InputError(f"every torque channel's gain is unknown ({', '.join(data.gain_names)}) and no "
+                             "force is known: add a run with a known payload ([runs.payload]) or give "
+                             "one gain", file=data.path)
+        X = np.concatenate([X, -data.gain_columns], axis=-1)
+        all_names += tuple(data.gain_names)
     notes = list(data.notes)
     outside = base.residual_outside(inertial.matrix)
     if outside > BASE_MODEL_TOLERANCE:
@@ -229,7 +241,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                      f"others): it is absorbed into {'; '.join(parts)} (JSON: absorbed_into)")
     stacked, scale = stacked[:, kept], scale[kept]
     names = tuple(all_names[k] for k in kept)
-    kinds = tuple("base" if k < base.rank else "effect" for k in kept)
+    kinds = tuple("base" if k < base.rank else "gain" if all_names[k] in data.gain_names else "effect"
+                  for k in kept)
     p = len(kept)
     rms_force = np.sqrt(np.mean(y ** 2, axis=0))
     floor = NOISE_FLOOR * max(float(rms_force.max()), np.finfo(float).tiny)
@@ -254,7 +267,7 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     singular = scipy.linalg.svdvals(weighted / wscale)
     condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
     final = y - (stacked @ estimates).reshape(n, f)
-    measured_rms = np.sqrt(np.mean(data.tau ** 2, axis=0))
+    measured_rms = np.sqrt(np.mean(measured_forces(data, names, estimates) ** 2, axis=0))
     with np.errstate(divide="ignore", invalid="ignore"):
         nrms = np.where(measured_rms > 0, np.sqrt(np.mean(final ** 2, axis=0)) / measured_rms, 0.0)
     return Identification(mechanism=mechanism.name, data=data.path, coordinates=data.coordinates,
@@ -274,6 +287,19 @@ def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence
     inertial, columns = design(mechanism, data.motion, effects, sample)
     y = data.tau - data.reduce(data.payload_force(inertial.matrix)) if data.payloads else data.tau.copy()
     return (Design(inertial.names, data.reduce(inertial.matrix)), Design(columns.names, data.reduce(columns.matrix)), y)
+
+
+def measured_forces(data: MeasuredData, names: Sequence[str], estimates: np.ndarray) -> np.ndarray:
+    """The data's generalized forces (n, f), its unknown current gains taken as estimated
+    (every one must be among ``names``)."""
+    if not data.gain_names:
+        return data.tau
+    missing = [g for g in data.gain_names if g not in names]
+    if missing:
+        raise InputError(f"the gains {', '.join(missing)} are unknown in these data and were not identified",
+                         file=data.path)
+    gains = np.array([estimates[list(names).index(g)] for g in data.gain_names])
+    return data.tau + data.gain_columns @ gains
 
 
 @dataclass
@@ -325,7 +351,8 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
     if result.known:
         predicted = predicted + columns.matrix[:, :, identified_width:] @ effect_values(mechanism, result.known)
     predicted = predicted + (data.tau - y)          # the known payloads' forces
-    return Prediction(data.path, data.coordinates, data.t, data.tau, predicted)
+    return Prediction(data.path, data.coordinates, data.t, measured_forces(data, result.names, result.estimates),
+                      predicted)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None

@@ -96,6 +96,7 @@ class Channel:
     scale: float
     offset: float
     key: str
+    unknown_gain: bool = False   # a current whose gain the fit identifies (a payload run fixes it)
 
 
 @dataclass(frozen=True)
@@ -194,18 +195,20 @@ def _channel(quantity: str, name: str, spec: dict, mechanism: Mechanism, path: s
             raise InputError(f"unknown unit {spec['unit']!r}; known: {', '.join(units)}", file=path,
                              key=f"{key}.unit")
         scale *= units[spec["unit"]]
+    unknown = spec.get("gain") == "unknown"
     if "gain" in spec:
         if quantity != "torque":
             raise InputError("a gain converts a current to a torque: torque channels only", file=path,
                              key=f"{key}.gain")
-        scale *= _number(spec["gain"], path, f"{key}.gain")
+        if not unknown:
+            scale *= _number(spec["gain"], path, f"{key}.gain")
     if scale == 0:
         raise InputError("a scale (or gain) of 0 would erase the channel", file=path, key=key)
     file, _, column = spec["column"].rpartition(":")
     if not column:
         raise InputError(f"{spec['column']!r}: expected COLUMN or FILE:COLUMN", file=path, key=f"{key}.column")
     return Channel(quantity, name, file or None, column, scale,
-                   _number(spec.get("offset", 0), path, f"{key}.offset"), key)
+                   _number(spec.get("offset", 0), path, f"{key}.offset"), key, unknown)
 
 
 def _check_time_source(head: dict, path: str) -> None:
@@ -315,14 +318,17 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         names = [c.coordinate for c in chans]
         matrix = _independent_rows(mechanism, names, coordinates, path, quantity)
         raw = np.stack([values(c) for c in chans], axis=1)
-        if transpose:
-            return raw @ matrix                          # tau = N^T tau_channels
+        if transpose:                                    # tau = N^T tau_channels; with unknown gains
+            known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
+            forces = [(raw * known) @ matrix] + [raw[:, k:k + 1] * matrix[k] for k in np.nonzero(~known)[0]]
+            return np.stack(forces, axis=2)              # (N, f, 1 + unknown gains)
         return np.linalg.solve(matrix, raw.T).T
 
     q = mapped("position")
     for coordinate, value in description.data.get("zero", {}).items():
         q[:, coordinates.index(coordinate)] += _number(value, path, f"zero.{coordinate}")
-    qd, qdd, tau = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
+    qd, qdd, forces = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
+    gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
     notes = [_drive_note(description)] if any(c.coordinate in mechanism.motor_names
                                               for chans in description.channels.values() for c in chans) else []
     pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
@@ -331,12 +337,12 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     parts = []
     for a, b in pieces:
         part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
-                                     None if qdd is None else qdd[a:b], tau[a:b], settings, path)
+                                     None if qdd is None else qdd[a:b], forces[a:b], settings, path)
         parts.append(part)
         if not parts[1:]:
             notes += part_notes
     payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
-    data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads)
+    data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads, gain_names)
     data.runs = (name,)
     return data
 
@@ -441,7 +447,8 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
         q = CubicSpline(t, q, axis=0)(grid)
         qd = None if qd is None else CubicSpline(t, qd, axis=0)(grid)
         qdd = None if qdd is None else CubicSpline(t, qdd, axis=0)(grid)
-        tau = np.stack([np.interp(grid, t, column) for column in tau.T], axis=1)
+        flat = tau.reshape(len(t), -1)
+        tau = np.stack([np.interp(grid, t, column) for column in flat.T], axis=1).reshape((len(grid),) + tau.shape[1:])
         t = grid
     fs = 1 / step
     order = int(settings.get("order", BUTTERWORTH_ORDER))
@@ -495,15 +502,18 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
     return data, notes
 
 
-def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads
-            ) -> MeasuredData:
-    parts = [MeasuredData(p.motion, p.tau, coordinates, path, (), p.estimated, segments=p.segments,
-                          runs=("run",)) for p in parts]
+def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads,
+            gain_names: tuple[str, ...]) -> MeasuredData:
+    """The pieces of one run as one MeasuredData; ``tau`` of each piece holds the known
+    forces and, behind them, one column per unknown gain (split here)."""
+    parts = [MeasuredData(p.motion, p.tau[:, :, 0], coordinates, path, (), p.estimated, segments=p.segments,
+                          runs=("run",), gain_names=gain_names, gain_columns=p.tau[:, :, 1:]) for p in parts]
     joined = concatenate(parts, path=path)
     segments = tuple(replace(s, run=0) for s in joined.segments)
     return MeasuredData(joined.motion, joined.tau, coordinates, path, tuple(notes), joined.estimated,
                         segments=segments, runs=("run",),
-                        payloads=tuple((0, label, phi) for label, phi in payloads))
+                        payloads=tuple((0, label, phi) for label, phi in payloads),
+                        gain_names=gain_names, gain_columns=joined.gain_columns)
 
 
 def _payload(spec: dict | None, mechanism: Mechanism, path: str, key: str) -> list[tuple[int, np.ndarray]]:
