@@ -504,3 +504,23 @@ def test_unknown_current_gains_fixed_by_a_known_payload_run(tmp_path):
     data, model = read_recording(tmp_path / "rec.toml", mech)
     with pytest.raises(InputError, match="known payload"):
         identify(model, data, base=_base(mech))
+
+
+@pytest.mark.parametrize("delimiter, sep, comment", [("auto", " ", "#"), ("space", "   ", None),
+                                                     ("auto", ";", None), ("tab", "\t", "%")])
+def test_logs_with_other_delimiters_and_comments(tmp_path, delimiter, sep, comment):
+    """Loggers write spaces (UR's RTDE), aligned columns, semicolons, tabs and comment lines."""
+    mech = parse_mechanism(_chain(2, bodies=2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    lines = ([f"{comment} logged by a robot", f"{comment} units: rad, N m"] if comment else [])
+    lines.append(sep.join(["timestamp", "q_0", "q_1", "tau_0", "tau_1"]))
+    lines += [sep.join(f"{v:.17g}" for v in row) for row in np.column_stack([t, motion.q, tau])]
+    (tmp_path / "log.txt").write_text("\n".join(lines) + "\n")
+    extra = f'delimiter = "{delimiter}"\n' + (f'comment = "{comment}"\n' if comment else "")
+    (tmp_path / "rec.toml").write_text(f'[recording]\ntime = "timestamp"\n{extra}[[runs]]\nfile = "log.txt"\n'
+                                       '[position]\nq1 = "q_0"\nq2 = "q_1"\n[torque]\nq1 = "tau_0"\nq2 = "tau_1"\n')
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    result = identify(model, data, base=_base(mech))
+    _check_base(result, _base(mech), phi, 2e-3)

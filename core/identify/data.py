@@ -307,13 +307,28 @@ def _read_text(path: str) -> str:
     return text
 
 
-def _parse_rows(path: str, text: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """The header and the data rows with their line numbers; blank lines skipped."""
-    reader = csv.reader(io.StringIO(text, newline=""), strict=True)
+DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " "}
+
+
+def _parse_rows(path: str, text: str, delimiter: str = ",", comment: str | None = None
+                ) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    """The header and the data rows with their line numbers; blank lines (and lines starting
+    with ``comment``) skipped. ``delimiter``: ",", ";", "\t", " " (any run of spaces and
+    tabs: loggers that align columns) or "auto" (the header's first of these)."""
+    if delimiter == "auto":
+        head = next((line for line in text.splitlines()
+                     if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
+        delimiter = next((d for d in (",", ";", "\t") if d in head), " " if " " in head.strip() else ",")
+    if delimiter == " ":
+        reader = _Whitespace(text)
+    else:
+        reader = csv.reader(io.StringIO(text, newline=""), strict=True, delimiter=delimiter)
     header, rows = None, []
     try:
         for fields in reader:
             if not fields or all(not f.strip() for f in fields):
+                continue
+            if comment and fields[0].lstrip().startswith(comment):
                 continue
             if header is None:
                 header = [f.strip() for f in fields]
@@ -334,6 +349,18 @@ def _parse_rows(path: str, text: str) -> tuple[list[str], list[tuple[int, list[s
     if not rows:
         raise InputError("a header but no samples", file=path)
     return header, rows
+
+
+class _Whitespace:
+    """Rows split at runs of spaces and tabs, with csv.reader's ``line_num``."""
+
+    def __init__(self, text: str):
+        self.lines = text.splitlines()
+        self.line_num = 0
+
+    def __iter__(self):
+        for self.line_num, line in enumerate(self.lines, start=1):
+            yield line.split()
 
 
 def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tuple[dict[str, int], list[str]]:

@@ -36,7 +36,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
-from baseparams.identify.data import (MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
+from baseparams.identify.data import (DELIMITERS, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
                                       _parse_rows, _read_text, bandwidth, concatenate, kinematics)
 from baseparams.identify.model import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
@@ -65,7 +65,8 @@ CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (V
                  "unit": (STRING, False), "gain": (VALUE, False)})
 SCHEMA = Table({
     "recording": (Table({"name": (STRING, False), "time": (STRING, False), "time_unit": (STRING, False),
-                         "rate": (VALUE, False), "step": (VALUE, False)}), False),
+                         "rate": (VALUE, False), "step": (VALUE, False), "delimiter": (STRING, False),
+                         "comment": (STRING, False)}), False),
     "runs": (ArrayOfTables(Table({
         "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
         "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
@@ -281,7 +282,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     if ("file" in run) == ("files" in run):
         raise InputError("give file (one log) or files (alias = log, read side by side)", file=path, key=key)
     files = {None: run["file"]} if "file" in run else dict(run["files"])
-    tables = {alias: _table(str(folder / name)) for alias, name in files.items()}
+    delimiter = head_format(description)
+    tables = {alias: _table(str(folder / name), *delimiter) for alias, name in files.items()}
     lengths = {alias: len(values) for alias, (_, values, _) in tables.items()}
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
@@ -347,8 +349,21 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     return data
 
 
-def _table(path: str) -> tuple[list[str], np.ndarray, list[int]]:
-    header, rows = _parse_rows(path, _read_text(path))
+def head_format(description: Description) -> tuple[str, str | None]:
+    """(delimiter, comment prefix) of the logs: ``[recording] delimiter`` (",", ";", "tab",
+    "space" or "auto", the default) and ``comment`` (a prefix of lines to skip, none by default)."""
+    head = description.data.get("recording", {})
+    delimiter = head.get("delimiter", "auto")
+    if delimiter != "auto" and delimiter not in DELIMITERS:
+        raise InputError(f"unknown delimiter {delimiter!r}: one of auto, ',', ';', tab, space",
+                         file=description.path, key="recording.delimiter")
+    comment = head.get("comment") or None
+    return DELIMITERS.get(delimiter, delimiter), comment
+
+
+def _table(path: str, delimiter: str = "auto", comment: str | None = None
+           ) -> tuple[list[str], np.ndarray, list[int]]:
+    header, rows = _parse_rows(path, _read_text(path), delimiter, comment)
     return header, _numbers(path, header, rows), [line for line, _ in rows]
 
 
