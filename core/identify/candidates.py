@@ -38,16 +38,23 @@ def parse_selection(mechanism: Mechanism, specs: Sequence[str]) -> list[tuple[st
         if coordinate and coordinate not in places:
             raise InputError(f"{coordinate!r} in {spec!r} is not a joint coordinate or a motor of "
                              f"{mechanism.name} (coordinates: {', '.join(places)})", key="--candidates")
-        for c in ([coordinate] if coordinate else places):
+        for c in ([coordinate] if coordinate else _places(mechanism)):
             if (kind, c) not in out:
                 out.append((kind, c))
     return out
 
 
 def all_pairs(mechanism: Mechanism) -> list[tuple[str, str]]:
-    """Every registered effect on every tree coordinate and every motor."""
-    return [(kind, c) for kind in registry.effects()
-            for c in tuple(mechanism.coordinates) + tuple(mechanism.motor_names)]
+    """Every registered effect on every tree coordinate and every coupled motor."""
+    return [(kind, c) for kind in registry.effects() for c in _places(mechanism)]
+
+
+def _places(mechanism: Mechanism) -> tuple[str, ...]:
+    """Where candidates act by default: every tree coordinate, and the motors that turn with
+    several coordinates (a coupled wrist, a differential). A motor on one joint moves as the
+    joint scaled: its friction, offset or inertia is the joint's own column times its ratio,
+    the same candidate under a second name (name it with KIND:MOTOR to test it anyway)."""
+    return tuple(mechanism.coordinates) + tuple(m.name for m in mechanism.motors if len(m.ratios) > 1)
 
 
 def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None,
