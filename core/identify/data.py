@@ -17,6 +17,7 @@ import io
 import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,12 @@ SG_BIAS = 1e-3
 # Bandwidth: the frequency below which this fraction of the (detrended) positions' power lies.
 BANDWIDTH_POWER = 0.9999
 MAX_FILE_BYTES = 2_000_000_000
+# Model rows evaluated at once when the model's columns are built for a fit (bounded memory
+# on long recordings), and how far beyond its kept rows a chunk reaches: this many times the
+# rows a segment drops at its ends (each 3 periods of the cut-off), so the zero-phase
+# filter's transient at a chunk's border has decayed below 1e-12 where rows are kept.
+CHUNK_ROWS = 20_000
+CHUNK_PAD = 4
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,41 @@ class MeasuredData:
     def run_of_row(self) -> np.ndarray:
         """The run index of each fit row."""
         return np.concatenate([np.full(len(s.kept()), s.run) for s in self.segments])
+
+    def payload_of_run(self, run: int) -> np.ndarray | None:
+        """The known payloads' parameters added to run ``run`` (P,), or None."""
+        added = [(label, phi) for r, label, phi in self.payloads if r == run]
+        if not added:
+            return None
+        total = np.zeros(10 * max(label for label, _ in added))
+        for label, phi in added:
+            total[10 * (label - 1): 10 * label] += phi
+        return total
+
+    def reduced_columns(self, build: Callable[[Motion, Sample | None, int], np.ndarray]) -> np.ndarray:
+        """Columns at the fit's rows (n, f, c): ``build(motion, sample, run)`` gives them at
+        some model rows (``sample`` None: evaluate the kinematics there), and each segment
+        reduces them as it reduced the torques. Long data go chunk by chunk (CHUNK_ROWS model
+        rows and a margin of CHUNK_PAD times the segment's edge), so memory stays bounded."""
+        if self.motion.count <= CHUNK_ROWS and len({s.run for s in self.segments}) == 1:
+            return self.reduce(build(self.motion, self.sample, self.segments[0].run))
+        out = []
+        for s in self.segments:
+            kept = s.kept()
+            pad = CHUNK_PAD * s.edge
+            step = max(1, CHUNK_ROWS // s.factor)
+            for first in range(0, len(kept), step):
+                rows = kept[first:first + step]
+                lo, hi = max(s.start, rows[0] - pad), min(s.stop, rows[-1] + pad + 1)
+                if lo - s.start < s.edge:            # the segment's own start: same rows as reduce
+                    lo = s.start
+                if s.stop - hi < s.edge:
+                    hi = s.stop
+                block = build(self.motion.take(slice(lo, hi)), None, s.run)
+                if s.sos is not None:
+                    block = sosfiltfilt(s.sos, block, axis=0)
+                out.append(block[rows - lo])
+        return np.concatenate(out, axis=0)
 
     def payload_force(self, inertial: np.ndarray) -> np.ndarray:
         """The known payloads' forces at the model rows (N, f), from the standard columns
@@ -240,8 +282,12 @@ def kinematics(mechanism: Mechanism, data: MeasuredData, rows: list[int] | None 
     """The kinematics at every sample, loops closed; a sample that cannot close (or leaves a
     coordinate's range) is an InputError naming the file's row (``rows``: each sample's line;
     default: sample k on line k + 2) and the time."""
-    lines = rows if rows is not None else [k + 2 for k in range(data.count)]
+    lines = rows if rows is not None else [k + 2 for k in range(data.motion.count)]
     try:
+        if data.motion.count > CHUNK_ROWS:         # checked chunk by chunk, not kept: the fit
+            for start in range(0, data.motion.count, CHUNK_ROWS):   # evaluates what it needs
+                _chunk_kinematics(mechanism, data, start)
+            return None
         return evaluate(mechanism, data.motion)
     except KinematicsError as exc:
         message, k = str(exc), None
@@ -255,6 +301,14 @@ def kinematics(mechanism: Mechanism, data: MeasuredData, rows: list[int] | None 
                 k = int(np.argmin(np.abs(data.motion.t - float(match.group(1)))))
         raise InputError(f"the positions cannot be reached by {mechanism.name}: {message}",
                          file=data.path, key=None if k is None else f"row {lines[k]}") from None
+
+
+def _chunk_kinematics(mechanism: Mechanism, data: MeasuredData, start: int) -> None:
+    rows = slice(start, start + CHUNK_ROWS)
+    try:
+        evaluate(mechanism, data.motion.take(rows))
+    except KinematicsError as exc:
+        raise KinematicsError(str(exc)) from None
 
 
 def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] | None:

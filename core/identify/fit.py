@@ -21,7 +21,7 @@ import scipy.linalg
 from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
-from baseparams.identify.data import MeasuredData, kinematics
+from baseparams.identify.data import MeasuredData
 from baseparams.identify.model import Design, design, effect_values
 from baseparams.identify.weighting import fixed_point
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -281,12 +281,23 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
 def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec]
                      ) -> tuple[Design, Design, np.ndarray]:
     """(inertial, effects, tau less the known payloads' forces) at the fit's rows: the model's
-    columns at every model row, then filtered and decimated like the torques (parallel
-    filtering), so the model and the measurement see the same filter."""
-    sample = data.sample if data.sample is not None else kinematics(mechanism, data)
-    inertial, columns = design(mechanism, data.motion, effects, sample)
-    y = data.tau - data.reduce(data.payload_force(inertial.matrix)) if data.payloads else data.tau.copy()
-    return (Design(inertial.names, data.reduce(inertial.matrix)), Design(columns.names, data.reduce(columns.matrix)), y)
+    columns at the model rows, then filtered and decimated like the torques (parallel
+    filtering), so the model and the measurement see the same filter; chunk by chunk on long
+    data (:meth:`MeasuredData.reduced_columns`)."""
+    p = len(mechanism.parameters)
+    names: list[str] = []
+
+    def build(motion, sample, run):
+        inertial, columns = design(mechanism, motion, effects, sample)
+        names[:] = columns.names
+        payload = data.payload_of_run(run)
+        force = np.zeros(inertial.matrix.shape[:2]) if payload is None else \
+            inertial.matrix[:, :, :len(payload)] @ payload
+        return np.concatenate([inertial.matrix, columns.matrix, force[:, :, None]], axis=-1)
+
+    full = data.reduced_columns(build)
+    y = data.tau - full[:, :, -1]
+    return (Design(tuple(mechanism.parameters), full[:, :, :p]), Design(tuple(names), full[:, :, p:-1]), y)
 
 
 def measured_forces(data: MeasuredData, names: Sequence[str], estimates: np.ndarray) -> np.ndarray:
