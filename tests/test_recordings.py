@@ -26,6 +26,8 @@ from baseparams.model.mechanism import EffectSpec
 from baseparams.numeric.backends import Float64
 
 RATE = 1000.0          # Hz of the synthetic logs
+# q1..q3 from columns a, b, c and their forces from x, y, z
+CHANNELS_ABC = '[position]\nq1 = "a"\nq2 = "b"\nq3 = "c"\n[torque]\nq1 = "x"\nq2 = "y"\nq3 = "z"\n'
 
 
 def _chain(seed: int, bodies: int = 3, motors: str = "") -> str:
@@ -159,21 +161,8 @@ def test_effects_on_a_coupled_motor_are_identified(tmp_path):
     hand = 30 * (2e-4 * 30 * (motion.qdd[:, 1] + motion.qdd[:, 2]) + 0.05 * np.sign(motion.qd[:, 1] + motion.qd[:, 2]))
     inertial, _ = design(mech, motion)
     np.testing.assert_allclose(tau[:, 2] - inertial.matrix[:, 2] @ phi, hand, atol=1e-9)
-    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "ta", "tb", "tc"], [t, *motion.q.T, *tau.T])
-    (tmp_path / "rec.toml").write_text("""
-[recording]
-time = "t"
-[[runs]]
-file = "log.csv"
-[position]
-q1 = "a"
-q2 = "b"
-q3 = "c"
-[torque]
-q1 = "ta"
-q2 = "tb"
-q3 = "tc"
-""")
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *tau.T])
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
     data, model = read_data([str(tmp_path / "rec.toml")], mech)
     result = identify(model, data, base=_base(mech), effects=[EffectSpec(s.kind, s.coordinate) for s in hidden])
     assert result.value("Ia_mot3") == pytest.approx(2e-4, rel=0.02)
@@ -229,21 +218,8 @@ def test_irregular_time_stamps_are_resampled(tmp_path):
     t = t[t < 10]
     motion, tau = _truth(mech, t, phi)
     _write(tmp_path / "log.csv", ["time_ms", "a", "b", "c", "x", "y", "z"], [t * 1e3, *motion.q.T, *tau.T])
-    (tmp_path / "rec.toml").write_text("""
-[recording]
-time = "time_ms"
-time_unit = "ms"
-[[runs]]
-file = "log.csv"
-[position]
-q1 = "a"
-q2 = "b"
-q3 = "c"
-[torque]
-q1 = "x"
-q2 = "y"
-q3 = "z"
-""")
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "time_ms"\ntime_unit = "ms"\n[[runs]]\n'
+                                       'file = "log.csv"\n' + CHANNELS_ABC)
     data, model = read_recording(tmp_path / "rec.toml", mech)
     assert any("irregular time steps" in n and "resampled" in n for n in data.notes)
     result = identify(model, data, base=_base(mech))
@@ -269,14 +245,7 @@ def _two_runs(tmp_path, mech, phi, seam_as_one: bool):
 [recording]
 time = "t"
 {runs}
-[position]
-q1 = "a"
-q2 = "b"
-q3 = "c"
-[torque]
-q1 = "x"
-q2 = "y"
-q3 = "z"
+{CHANNELS_ABC}
 """)
     return read_recording(tmp_path / "rec.toml", mech)
 
@@ -314,7 +283,7 @@ def test_known_payload_on_one_run(tmp_path):
     header = ["t", "a", "b", "c", "x", "y", "z"]
     _write(tmp_path / "empty.csv", header, [t, *motion.q.T, *tau.T])
     _write(tmp_path / "loaded.csv", header, [t, *motion.q.T, *tau_loaded.T])
-    channels = '[position]\nq1 = "a"\nq2 = "b"\nq3 = "c"\n[torque]\nq1 = "x"\nq2 = "y"\nq3 = "z"\n'
+    channels = CHANNELS_ABC
     payload = ("[runs.payload]\nbody = 3\nmass = 2.5\ncom = [0.05, -0.02, 0.1]\n"
                "inertia = [0.004, 0, 0, 0.005, 0, 0.003]\n")
     for declared in (True, False):
