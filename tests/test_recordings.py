@@ -514,3 +514,23 @@ def test_long_data_are_built_chunk_by_chunk_with_the_same_result(tmp_path, monke
     np.testing.assert_allclose(results[1].estimates, results[0].estimates, rtol=1e-8,
                                atol=1e-10 * np.abs(results[0].estimates).max())
     np.testing.assert_allclose(results[1].residual, results[0].residual, atol=1e-8)
+
+
+def test_a_gap_in_the_log_splits_the_run(tmp_path):
+    """A logger that stopped for 0.5 s: the run is split at the gap and each piece filtered on
+    its own (a filter across it would smear the jump), a piece too short for the filter is
+    dropped with a note, and the base parameters come back."""
+    mech = parse_mechanism(_chain(10))
+    phi = random_physical_inertia(mech, np.random.default_rng(10))
+    t = np.arange(0, 10, 1 / RATE)
+    keep = (t < 4) | ((t > 4.5) & (t < 4.53)) | (t > 5)      # a 30 ms piece between two gaps
+    t = t[keep]
+    motion, tau = _truth(mech, t, phi)
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *tau.T])
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert any("split at 2 gap(s)" in n for n in data.notes), data.notes
+    assert any("dropped" in n and "too short" in n for n in data.notes), data.notes
+    assert len(data.segments) == 2 and data.runs == ("log.csv",)
+    result = identify(model, data, base=_base(mech))
+    _check_base(result, _base(mech), phi, 2e-3)

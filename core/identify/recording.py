@@ -282,7 +282,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     if ("file" in run) == ("files" in run):
         raise InputError("give file (one log) or files (alias = log, read side by side)", file=path, key=key)
     files = {None: run["file"]} if "file" in run else dict(run["files"])
-    delimiter = head_format(description)
+    delimiter = log_format(description)
     tables = {alias: _table(str(folder / name), *delimiter) for alias, name in files.items()}
     lengths = {alias: len(values) for alias, (_, values, _) in tables.items()}
     if len(set(lengths.values())) > 1:
@@ -335,21 +335,36 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                                               for chans in description.channels.values() for c in chans) else []
     pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
     notes += split_notes
-    settings = description.data.get("filter", {})
+    settings = dict(description.data.get("filter", {}))
+    if "cutoff" not in settings and len(pieces) > 1:     # one filter for the run: the longest piece's
+        a, b = max(pieces, key=lambda piece: piece[1] - piece[0])
+        signal = q[a:b] if qd is None else qd[a:b]
+        settings["cutoff"], how = auto_cutoff(signal, float(np.median(np.diff(t[a:b]))),
+                                              "positions" if qd is None else "velocities")
+        settings["how"] = how + " on the run's longest piece"
     parts = []
     for a, b in pieces:
-        part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
-                                     None if qdd is None else qdd[a:b], forces[a:b], settings, path)
-        parts.append(part)
-        if not parts[1:]:
+        try:
+            part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
+                                         None if qdd is None else qdd[a:b], forces[a:b], settings, path)
+        except InputError as exc:
+            if len(pieces) == 1 or "too short" not in exc.reason:
+                raise
+            notes.append(f"the piece from {t[a]:.6g} to {t[b - 1]:.6g} s dropped: {exc.reason}")
+            continue
+        if not parts:
             notes += part_notes
+        parts.append(part)
+    if not parts:
+        raise InputError(f"every piece of run {name!r} between gaps is too short for its filter", file=path,
+                         key=key)
     payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
     data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads, gain_names)
     data.runs = (name,)
     return data
 
 
-def head_format(description: Description) -> tuple[str, str | None]:
+def log_format(description: Description) -> tuple[str, str | None]:
     """(delimiter, comment prefix) of the logs: ``[recording] delimiter`` (",", ";", "tab",
     "space" or "auto", the default) and ``comment`` (a prefix of lines to skip, none by default)."""
     head = description.data.get("recording", {})
@@ -448,6 +463,18 @@ def _uniform_pieces(t: np.ndarray, t_file: str, rows: list[int], path: str
     return pieces, notes
 
 
+def auto_cutoff(signal: np.ndarray, step: float, what: str) -> tuple[float, str]:
+    """The default cut-off (Hz) for ``signal`` sampled every ``step`` s, and how it was chosen:
+    CUTOFF_PER_BANDWIDTH times its bandwidth, at most DECIMATION_BAND times Nyquist."""
+    fs = 1 / step
+    band = bandwidth(signal, step)
+    cutoff = min(CUTOFF_PER_BANDWIDTH * band if band > 0 else fs, DECIMATION_BAND * fs / 2)
+    how = f"{CUTOFF_PER_BANDWIDTH:g} x the {what}' bandwidth {band:.3g} Hz"
+    if cutoff < CUTOFF_PER_BANDWIDTH * band:
+        how += f", capped at {DECIMATION_BAND:g} x the Nyquist frequency"
+    return cutoff, how
+
+
 def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredData, list[str]]:
     """One uniform piece: resampled if irregular, positions filtered and differentiated, the
     parallel filter and decimation planned (:class:`Segment`)."""
@@ -469,15 +496,11 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
     order = int(settings.get("order", BUTTERWORTH_ORDER))
     if not 1 <= order <= 12:
         raise InputError(f"order {order}: between 1 and 12", file=path, key="filter.order")
-    band = bandwidth(q if qd is None else qd, step)
     if "cutoff" in settings:
         cutoff = _number(settings["cutoff"], path, "filter.cutoff")
-        how = "as set"
+        how = settings.get("how", "as set")
     else:
-        cutoff = min(CUTOFF_PER_BANDWIDTH * band if band > 0 else fs, DECIMATION_BAND * fs / 2)
-        how = f"{CUTOFF_PER_BANDWIDTH:g} x the {'velocities' if qd is not None else 'positions'}' bandwidth {band:.3g} Hz"
-        if cutoff < CUTOFF_PER_BANDWIDTH * band:
-            how += f", capped at {DECIMATION_BAND:g} x the Nyquist frequency"
+        cutoff, how = auto_cutoff(q if qd is None else qd, step, "velocities" if qd is not None else "positions")
     if not 0 < cutoff < 0.5 * fs:
         raise InputError(f"cut-off {cutoff:.4g} Hz: must lie between 0 and the Nyquist frequency "
                          f"{0.5 * fs:.4g} Hz", file=path, key="filter.cutoff")
