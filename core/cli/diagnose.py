@@ -26,12 +26,15 @@ if TYPE_CHECKING:
               show_default=True, help="Family-wise significance level (Holm over the candidates).")
 @click.option("--holdout", type=click.FloatRange(0.0, 0.9), default=0.3, show_default=True,
               help="Fraction of the samples, the last time block, kept out of the fit.")
+@click.option("--max-steps", type=click.IntRange(1, 1000), default=12, show_default=True,
+              help="At most this many forward steps (each adds one effect or group); when the search "
+                   "stops here with candidates still significant, the report says so.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Residuals before/after per coordinate and the candidates' statistics (png, pdf, svg).")
 @click.option("--write", "write_path", type=click.Path(dir_okay=False), default=None, metavar="FILE.toml",
               help="Save the mechanism with the named effects added as [[effects]] tables.")
 @format_option
-def diagnose(mech, data_paths, selection, alpha, holdout, plot_path, write_path, fmt):
+def diagnose(mech, data_paths, selection, alpha, holdout, max_steps, plot_path, write_path, fmt):
     """Find where MECH's model and measured DATA disagree and name the missing effect.
 
     DATA: CSV files or recording descriptions (.toml), as for identify.
@@ -55,7 +58,7 @@ def diagnose(mech, data_paths, selection, alpha, holdout, plot_path, write_path,
     measured, mechanism = read_data(list(data_paths), mechanism)
     data = ", ".join(data_paths)
     result = diagnose_data(mechanism, measured, selection=list(selection) or None, alpha=alpha,
-                           holdout=holdout)
+                           holdout=holdout, max_steps=max_steps)
     written = None
     if write_path:
         named = result.named()
@@ -103,6 +106,9 @@ def render_text(result: "Diagnosis", written: str | None = None) -> str:
     boxes = ", ".join(f"{c} p = {b['pvalue']:.2g}" for c, b in un["ljung_box"].items())
     lines.append(f"residual / noise level (second differences): {ratios}")
     lines.append(f"whiteness (Ljung-Box, {next(iter(un['ljung_box'].values()))['lags']} lags): {boxes}")
+    if un.get("significant_candidates_left"):
+        lines.append(f"the search stopped at --max-steps {un['max_steps']} with candidates still "
+                     "significant: the named effects are incomplete")
     lines.append("gap closed to the noise level" if result.closed else
                  "structure remains unexplained (residual not white, or candidates still significant)")
     if result.untestable:

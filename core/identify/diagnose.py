@@ -220,6 +220,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     unexplained = _unexplained(after, train, problem.coordinates, alpha)
     closed = bool(unexplained["white"] and not remaining)
     unexplained["significant_candidates_left"] = remaining
+    unexplained["max_steps"] = max_steps
     first = chosen.steps[0]
     untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
     unexplained["confusable_with_model"] = _weak(problem.inertial[rows], candidates, first)
@@ -235,6 +236,9 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                  f"nothing testable of it is left ({test.reason})")
         notes.append(f"{candidates[i].label} was named, then taken out: once the effects named after it "
                      f"are in, it adds nothing significant ({given})")
+    if remaining:
+        notes.insert(0, f"the search stopped at --max-steps {max_steps} with candidates still significant: "
+                        "what is named is incomplete; raise --max-steps to go on")
     if untestable:
         notes.append(f"{len(untestable)} candidates not testable on this data: 'absorbed' (no direction "
                      "beyond the inertial model: not identifiable) or 'support' (acting on too few samples)")
@@ -431,11 +435,11 @@ def _finite(values: np.ndarray) -> list:
 
 
 def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequence[str] | None = None,
-                  alpha: float = 0.05, holdout: float = 0.3) -> Diagnosis:
+                  alpha: float = 0.05, holdout: float = 0.3, max_steps: int = MAX_STEPS) -> Diagnosis:
     """:func:`prepare` then :func:`diagnose` on measured data (the CSV's notes kept)."""
     problem = prepare(mechanism, data.motion, data.sample, selection, data)
     problem.notes = list(data.notes) + problem.notes
-    return diagnose(problem, data.tau, alpha=alpha, holdout=holdout)
+    return diagnose(problem, data.tau, alpha=alpha, holdout=holdout, max_steps=max_steps)
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------
