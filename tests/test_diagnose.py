@@ -322,3 +322,21 @@ def test_verb_bad_candidates_exit_2(tmp_path):
     with pytest.raises(InputError, match="holdout"):
         mech = resolve("pendulum")
         diagnose(_problem(mech, 50), np.zeros((50, 1)), holdout=1.5)
+
+
+def test_diagnose_says_when_it_stops_at_max_steps(tmp_path):
+    """No silent cap: a search stopped by --max-steps with candidates still significant says
+    so in the text and the JSON (three hidden effects, one step allowed)."""
+    runner = CliRunner()
+    data = tmp_path / "d.csv"
+    result = runner.invoke(main, ["simulate", "planar_2r", "-o", str(data), "--samples", "600", "--noise", "0.01",
+                                  "--effect", "viscous_friction:q1=0.5", "--effect", "coulomb_friction:q2=0.3",
+                                  "--effect", "offset:q1=0.4"])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(main, ["diagnose", "planar_2r", str(data), "--max-steps", "1", "--format", "json"])
+    assert result.exit_code == 1, result.output + result.stderr
+    out = json.loads(result.stdout)
+    assert out["unexplained"]["significant_candidates_left"] is True and out["unexplained"]["max_steps"] == 1
+    assert "--max-steps 1" in out["notes"][0]
+    text = runner.invoke(main, ["diagnose", "planar_2r", str(data), "--max-steps", "1"]).output
+    assert "stopped at --max-steps 1" in text
