@@ -21,8 +21,10 @@ from baseparams.orchestrate.model_checks import model_checks
 MODEL = "model"     # the pseudo-solver name of a mechanism's model checks
 
 # outcome statuses
-OK, NOT_APPLICABLE, ERROR, MISSING_PLUGIN, TIMEOUT, DIED, INTERNAL = (
-    "ok", "not_applicable", "error", "missing_plugin", "timeout", "died", "internal_error")
+OK, NOT_APPLICABLE, ERROR, MISSING_PLUGIN, TIMEOUT, DIED, INTERNAL, LOST = (
+    "ok", "not_applicable", "error", "missing_plugin", "timeout", "died", "internal_error", "lost")
+# LOST: the cluster lost the job (no worker or no scheduler left to run it); DIED: its own
+# worker process died while running it
 
 
 @dataclass(frozen=True)

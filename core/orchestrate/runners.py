@@ -12,21 +12,30 @@ crashed) or passes its timeout is reported as such and the other jobs go on.
   ``LocalCluster`` started for the run; at most as many jobs in flight as the cluster
   has worker threads, so a job's timeout counts from when a worker can start it. A job
   past its timeout is cancelled; Dask cannot stop a running task, so its thread runs on
-  until it ends (Dask needs the optional extra ``baseparams[distributed]``).
+  until it ends (Dask needs the optional extra ``baseparams[distributed]``). Every wait
+  on the cluster has a deadline: an address that is no Dask scheduler is an input
+  error within seconds, and a cluster left without workers or scheduler ends the run
+  with each unfinished job reported ``lost``.
+
+Worker processes of :class:`Processes` die with their parent, however it ends
+(:func:`die_with_parent`), and leave Ctrl-C to it.
 """
 
+import contextlib
 import ctypes
 import multiprocessing
 import os
+import re
 import signal
+import socket
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from baseparams.errors import InputError
-from baseparams.orchestrate.jobs import DIED, INTERNAL, TIMEOUT, Job, Outcome, run_job
+from baseparams.orchestrate.jobs import DIED, INTERNAL, LOST, TIMEOUT, Job, Outcome, run_job
 
 Progress = Callable[[int, int, str], None]      # (done, total, label of the job just done)
 POLL_S = 0.05
@@ -80,8 +89,9 @@ class _Window:
     counted from each job's start."""
 
     def __init__(self, size: int, start: Callable[[Job], Any], poll: Callable[[Any, Job], Outcome | None],
-                 stop: Callable[[Any], None]):
+                 stop: Callable[[Any], None], health: Callable[[], str | None] | None = None):
         self.size, self.start, self.poll, self.stop = max(1, size), start, poll, stop
+        self.health = health        # None while jobs can run, else why every unfinished job is lost
 
     def run(self, jobs, timeout=None, progress=None):
         outcomes: list[Outcome | None] = [None] * len(jobs)
@@ -106,6 +116,21 @@ class _Window:
                         done += 1
                         if progress:
                             progress(done, len(jobs), jobs[k].label)
+                reason = self.health() if self.health and (waiting or running) else None
+                if reason is not None:
+                    for k, (handle, began) in list(running.items()):
+                        self.stop(handle)
+                        outcomes[k] = Outcome(jobs[k].mechanism.name, jobs[k].solver, LOST,
+                                              time.perf_counter() - began, message=f"{reason}, while the job ran")
+                        del running[k]
+                    for k in waiting:
+                        outcomes[k] = Outcome(jobs[k].mechanism.name, jobs[k].solver, LOST, 0.0,
+                                              message=f"{reason}; the job never started")
+                    done += len(waiting)
+                    waiting = []
+                    if progress:
+                        progress(len(jobs), len(jobs), "lost")
+                    break
                 time.sleep(POLL_S)
         finally:
             for handle, _ in running.values():
@@ -208,56 +233,209 @@ class Processes:
         receive.close()
 
 
+DASK_SCHEMES = ("tcp", "tls", "ucx", "inproc", "ws", "wss")
+CONNECT_S = 15.0            # to reach a scheduler and complete Dask's handshake
+RPC_S = 10.0                # one call to the scheduler
+HEALTH_RPC_S = 5.0          # the health check's call (a silent scheduler counts as trouble after it)
+LOST_AFTER_S = 20.0         # no worker, or no scheduler, this long: the jobs in flight are lost
+HEALTH_EVERY_S = 1.0
+
+
+def check_scheduler_address(address: str) -> tuple[str, str, int | None]:
+    """(scheme, host, port) of a Dask scheduler address (``tcp://host:8786``, ``host:8786``),
+    or an InputError (exit 2) naming ``--scheduler``: a typo is bad input, not a hang or
+    an internal error."""
+    text = address.strip()
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    match = re.fullmatch(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::([0-9]{1,5}))?", rest)
+    port = int(match[2]) if match and match[2] else None
+    if scheme not in DASK_SCHEMES or match is None or (port is not None and not 0 < port < 65536) \
+            or (scheme != "inproc" and port is None):
+        raise InputError(f"{address!r} is not a Dask scheduler address: give tcp://HOST:PORT (e.g. "
+                         f"tcp://127.0.0.1:8786) or 'local'", key="--scheduler")
+    return scheme, match[1].strip("[]"), port
+
+
+def _bounded(call: Callable[[], Any], seconds: float) -> Any:
+    """``call()`` with a deadline: its value or exception, or TimeoutError after ``seconds``.
+
+    Some Dask calls wait forever on a peer that accepts a connection and never answers (a
+    silent listener, an HTTP server), whatever their own timeout says; the call runs in a
+    daemon thread that is abandoned at the deadline (it cannot hold the process open)."""
+    box: dict[str, Any] = {}
+
+    def run():
+        try:
+            box["value"] = call()
+        except BaseException as exc:        # handed to the caller
+            box["error"] = exc
+
+    thread = threading.Thread(target=run, name="baseparams-dask-call", daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {seconds:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box.get("value")
+
+
 class DaskCluster:
     """Jobs on a Dask cluster: ``address`` of a running scheduler, or "local" for a
-    LocalCluster of ``workers`` single-threaded worker processes started for the run."""
+    LocalCluster of ``workers`` single-threaded worker processes started for the run.
 
-    def __init__(self, address: str, workers: int | None = None):
+    Every wait has a deadline: connecting (``connect_s``, then an InputError: the address
+    is not a usable Dask scheduler), each call to the scheduler (RPC_S), and the cluster's
+    health: with no worker, or no reachable scheduler, for ``lost_after_s``, every job not
+    yet finished is reported as ``lost`` (by name) and the run ends.
+    """
+
+    def __init__(self, address: str, workers: int | None = None, connect_s: float = CONNECT_S,
+                 lost_after_s: float = LOST_AFTER_S):
+        self.cluster = None
+        self.lost_after_s = lost_after_s
+        if address != "local":
+            scheme, host, port = check_scheduler_address(address)
+            if scheme == "tcp":
+                _probe(address, host, port, min(connect_s, 5.0))
         try:
             from dask.distributed import Client, LocalCluster     # optional extra: imported on use
         except ImportError:
             raise InputError("--scheduler needs Dask: pip install 'baseparams[distributed]'") from None
-        self.cluster = None
         if address == "local":
-            self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
-                                        dashboard_address=None)
+            with _sigint_ignored():     # the workers inherit it: Ctrl-C is this process's to handle
+                self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
+                                            dashboard_address=None)
             address = self.cluster.scheduler_address
         try:
-            self.client = Client(address, timeout="20s")
+            self.client = _bounded(lambda: Client(address, timeout=f"{connect_s}s"), connect_s + 2)
+            nthreads = _bounded(self.client.nthreads, RPC_S)
         except (OSError, TimeoutError) as exc:
-            if self.cluster is not None:
-                self.cluster.close()
-            raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
-        self.workers = max(1, sum(self.client.nthreads().values()))
+            self._close_cluster()
+            raise InputError(f"no Dask scheduler answered at {address} ({exc}): is it the address of a "
+                             f"running Dask scheduler?", key="--scheduler") from None
+        self.workers = max(1, sum(nthreads.values()))
+        self._checked = 0.0
+        self._trouble_since: float | None = None
 
     def run(self, jobs, timeout=None, progress=None):
         try:
-            return _Window(self.workers, self._start, self._poll, self._stop).run(jobs, timeout, progress)
+            return _Window(self.workers, self._start, self._poll, self._stop, self._health).run(
+                jobs, timeout, progress)
         finally:
             self.close()
 
     def _start(self, job):
-        return self.client.submit(run_job, job, pure=False), time.perf_counter()
+        try:
+            return self.client.submit(run_job, job, pure=False), time.perf_counter()
+        except Exception as exc:             # a closed client: the scheduler is gone
+            return _Failed(f"{type(exc).__name__}: {exc}"), time.perf_counter()
 
     @staticmethod
     def _poll(handle, job):
         future, began = handle
+        if isinstance(future, _Failed):
+            return Outcome(job.mechanism.name, job.solver, LOST, time.perf_counter() - began,
+                           message=f"not submitted: {future.reason}")
         if not future.done():
             return None
         try:
-            return future.result()
-        except Exception as exc:          # the worker died, or could not unpickle the job
-            return Outcome(job.mechanism.name, job.solver, DIED if "Killed" in type(exc).__name__ else INTERNAL,
-                           time.perf_counter() - began, message=f"{type(exc).__name__}: {exc}")
+            return future.result(timeout=RPC_S)
+        except Exception as exc:          # the worker died, the scheduler went, or unpicklable
+            name = type(exc).__name__
+            status = DIED if "Killed" in name else LOST if _is_lost(exc) else INTERNAL
+            return Outcome(job.mechanism.name, job.solver, status, time.perf_counter() - began,
+                           message=f"{name}: {exc}")
 
     @staticmethod
     def _stop(handle):
-        handle[0].cancel()
+        future = handle[0]
+        if not isinstance(future, _Failed):
+            try:
+                future.cancel()
+            except Exception:
+                pass
+
+    def _health(self) -> str | None:
+        """None while the cluster can run jobs; the reason once it has had no worker, or no
+        reachable scheduler, for ``lost_after_s``."""
+        now = time.monotonic()
+        if now - self._checked < HEALTH_EVERY_S:
+            return None
+        trouble = None
+        if getattr(self.client, "status", "running") not in ("running", "connecting", "newly-created"):
+            # Dask has given up reconnecting already: no reason to wait any longer
+            return f"the Dask scheduler is gone (the client is {self.client.status})"
+        else:
+            try:
+                if not _bounded(self.client.nthreads, HEALTH_RPC_S):
+                    trouble = "the cluster has no worker"
+            except Exception as exc:
+                trouble = f"the scheduler does not answer ({type(exc).__name__}: {exc})"
+        self._checked = time.monotonic()
+        if trouble is None:
+            self._trouble_since = None
+            return None
+        if self._trouble_since is None:
+            self._trouble_since = now           # when the failed check began
+        if self._checked - self._trouble_since >= self.lost_after_s:
+            return f"{trouble} for {self.lost_after_s:g} s"
+        return None
 
     def close(self):
-        self.client.close()
+        try:
+            _bounded(lambda: self.client.close(timeout=5), 10)
+        except Exception:
+            pass                              # a scheduler already gone: nothing to close
+        self._close_cluster()
+
+    def _close_cluster(self):
         if self.cluster is not None:
-            self.cluster.close()
+            try:
+                _bounded(lambda: self.cluster.close(timeout=10), 15)
+            except Exception:
+                pass
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while worker processes are started: a disposition of SIG_IGN survives
+    fork and exec, and Python then installs no KeyboardInterrupt handler in the child, so
+    Ctrl-C in the terminal no longer prints a traceback from each Dask worker."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+class _Failed:
+    """A job that could not be submitted (its reason is reported as the job's outcome)."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
+
+
+def _is_lost(exc: BaseException) -> bool:
+    names = {t.__name__ for t in type(exc).__mro__}
+    return bool(names & {"CancelledError", "ClosedClientError", "CommClosedError", "FutureCancelledError",
+                         "TimeoutError", "OSError", "ConnectionError"})
+
+
+def _probe(address: str, host: str, port: int, seconds: float) -> None:
+    """A TCP connection to the scheduler's port, refused or unroutable in a few seconds
+    rather than after Dask's retries (an InputError naming the address)."""
+    try:
+        with socket.create_connection((host, port), timeout=seconds):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}", key="--scheduler") from None
 
 
 def make_runner(workers: int | None = None, scheduler: str | None = None) -> Runner:
