@@ -234,7 +234,7 @@ BAD = {
                         joint("j1")), "no moving link has an <inertial>"),
     "bad_rpy": (robot(link("l1"), joint("elbow", rpy="0 zero 0")), "joint[name=elbow].origin.rpy: 'zero' is not a number"),
     "short_rpy": (robot(link("l1"), joint("elbow", rpy="0 0")), "joint[name=elbow].origin.rpy: needs 3 number(s)"),
-    "mimic": (robot(link("l1"), joint("j1", extra='<mimic joint="x"/>')), "joint[name=j1].mimic: mimic joints are not supported"),
+    "mimic": (robot(link("l1"), joint("j1", extra='<mimic joint="x"/>')), "joint[name=j1].mimic.joint: joint 'x' is not a revolute"),
     "planar": (robot(link("l1"), joint("j1", "planar")), "planar joints are not supported"),
     "zero_axis": (robot(link("l1"), joint("j1", axis="0 0 0")), "joint[name=j1].axis.xyz: zero-length axis"),
     "two_roots": (robot(link("l1"), link("l2"), joint("j1")), "more than one root link"),

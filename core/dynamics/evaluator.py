@@ -42,12 +42,16 @@ def closure_structure(mechanism):
     n = len(mechanism.coordinates)
     names = list(mechanism.coordinates)
     if not mechanism.loops:
-        if mechanism.independent and sorted(mechanism.independent) != sorted(names):
-            raise InputError(f"a mechanism without loops has {n} degrees of freedom: every tree coordinate "
-                             f"is independent ({', '.join(names)}); omit coordinates.independent or list "
-                             f"them all", file=mechanism.path, key="coordinates.independent")
-        indep = tuple(names.index(c) for c in mechanism.independent) if mechanism.independent else tuple(range(n))
-        return ClosureStructure((), indep, (), 0, 0)
+        followers = [names.index(c.coordinate) for c in mechanism.couplings]
+        free = [c for i, c in enumerate(names) if i not in followers]
+        if mechanism.independent and sorted(mechanism.independent) != sorted(free):
+            raise InputError(f"a mechanism without loops has {len(free)} degrees of freedom: every tree "
+                             f"coordinate that follows no other is independent ({', '.join(free)}); omit "
+                             f"coordinates.independent or list them all", file=mechanism.path,
+                             key="coordinates.independent")
+        indep = tuple(names.index(c) for c in mechanism.independent) if mechanism.independent else \
+            tuple(names.index(c) for c in free)
+        return ClosureStructure((), indep, tuple(followers), 0, 0)
     kin = TreeKinematics(mechanism, Float64())
     _, rows, _ = kin.closure(kin.forward([0.0] * n))
     jac = np.array([[float(v) for v in row] for row in rows])
@@ -108,7 +112,7 @@ class Sample:
     def regressor(self):
         """K in the independent coordinates: f rows of 10 * bodies entries."""
         k_tree = codegen.regressor_rows(self.kin, self.q, self.qd, self.qdd, lambda: self.states)
-        if not self.kin.mechanism.loops:
+        if not self.kin.mechanism.loops and not self.kin.mechanism.couplings:
             return k_tree
         return project(self.projection, k_tree, self.kin.zero, codegen.regressor_columns(self.kin))
 
@@ -119,7 +123,7 @@ class Sample:
             k_tree = codegen.tree_regressor(mech, self.q, self.qd, self.qdd)
         else:
             k_tree = tree_regressor_array(self.kin, self.states, self.qdd)
-        if not self.kin.mechanism.loops:
+        if not self.kin.mechanism.loops and not self.kin.mechanism.couplings:
             return k_tree
         shape = k_tree.shape[:-2]
         r = np.stack([np.stack([np.broadcast_to(v, shape) for v in row], axis=-1) for row in self.projection],
@@ -202,6 +206,8 @@ class Evaluator:
         for value, i in zip(z, st.independent):
             q[i] = value
         if not self.mechanism.loops:
+            for i, leader, ratio, offset in self._couplings():
+                q[i] = ratio * q[leader] + offset
             return q
         if self.backend.exact:
             raise KinematicsError("exact and symbolic arithmetic cannot solve loop closure; "
@@ -436,10 +442,19 @@ class Evaluator:
         zero, one = self.kin.zero, self.kin.one
         st = self.structure
         qd, qdd = [zero] * self.n, [zero] * self.n
-        r = [[zero] * len(st.independent) for _ in range(self.n)]    # a permutation
+        r = [[zero] * len(st.independent) for _ in range(self.n)]    # a permutation (and couplings)
         for j, i in enumerate(st.independent):
             qd[i], qdd[i], r[i][j] = zd[j], zdd[j], one
+        for i, leader, ratio, _ in self._couplings():
+            qd[i], qdd[i] = ratio * qd[leader], ratio * qdd[leader]
+            r[i] = [ratio * v for v in r[leader]]
         return Sample(q, qd, qdd, self.kin.forward(q, qd), r, self.kin)
+
+    def _couplings(self):
+        """(coordinate index, leader index, ratio, offset) in this backend, per coupling."""
+        names = list(self.mechanism.coordinates)
+        return [(names.index(c.coordinate), names.index(c.leader), self.backend.rational(c.ratio),
+                 self.backend.rational(c.offset)) for c in self.mechanism.couplings]
 
     def _closed_sample(self, q, zd, zdd, where):
         """qd = R zd with R = [I; -Phi_d^-1 Phi_z]; qdd = R zdd - [0; Phi_d^-1 gamma]."""

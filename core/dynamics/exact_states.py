@@ -44,6 +44,14 @@ def check_exact_possible(mechanism):
             f"{len(mechanism.loops)} closed loop(s): loop closure makes the dependent coordinates "
             f"irrational; use --solver vp (certified ball arithmetic) instead",
             file=mechanism.path)
+    for coupling in mechanism.couplings:
+        joint = mechanism.joint_of_coordinate(coupling.coordinate)
+        if "angle" in joint.type.coordinate_kinds:
+            raise InputError(
+                f"the exact solver evaluates angles as rational points of the circle, and "
+                f"{coupling.coordinate} = {coupling.ratio} {coupling.leader} + {coupling.offset} is not one "
+                f"of them in general; use --solver vp (certified ball arithmetic) instead",
+                file=mechanism.path)
 
 
 def _random_state(rng, mechanism, names, kinds):

@@ -93,6 +93,9 @@ SCHEMA = Table({
         "t_start": (VALUE, False), "t_end": (VALUE, False), "samples": (INTEGER, False),
         "q": (Map(VALUE), True),
     }), False),
+    "couplings": (ArrayOfTables(Table({
+        "coordinate": (STRING, True), "leader": (STRING, True), "ratio": (VALUE, False), "offset": (VALUE, False),
+    })), False),
     "motors": (ArrayOfTables(Table({
         "name": (STRING, True), "ratios": (Map(VALUE), True),
     })), False),

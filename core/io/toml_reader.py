@@ -104,6 +104,9 @@ class _Walker:
             b.trajectory(trajectory["q"], t_start=trajectory.get("t_start", 0),
                          t_end=trajectory.get("t_end", 10), samples=trajectory.get("samples", 200),
                          key="trajectory")
+        for i, coupling in enumerate(data.get("couplings", [])):
+            b.coupling(coupling["coordinate"], coupling["leader"], coupling.get("ratio", 1),
+                       coupling.get("offset", 0), key=f"couplings[{i}]")
         for i, motor in enumerate(data.get("motors", [])):
             b.motor(motor["name"], motor["ratios"], key=f"motors[{i}]")
         for i, effect in enumerate(data.get("effects", [])):

@@ -40,7 +40,7 @@ from baseparams.model.expressions import ExpressionError, parse_decimal, parse_e
 from baseparams.model.expressions import NON_FINITE
 from baseparams.model.consistency import check_body
 from baseparams.model.joints import JointType
-from baseparams.model.mechanism import (MAX_SAMPLES, Body, EffectSpec, Frame, Joint, Mechanism, Motor,
+from baseparams.model.mechanism import (MAX_SAMPLES, Body, Coupling, EffectSpec, Frame, Joint, Mechanism, Motor,
                                         TrajectorySpec, TreeEdge)
 from baseparams.model.params import PARAMETER_KINDS, from_mass_properties
 
@@ -91,6 +91,7 @@ class MechanismBuilder:
         self._trajectory: tuple[TrajectorySpec, str] | None = None
         self._effects: list[tuple[EffectSpec, str]] = []
         self._motors: list[tuple[Motor, str]] = []
+        self._couplings: list[tuple[Coupling, str]] = []
         self._warnings: list[str] = []
 
     # ----- errors and values ---------------------------------------------------------
@@ -409,6 +410,27 @@ class MechanismBuilder:
         self._motors.append((motor, key))
         return motor
 
+    def coupling(self, coordinate: str, leader: str, ratio: Value = 1, offset: Value = 0, *,
+                 key: str | None = None) -> Coupling:
+        """``coordinate = ratio * leader + offset``: a joint coordinate that follows another
+        (a gear train between joints, URDF ``<mimic>``); it is then not independent. Only on
+        mechanisms without closed loops. Coordinates are checked by :meth:`build`."""
+        key = key or f"couplings[{len(self._couplings)}]"
+        for field, name in (("coordinate", coordinate), ("leader", leader)):
+            if not isinstance(name, str):
+                raise self.error(f"{key}.{field}", "required: a joint coordinate name")
+        if coordinate == leader:
+            raise self.error(f"{key}.leader", "a coordinate cannot follow itself")
+        if any(c.coordinate == coordinate for c, _ in self._couplings):
+            raise self.error(f"{key}.coordinate", f"{coordinate!r} already follows another coordinate")
+        value = self.rational(ratio, f"{key}.ratio")
+        if value == 0:
+            raise self.error(f"{key}.ratio", "a ratio of 0 would hold the coordinate fixed: make the joint "
+                             "fixed instead")
+        coupling = Coupling(coordinate, leader, value, self.rational(offset, f"{key}.offset"))
+        self._couplings.append((coupling, key))
+        return coupling
+
     # ----- the whole -----------------------------------------------------------------
     def build(self) -> Mechanism:
         """Check the whole and return the Mechanism (the builder may be built again)."""
@@ -419,7 +441,8 @@ class MechanismBuilder:
         bodies = sorted(self._bodies, key=lambda body: body.label)
         tree, loops = self._spanning_tree(bodies)
         coordinates = tuple(c for edge in tree for c in edge.joint.coordinates)
-        independent = self._checked_independent(coordinates, loops)
+        couplings = self._checked_couplings(coordinates, loops)
+        independent = self._checked_independent(coordinates, loops, couplings)
         trajectory = self._checked_trajectory(independent or coordinates)
         gruebler = 6 * len(bodies) - sum(6 - j.type.dof for j in self._joints)
         for motor, key in self._motors:
@@ -441,7 +464,8 @@ class MechanismBuilder:
             geometry=dict(self._geometry), gravity=self._gravity, trajectory=trajectory,
             title=self.title, description=self.description, source=self.source, path=self.path,
             gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects),
-            warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors))
+            warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors),
+            couplings=couplings)
 
     def _spanning_tree(self, bodies):
         """Joints in declaration order; one joining two placed bodies closes a loop."""
@@ -471,15 +495,35 @@ class MechanismBuilder:
         loops.extend(j for j in self._joints if j.loop)
         return tree, loops
 
-    def _checked_independent(self, coordinates, loops):
+    def _checked_couplings(self, coordinates, loops):
+        followers = {c.coordinate for c, _ in self._couplings}
+        for coupling, key in self._couplings:
+            if loops:
+                raise self.error(key, "couplings between joint coordinates are supported on mechanisms "
+                                 "without closed loops only")
+            for field in ("coordinate", "leader"):
+                name = getattr(coupling, field)
+                if name not in coordinates:
+                    raise self.error(f"{key}.{field}", f"{name!r} is not a tree coordinate (tree coordinates: "
+                                     f"{', '.join(coordinates)})")
+            if coupling.leader in followers:
+                raise self.error(f"{key}.leader", f"{coupling.leader!r} follows another coordinate itself: "
+                                 "name the coordinate it follows (chains of couplings are not read)")
+        return tuple(c for c, _ in self._couplings)
+
+    def _checked_independent(self, coordinates, loops, couplings=()):
+        followers = {c.coordinate for c in couplings}
         if self._independent is None:
-            return () if loops else tuple(coordinates)
+            return () if loops else tuple(c for c in coordinates if c not in followers)
         names, key = self._independent
         for c in names:
             if c not in coordinates:
                 raise self.error(key, f"{c!r} is not a tree coordinate (tree coordinates: {', '.join(coordinates)})")
         if len(set(names)) != len(names):
             raise self.error(key, "repeated coordinate")
+        if couplings and set(names) != {c for c in coordinates if c not in followers}:
+            raise self.error(key, f"with couplings the independent coordinates are the tree coordinates "
+                             f"that follow no other: {', '.join(c for c in coordinates if c not in followers)}")
         return names
 
     def _checked_trajectory(self, independent):

@@ -323,6 +323,28 @@ def _open(name, draw, parents, types, spherical, irrational, zero_offset, sample
     return "\n".join(out)
 
 
+def coupled_chain(seed: int, bodies: int | None = None, max_bodies: int = 6, types: str = "RP",
+                  samples: int = 100) -> str:
+    """A random serial chain (as :func:`serial_chain`) in which one coordinate follows an
+    earlier one of the same kind: ``[[couplings]]`` with a random nonzero rational ratio and
+    offset (a gear train between joints, URDF ``<mimic>``); its trajectory expression is
+    left out (it is not independent)."""
+    text = serial_chain(seed, bodies=bodies or None, max_bodies=max_bodies, types=types, samples=samples)
+    draw = _Draw(f"coupling:{seed}")
+    kinds = re.findall(r'type = "([RP])"\nparent = \d+\nchild = (\d+)', text)
+    pairs = [(f"q{b}", f"q{a}") for i, (kind_b, b) in enumerate(kinds) for kind_a, a in kinds[:i]
+             if kind_a == kind_b]
+    if not pairs:
+        raise ValueError(f"chain {seed} has no two coordinates of one kind to couple")
+    follower, leader = draw.rng.choice(pairs)
+    text = re.sub(rf'(, )?{follower} = "[^"]*"(, )?', lambda m: ", " if m.group(1) and m.group(2) else "", text)
+    ratio = draw.sign() * draw.decimal(0.3, 3, 1)
+    offset = draw.decimal(-0.2, 0.2, 2)
+    return (text.replace(f'name = "gen_chain_{seed}"', f'name = "gen_coupled_{seed}"')
+            + f'\n[[couplings]]\ncoordinate = "{follower}"\nleader = "{leader}"\n'
+              f'ratio = "{exact_text(ratio)}"\noffset = "{exact_text(offset)}"\n')
+
+
 # ----- a closed loop ------------------------------------------------------------------------
 def _unit_2d(draw):
     """A rational unit vector of the plane (a Pythagorean direction, or an axis)."""

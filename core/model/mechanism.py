@@ -94,6 +94,17 @@ class Motor:
     ratios: tuple                     # ((coordinate, Fraction), ...), file order
 
 
+@dataclass(frozen=True)
+class Coupling:
+    """A joint coordinate that follows another linearly, ``coordinate = ratio * leader +
+    offset`` (a gear train between two joints, URDF's ``<mimic>``): it is not independent,
+    and its velocity and acceleration are the leader's times ``ratio``."""
+    coordinate: str
+    leader: str
+    ratio: Fraction
+    offset: Fraction = Fraction(0)
+
+
 @dataclass(frozen=True, eq=False)
 class Mechanism:
     name: str
@@ -114,6 +125,7 @@ class Mechanism:
     effects: tuple = ()               # EffectSpec, file order
     warnings: tuple = ()              # remarks on the input that did not stop the build (text)
     motors: tuple = ()                # Motor, file order: the drive chain (may be empty)
+    couplings: tuple = ()             # Coupling, file order: coordinates following another
 
     # ----- names and counts -------------------------------------------------
     @property

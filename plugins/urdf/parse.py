@@ -45,6 +45,7 @@ class UrdfJoint:
     limits: tuple | None = None       # (lower, upper) Decimals
     damping: Decimal | None = None
     friction: Decimal | None = None
+    mimic: tuple | None = None        # (leader joint name, multiplier, offset) Decimals
 
 
 @dataclass
@@ -183,10 +184,6 @@ class _Parser:
         if jtype == "planar":
             raise self.error(f"{key}.type", "planar joints are not supported (docs/urdf.md): model the "
                              "plane motion as two prismatic joints and a revolute one through massless links")
-        if elem.find("mimic") is not None:
-            raise self.error(f"{key}.mimic", "mimic joints are not supported (docs/urdf.md): a mimic joint "
-                             "couples two coordinates, which baseparams has no constraint for; remove "
-                             "<mimic> to let the joint move on its own, or make it fixed")
         ends = []
         for end in ("parent", "child"):
             sub = elem.find(end)
@@ -209,6 +206,15 @@ class _Parser:
                 joint.axis = axis
             else:
                 joint.axis = (Fraction(1), Fraction(0), Fraction(0))      # the URDF default
+        mimic = elem.find("mimic")
+        if mimic is not None:
+            if jtype not in ("revolute", "continuous", "prismatic"):
+                raise self.error(f"{key}.mimic", f"a {jtype} joint cannot mimic another")
+            leader = mimic.get("joint")
+            if not leader:
+                raise self.error(f"{key}.mimic.joint", "missing (required)")
+            joint.mimic = (leader, self.number(mimic, "multiplier", f"{key}.mimic", Decimal(1)),
+                           self.number(mimic, "offset", f"{key}.mimic", Decimal(0)))
         limit = elem.find("limit")
         if jtype in ("revolute", "prismatic") and limit is not None:
             lo = self.number(limit, "lower", f"{key}.limit", Decimal(0))
@@ -289,6 +295,11 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
                           f"({parent_of[joint.child].name}): URDF is a tree (closed loops are not URDF)")
         parent_of[joint.child] = joint
         joints.append(joint)
+    moving = {j.name for j in joints if j.type in ("revolute", "continuous", "prismatic")}
+    for j in joints:
+        if j.mimic is not None and j.mimic[0] not in moving:
+            raise p.error(f"{j.key}.mimic.joint", f"joint {j.mimic[0]!r} is not a revolute, continuous or "
+                          "prismatic joint of this robot: a mimic joint follows one")
     roots = [name for name in links if name not in parent_of]
     if not roots:
         raise p.error("robot", f"the joints form a cycle: {_cycle(links, parent_of)}")

@@ -16,6 +16,7 @@ works on a bare URDF.
 import random
 import re
 from dataclasses import dataclass
+from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
 
@@ -127,11 +128,45 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
         motions.append((joint, jtype, j.limits))
         if jtype in ("R", "P"):
             names[j.name] = cname
+    followers = _couplings(b, joints, names)
     _motors(b, urdf.transmissions, names, used, notes)
+    motions = [(joint, jtype, _leader_limits(joint, limits, joints, names, followers))
+               for joint, jtype, limits in motions if not set(joint.coordinates) & followers]
     b.trajectory(default_trajectory(urdf.robot, motions), t_start=0, t_end=T_END, samples=SAMPLES,
                  key="trajectory")
     mech = b.build()
     return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed)
+
+
+def _couplings(b, joints, names) -> set[str]:
+    """``<mimic>`` joints as couplings: the coordinate = multiplier * the leader's + offset."""
+    followers = set()
+    for j in joints:
+        if j.mimic is None:
+            continue
+        leader, multiplier, offset = j.mimic
+        if leader not in names:
+            raise InputError(f"joint {leader!r} is not a moving joint of the model", file=b.path,
+                             key=f"{j.key}.mimic.joint")
+        b.coupling(names[j.name], names[leader], multiplier, offset, key=f"{j.key}.mimic")
+        followers.add(names[j.name])
+    return followers
+
+
+def _leader_limits(joint, limits, joints, names, followers):
+    """The leader's range for the default trajectory, narrowed so that every joint mimicking it
+    stays inside its own limits (follower = multiplier * leader + offset)."""
+    if not followers:
+        return limits
+    lo, hi = (Decimal(limits[0]), Decimal(limits[1])) if limits is not None else (None, None)
+    for j in joints:
+        if j.mimic is None or j.limits is None or names.get(j.mimic[0]) not in joint.coordinates:
+            continue
+        _, multiplier, offset = j.mimic
+        ends = sorted(((j.limits[0] - offset) / multiplier, (j.limits[1] - offset) / multiplier))
+        lo = ends[0] if lo is None else max(lo, ends[0])
+        hi = ends[1] if hi is None else min(hi, ends[1])
+    return (lo, hi) if lo is not None and hi is not None and lo < hi else limits
 
 
 def motor_ratios(transmission) -> list[tuple[str, dict]] | str:

@@ -30,8 +30,14 @@ class SymbolicSolver:
     )
 
     def applicable(self, mechanism):
-        """Any mechanism: a joint type without transfer rules makes the rank an upper bound,
-        which the result says."""
+        """Any mechanism without couplings between joint coordinates: a joint type without
+        transfer rules makes the rank an upper bound, which the result says. A coupled joint
+        moves with its leader, so the per-joint transfer rules (which assume every joint
+        free) do not describe it."""
+        if mechanism.couplings:
+            names = ", ".join(f"{c.coordinate} follows {c.leader}" for c in mechanism.couplings)
+            return (f"the transfer rules assume every joint moves freely, and {names}: use --solver vp "
+                    "(certified) instead")
         return None
 
     def solve(self, mechanism, progress=None, **options):
