@@ -60,3 +60,28 @@ def raised_warning(mechanism: Mechanism, before: int, after: int, states: int,
     return (f"{cause}: rank raised from {before} to {after} by an independent random batch ({states} "
             f"random positions, velocities and accelerations), analysed together with W; use more "
             f"samples or a richer trajectory" + (", or vp" if double_precision else ""))
+
+
+# ----- estimates of long work ----------------------------------------------------------------
+def size_text(n: float) -> str:
+    """Bytes in GiB or MiB, as the memory-limit messages word them."""
+    n = max(n, 1024 ** 2)           # "about 1 MiB" for anything small
+    return f"{n / 1024 ** 3:.1f} GiB" if n >= 1024 ** 3 else f"{n / 1024 ** 2:.0f} MiB"
+
+
+def seconds_text(s: float) -> str:
+    s = max(s, 1.0)
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min" if s < 7200 else f"{s / 3600:.1f} h"
+
+
+def check_memory(need: float, what: str, advice: str, file: str | None = None, key: str | None = None) -> None:
+    """Refuse (InputError) work whose estimated memory ``need`` exceeds the budget that
+    ``BASEPARAMS_MAX_MEMORY`` sets (the same limit the float64 stage uses), before it is
+    allocated: the process would otherwise grow for minutes and be killed by the system."""
+    from baseparams.dynamics.trajectory import MEMORY_VARIABLE, memory_limit
+    from baseparams.errors import InputError
+    limit = memory_limit()
+    if need > limit:
+        raise InputError(f"{what} needs about {size_text(need)} of memory, above the limit of {size_text(limit)}: "
+                         f"{advice}, or raise the limit with the environment variable {MEMORY_VARIABLE} "
+                         f"(e.g. {MEMORY_VARIABLE}=16G)", file=file, key=key)

@@ -11,9 +11,24 @@ from baseparams.model.expressions import exact_text
 from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
                                          check_options, require_applicable)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
-from baseparams.solvers.support import base_rows, exact_coefficients, say
+from baseparams.solvers.support import (base_rows, check_memory, exact_coefficients, say, seconds_text,
+                                        size_text)
 
 EXACT_ROUNDS = 6           # independent batches before the rank is declared unsettled
+
+
+BYTES_PER_ENTRY = 64        # + PER_BODY_BYTES x bodies: rationals grow with the chain's depth
+PER_BODY_BYTES = 32         # (measured: pendulum ~100 B, 6-body chain ~250 B an entry)
+SECONDS_PER_STATE = 7e-5    # x bodies^2 (measured: pendulum 0.07 ms, 6-body chain 2.8 ms a state)
+
+
+def exact_cost(mechanism, states: int) -> tuple[float, float]:
+    """(bytes, seconds) that W over the rationals at ``states`` states should take: printed
+    up front, and the bytes checked against BASEPARAMS_MAX_MEMORY before any is spent."""
+    f = max(1, len(mechanism.independent or mechanism.coordinates))
+    bodies = max(1, len(mechanism.bodies))
+    entries = states * f * len(mechanism.parameters)
+    return entries * (BYTES_PER_ENTRY + PER_BODY_BYTES * bodies), states * SECONDS_PER_STATE * bodies ** 2
 
 
 class ExactSolver:
@@ -55,7 +70,11 @@ class ExactSolver:
         n = len(params)
         count = samples or max(4, math.ceil(1.5 * n / f))
         per_batch = max(2, math.ceil(n / f))          # each check batch: at least n rows
-        say(progress, f"exact: W at {count} random rational states")
+        need, seconds = exact_cost(mechanism, count + per_batch)
+        check_memory(need, f"exact: W over the rationals at {count:,} states ({count * f:,} x {n})",
+                     "use fewer samples (--samples or -O samples)", file=mechanism.path)
+        say(progress, f"exact: W at {count} random rational states ({count * f:,} x {n}): about "
+                      f"{size_text(need)} of memory and {seconds_text(seconds)}")
         W = exact_observation_matrix(mechanism, count, seed=seed)
         first = rank = W.rank()
         batches, settled = 0, False

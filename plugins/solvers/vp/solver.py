@@ -26,7 +26,9 @@ from baseparams.numeric.backends import Arb
 from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
                                          check_options, last_parameter_index, require_applicable)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
-from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
+from baseparams.dynamics.trajectory import memory_limit
+from baseparams.solvers.support import (base_rows, check_memory, decimal_coefficients, raised_warning, say,
+                                        size_text, untrusted_warning)
 
 RIDGE_DECADES = 3          # a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
 MIN_DIGITS = 10            # coefficients must agree to 10 digits between two precisions
@@ -39,6 +41,16 @@ MAX_ROWS_PER_PARAMETER = 6
 MIN_SAMPLES = 10
 KEPT_RIDGE_DECADES = 1     # imposed kept columns with less than this ridge after them do not span W
 MIN_WORKING_DIGITS = 10    # fewer digits cannot give the 10 agreeing digits (MIN_DIGITS) asked for
+
+
+BALL_ENTRY_BYTES = 400      # + the digits: one entry of W in balls, with the analysis' share
+                           # (measured: chains of 20 and 40 bodies at 30 and 60 digits, 5-15 % above)
+
+
+def ball_bytes(rows: int, cols: int, steps) -> float:
+    """Memory of W in balls at each precision of ``steps`` (every run's W is kept until the
+    result: the last two are compared): checked against BASEPARAMS_MAX_MEMORY up front."""
+    return rows * cols * sum(BALL_ENTRY_BYTES + d for d in steps)
 
 
 def default_samples(mechanism):
@@ -292,6 +304,15 @@ class VariablePrecisionSolver:
         params = mechanism.parameters
         warnings, notes = [], []
         steps = [int(digits)] if digits else [int(d) for d in ladder]
+        rows, cols = len(trajectory.times) * max(1, len(mechanism.independent) or len(mechanism.coordinates)), len(params)
+        first = steps[:2]          # the least the ladder needs: two precisions that agree
+        check_memory(ball_bytes(rows, cols, first), f"vp: W ({rows:,} x {cols}) in balls at "
+                     f"{', '.join(map(str, first))} digits", "use fewer samples (--samples or -O samples), "
+                     "or fix the precision (--digits)", file=mechanism.path)
+        say(progress, f"vp: W is {rows:,} x {cols}: about {size_text(ball_bytes(rows, cols, first))} of memory "
+                      f"at {', '.join(map(str, first))} digits"
+                      + (f", up to {size_text(ball_bytes(rows, cols, steps))} if the ladder climbs to "
+                         f"{steps[-1]}" if len(steps) > 2 else ""))
         batches, checks = [], []
         for round_ in range(CHECK_ROUNDS + 1):
             try:
@@ -414,7 +435,14 @@ class VariablePrecisionSolver:
         """W at each precision of ``steps`` until two consecutive ones agree:
         (runs, accepted, agreement digits, reasons)."""
         runs, accepted, agreement, reasons = [], False, None, []
-        for D in steps:
+        rows = len(trajectory.times) * max(1, len(mechanism.independent) or len(mechanism.coordinates))
+        rows += sum(b.states for b in batches) * max(1, len(mechanism.independent) or len(mechanism.coordinates))
+        for k, D in enumerate(steps):
+            need = ball_bytes(rows, len(mechanism.parameters), steps[:k + 1])
+            if k >= 2 and need > memory_limit():
+                reasons = reasons + [f"the next precision ({D} digits) would need about {size_text(need)}, above "
+                                     f"the memory limit {size_text(memory_limit())} (BASEPARAMS_MAX_MEMORY)"]
+                break
             say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples"
                            + (f" + {sum(b.states for b in batches)} random states" if batches else "") + ")")
             run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress,
