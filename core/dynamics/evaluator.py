@@ -45,8 +45,9 @@ def closure_structure(mechanism):
         followers = [names.index(c.coordinate) for c in mechanism.couplings]
         free = [c for i, c in enumerate(names) if i not in followers]
         if mechanism.independent and sorted(mechanism.independent) != sorted(free):
+            which = "that follows no other " if followers else ""
             raise InputError(f"a mechanism without loops has {len(free)} degrees of freedom: every tree "
-                             f"coordinate that follows no other is independent ({', '.join(free)}); omit "
+                             f"coordinate {which}is independent ({', '.join(free)}); omit "
                              f"coordinates.independent or list them all", file=mechanism.path,
                              key="coordinates.independent")
         indep = tuple(names.index(c) for c in mechanism.independent) if mechanism.independent else \
