@@ -503,3 +503,90 @@ def run_case(case: Case, command: str, directory: Path, timeout: float = 20.0) -
     stopped = proc.returncode in (-signal.SIGXCPU, -signal.SIGKILL)
     return Outcome(case, command, None if stopped else proc.returncode,
                    proc.stderr.decode("utf-8", "replace"), elapsed)
+
+
+# ----- bad command-line values: solver options, output targets, scheduler addresses ---------
+# (issue 24). Each is a full argument list for `baseparams` with what a correct program must
+# do: "invalid" (exit 2, one `error:` line), "valid" (exit 0) or "any" (0 or 2); never a
+# traceback, another exit code, or a result from a degenerate setting.
+
+INT_VALUES = {"-1": "invalid", "1_0": "invalid", "\u0663": "invalid", "\uff11\uff10": "invalid",
+              "nan": "invalid", "": "invalid", "true": "invalid", "9" * 50: "invalid", "1e3": "invalid",
+              "2147483648000": "invalid", "0x10": "invalid", " 12 ": "any", "0": None}
+INT_LIST_VALUES = {"": "invalid", "0": "invalid", "-5,30": "invalid", "30,10000000": "invalid",
+                   "a,b": "invalid", "30,30": "invalid", "1_0,20": "invalid"}
+BOOL_VALUES = {"maybe": "invalid", "2": "invalid", "": "invalid", "TRUE": "valid"}
+CHOICE_VALUES = {"sideways": "invalid", "": "invalid", "NATURAL": "invalid"}
+NAME_LIST_VALUES = {"zz": "invalid", "1": "invalid", "m1;Izz1": "invalid"}
+OPTION_TYPES = {  # solver -> option -> kind (the declarations, written out: the corpus must
+    "dp": {"samples": "int", "rank": "int", "seed": "seed", "digits": "int", "scale": "bool"},
+    "vp": {"digits": "int", "samples": "int", "seed": "seed", "ladder": "ints", "kept": "ints",
+           "pivoting": "choice", "recover": "bool"},
+    "exact": {"samples": "int", "seed": "seed", "digits": "int"},
+    "symbolic": {"digits": "int", "samples": "int", "seed": "seed", "keep": "names",
+                 "eliminate_first": "names", "certify": "bool"},
+}                 # not read them, or a wrong range would agree with itself)
+
+
+@dataclass(frozen=True)
+class CommandCase:
+    name: str
+    args: tuple
+    expect: str               # "invalid" | "valid" | "any"
+
+
+def option_cases(mechanism: str = "pendulum") -> list:
+    """Every built-in solver's every option with values of the wrong form or range."""
+    cases = []
+    for solver, options in OPTION_TYPES.items():
+        for option, kind in options.items():
+            values = {"int": INT_VALUES, "seed": INT_VALUES, "ints": INT_LIST_VALUES, "bool": BOOL_VALUES,
+                      "choice": CHOICE_VALUES, "names": NAME_LIST_VALUES}[kind]
+            for k, (value, expect) in enumerate(values.items()):
+                if expect is None:           # "0": a valid seed, below every other range
+                    expect = "valid" if kind == "seed" else "invalid"
+                # " 12 " (spaces trimmed): 12 digits or samples are fine, a rank of 12 on 10
+                # parameters is not: "any" covers both; no traceback either way
+                args = ("solve", mechanism, "--solver", solver, "-O", f"{option}={value}", "--format", "json")
+                cases.append(CommandCase(f"option.{solver}.{option}.{k}", args, expect))
+    cases += [
+        CommandCase("option.dp.rank_above_rows", ("solve", mechanism, "--solver", "dp", "-O", "rank=3",
+                                                  "-O", "samples=2"), "invalid"),
+        CommandCase("option.vp.kept_too_few", ("solve", mechanism, "--solver", "vp", "-O", "kept=1",
+                                               "-O", "ladder=30,60"), "invalid"),
+        CommandCase("option.vp.kept_dependent", ("solve", mechanism, "--solver", "vp", "-O", "kept=0,1,2,3"),
+                    "invalid"),
+        CommandCase("option.digits_and_O", ("solve", mechanism, "--solver", "vp", "--digits", "30", "-O",
+                                            "digits=40"), "invalid"),
+    ]
+    return cases
+
+
+def output_cases(folder: str) -> list:
+    """Output targets every writing verb must refuse cleanly (exit 2), or write."""
+    writers = [("report", "pendulum", "--no-certify", "-o"), ("export", "pendulum", "--to", "python", "-o"),
+               ("convert", "pendulum", "-o"), ("plot", "mechanism", "pendulum", "-o")]
+    targets = {"empty": ("", "invalid"), "folder": (folder, "invalid"),
+               "missing_folder": (f"{folder}/missing/out", "invalid"),
+               "long_name": (f"{folder}/{'x' * 300}", "invalid"),
+               "under_a_file": (f"{folder}/file.txt/out", "invalid"),
+               "dev_full": ("/dev/full", "invalid")}
+    cases = []
+    for verb in writers:
+        for label, (target, expect) in targets.items():
+            suffix = {"convert": ".toml", "plot": ".png"}.get(verb[0], ".txt")
+            path = target + suffix if target and label not in ("folder", "dev_full") else target
+            if verb[0] == "convert" and label == "dev_full":
+                path = target                # no suffix: "no writer" (exit 2) as well
+            cases.append(CommandCase(f"output.{verb[0]}.{label}", (*verb, path), expect))
+    return cases
+
+
+SCHEDULER_ADDRESSES = ["not a url", "http://127.0.0.1:8786", "tcp://127.0.0.1", "tcp://127.0.0.1:0",
+                       "tcp://127.0.0.1:99999", "tcp://:8786", "", "127.0.0.1", "tcp://a b:1", "\u0663:1"]
+
+
+def scheduler_cases() -> list:
+    """Addresses refused before any connection is tried (so no network is used)."""
+    return [CommandCase(f"scheduler.{k}", ("validate", "pendulum", "--scheduler", a, "--quiet"), "invalid")
+            for k, a in enumerate(SCHEDULER_ADDRESSES)]

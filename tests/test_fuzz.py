@@ -18,6 +18,7 @@ import json
 import re
 import time
 import tomllib
+from pathlib import Path
 from concurrent.futures import ThreadPoolExecutor
 from decimal import Decimal
 
@@ -221,3 +222,60 @@ def test_the_json_schema_agrees_with_the_validator():
         assert ours == theirs, (case.name, case.detail)
         seen[ours] += 1
     assert seen[True] > 40 and seen[False] > 20, seen
+
+
+# ----- bad command-line values (issue 24): options, output targets, scheduler addresses ---------
+# In process (CliRunner: no interpreter start-up), so all ~240 cases take seconds; an exception
+# other than SystemExit is a traceback the real command line would print.
+
+def _run_command_case(case, env=None):
+    from click.testing import CliRunner
+    from baseparams.cli.commands import main
+    start = time.perf_counter()
+    result = CliRunner(env=env).invoke(main, list(case.args))
+    seconds = time.perf_counter() - start
+    assert result.exception is None or isinstance(result.exception, SystemExit), \
+        f"{case.name}: {type(result.exception).__name__}: {result.exception}"
+    assert result.exit_code in (0, 2), f"{case.name}: exit {result.exit_code}: {result.output[-300:]}"
+    assert "Traceback" not in result.output and "internal error" not in result.output, case.name
+    if case.expect == "invalid":
+        assert result.exit_code == 2, f"{case.name}: accepted: {result.stdout[:200]}"
+    if case.expect == "valid":
+        assert result.exit_code == 0, f"{case.name}: {result.stderr[-300:]}"
+    if result.exit_code == 2:
+        last = [line for line in result.stderr.splitlines() if line.strip()][-1]
+        assert last.startswith(("error: ", "Error: ")) and "\n" not in last, (case.name, result.stderr)
+        assert result.stdout == "", f"{case.name}: a refused run printed a result"
+    assert seconds < 60, (case.name, seconds)
+
+
+OPTION_CASES = fuzz_corpus.option_cases()
+
+
+@pytest.mark.parametrize("case", OPTION_CASES, ids=[c.name for c in OPTION_CASES])
+def test_a_bad_option_value_is_refused_never_crashes(case):
+    _run_command_case(case)
+
+
+def test_the_option_corpus_covers_every_declared_option():
+    from baseparams import registry
+    for name, options in fuzz_corpus.OPTION_TYPES.items():
+        assert set(options) == {o.name for o in registry.solvers()[name].item.options}, name
+    assert len(OPTION_CASES) >= 200
+
+
+@pytest.mark.parametrize("case", fuzz_corpus.output_cases("{folder}"),
+                         ids=[c.name for c in fuzz_corpus.output_cases("{folder}")])
+def test_a_bad_output_target_is_refused_never_crashes(case, tmp_path):
+    (tmp_path / "file.txt").write_text("a file, not a folder\n")
+    case = fuzz_corpus.CommandCase(case.name, tuple(a.replace("{folder}", str(tmp_path)) for a in case.args),
+                                   case.expect)
+    if "/dev/full" in case.args and not Path("/dev/full").exists():
+        pytest.skip("no /dev/full")
+    _run_command_case(case)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt"]        # nothing half-written
+
+
+@pytest.mark.parametrize("case", fuzz_corpus.scheduler_cases(), ids=[c.name for c in fuzz_corpus.scheduler_cases()])
+def test_a_bad_scheduler_address_is_refused_before_any_connection(case):
+    _run_command_case(case)

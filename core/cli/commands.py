@@ -553,7 +553,7 @@ def report(mech, solver_name, fmt, keep, first, no_certify, output):
     if result.diagnostics.derivation is None:
         raise UserError(f"solver {solver_name!r} declares a derivation but its result has none")
     text = render(result, fmt)
-    if output:
+    if output is not None:                  # -o "" is a bad file name, not standard output
         from baseparams.io.atomic import atomic_write
         atomic_write(output, text, what="the report")     # a full disk keeps the old file whole
         click.echo(f"wrote {output}")

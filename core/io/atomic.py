@@ -13,6 +13,7 @@ Every failure is a :class:`~baseparams.errors.InputError` ``<file>: cannot write
 """
 
 import contextlib
+import errno
 import os
 import secrets
 import stat
@@ -44,7 +45,7 @@ def atomic_write(path: str | os.PathLike, data: str | bytes, what: str = "") -> 
     ``what`` names the content in the error ("the report": ``cannot write the report: ...``).
     """
     payload = data.encode("utf-8") if isinstance(data, str) else bytes(data)
-    if is_device(path):
+    if os.fspath(path) and "\0" not in os.fspath(path) and is_device(path):
         _write_in_place(path, payload, what)
         return
     with atomic_path(path, what) as temporary:
@@ -69,6 +70,8 @@ def atomic_path(path: str | os.PathLike, what: str = "") -> Iterator[Path]:
 
     An OSError inside the block becomes ``InputError("cannot write: ...")``.
     """
+    if not os.fspath(path) or "\0" in os.fspath(path):
+        raise InputError(f"cannot write{_what(what)}: not a file name", file=repr(os.fspath(path)))
     target = Path(path)
     if is_device(target):
         try:
@@ -76,7 +79,13 @@ def atomic_path(path: str | os.PathLike, what: str = "") -> Iterator[Path]:
         except OSError as exc:
             raise _error(target, what, exc) from None
         return
-    if target.is_dir():
+    try:
+        folder = stat.S_ISDIR(os.stat(target).st_mode)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOENT,):        # a name too long, a file used as a folder ...
+            raise _error(target, what, exc) from None
+        folder = False
+    if folder:
         raise InputError(f"cannot write{_what(what)}: it is a folder", file=target)
     temporary = _create_temporary(target, what)
     try:
@@ -111,7 +120,8 @@ def _create_temporary(target: Path, what: str) -> Path:
     except OSError:
         mode = 0o666
     for _ in range(_TEMP_ATTEMPTS):
-        candidate = folder / f".{target.stem}.{secrets.token_hex(4)}.tmp{target.suffix}"
+        # the stem shortened so that the temporary name is no longer than the target's
+        candidate = folder / f".{target.stem[:max(1, len(target.stem) - 20)]}.{secrets.token_hex(4)}.tmp{target.suffix}"
         try:
             fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
         except FileExistsError:

@@ -440,7 +440,7 @@ def _probe(address: str, host: str, port: int, seconds: float) -> None:
 
 def make_runner(workers: int | None = None, scheduler: str | None = None) -> Runner:
     """The runner the command line's ``--workers`` and ``--scheduler`` ask for."""
-    if scheduler:
+    if scheduler is not None:             # --scheduler "" is a bad address, not "no scheduler"
         return DaskCluster(scheduler, workers)
     if workers and workers > 1:
         return Processes(workers)
