@@ -586,7 +586,13 @@ SCHEDULER_ADDRESSES = ["not a url", "http://127.0.0.1:8786", "tcp://127.0.0.1", 
                        "tcp://127.0.0.1:99999", "tcp://:8786", "", "127.0.0.1", "tcp://a b:1", "\u0663:1"]
 
 
+TIMEOUTS = ["nan", "inf", "-inf", "1e30", "-1", "0", "", "1_0", "\u0661"]
+
+
 def scheduler_cases() -> list:
-    """Addresses refused before any connection is tried (so no network is used)."""
-    return [CommandCase(f"scheduler.{k}", ("validate", "pendulum", "--scheduler", a, "--quiet"), "invalid")
-            for k, a in enumerate(SCHEDULER_ADDRESSES)]
+    """Addresses refused before any connection is tried (so no network is used), and
+    --timeout values that are no number of seconds (issue 24: nan, inf, 1e30 exited 3)."""
+    return ([CommandCase(f"scheduler.{k}", ("validate", "pendulum", "--scheduler", a, "--quiet"), "invalid")
+             for k, a in enumerate(SCHEDULER_ADDRESSES)]
+            + [CommandCase(f"timeout.{k}", ("validate", "pendulum", "--solvers", "dp", "--timeout", t, "--quiet"),
+                           "invalid") for k, t in enumerate(TIMEOUTS)])

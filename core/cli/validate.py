@@ -1,5 +1,7 @@
 """``baseparams validate``: the orchestrator on the command line (registered on ``main``)."""
 
+import math
+import re
 import sys
 
 import click
@@ -9,6 +11,28 @@ from baseparams.orchestrate.runners import make_runner
 from baseparams.orchestrate.validate import (mechanism_texts, render_markdown, render_text, select_solvers,
                                              validate as run_validation)
 from baseparams import registry
+
+
+MAX_TIMEOUT_S = 1e7         # about 116 days: past SIGALRM's and the OS timers' range otherwise
+
+
+class Seconds(click.ParamType):
+    """A number of seconds from 0.1 to MAX_TIMEOUT_S in ASCII digits: click's FloatRange
+    takes float()'s forms ("1_0" is 10, Arabic-Indic digits) and lets NaN through (every
+    comparison with it is false)."""
+    name = "seconds"
+    _TEXT = re.compile(r"[+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            seconds = float(value)
+        elif isinstance(value, str) and self._TEXT.fullmatch(value.strip()):
+            seconds = float(value)
+        else:
+            self.fail(f"{value!r} is not a number of seconds", param, ctx)
+        if not (math.isfinite(seconds) and 0.1 <= seconds <= MAX_TIMEOUT_S):
+            self.fail(f"{value!r}: give 0.1 to {MAX_TIMEOUT_S:.0e} seconds", param, ctx)
+        return seconds
 
 
 @main.command()
@@ -23,8 +47,8 @@ from baseparams import registry
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="A Dask scheduler (tcp://host:8786), or 'local' for a LocalCluster of --workers "
                    "processes; needs pip install 'baseparams[distributed]'.")
-@click.option("--timeout", type=click.FloatRange(min=0.1), default=None, metavar="S",
-              help="Seconds one job may take; a job past it is reported as timed out.")
+@click.option("--timeout", type=Seconds(), default=None, metavar="S", help="Seconds one job may take (0.1 to 10^7); a job past it is reported as "
+                                      "timed out.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def validate(mechs, everything, solvers, fmt, workers, scheduler, timeout, quiet):
     """Cross-validate every solver on MECH (or --all registered mechanisms).
