@@ -62,11 +62,14 @@ def _number(text: str, key: str) -> Fraction:
 
 
 def _noise(text: str) -> list[float] | float:
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError(f"{text!r}: expected SD or SD,SD,... (one per independent coordinate)",
-                         key="--noise") from None
+    from baseparams.identify.data import MAX_MAGNITUDE, NUMBER
+    parts = [v.strip() for v in text.split(",")]
+    if not all(NUMBER.fullmatch(v) for v in parts):
+        raise InputError(f"{text!r}: expected SD or SD,SD,... (one per independent coordinate; ASCII "
+                         "digits)", key="--noise")
+    values = [float(v) for v in parts]
+    if not all(0 <= v <= MAX_MAGNITUDE for v in values):
+        raise InputError(f"{text!r}: a standard deviation is between 0 and {MAX_MAGNITUDE:g}", key="--noise")
     return values[0] if len(values) == 1 else values
 
 
@@ -83,7 +86,8 @@ def _same_file(a: str | None, b: str | None) -> bool:
                    "the effect's order, or KIND:COORD:NAME=VALUE[,NAME=VALUE]; repeatable.")
 @click.option("--noise", default="0", show_default=True, metavar="SD[,SD...]",
               help="Standard deviation of the Gaussian noise on tau, one for all coordinates or one each.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random numbers.")
+@click.option("--seed", type=click.IntRange(0, 2 ** 32 - 1), default=0, show_default=True,
+              help="Seed of the random numbers (0 to 2^32 - 1).")
 @click.option("--samples", type=click.IntRange(2, 10_000_000), default=None,
               help="Samples of the exciting trajectory [default: the mechanism file's].")
 @click.option("--truth", type=click.Path(dir_okay=False), default=None,

@@ -42,6 +42,17 @@ SG_BIAS = 1e-3
 # Bandwidth: the frequency below which this fraction of the (detrended) positions' power lies.
 BANDWIDTH_POWER = 0.9999
 MAX_FILE_BYTES = 2_000_000_000
+# Reading a CSV takes about this many bytes of memory per byte of text (the text, the rows'
+# field strings, the float array; measured ~16 on a 70 MB file): a file is refused before it
+# is parsed when that exceeds BASEPARAMS_MAX_MEMORY (default 2 GiB, so about 70 MB of text).
+PARSE_BYTES_PER_BYTE = 30
+READ_CHUNK = 1 << 20
+# |value| above this is refused as out of range: the fit squares and sums the columns, and
+# 1e150 squared is still finite where 1e300 is not.
+MAX_MAGNITUDE = 1e150
+# A number as the project's CSV takes it: ASCII digits, one optional sign, point and exponent
+# (Python's float() also reads 1_0 as 10 and other scripts' digits).
+NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 # Model rows evaluated at once when the model's columns are built for a fit (bounded memory
 # on long recordings), and how far beyond its kept rows a chunk reaches: this many times the
 # rows a segment drops at its ends (each 3 periods of the cut-off), so the zero-phase
@@ -338,14 +349,34 @@ def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] 
     return None if message is None else (lo, message)
 
 
+def read_budget() -> int:
+    """The most bytes of text a data file may have: BASEPARAMS_MAX_MEMORY over what parsing
+    takes per byte, and at most MAX_FILE_BYTES."""
+    from baseparams.dynamics.trajectory import memory_limit
+    return min(MAX_FILE_BYTES, memory_limit() // PARSE_BYTES_PER_BYTE)
+
+
 def _read_text(path: str) -> str:
+    """The file's text, read in chunks up to :func:`read_budget` (a device such as /dev/zero
+    or an endless pipe is refused once past it, never read whole)."""
+    budget = read_budget()
     try:
         size = os.path.getsize(path)
-        if size > MAX_FILE_BYTES:
-            raise InputError(f"{size} bytes: larger than the {MAX_FILE_BYTES} bytes a data file may have",
-                             file=path)
+        if size > budget:
+            raise InputError(_too_large(size, budget), file=path)
+        chunks, total = [], 0
         with open(path, "rb") as fh:
-            raw = fh.read()
+            while True:
+                chunk = fh.read(READ_CHUNK)
+                if not chunk:
+                    break
+                if b"\x00" in chunk:
+                    raise InputError("binary file (it contains NUL bytes): not a CSV file", file=path)
+                total += len(chunk)
+                if total > budget:
+                    raise InputError(_too_large(total, budget, more=True), file=path)
+                chunks.append(chunk)
+        raw = b"".join(chunks)
     except IsADirectoryError:
         raise InputError("is a directory, not a CSV file", file=path) from None
     except OSError as exc:
@@ -359,6 +390,13 @@ def _read_text(path: str) -> str:
     except UnicodeDecodeError as exc:
         raise InputError(f"not a text file (byte {exc.start} is not UTF-8): not a CSV file", file=path) from None
     return text
+
+
+def _too_large(size: int, budget: int, more: bool = False) -> str:
+    from baseparams.dynamics.trajectory import MEMORY_VARIABLE
+    return (f"{'more than ' if more else ''}{size:,} bytes: reading it would take about "
+            f"{PARSE_BYTES_PER_BYTE} times that in memory, above the limit for a data file of {budget:,} "
+            f"bytes; split it into runs or files, decimate it, or raise {MEMORY_VARIABLE}")
 
 
 DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " "}
@@ -445,15 +483,20 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
 def _numbers(path: str, header: list[str], rows: list[tuple[int, list[str]]]) -> np.ndarray:
     """All fields as float64; a field that is not a finite number names its row and column."""
     out = np.empty((len(rows), len(header)))
+    match = NUMBER.fullmatch
     for i, (line, fields) in enumerate(rows):
         for k, text in enumerate(fields):
-            try:
-                value = float(text)
-            except ValueError:
-                value = None
-            if value is None or not math.isfinite(value):
-                shown = text.strip() if len(text) <= 40 else text.strip()[:37] + "..."
-                reason = "is not a number" if value is None else "is not finite"
+            stripped = text.strip()
+            value = float(stripped) if match(stripped) else None
+            if value is None or not abs(value) <= MAX_MAGNITUDE:
+                shown = stripped if len(stripped) <= 40 else stripped[:37] + "..."
+                if value is not None:
+                    reason = "is not finite" if not math.isfinite(value) else \
+                        f"is out of range (|value| > {MAX_MAGNITUDE:g})"
+                elif stripped.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                    reason = "is not finite"
+                else:
+                    reason = "is not a number (ASCII digits, sign, point and exponent only)"
                 raise InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {header[k]}")
             out[i, k] = value
     return out

@@ -36,7 +36,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
-from baseparams.identify.data import (DELIMITERS, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
+from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
                                       _parse_rows, _read_text, bandwidth, concatenate, kinematics)
 from baseparams.identify.model import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
@@ -311,7 +311,12 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         if channel.column not in header:
             raise InputError(f"no column {channel.column!r} (columns: {', '.join(header)})",
                              file=str(folder / files[alias]), key="header")
-        return channel.scale * table[:, header.index(channel.column)] + channel.offset
+        with np.errstate(all="ignore"):
+            out = channel.scale * table[:, header.index(channel.column)] + channel.offset
+        if not np.all(np.abs(out) <= MAX_MAGNITUDE):
+            raise InputError(f"scaled by {channel.scale:g} (and shifted by {channel.offset:g}) the column leaves "
+                             f"the range |value| <= {MAX_MAGNITUDE:g}", file=path, key=channel.key)
+        return out
 
     def mapped(quantity: str, transpose: bool = False) -> np.ndarray | None:
         chans = description.channels[quantity]
