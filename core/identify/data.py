@@ -189,13 +189,12 @@ class MeasuredData:
 
     def payload_force(self, inertial: np.ndarray) -> np.ndarray:
         """The known payloads' forces at the model rows (N, f), from the standard columns
-        K (N, f, P): each payload adds its parameters to its body's on its run's rows."""
+        K (N, f, P): each run's payloads (:meth:`payload_of_run`) on that run's rows."""
         force = np.zeros(inertial.shape[:2])
-        for run, label, phi in self.payloads:
-            columns = slice(10 * (label - 1), 10 * label)
-            for s in self.segments:
-                if s.run == run:
-                    force[s.start:s.stop] += inertial[s.start:s.stop, :, columns] @ phi
+        for s in self.segments:
+            payload = self.payload_of_run(s.run)
+            if payload is not None:
+                force[s.start:s.stop] = inertial[s.start:s.stop, :, :len(payload)] @ payload
         return force
 
     def take(self, rows: np.ndarray | slice) -> "MeasuredData":
