@@ -14,11 +14,28 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class Shape:
+    """A nonlinear parameter of an effect's columns (Coulomb friction's transition speed):
+    the columns stay linear in the coefficients at a fixed shape value; diagnosis fits the
+    value (variable projection over a grid of ``grid`` values, each a multiple of the
+    coordinate's RMS speed when ``relative`` is "speed"), and a mechanism file may give it
+    among the effect's ``values``. ``default`` is used when nothing gives it."""
+    name: str
+    default: float
+    grid: tuple = ()                         # candidate values (times the RMS speed if relative)
+    relative: str = ""                       # "speed": grid values are multiples of RMS |qd|
+
+
+@dataclass(frozen=True)
 class Effect:
     name: str
     description: str
     coefficients: tuple                      # coefficient names, one per column
     columns_fn: Callable                     # (q, qd, qdd, **options) -> list of arrays
+    shapes: tuple = ()                       # Shape parameters passed to columns_fn by name
+    # kinds this one generalises: where the data cannot tell the two apart, diagnosis names the
+    # simpler one (cogging's harmonics look like an offset or a spring over a small range)
+    generalises: tuple = ()
 
     def columns(self, q, qd, qdd, **options):
         """Columns (one per coefficient) evaluated on arrays of q, qd, qdd of one coordinate."""
@@ -28,3 +45,11 @@ class Effect:
 
     def coefficient_names(self, coordinate):
         return [f"{c}_{coordinate}" for c in self.coefficients]
+
+    @property
+    def shape_names(self) -> tuple:
+        return tuple(s.name for s in self.shapes)
+
+    def shape_values(self, values) -> dict:
+        """The shape parameters among an effect's given ``values`` (name -> float)."""
+        return {name: float(values[name]) for name in self.shape_names if name in values}

@@ -11,6 +11,7 @@ offset when the spring's q column adds nothing significant beyond it, and once e
 the model the other is tested only on what it still adds (an offset is then absorbed).
 """
 
+import itertools
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -18,7 +19,7 @@ import numpy as np
 from baseparams import registry
 from baseparams.dynamics.evaluator import Sample
 from baseparams.errors import InputError
-from baseparams.identify.model import effect_columns
+from baseparams.identify.model import coordinate_speed_rms, effect_columns
 from baseparams.identify.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
@@ -69,12 +70,37 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
     for kind, coordinate in pairs:
         if (kind, coordinate) in present:
             continue
-        names, columns = effect_columns(mechanism, sample, n, kind, coordinate)
-        columns = np.ascontiguousarray(columns, dtype=float)
-        if not np.all(np.isfinite(columns)):
+        shapes = shape_grid(mechanism, sample, n, kind, coordinate)
+        variants = []
+        for shape in shapes:
+            names, columns = effect_columns(mechanism, sample, n, kind, coordinate, shape=shape)
+            columns = np.ascontiguousarray(columns, dtype=float)
+            if not np.all(np.isfinite(columns)):
+                break
+            variants.append(np.ascontiguousarray(reduce(columns)) if reduce is not None else columns)
+        if len(variants) < len(shapes):
             notes.append(f"candidate {kind}:{coordinate} left out: its columns are not finite on this data")
             continue
-        if reduce is not None:
-            columns = np.ascontiguousarray(reduce(columns))
-        out.append(Candidate(kind, coordinate, tuple(names), columns))
+        general = registry.effects()[kind].item.generalises
+        if len(variants) == 1:
+            out.append(Candidate(kind, coordinate, tuple(names), variants[0], shape=dict(shapes[0]),
+                                 generalises=general))
+        else:
+            out.append(Candidate(kind, coordinate, tuple(names), variants[0], tuple(variants), tuple(shapes),
+                                 dict(shapes[0]), general))
     return out, notes
+
+
+def shape_grid(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str) -> list[dict]:
+    """The shape parameters diagnosis tries for an effect on a coordinate: one empty dict for
+    an effect without shapes; else each grid value (times the coordinate's RMS speed where
+    the shape is a speed)."""
+    effect = registry.effects()[kind].item
+    if not effect.shapes:
+        return [{}]
+    speed = coordinate_speed_rms(mechanism, sample, n, coordinate)
+    grids = []
+    for shape in effect.shapes:
+        scale = speed if shape.relative == "speed" and speed > 0 else 1.0
+        grids.append([(shape.name, float(v) * scale) for v in (shape.grid or (shape.default,))])
+    return [dict(combo) for combo in itertools.product(*grids)]

@@ -190,7 +190,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                          f"{model_rank} identifiable inertial parameters: give more samples or a smaller "
                          "--holdout", key="samples")
     rows = slice(0, train)
-    candidates = [Candidate(c.kind, c.coordinate, c.names, c.columns[rows]) for c in problem.candidates]
+    candidates = [c.rows(rows) for c in problem.candidates]
     chosen = select(problem.inertial[rows], y[rows], candidates, alpha, max_steps)
 
     added_full = [problem.candidates[i] for i in chosen.in_model]

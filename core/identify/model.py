@@ -104,8 +104,9 @@ def drive_rows(mechanism: Mechanism, names: Sequence[str]) -> np.ndarray:
 
 
 def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
-                   key: str = "effect") -> tuple[list[str], np.ndarray]:
-    """An effect's coefficient names and columns (N, f, c) on the independent coordinates.
+                   key: str = "effect", shape: dict | None = None) -> tuple[list[str], np.ndarray]:
+    """An effect's coefficient names and columns (N, f, c) on the independent coordinates,
+    at the ``shape`` parameters given (name -> value; the effect's defaults otherwise).
 
     On a motor the effect sees the motor's position, velocity and acceleration (the gear
     ratios times the joints'), and its force reaches each joint coordinate times that
@@ -119,11 +120,19 @@ def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coor
 
     q, qd, qdd = (combined(values) for values in (sample.q, sample.qd, sample.qdd))
     with np.errstate(all="ignore"):
-        columns = effect.columns(q, qd, qdd)
+        columns = effect.columns(q, qd, qdd, **(shape or {}))
     r_row = sum(row[i] * np.stack([_as_batch(v, n) for v in sample.projection[i]], axis=-1)
                 for i in used)                                                    # (N, f)
     out = np.stack([r_row * c[:, None] for c in columns], axis=-1)               # (N, f, c)
     return effect.coefficient_names(coordinate), out
+
+
+def coordinate_speed_rms(mechanism: Mechanism, sample: Sample, n: int, coordinate: str) -> float:
+    """RMS speed of a joint coordinate or a motor over the samples (the scale of friction
+    shapes: a transition speed is a fraction of it)."""
+    row = drive_rows(mechanism, [coordinate])[0]
+    qd = sum(row[i] * _as_batch(sample.qd[i], n) for i in np.nonzero(row)[0])
+    return float(np.sqrt(np.mean(np.square(qd))))
 
 
 @dataclass(frozen=True)
@@ -146,7 +155,8 @@ def design(mechanism: Mechanism, motion: Motion, effects: Sequence[EffectSpec] =
     inertial = Design(tuple(mechanism.parameters), inertial_columns(sample, n))
     names, blocks = [], []
     for spec in effects:
-        cnames, block = effect_columns(mechanism, sample, n, spec.kind, spec.coordinate)
+        shape = registry.effects()[spec.kind].item.shape_values(spec.values)
+        cnames, block = effect_columns(mechanism, sample, n, spec.kind, spec.coordinate, shape=shape)
         names.extend(cnames)
         blocks.append(block)
     f = inertial.matrix.shape[1]

@@ -34,7 +34,7 @@ Why these choices:
   entered by is taken out (:func:`eliminate`); the forward steps then resume.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -79,15 +79,40 @@ TOO_SPARSE = Test(0.0, 0, 1.0, -np.inf, reason="support")
 
 @dataclass(frozen=True)
 class Candidate:
-    """An effect on one coordinate: ``columns`` (N, f, c) on the independent coordinates."""
+    """An effect on one coordinate: ``columns`` (N, f, c) on the independent coordinates.
+
+    A shaped effect (Coulomb friction's transition speed) carries ``variants``: its columns
+    at each value of a grid of shape parameters (``shapes``, one dict each). Selection tests
+    the best variant against the current model (variable projection over the grid) and
+    counts the fitted shape as one more degree of freedom; once the effect enters the model
+    its variant is fixed (:meth:`at`)."""
     kind: str
     coordinate: str
     names: tuple[str, ...]
     columns: np.ndarray
+    variants: tuple = ()                       # columns (N, f, c) at each shape of ``shapes``
+    shapes: tuple = ()                         # shape parameters of each variant
+    shape: dict = field(default_factory=dict)  # the shape of ``columns``
+    generalises: tuple = ()                    # kinds this one generalises (Effect.generalises)
 
     @property
     def label(self) -> str:
         return f"{self.kind}:{self.coordinate}"
+
+    @property
+    def extra_df(self) -> int:
+        """Shape parameters fitted by the test (one per shape name, when there is a grid)."""
+        return len(self.shapes[0]) if len(self.variants) > 1 else 0
+
+    def at(self, k: int) -> "Candidate":
+        """The candidate fixed at its ``k``-th shape."""
+        return Candidate(self.kind, self.coordinate, self.names, self.variants[k], (), (), dict(self.shapes[k]),
+                         self.generalises)
+
+    def rows(self, index) -> "Candidate":
+        """The candidate restricted to samples ``index`` (a slice or an index array)."""
+        return Candidate(self.kind, self.coordinate, self.names, self.columns[index],
+                         tuple(v[index] for v in self.variants), self.shapes, self.shape, self.generalises)
 
 
 @dataclass
@@ -123,6 +148,8 @@ class Selection:
     # others, the bar it failed)
     regrouped: list[tuple[int, int]] = field(default_factory=list)
     # ambiguous groups resolved again once the model was complete: (old head, new winner)
+    candidates: list = field(default_factory=list)
+    # the candidates as selection left them: shaped ones in the model fixed at their shape
 
     @property
     def in_model(self) -> list[int]:
@@ -209,7 +236,7 @@ def wilson_hilferty(stat: float, df: int) -> float:
 
 
 def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int,
-         lags: int | None = None, sparse_if_white: bool = False) -> Test:
+         lags: int | None = None, sparse_if_white: bool = False, extra_df: int = 0) -> Test:
     """Wald test that the orthonormal directions ``basis`` (rows, r), orthogonal to the null
     model, have zero coefficients, given the null model's ``residual`` (rows,). HAC covariance:
     per-sample scores summed over the f coordinates, Bartlett kernel over time.
@@ -247,8 +274,9 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     except np.linalg.LinAlgError:
         stat = float(gamma @ np.linalg.pinv(S) @ gamma)
     denominator = max(n - int(np.ceil(dof / f)) - r, 1)     # samples left: scores are per sample
-    pvalue = float(stats.f.sf(stat / r, r, denominator))
-    return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
+    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
+    pvalue = float(stats.f.sf(stat / k, k, denominator))
+    return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
 
 
 # ----- the weighted model ------------------------------------------------------------------
@@ -299,10 +327,11 @@ def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = 
     return Fit(weights, u, residual, coefficients, int(keep.sum()), (vt.T / s) / scale[:, None])
 
 
-def candidate_basis(candidate: Candidate, fit: Fit) -> np.ndarray:
-    """The candidate's directions beyond the current model (weighted, orthonormal)."""
-    n, f, c = candidate.columns.shape
-    Z = (candidate.columns * fit.weights[None, :, None]).reshape(n * f, c)
+def candidate_basis(candidate: "Candidate | np.ndarray", fit: Fit) -> np.ndarray:
+    """The candidate's (or columns') directions beyond the current model (weighted, orthonormal)."""
+    columns = candidate.columns if isinstance(candidate, Candidate) else candidate
+    n, f, c = columns.shape
+    Z = (columns * fit.weights[None, :, None]).reshape(n * f, c)
     return orthonormal_basis(project_out(Z, fit.basis), ABSORB_TOL, reference=Z)
 
 
@@ -347,6 +376,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     it, a small but sharp remainder, was chased by further candidates (the SLA, viscous
     friction on the upper arm hidden, named four wrong effects after its group)."""
     n, f, _ = model.shape
+    candidates = list(candidates)             # shaped ones are fixed at their variant on entry
     added: list[int] = []
     steps: list[Step] = []
     ambiguous: dict = {}
@@ -362,13 +392,13 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         previous = fit.weights
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
-        bases, tests = {}, []
+        bases, tests, variant = {}, [], {}
         for i, cand in enumerate(candidates):
             if i in excluded:
                 tests.append(NOT_TESTED)
                 continue
-            bases[i] = candidate_basis(cand, fit)
-            tests.append(wald(fit.residual, bases[i], (n, f), dof))
+            bases[i], test, variant[i] = best_variant(cand, fit, (n, f), dof)
+            tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
         if tested:
@@ -404,14 +434,42 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         winner = max(significant, key=lambda i: tests[i].z)
         rivals = [i for i in tested if tests[i].pvalue <= alpha and i != winner]
         winner, confusable, beaten = resolve(winner, rivals, bases, fit, (n, f), dof, alpha,
-                                             nested_level=alpha / len(tested))
+                                             nested_level=alpha / len(tested),
+                                             generalises=_generalises(candidates))
         step.chosen, step.confusable, step.beaten = winner, confusable, beaten
+        for i in [winner] + [r.index for r in confusable]:
+            if candidates[i].variants:            # its shape is fixed once it is in the model
+                candidates[i] = candidates[i].at(variant[i])
         added.append(winner)
         bars[winner] = alpha / len(tested)
         if confusable:
             ambiguous[winner] = confusable
             companions.extend(r.index for r in confusable)
-    return Selection(steps, added, ambiguous, companions, removed, regroups)
+    return Selection(steps, added, ambiguous, companions, removed, regroups, candidates)
+
+
+def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
+    """Whether candidate a's kind generalises candidate b's on the same coordinate."""
+    def relation(a: int, b: int) -> bool:
+        ca, cb = candidates[a], candidates[b]
+        return ca.coordinate == cb.coordinate and cb.kind in ca.generalises
+    return relation
+
+
+def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int
+                 ) -> tuple[np.ndarray, Test, int]:
+    """(basis, test, variant index) of the candidate's best shape against ``fit`` (the
+    largest normal-equivalent statistic; the one form of an unshaped candidate)."""
+    if not cand.variants:
+        basis = candidate_basis(cand, fit)
+        return basis, wald(fit.residual, basis, shape, dof), -1
+    best = None
+    for k, columns in enumerate(cand.variants):
+        basis = candidate_basis(columns, fit)
+        test = wald(fit.residual, basis, shape, dof, extra_df=cand.extra_df)
+        if best is None or test.z > best[1].z:
+            best = (basis, test, k)
+    return best
 
 
 def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], added: list[int],
@@ -445,7 +503,7 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
         if any(b.shape[1] == 0 for b in bases.values()):
             continue
         winner, confusable, beaten = resolve(head, members[1:], bases, fit, (n, f), fit.rank, alpha,
-                                             nested_level=bars[head])
+                                             nested_level=bars[head], generalises=_generalises(candidates))
         if winner == head and {r.index for r in confusable} == set(members[1:]):
             continue
         return head, winner, confusable, beaten
@@ -494,7 +552,8 @@ def _verdict(winner_adds: bool, rival_adds: bool) -> str | None:
 
 
 def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[int, int], dof: int,
-            alpha: float, nested_level: float | None = None) -> tuple[int, list[Rival], list[Rival]]:
+            alpha: float, nested_level: float | None = None,
+            generalises: Callable[[int, int], bool] | None = None) -> tuple[int, list[Rival], list[Rival]]:
     """Compare the winner with each rival by encompassing tests (does each add significantly
     to the other?). A rival nested in the winner (an offset inside a spring on the same
     independent coordinate) replaces it unless the winner's extra directions are significant
@@ -541,6 +600,11 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
                 # is a fluke of alpha; both at that bar: the rival competes again next step
                 verdict = _verdict(a_adds, b_adds) or _verdict(t_ab.pvalue <= nested_level,
                                                                t_ba.pvalue <= nested_level)
+                if verdict == "confusable" and generalises is not None:
+                    # a kind that generalises the other (cogging's harmonics an offset over a small
+                    # range) is not named for what the simpler kind explains as well
+                    verdict = ("beaten" if generalises(j, winner) else
+                               "switch" if generalises(winner, j) else verdict)
                 if verdict is not None:
                     {"beaten": beaten, "switch": switch, "confusable": confusable}[verdict].append(rival)
         fresh = [r for r in switch if r.index not in seen]

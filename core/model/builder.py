@@ -377,11 +377,12 @@ class MechanismBuilder:
         raw = {} if values is None else values
         if not isinstance(raw, Mapping):
             raise self.error(f"{key}.values", "must be a table: coefficient = value")
-        coefficients = effects[kind].item.coefficients
+        coefficients = effects[kind].item.coefficients + effects[kind].item.shape_names
         exact = {}
         for name, value in raw.items():
             if name not in coefficients:
-                raise self.error(f"{key}.values.{name}", f"not a coefficient of {kind} ({', '.join(coefficients)})")
+                raise self.error(f"{key}.values.{name}", f"not a coefficient or shape parameter of {kind} "
+                                 f"({', '.join(coefficients)})")
             exact[name] = self.rational(value, f"{key}.values.{name}")
         spec = EffectSpec(kind, coordinate, exact)
         self._effects.append((spec, key))
