@@ -19,27 +19,40 @@ import numpy as np
 from baseparams import registry
 from baseparams.dynamics.evaluator import Sample
 from baseparams.errors import InputError
+from baseparams.identify import derived
 from baseparams.identify.model import coordinate_speed_rms, effect_columns
 from baseparams.identify.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
 
-def parse_selection(mechanism: Mechanism, specs: Sequence[str]) -> list[tuple[str, str]]:
-    """``KIND[:COORD]`` strings -> (kind, coordinate) pairs; a bare KIND means every tree
-    coordinate. Unknown kinds or coordinates are InputErrors naming the option."""
+def parse_selection(mechanism: Mechanism, specs: Sequence[str], given: bool = False) -> list[tuple[str, str]]:
+    """``KIND[:PLACE]`` strings -> (kind, place) pairs; a bare KIND means every place it
+    acts on (tree coordinates and coupled motors; for the derived kinds of
+    :mod:`.derived` the independent coordinates, the bodies, or 'all'). Unknown kinds or
+    places are InputErrors naming the option; body and gain kinds need ``given``
+    parameters (--params)."""
     effects = registry.effects()
+    known_kinds = sorted(effects) + list(derived.TORQUE_KINDS) + (list(derived.GIVEN_KINDS) if given else [])
+    independent = tuple(mechanism.independent or mechanism.coordinates)
     out: list[tuple[str, str]] = []
     for spec in specs:
-        kind, _, coordinate = spec.partition(":")
-        kind, coordinate = kind.strip(), coordinate.strip()
-        if kind not in effects:
-            raise InputError(f"unknown effect {kind!r} in {spec!r}; known: {', '.join(sorted(effects))}",
+        kind, _, place = spec.partition(":")
+        kind, place = kind.strip(), place.strip()
+        if kind in derived.GIVEN_KINDS and not given:
+            raise InputError(f"{kind!r} in {spec!r} is a candidate only when the inertial parameters are "
+                             "given (--params)", key="--candidates")
+        if kind not in known_kinds:
+            raise InputError(f"unknown effect {kind!r} in {spec!r}; known: {', '.join(known_kinds)}",
                              key="--candidates")
-        places = tuple(mechanism.coordinates) + tuple(mechanism.motor_names)
-        if coordinate and coordinate not in places:
-            raise InputError(f"{coordinate!r} in {spec!r} is not a joint coordinate or a motor of "
-                             f"{mechanism.name} (coordinates: {', '.join(places)})", key="--candidates")
-        for c in ([coordinate] if coordinate else _places(mechanism)):
+        if kind in derived.KINDS:
+            places = derived.places(mechanism, kind, independent)
+        else:
+            places = tuple(mechanism.coordinates) + tuple(mechanism.motor_names)
+        if place and place not in places:
+            raise InputError(f"{place!r} in {spec!r} is not a place of {kind} on {mechanism.name} "
+                             f"(one of: {', '.join(places)})", key="--candidates")
+        default = derived.places(mechanism, kind, independent) if kind in derived.KINDS else _places(mechanism)
+        for c in ([place] if place else default):
             if (kind, c) not in out:
                 out.append((kind, c))
     return out

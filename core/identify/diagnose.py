@@ -25,16 +25,19 @@ from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
-from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 from baseparams import registry
 from baseparams.errors import InputError
+from baseparams.identify import derived
 from baseparams.identify.candidates import library, parse_selection
+from baseparams.identify.derived import KINDS as DERIVED_KINDS
+from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, implausible, stability
+from baseparams.identify.physical import pseudo_inertia
 from baseparams.identify.data import MeasuredData
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
-from baseparams.identify.selection import (MAX_STEPS, Candidate, Fit, Rival, Selection, hac_lags,
-                                           project_out, holm, select, weighted_fit)
+from baseparams.identify.selection import (Candidate, long_run, Fit, Rival, Selection, hac_lags,
+                                           project_out, holm, select_whitened, weighted_fit)
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -84,9 +87,12 @@ def separation(kinds: Sequence[str], same_coordinate_kinds: bool) -> str:
 @dataclass
 class Problem:
     """The model's columns at the data's samples, computed once (a campaign reuses them
-    for many datasets on the same motion): ``inertial`` (N, f, P) plus the mechanism's
-    effects with unknown coefficients; ``known`` (N, f) the force of its effects with known
-    coefficients; the candidates."""
+    for many datasets on the same motion): ``inertial`` (N, f, P) the columns fitted to the
+    data (the standard parameters plus the mechanism's effects with unknown coefficients;
+    with a given simulation only those effects); ``known`` (N, f) the force the model
+    already gives (known effects, known payloads, and the given simulation's torque);
+    the candidates; ``qd`` (N, f) the independent speeds; ``bodies`` (N, f, P) the standard
+    columns when the inertial parameters are given (body and payload candidates), else None."""
     mechanism: Mechanism
     coordinates: tuple[str, ...]
     t: np.ndarray
@@ -94,16 +100,23 @@ class Problem:
     known: np.ndarray
     candidates: list[Candidate]
     notes: list[str] = field(default_factory=list)
+    qd: np.ndarray | None = None
+    bodies: np.ndarray | None = None
+    given: np.ndarray | None = None            # the given standard parameters (P,), or None
+    wanted: set | None = None                  # derived candidates to build (None: all)
 
 
 def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
-            selection: Sequence[str] | None = None, data: MeasuredData | None = None) -> Problem:
+            selection: Sequence[str] | None = None, data: MeasuredData | None = None,
+            given: np.ndarray | None = None) -> Problem:
     """The inertial and candidate columns along ``motion``; ``selection``: ``KIND[:COORD]``
     strings restricting the candidates (None: every registered effect on every coordinate
-    and motor). With measured ``data`` every column is reduced to the fit's rows as its
-    torques were (parallel filtering), and its known payloads' forces count as known."""
+    and motor, and the derived candidates of :mod:`.derived`). With measured ``data`` every
+    column is reduced to the fit's rows as its torques were (parallel filtering), and its
+    known payloads' forces count as known. ``given``: standard parameters (P,) held as
+    given (diagnose a simulation): their torque is known, and bodies become candidates."""
     sample = sample if sample is not None else evaluate(mechanism, motion)
-    pairs = parse_selection(mechanism, selection) if selection else None
+    pairs = parse_selection(mechanism, selection, given is not None) if selection else None
     known_specs = [e for e in mechanism.effects if _all_given(e)]
     fitted_specs = [e for e in mechanism.effects if not _all_given(e)]
     inertial, fitted = design(mechanism, motion, fitted_specs, sample)
@@ -111,25 +124,38 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     known = known_cols.matrix @ effect_values(mechanism, known_specs) if known_specs else \
         np.zeros(inertial.matrix.shape[:2])
     t = np.asarray(motion.t, float)
+    qd = np.asarray(motion.qd, float)
     reduce = None
     if data is not None:
         if data.payloads:
             known = known + data.payload_force(inertial.matrix)
         reduce, t = data.reduce, data.t
+        qd = qd[data.kept_rows()]
         inertial = Design(inertial.names, data.reduce(inertial.matrix))
         fitted = Design(fitted.names, data.reduce(fitted.matrix))
         known = data.reduce(known)
-    candidates, notes = library(mechanism, sample, motion.count, pairs, reduce)
+    registered = None if pairs is None else [(k, c) for k, c in pairs if k not in DERIVED_KINDS]
+    candidates, notes = library(mechanism, sample, motion.count, registered, reduce) \
+        if registered is None or registered else ([], [])
     if known_specs:
         notes.append("known effects subtracted: " + ", ".join(f"{e.kind}:{e.coordinate}" for e in known_specs))
     if fitted_specs:
         notes.append("effects fitted with the inertial model: "
                      + ", ".join(f"{e.kind}:{e.coordinate}" for e in fitted_specs))
-    if not candidates:
+    wanted = None if pairs is None else {(k, c) for k, c in pairs if k in DERIVED_KINDS}
+    if not candidates and wanted == set():
         raise InputError("no candidate effects left to test (every selected effect is already "
                          "in the mechanism)", key="--candidates")
+    if given is not None:
+        given = np.asarray(given, dtype=float)
+        known = known + inertial.matrix @ given
+        notes.append("the inertial parameters are held as given (--params): bodies, payloads and "
+                     "torque gains are candidates")
+        return Problem(mechanism, independent_names(mechanism), t, fitted.matrix, known, candidates, notes,
+                       qd, inertial.matrix, given, wanted)
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
-    return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes)
+    return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
+                   None, None, wanted)
 
 
 def _all_given(spec: EffectSpec) -> bool:
@@ -157,74 +183,104 @@ class Diagnosis:
     residual_before: np.ndarray = field(repr=False)       # (N, f): training then holdout
     residual_after: np.ndarray = field(repr=False)
     added: list[Candidate] = field(default_factory=list, repr=False)
+    verdict: str = ""
+    unsupported: list[dict] = field(default_factory=list)
+    where: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
-        return {"mechanism": self.mechanism, "coordinates": list(self.coordinates),
-                "effects": self.effects, "ambiguous": self.ambiguous, "gap": self.gap,
+        return {"mechanism": self.mechanism, "verdict": self.verdict, "coordinates": list(self.coordinates),
+                "effects": self.effects, "ambiguous": self.ambiguous, "unsupported": self.unsupported,
+                "gap": self.gap, "where": self.where,
                 "unexplained": self.unexplained, "closed": self.closed, "alpha": self.alpha,
                 "samples": {"fit": self.training, "holdout": self.held_out},
                 "steps": self.steps, "untestable": self.untestable, "notes": self.notes}
 
     def named(self) -> list[EffectSpec]:
-        """The named effects as mechanism effects with their estimated coefficients."""
-        return [EffectSpec(e["kind"], e["coordinate"], {k: v["value"] for k, v in e["coefficients"].items()})
-                for e in self.effects]
+        """The named effects that are mechanism effects (registered kinds), with their
+        estimated coefficients and fitted shapes."""
+        effects = registry.effects()
+        return [EffectSpec(e["kind"], e["coordinate"],
+                           {**{k: v["value"] for k, v in e["coefficients"].items()}, **e.get("shape", {})})
+                for e in self.effects if e["kind"] in effects]
 
 
 # ----- the loop ------------------------------------------------------------------------------
-def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout: float = 0.3,
-             max_steps: int = MAX_STEPS) -> Diagnosis:
-    """Fit, test, add, repeat (see the module docstring); ``tau`` (N, f) measured forces."""
+def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout: float = 0.0,
+             folds: int = FOLDS, max_steps: int | None = None) -> Diagnosis:
+    """Fit, test, add, repeat (see the module docstring); ``tau`` (N, f) measured forces.
+    ``max_steps`` None: until nothing is significant (every step adds one candidate or takes
+    one out for good, so the search ends)."""
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha must be in (0, 1), not {alpha}", key="--alpha")
     if not 0.0 <= holdout < 1.0:
         raise InputError(f"holdout must be in [0, 1), not {holdout}", key="--holdout")
+    if not 2 <= folds <= 100:
+        raise InputError(f"folds must be in 2..100, not {folds}", key="--folds")
     tau = np.asarray(tau, dtype=float)
     n, f = tau.shape
     held = int(round(holdout * n))
     train = n - held
     y = tau - problem.known
-    model_rank = np.linalg.matrix_rank(problem.inertial[:train].reshape(train * f, -1))
-    if train * f < model_rank + 20 or train < 20:
+    p = problem.inertial.shape[-1]
+    model_rank = np.linalg.matrix_rank(problem.inertial[:train].reshape(train * f, -1)) if p else 0
+    if train * f < model_rank + 20 or train < 20 or train < 4 * folds:
         raise InputError(f"{train} training samples x {f} coordinates cannot test effects beyond the "
                          f"{model_rank} identifiable inertial parameters: give more samples or a smaller "
                          "--holdout", key="samples")
     rows = slice(0, train)
-    candidates = [c.rows(rows) for c in problem.candidates]
-    chosen = select(problem.inertial[rows], y[rows], candidates, alpha, max_steps)
-
-    added_full = [problem.candidates[i] for i in chosen.in_model]
+    everything = problem.candidates + _derived(problem, y, rows)
+    if not everything:
+        raise InputError("no candidate effects left to test", key="--candidates")
+    candidates = [c.rows(rows) for c in everything]
+    limit = max_steps if max_steps is not None else 2 * len(candidates) + 2
+    chosen = select_whitened(problem.inertial[rows], y[rows], candidates, alpha, limit)
+    candidates = chosen.candidates                       # shaped ones fixed where they entered
+    full = [_fixed(everything[i], c) for i, c in enumerate(candidates)]
     last = chosen.steps[-1]
     remaining = last.chosen is not None         # stopped at max_steps with something significant
+    ambiguous_idx = set(chosen.ambiguous)
+    named = [i for i in chosen.added if i not in ambiguous_idx]
+
+    # out of sample: plausibility, block cross-validation, stability over the blocks
+    weights = last.fit.weights
+    kept_named, unsupported = _gate(problem, problem.inertial[rows], candidates, chosen.in_model, named, y[rows],
+                                    weights, alpha, folds)
+    in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
     before = _predict(problem.inertial, [], y, chosen.steps[0].fit, train)
-    after = _predict(problem.inertial, added_full, y, None if remaining else last.fit, train)
+    after = _predict(problem.inertial, [full[i] for i in in_model], y, None, train)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
            "holdout_before": nrms(before.residual[train:], tau[train:]) if held else None,
            "holdout_after": nrms(after.residual[train:], tau[train:]) if held else None,
            "holdout_floor": floor, "holdout_noise_floor": noise_only}
+    gap.update(_cross_validated(problem.inertial[rows], [candidates[i] for i in in_model], y[rows], tau[rows],
+                                after.fit.weights, folds))
     gap["per_coordinate"] = {c: {"before": nrms(before.residual[rows, j:j + 1], tau[rows, j:j + 1]),
                                  "after": nrms(after.residual[rows, j:j + 1], tau[rows, j:j + 1])}
                              for j, c in enumerate(problem.coordinates)}
 
-    ambiguous_idx = set(chosen.ambiguous)
-    estimates = coefficients(problem.inertial[rows], candidates, chosen.in_model, y[rows], after.fit.weights)
-    effects = []
-    for i, (values, stds) in zip(chosen.added, estimates):
-        if i in ambiguous_idx:
-            continue
-        effects.append(_effect_entry(problem.candidates, values, stds, chosen, i))
-    ambiguous = [_ambiguous_entry(problem.candidates, chosen, i, estimates[chosen.added.index(i)])
-                 for i in chosen.added if i in ambiguous_idx]
+    estimates = coefficients(problem.inertial[rows], candidates, in_model, y[rows], after.fit.weights)
+    by_index = dict(zip(in_model, estimates))
+    effects = [_effect_entry(candidates, *by_index[i], chosen, i) for i in chosen.added
+               if i not in ambiguous_idx and i in by_index]
+    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added if i in ambiguous_idx]
     unexplained = _unexplained(after, train, problem.coordinates, alpha)
-    closed = bool(unexplained["white"] and not remaining)
+    white = unexplained["white"]
+    closed = bool(white and not remaining and not unsupported)
     unexplained["significant_candidates_left"] = remaining
     unexplained["max_steps"] = max_steps
     first = chosen.steps[0]
     untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
     unexplained["confusable_with_model"] = _weak(problem.inertial[rows], candidates, first)
+    where = _where(after.residual[rows], tau[rows], problem.qd[rows] if problem.qd is not None else None,
+                   problem.t[rows], problem.coordinates, unexplained["noise_level"], folds)
+    named_any = bool(effects or ambiguous)
+    verdict = ("explained" if closed else "partly explained") if named_any else \
+        ("nothing missing" if closed else "unexplained")
     notes = list(problem.notes)
+    for u in unsupported:
+        u.pop("index")
     for old, new in chosen.regrouped:
         notes.append(f"{candidates[old].label} and its rivals were ambiguous when they entered (their "
                      "difference acts on too few samples to test while other effects were missing from "
@@ -239,12 +295,145 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     if remaining:
         notes.insert(0, f"the search stopped at --max-steps {max_steps} with candidates still significant: "
                         "what is named is incomplete; raise --max-steps to go on")
+    if gap["cv_after"] > gap["cv_before"]:
+        notes.insert(0, "the cross-validated gap grew with the named effects: they do not predict "
+                        "held-out blocks better than the model without them")
     if untestable:
         notes.append(f"{len(untestable)} candidates not testable on this data: 'absorbed' (no direction "
                      "beyond the inertial model: not identifiable) or 'support' (acting on too few samples)")
     return Diagnosis(problem.mechanism.name, problem.coordinates, alpha, train, held, effects, ambiguous,
                      gap, unexplained, _steps_json(candidates, chosen), untestable, closed, notes,
-                     problem.t, before.residual, after.residual, added_full)
+                     problem.t, before.residual, after.residual, [full[i] for i in in_model],
+                     verdict, unsupported, where)
+
+
+def _derived(problem: Problem, y: np.ndarray, rows: slice) -> list[Candidate]:
+    """The candidates built from the model's torque (:mod:`.derived`): the training fit of the
+    model alone predicts it (with a given simulation: the given torque)."""
+    p = problem.inertial.shape[-1]
+    torque = problem.known.copy()
+    if p:
+        fit = weighted_fit(problem.inertial[rows], y[rows])
+        torque = torque + problem.inertial @ fit.coefficients
+    qd = problem.qd if problem.qd is not None else np.gradient(torque, problem.t, axis=0) * 0
+    out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, problem.wanted)
+    if problem.bodies is not None:
+        out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
+                                        problem.wanted)
+    return out
+
+
+def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
+    """``original`` (every row) at the shape selection fixed ``chosen`` at."""
+    if not original.variants or chosen.variants:
+        return original
+    k = next(k for k, shape in enumerate(original.shapes) if dict(shape) == chosen.shape)
+    return original.at(k)
+
+
+def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int], named: list[int],
+          y: np.ndarray, weights: np.ndarray, alpha: float, folds: int) -> tuple[list[int], list[dict]]:
+    """The named effects that hold up (physical, predicting held-out blocks, one coefficient for
+    the whole recording) and the others with their reasons (:mod:`.outofsample`); ``model``
+    and ``y``: the training rows."""
+    if not named:
+        return [], []
+    blocks_ = [model] + [candidates[i].columns for i in in_model]
+    X = np.concatenate(blocks_, axis=-1)
+    fit = weighted_fit(X, y, weights)
+    estimates = coefficients(model, candidates, in_model, y, weights)
+    cv_all = cross_validate(X, y, weights, folds)
+    widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
+    offsets = np.cumsum([0] + widths)
+    kept, out = [], []
+    level = alpha / len(named)
+    for i in named:
+        k = in_model.index(i)
+        lo, hi = offsets[k + 1], offsets[k + 2]
+        values = dict(zip(coefficient_names(candidates[i].kind), estimates[k][0].tolist()))
+        reason = implausible(candidates[i].kind, values) or _body_implausible(problem, candidates[i], values)
+        detail: dict = {}
+        if not reason:
+            others = np.r_[0:lo, hi:X.shape[-1]]
+            cv_without = cross_validate(X[:, :, others], y, weights, folds)
+            gain = (cv_without.total - cv_all.total) / max(cv_all.total, 1e-300)
+            partial = y - X[:, :, others] @ fit.coefficients[others]
+            stable = stability(partial, candidates[i].columns, weights, folds)
+            detail = {"cv_gain": gain, "stability_pvalue": stable.pvalue, "spread": stable.spread,
+                      "per_block": stable.values}
+            if gain <= 0:
+                reason = ("does not predict held-out blocks better: block cross-validation without it is "
+                          f"as good ({100 * gain:+.2g} %)")
+            elif stable.unstable(level):
+                reason = (f"its coefficient changes from block to block (spread {stable.spread:.2g} of its value, "
+                          f"p = {stable.pvalue:.2g}): it stands in for something the catalogue lacks")
+        if reason:
+            out.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
+                        "values": values, "reason": reason, **detail})
+        else:
+            kept.append(i)
+    return kept, out
+
+
+def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
+    """A changed body must stay physical: the given parameters plus the change have a positive
+    semidefinite pseudo-inertia (a payload or point mass is checked by its sign alone)."""
+    if cand.kind != "body" or problem.given is None:
+        return ""
+    k = next(k for k, b in enumerate(problem.mechanism.bodies)
+             if derived.body_name(problem.mechanism, b.label) == cand.coordinate)
+    phi = problem.given[10 * k: 10 * k + 10] + np.array([values[c] for c in derived.COEFFICIENTS["body"]])
+    low = float(np.linalg.eigvalsh(pseudo_inertia(phi))[0])
+    scale = max(abs(phi[0]), float(np.abs(phi[4:]).max()), 1e-300)
+    return f"the changed body is not physical (pseudo-inertia eigenvalue {low:.3g})" if low < -1e-6 * scale else ""
+
+
+def _cross_validated(model: np.ndarray, added: list[Candidate], y: np.ndarray, tau: np.ndarray,
+                     weights: np.ndarray, folds: int) -> dict:
+    """Block cross-validated NRMS of the model alone and with ``added``, overall and per block."""
+    before = cross_validate(model, y, weights, folds)
+    X = np.concatenate([model] + [c.columns for c in added], axis=-1)
+    after = cross_validate(X, y, weights, folds)
+    per_block = [{"start": float(b[0]), "before": nrms(before.residual[b], tau[b]),
+                  "after": nrms(after.residual[b], tau[b])} for b in blocks(len(tau), folds)]
+    return {"cv_before": nrms(before.residual, tau), "cv_after": nrms(after.residual, tau),
+            "cv_folds": folds, "cv_blocks": per_block}
+
+
+def _where(residual: np.ndarray, tau: np.ndarray, qd: np.ndarray | None, t: np.ndarray, coordinates,
+           noise: dict, folds: int) -> dict:
+    """Where the final residual is concentrated: per block of time and per motion regime
+    (velocity reversals, high acceleration, slow or static poses), as RMS / the whole
+    coordinate's residual RMS; regimes at 1.5 times or more are listed in ``concentrated``."""
+    rms = np.sqrt(np.mean(residual ** 2, axis=0))
+    rms[rms == 0] = 1.0
+    out: dict = {"blocks": [], "regimes": {}, "concentrated": []}
+    for b in blocks(len(residual), folds):
+        ratio = np.sqrt(np.mean(residual[b] ** 2, axis=0)) / rms
+        out["blocks"].append({"t": [float(t[b[0]]), float(t[b[-1]])],
+                              "ratio": dict(zip(coordinates, np.round(ratio, 4).tolist()))})
+    if qd is None or len(qd) < 3:
+        return out
+    speed = np.sqrt(np.mean(qd ** 2, axis=0))
+    speed[speed == 0] = 1.0
+    acc = np.gradient(qd, t, axis=0)
+    acc_rms = np.sqrt(np.mean(acc ** 2, axis=0))
+    acc_rms[acc_rms == 0] = 1.0
+    slow_all = np.all(np.abs(qd) < 0.1 * speed, axis=1)
+    for j, c in enumerate(coordinates):
+        regimes = {"reversal": np.abs(qd[:, j]) < 0.1 * speed[j],
+                   "high_acceleration": np.abs(acc[:, j]) > 1.5 * acc_rms[j],
+                   "slow_or_static": slow_all}
+        entry = {}
+        for name, mask in regimes.items():
+            if mask.sum() < 10:
+                continue
+            ratio = float(np.sqrt(np.mean(residual[mask, j] ** 2)) / rms[j])
+            entry[name] = {"ratio": ratio, "share": float(mask.mean())}
+            if ratio >= 1.5:
+                out["concentrated"].append({"coordinate": c, "regime": name, "ratio": ratio})
+        out["regimes"][c] = entry
+    return out
 
 
 @dataclass
@@ -304,7 +493,7 @@ def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[
     r = e - Z @ gamma
     lags = hac_lags(r.reshape(n, f))
     scores = (Z * r[:, None]).reshape(n, f, -1).sum(axis=1)
-    S = S_hac_simple(scores, nlags=lags) * (n * f) / max(n * f - full.rank, 1)
+    S = long_run(scores, lags) * (n * f) / max(n * f - full.rank, 1)
     H = np.linalg.pinv(Z.T @ Z)
     std = np.sqrt(np.maximum(np.diag(H @ S @ H), 0.0))
     out, start = [], 0
@@ -315,8 +504,14 @@ def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[
     return out
 
 
+def coefficient_names(kind: str) -> tuple[str, ...]:
+    """A candidate kind's coefficient names (a registered effect's, or a derived kind's)."""
+    effects = registry.effects()
+    return effects[kind].item.coefficients if kind in effects else derived.COEFFICIENTS[kind]
+
+
 def _coefficient_map(cand: Candidate, values: np.ndarray, stds: np.ndarray) -> dict:
-    names = registry.effects()[cand.kind].item.coefficients
+    names = coefficient_names(cand.kind)
     return {name: {"value": float(v), "std": float(s)} for name, v, s in zip(names, values, stds)}
 
 
@@ -332,7 +527,8 @@ def _effect_entry(all_candidates: list[Candidate], values, stds, chosen: Selecti
             "coefficients": coefficients_,
             "test": {"stat": test.stat, "df": test.df, "pvalue": test.pvalue,
                      "pvalue_holm": float(step.adjusted[index])},
-            "rivals": [_rival_json(all_candidates[r.index], r) for r in step.beaten]}
+            "rivals": [_rival_json(all_candidates[r.index], r) for r in step.beaten],
+            **({"shape": {k: float(v) for k, v in cand.shape.items()}} if cand.shape else {})}
 
 
 def _rival_json(rival_candidate: Candidate, rival: Rival) -> dict:
@@ -385,7 +581,7 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first) -> list[dict
     for cand, test in zip(candidates, first.tests):
         if not test.tested:
             continue
-        Z = (cand.columns * fit.weights[None, :, None]).reshape(n * f, -1)
+        Z = (first.whiten(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1.0
         kept = float(np.linalg.svd(project_out(Z / norms, fit.basis), compute_uv=False).min())
@@ -435,11 +631,13 @@ def _finite(values: np.ndarray) -> list:
 
 
 def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequence[str] | None = None,
-                  alpha: float = 0.05, holdout: float = 0.3, max_steps: int = MAX_STEPS) -> Diagnosis:
-    """:func:`prepare` then :func:`diagnose` on measured data (the CSV's notes kept)."""
-    problem = prepare(mechanism, data.motion, data.sample, selection, data)
+                  alpha: float = 0.05, holdout: float = 0.0, folds: int = FOLDS, max_steps: int | None = None,
+                  given: np.ndarray | None = None) -> Diagnosis:
+    """:func:`prepare` then :func:`diagnose` on measured data (the CSV's notes kept);
+    ``given``: standard parameters held as given (--params)."""
+    problem = prepare(mechanism, data.motion, data.sample, selection, data, given)
     problem.notes = list(data.notes) + problem.notes
-    return diagnose(problem, data.tau, alpha=alpha, holdout=holdout, max_steps=max_steps)
+    return diagnose(problem, data.tau, alpha=alpha, holdout=holdout, folds=folds, max_steps=max_steps)
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------

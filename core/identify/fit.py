@@ -374,16 +374,14 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
 
 
 def _hac_scores(matrix: np.ndarray, residual: np.ndarray, n: int, f: int, p: int) -> np.ndarray:
-    """The Newey-West (Bartlett) covariance of the least-squares scores summed per sample over
-    the coordinates (Driscoll-Kraay), its window from the residual's own autocorrelation
+    """The (prewhitened) Newey-West covariance of the least-squares scores summed per sample over
+    the coordinates (Driscoll-Kraay, :func:`baseparams.identify.selection.long_run`), its window from the residual's own autocorrelation
     (:func:`baseparams.identify.selection.hac_lags`, as diagnosis uses), scaled for the
     unknowns fitted: the middle of the sandwich (A^T A)^-1 S (A^T A)^-1."""
-    from statsmodels.stats.sandwich_covariance import S_hac_simple
-
-    from baseparams.identify.selection import hac_lags
+    from baseparams.identify.selection import hac_lags, long_run
     scores = (matrix * residual[:, None]).reshape(n, f, p).sum(axis=1)
     lags = hac_lags(residual.reshape(n, f))
-    return S_hac_simple(scores, nlags=lags) * (n * f) / max(n * f - p, 1)
+    return long_run(scores, lags) * (n * f) / max(n * f - p, 1)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None

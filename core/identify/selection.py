@@ -135,6 +135,7 @@ class Step:
     chosen: int | None = None
     confusable: list[Rival] = field(default_factory=list)
     beaten: list[Rival] = field(default_factory=list)
+    whiten: Callable | None = None  # the filter the step's fit and tests saw (Whitening or identity)
 
 
 @dataclass
@@ -218,6 +219,31 @@ def hac_lags(residual: np.ndarray) -> int:
     return int(min(limit, max(base, 2 * leading)))
 
 
+# Andrews and Monahan's bound on the prewhitening filter's singular values: a near-unit
+# root would make (I - A)^-1 explode.
+PREWHITEN_LIMIT = 0.97
+
+
+def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarray:
+    """The long-run covariance of per-sample ``scores`` (n, r): Newey-West (Bartlett) with
+    ``lags``; when ``lags`` > 0 and ``prewhiten``, Andrews and Monahan's (Econometrica 1992)
+    VAR(1)-prewhitened form: fit s_t = A s_(t-1) + e_t, Newey-West on e (window from e's own
+    autocorrelation), recoloured by (I - A)^-1. Why: with strongly autocorrelated residuals
+    (AR(1) at 0.9) the Bartlett kernel alone underestimates the long-run variance by a
+    fifth or more at any practical window, and the tests named effects in noise (4 of 10
+    datasets); prewhitening removes most of that bias."""
+    if lags == 0 or not prewhiten or len(scores) < 20:
+        return S_hac_simple(scores, nlags=lags)
+    before, after = scores[:-1], scores[1:]
+    At, *_ = np.linalg.lstsq(before, after, rcond=None)
+    u, sv, vt = np.linalg.svd(At.T)
+    A = (u * np.minimum(sv, PREWHITEN_LIMIT)) @ vt
+    e = after - before @ A.T
+    S = S_hac_simple(e, nlags=hac_lags(e))
+    B = np.linalg.inv(np.eye(A.shape[0]) - A)
+    return B @ S @ B.T
+
+
 def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
     """The fewest samples any direction of ``basis`` effectively acts on (participation
     ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
@@ -236,7 +262,8 @@ def wilson_hilferty(stat: float, df: int) -> float:
 
 
 def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int,
-         lags: int | None = None, sparse_if_white: bool = False, extra_df: int = 0) -> Test:
+         lags: int | None = None, sparse_if_white: bool = False, extra_df: int = 0,
+         prewhiten: bool = True) -> Test:
     """Wald test that the orthonormal directions ``basis`` (rows, r), orthogonal to the null
     model, have zero coefficients, given the null model's ``residual`` (rows,). HAC covariance:
     per-sample scores summed over the f coordinates, Bartlett kernel over time.
@@ -268,13 +295,14 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
         return Test(stat, r, pvalue, wilson_hilferty(stat, r), 0)
     scores = (basis * augmented[:, None]).reshape(n, f, r).sum(axis=1)
     rows = n * f
-    S = S_hac_simple(scores, nlags=lags) * rows / max(rows - dof - r, 1)   # small-sample factor
+    small = rows / max(rows - dof - r, 1)                   # small-sample factor
+    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
+    S = long_run(scores, lags, prewhiten) * small
     try:
         stat = float(gamma @ np.linalg.solve(S, gamma))
     except np.linalg.LinAlgError:
         stat = float(gamma @ np.linalg.pinv(S) @ gamma)
     denominator = max(n - int(np.ceil(dof / f)) - r, 1)     # samples left: scores are per sample
-    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
     pvalue = float(stats.f.sf(stat / k, k, denominator))
     return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
 
@@ -360,9 +388,52 @@ def holm(pvalues: Sequence[float]) -> np.ndarray:
     return out
 
 
+# ----- coloured residuals: Prais-Winsten whitening --------------------------------------------
+# The largest AR(1) coefficient whitening uses (beyond it the filter is a plain difference).
+MAX_RHO = 0.98
+
+
+@dataclass(frozen=True)
+class Whitening:
+    """Per-coordinate AR(1) filter x_t - rho x_(t-1) (Prais-Winsten: the first row times
+    sqrt(1 - rho^2)), applied alike to the data, the model and the candidates: feasible GLS
+    (Cochrane-Orcutt). Why: on residuals correlated over tens of samples (AR(1) noise at 0.9,
+    filtered recordings) the tests of candidates orthogonal to a smooth model are liberal
+    however their variance is estimated: the fitted model removes the residual's
+    low-frequency content, where a low-frequency candidate's own variance lives; HAC tests
+    rejected at 16 % (prewhitened HAC 9 %, batch means 14 %) instead of 5 % on the PUMA with
+    AR(1) noise at 0.9. The tests after whitening see a nearly white residual."""
+    rho: np.ndarray                     # (f,)
+
+    @staticmethod
+    def of(residual: np.ndarray) -> "Whitening | None":
+        """The filter for a residual (n, f), or None when it is white (HAC window 0)."""
+        if len(residual) < 20 or hac_lags(residual) == 0:
+            return None
+        lag0 = np.sum(residual[:-1] ** 2, axis=0)
+        rho = np.sum(residual[1:] * residual[:-1], axis=0) / np.where(lag0 > 0, lag0, 1.0)
+        return Whitening(np.clip(rho, 0.0, MAX_RHO))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """x (n, f) or (n, f, c), filtered along the samples."""
+        rho = self.rho if x.ndim == 2 else self.rho[:, None]
+        out = np.empty_like(x)
+        out[1:] = x[1:] - rho * x[:-1]
+        out[0] = x[0] * np.sqrt(1.0 - rho ** 2)
+        return out
+
+    def candidate(self, cand: Candidate) -> Candidate:
+        return Candidate(cand.kind, cand.coordinate, cand.names, self(cand.columns),
+                         tuple(self(v) for v in cand.variants), cand.shapes, cand.shape, cand.generalises)
+
+
+def _same(x):
+    return x
+
+
 # ----- the forward loop ----------------------------------------------------------------------
 def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
-           max_steps: int = MAX_STEPS) -> Selection:
+           max_steps: int = MAX_STEPS, whiten: "Whitening | None" = None) -> Selection:
     """Forward selection: test every candidate against the current model, Holm-correct, add
     the most significant (or, for a confusable group, its strongest member, reported as
     ambiguous), refit and repeat until no candidate is significant. Then backward
@@ -374,9 +445,15 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     A confusable group enters the working model whole (its strongest member among ``added``,
     the others as ``companions``): with only one member in, what the hidden member adds over
     it, a small but sharp remainder, was chased by further candidates (the SLA, viscous
-    friction on the upper arm hidden, named four wrong effects after its group)."""
+    friction on the upper arm hidden, named four wrong effects after its group).
+
+    ``whiten``: a filter for coloured noise (:class:`Whitening`, estimated from a complete
+    model's residual: :func:`select_whitened`) applied to the data, the model and every
+    candidate before each fit and test."""
     n, f, _ = model.shape
+    whiten = whiten or _same
     candidates = list(candidates)             # shaped ones are fixed at their variant on entry
+    shaped: dict[int, Candidate] = {}         # ... and their every variant kept here
     added: list[int] = []
     steps: list[Step] = []
     ambiguous: dict = {}
@@ -387,8 +464,9 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     regroups: list[tuple[int, int]] = []
     previous = None
     while len(steps) < max_steps:
+        refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten)
         current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
-        fit = weighted_fit(current, y, start=previous)
+        fit = weighted_fit(whiten(current), whiten(y), start=previous)
         previous = fit.weights
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
@@ -397,20 +475,23 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             if i in excluded:
                 tests.append(NOT_TESTED)
                 continue
-            bases[i], test, variant[i] = best_variant(cand, fit, (n, f), dof)
+            seen = cand if whiten is _same else whiten.candidate(cand)
+            # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
+            # variance when the whitened residual is white
+            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not _same)
             tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
         if tested:
             adjusted[tested] = holm([tests[i].pvalue for i in tested])
-        step = Step(tests, adjusted, fit)
+        step = Step(tests, adjusted, fit, whiten=whiten)
         steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
         if not significant:
             if len(steps) >= max_steps:    # no step left to test a changed model: this fit is the last
                 break
             change = regroup(model, y, candidates, added, companions, ambiguous, bars, fit.weights,
-                             alpha, regrouped)
+                             alpha, regrouped, whiten)
             if change is not None:
                 old, winner, confusable, beaten = change
                 regroups.append((old, winner))
@@ -425,7 +506,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                     ambiguous[winner] = confusable
                     companions.extend(r.index for r in confusable)
                 continue
-            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights)
+            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, whiten)
             if out is None:
                 break
             removed.append(out)
@@ -438,7 +519,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                                              generalises=_generalises(candidates))
         step.chosen, step.confusable, step.beaten = winner, confusable, beaten
         for i in [winner] + [r.index for r in confusable]:
-            if candidates[i].variants:            # its shape is fixed once it is in the model
+            if candidates[i].variants:            # its shape is chosen again at each step (refine_shapes)
+                shaped[i] = candidates[i]
                 candidates[i] = candidates[i].at(variant[i])
         added.append(winner)
         bars[winner] = alpha / len(tested)
@@ -456,17 +538,56 @@ def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
     return relation
 
 
-def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int
+def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
+                    max_steps: int = MAX_STEPS) -> Selection:
+    """:func:`select`, then, when the complete model's residual is coloured, :func:`select` again
+    on data, model and candidates whitened by that residual's AR(1) filter (feasible GLS,
+    :class:`Whitening`). The filter comes from the complete model, not from a residual that
+    still holds missing effects (whose AR(1) coefficient would be near 1, a plain difference
+    that hides a step-like effect among a few spikes)."""
+    chosen = select(model, y, candidates, alpha, max_steps)
+    last = chosen.steps[-1].fit
+    n, f = y.shape
+    whiten = Whitening.of(last.residual.reshape(n, f) / last.weights)
+    if whiten is None:
+        return chosen
+    return select(model, y, candidates, alpha, max_steps, whiten)
+
+
+def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
+                  shaped: dict, weights: np.ndarray | None, whiten: Callable = _same) -> None:
+    """Variable projection for the shaped effects in the model: each one's shape is chosen
+    again given everything else in the model (the variant that leaves the smallest weighted
+    residual), in place. Why: a shape chosen while other effects were still missing fits
+    those too (Coulomb friction took a smooth shape, then a Stribeck bump made up the
+    difference)."""
+    for i in in_model:
+        if i not in shaped:
+            continue
+        others = [j for j in in_model if j != i]
+        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                           whiten(y), weights)
+        best, gain = None, -1.0
+        for k, columns in enumerate(shaped[i].variants):
+            basis = candidate_basis(whiten(columns), fit)
+            explained = float(np.sum((basis.T @ fit.residual) ** 2))
+            if explained > gain:
+                best, gain = k, explained
+        if best is not None and shaped[i].shapes[best] != candidates[i].shape:
+            candidates[i] = shaped[i].at(best)
+
+
+def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False
                  ) -> tuple[np.ndarray, Test, int]:
     """(basis, test, variant index) of the candidate's best shape against ``fit`` (the
     largest normal-equivalent statistic; the one form of an unshaped candidate)."""
     if not cand.variants:
         basis = candidate_basis(cand, fit)
-        return basis, wald(fit.residual, basis, shape, dof), -1
+        return basis, wald(fit.residual, basis, shape, dof, sparse_if_white=sparse_if_white), -1
     best = None
     for k, columns in enumerate(cand.variants):
         basis = candidate_basis(columns, fit)
-        test = wald(fit.residual, basis, shape, dof, extra_df=cand.extra_df)
+        test = wald(fit.residual, basis, shape, dof, extra_df=cand.extra_df, sparse_if_white=sparse_if_white)
         if best is None or test.z > best[1].z:
             best = (basis, test, k)
     return best
@@ -474,7 +595,7 @@ def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int
 
 def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], added: list[int],
             companions: list[int], ambiguous: dict, bars: dict, weights: np.ndarray, alpha: float,
-            done: set[int]) -> tuple[int, int, list[Rival], list[Rival]] | None:
+            done: set[int], whiten: Callable = _same) -> tuple[int, int, list[Rival], list[Rival]] | None:
     """An ambiguous group formed while a comparison inside it could not be made, resolved
     again given the rest of the final model: (the group's old strongest member, the new
     winner, its confusable rivals, the beaten ones) when the group changes, else None.
@@ -497,9 +618,9 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
             continue
         members = [head] + [r.index for r in rivals]
         others = [j for j in added + companions if j not in members]
-        fit = weighted_fit(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1),
-                           y, weights)
-        bases = {i: candidate_basis(candidates[i], fit) for i in members}
+        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                           whiten(y), weights)
+        bases = {i: candidate_basis(whiten(candidates[i].columns), fit) for i in members}
         if any(b.shape[1] == 0 for b in bases.values()):
             continue
         winner, confusable, beaten = resolve(head, members[1:], bases, fit, (n, f), fit.rank, alpha,
@@ -511,8 +632,8 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
 
 
 def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], added: list[int],
-              companions: list[int], ambiguous: dict, bars: dict, weights: np.ndarray
-              ) -> tuple[int, Test, float] | None:
+              companions: list[int], ambiguous: dict, bars: dict, weights: np.ndarray,
+              whiten: Callable = _same) -> tuple[int, Test, float] | None:
     """Backward elimination, one effect at a time: each named effect (not an ambiguous
     group: those are not named) is tested beyond everything else in the final model, at the
     Bonferroni bar alpha / m it cleared to enter (the most significant of m candidates under
@@ -531,9 +652,9 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     worst = None
     for i in named:
         others = [j for j in added + companions if j != i]
-        fit = weighted_fit(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1),
-                           y, weights)
-        basis = candidate_basis(candidates[i], fit)
+        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                           whiten(y), weights)
+        basis = candidate_basis(whiten(candidates[i].columns), fit)
         test = wald(fit.residual, basis, (n, f), fit.rank, sparse_if_white=True)
         if not test.tested and test.reason != "absorbed":
             continue                         # too sparse to test on this residual: no evidence to take it out

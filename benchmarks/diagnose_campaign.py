@@ -1,0 +1,250 @@
+"""Issue 21's campaign for ``diagnose``: data as real recordings are (coloured noise,
+shapes and mismatches outside the catalogue, a payload the model lacks), with known truth.
+
+Each scenario draws a dataset on a fixed motion (a mechanism's default trajectory, or the
+TX40's recorded motion), runs :func:`baseparams.identify.diagnose.diagnose` and scores the
+answer. A "confident wrong name" is an effect under ``effects`` (named, not ambiguous, not
+held back as unsupported) that is not the truth (or, for a mismatch outside the catalogue,
+not in its short list of acceptable names: friction kinds on the joint whose friction has
+an uncatalogued shape). Used by ``benchmarks/bench_diagnose.py --outside`` (the figures of
+docs/diagnosis.md) and, with few seeds, by ``tests/test_diagnose_campaign.py`` (slow).
+
+Noise: each coordinate's SD is 2 % of its RMS inertial torque; AR(1) noise has the same
+marginal SD with correlation ``rho`` from one sample to the next.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from baseparams.identify.diagnose import Problem, diagnose, prepare
+from baseparams.identify.model import evaluate
+from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
+from baseparams.io.loader import resolve
+
+NOISE = 0.02
+FRICTION = {"viscous_friction", "coulomb_friction", "stribeck_friction", "position_friction", "load_friction"}
+
+
+@dataclass
+class Setting:
+    """A mechanism and motion with its columns computed once."""
+    name: str
+    mechanism: object
+    problem: Problem
+    motion: object
+
+    @property
+    def coordinates(self):
+        return self.problem.coordinates
+
+
+def setting(name: str, samples: int = 1200) -> Setting:
+    mechanism = resolve(name)
+    motion = trajectory_motion(mechanism, samples)
+    return Setting(name, mechanism, prepare(mechanism, motion, evaluate(mechanism, motion)), motion)
+
+
+def noise(rng, shape, sd, rho: float = 0.0) -> np.ndarray:
+    white = rng.standard_normal(shape)
+    if rho:
+        out = np.empty_like(white)
+        out[0] = white[0]
+        for k in range(1, len(white)):
+            out[k] = rho * out[k - 1] + np.sqrt(1 - rho ** 2) * white[k]
+        white = out
+    return white * sd
+
+
+@dataclass
+class Dataset:
+    tau: np.ndarray
+    truth: set                    # (kind, place) the right answer names
+    acceptable: set               # names that are not wrong (truth included)
+    sd: np.ndarray
+    phi: np.ndarray
+    extra: dict
+
+
+def base(s: Setting, rng):
+    phi = random_physical_inertia(s.mechanism, rng)
+    clean = s.problem.inertial @ phi
+    sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
+    return phi, clean, sd
+
+
+def scaled(force, sd, ratio):
+    rms = np.sqrt(np.mean(force ** 2, axis=0))
+    return force * ratio / np.max(rms / sd)
+
+
+def on(f: int, j: int, column: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(column), f))
+    out[:, j] = column
+    return out
+
+
+def driven(s: Setting, rng) -> int:
+    """A coordinate that moves (random)."""
+    return int(rng.integers(len(s.coordinates)))
+
+
+# ----- scenarios: each returns a Dataset --------------------------------------------------------
+def nothing(s, rng, rho=0.0, ratio=None):
+    phi, clean, sd = base(s, rng)
+    return Dataset(clean + noise(rng, clean.shape, sd, rho), set(), set(), sd, phi, {})
+
+
+def catalogue(kind):
+    def make(s, rng, rho=0.0, ratio=5.0):
+        phi, clean, sd = base(s, rng)
+        choices = [c for c in s.problem.candidates if c.kind == kind and c.coordinate in s.coordinates]
+        cand = choices[int(rng.integers(len(choices)))]
+        theta = rng.uniform(0.5, 1.5, size=cand.columns.shape[-1]) * (rng.choice([-1, 1]) if kind == "offset" else 1)
+        if kind == "spring":
+            j = s.coordinates.index(cand.coordinate)
+            q = s.motion.q[:, j]
+            theta[1] = theta[0] * (np.mean(q) + 0.1 * np.std(q))
+        columns = cand.variants[int(rng.integers(1, len(cand.variants)))] if cand.variants else cand.columns
+        force = scaled(columns @ theta, sd, ratio)
+        truth = {(kind, cand.coordinate)}
+        return Dataset(clean + force + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {})
+    return make
+
+
+def smooth_coulomb(s, rng, rho=0.0, ratio=5.0):
+    """fc tanh(qd / vs), vs a fraction of the RMS speed off the diagnosis grid."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    qd = s.motion.qd[:, j]
+    vs = rng.uniform(0.04, 0.2) * np.sqrt(np.mean(qd ** 2))
+    force = scaled(on(clean.shape[1], j, np.tanh(qd / vs)), sd, ratio)
+    truth = {("coulomb_friction", s.coordinates[j])}
+    return Dataset(clean + force + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {"vs": vs})
+
+
+def delay(s, rng, rho=0.0, ratio=None):
+    """The torques lag the positions by 0.5 to 3 samples."""
+    phi, clean, sd = base(s, rng)
+    t = s.motion.t
+    d = rng.uniform(0.5, 3.0) * (t[1] - t[0])
+    lagged = np.stack([np.interp(t - d, t, clean[:, j]) for j in range(clean.shape[1])], axis=1)
+    truth = {("delay", "all")}
+    return Dataset(lagged + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {"d": d})
+
+
+def gear_loss(s, rng, rho=0.0, ratio=5.0):
+    """mu |tau_j| sign(qd_j): friction growing with the transmitted load on one joint."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    force = scaled(on(clean.shape[1], j, np.abs(clean[:, j]) * np.sign(s.motion.qd[:, j])), sd, ratio)
+    truth = {("load_friction", s.coordinates[j])}
+    return Dataset(clean + force + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {})
+
+
+# outside the catalogue
+def power_friction(s, rng, rho=0.0, ratio=5.0):
+    """sign(qd) sqrt(|qd| / rms): a friction shape the catalogue lacks (friction kinds on the
+    joint are acceptable: they are the right physics, approximated)."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    qd = s.motion.qd[:, j]
+    force = scaled(on(clean.shape[1], j, np.sign(qd) * np.sqrt(np.abs(qd) / np.sqrt(np.mean(qd ** 2)))), sd, ratio)
+    ok = {(k, s.coordinates[j]) for k in FRICTION}
+    return Dataset(clean + force + noise(rng, clean.shape, sd, rho), set(), ok, sd, phi, {})
+
+
+def compliance(s, rng, rho=0.0, ratio=None):
+    """One joint's torque through a lightly damped second-order lag (an elastic joint's
+    resonance above the motion's bandwidth): nothing in the catalogue is right."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    t = s.motion.t
+    dt = t[1] - t[0]
+    from scipy.signal import bilinear, lfilter
+    spectrum = np.abs(np.fft.rfft(clean[:, j] - clean[:, j].mean()))
+    freqs = np.fft.rfftfreq(len(t), dt)
+    bandwidth = freqs[np.searchsorted(np.cumsum(spectrum ** 2) / np.sum(spectrum ** 2), 0.99)]
+    w = 2 * np.pi * bandwidth * rng.uniform(1.5, 3.0)
+    zeta = 0.2
+    b, a = bilinear([w ** 2], [1, 2 * zeta * w, w ** 2], fs=1 / dt)
+    out = clean.copy()
+    out[:, j] = lfilter(b, a, clean[:, j] - clean[0, j]) + clean[0, j]
+    return Dataset(out + noise(rng, clean.shape, sd, rho), set(), set(), sd, phi, {})
+
+
+def ripple(s, rng, rho=0.0, ratio=5.0):
+    """A torque ripple periodic in time (a pump, a fan), not in any coordinate."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    t = s.motion.t
+    period = (t[-1] - t[0]) / rng.uniform(7, 15)
+    force = scaled(on(clean.shape[1], j, np.sin(2 * np.pi * t / period + rng.uniform(0, 6.3))), sd, ratio)
+    return Dataset(clean + force + noise(rng, clean.shape, sd, rho), set(), set(), sd, phi, {})
+
+
+def joint_delay(s, rng, rho=0.0, ratio=None):
+    """Only one joint's torque lags (3 to 6 samples): a delay is acceptable, nothing else."""
+    phi, clean, sd = base(s, rng)
+    j = driven(s, rng)
+    t = s.motion.t
+    d = rng.uniform(3, 6) * (t[1] - t[0])
+    out = clean.copy()
+    out[:, j] = np.interp(t - d, t, clean[:, j])
+    return Dataset(out + noise(rng, clean.shape, sd, rho), set(), {("delay", "all")}, sd, phi, {})
+
+
+INSIDE = {"viscous": catalogue("viscous_friction"), "coulomb": catalogue("coulomb_friction"),
+          "offset": catalogue("offset"), "spring": catalogue("spring"), "rotor_inertia": catalogue("rotor_inertia")}
+NEW = {"smooth_coulomb": smooth_coulomb, "delay": delay, "gear_loss": gear_loss}
+OUTSIDE = {"power_friction": power_friction, "compliance": compliance, "ripple": ripple, "joint_delay": joint_delay}
+
+
+def score(d, data: Dataset) -> str:
+    """'right' (the truth named, nothing wrong), 'ambiguous' (the truth in an ambiguous group,
+    nothing wrong), 'wrong' (a confident wrong name), 'none' (nothing wrong named, the truth
+    missed or there was no truth)."""
+    named = {(e["kind"], e["coordinate"]) for e in d.effects}
+    wrong = named - data.acceptable - data.truth
+    if wrong:
+        return "wrong"
+    if data.truth and data.truth <= named:
+        return "right"
+    groups = [{(c["kind"], c["coordinate"]) for c in a["candidates"]} for a in d.ambiguous]
+    if data.truth and all(any(t in g for g in groups) or t in named for t in data.truth):
+        return "ambiguous"
+    return "none"
+
+
+def run(s: Setting, make: Callable, rng, *, rho: float = 0.0, ratio: float = 5.0, **options):
+    data = make(s, rng, rho=rho, ratio=ratio)
+    d = diagnose(s.problem, data.tau, **options)
+    return d, data, score(d, data)
+
+
+# ----- a payload the model lacks, diagnosed with the model held as given -------------------------
+def payload_problem(s: Setting, phi: np.ndarray) -> Problem:
+    return prepare(s.mechanism, s.motion, evaluate(s.mechanism, s.motion), given=phi)
+
+
+def payload(s: Setting, rng, rho=0.0, mass_fraction=None):
+    """A rigid payload on the last body (mass 20-60 % of that body's, its centre 2-10 cm from
+    the frame origin, a small inertia of its own); returns (tau, body name, mass, phi)."""
+    phi = random_physical_inertia(s.mechanism, rng)
+    k = max(i for i in range(len(s.mechanism.bodies)) if np.any(s.problem.inertial[:, :, 10 * i:10 * i + 10]))
+    m = phi[10 * k] * (mass_fraction or rng.uniform(0.2, 0.6))
+    c = rng.uniform(-1, 1, 3)
+    c *= rng.uniform(0.02, 0.1) / np.linalg.norm(c)
+    r = 0.02
+    inertia_com = 0.4 * m * r ** 2
+    # parameters about the body origin: m, m c, I_com + m (|c|^2 1 - c c^T)
+    I = inertia_com * np.eye(3) + m * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
+    extra = np.array([m, *(m * c), I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]])
+    true = phi.copy()
+    true[10 * k:10 * k + 10] += extra
+    clean = s.problem.inertial @ true
+    sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
+    from baseparams.identify.derived import body_name
+    name = body_name(s.mechanism, s.mechanism.bodies[k].label)
+    return clean + noise(rng, clean.shape, sd, rho), name, m, phi

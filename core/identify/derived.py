@@ -1,0 +1,83 @@
+"""Diagnosis candidates that are not registered effects: they are built from the model's own
+predicted torque or from the bodies' inertial columns, so they exist only inside a diagnosis.
+
+- ``load_friction:COORD``: |tau| sign(qd) on a coordinate (gear friction growing with the
+  transmitted load), tau the model's predicted torque there.
+- ``delay:all``: one time delay d between the measured positions and the torques (a filter's
+  or a bus's lag): tau_measured(t) = tau(t - d) = tau(t) - d dtau/dt to first order, so the
+  column is -dtau/dt and the coefficient is d in seconds (fractional samples).
+- With ``--params`` (the simulation held as given): ``gain:COORD`` (the torque on a
+  coordinate scaled by 1 + g: a current-to-torque constant off), and a changed body:
+  ``mass:BODY`` (a point mass at the body's frame origin), ``payload:BODY`` (a point mass
+  anywhere on it: m, m c) and ``body:BODY`` (all ten parameters). Each is the next one's
+  special case; selection names the simplest that explains the data (``generalises``).
+"""
+
+import numpy as np
+
+from baseparams.identify.selection import Candidate
+from baseparams.model.mechanism import Mechanism
+
+TORQUE_KINDS = ("load_friction", "delay")
+GIVEN_KINDS = ("gain", "mass", "payload", "body")
+KINDS = TORQUE_KINDS + GIVEN_KINDS
+COEFFICIENTS = {"load_friction": ("mu",), "delay": ("d",), "gain": ("g",), "mass": ("m",),
+                "payload": ("m", "mx", "my", "mz"),
+                "body": ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")}
+BODY_PARTS = {"mass": slice(0, 1), "payload": slice(0, 4), "body": slice(0, 10)}
+GENERALISES = {"payload": ("mass",), "body": ("mass", "payload")}
+
+
+def body_name(mechanism: Mechanism, label: int) -> str:
+    body = mechanism.body(label)
+    return body.name or f"body{label}"
+
+
+def places(mechanism: Mechanism, kind: str, coordinates: tuple[str, ...]) -> tuple[str, ...]:
+    """Where a derived kind acts: the independent coordinates, the bodies, or 'all'."""
+    if kind == "delay":
+        return ("all",)
+    if kind in BODY_PARTS:
+        return tuple(body_name(mechanism, b.label) for b in mechanism.bodies)
+    return coordinates
+
+
+def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarray, torque: np.ndarray,
+                      wanted: set | None = None) -> list[Candidate]:
+    """load_friction on each coordinate and one delay, from the model's ``torque`` (n, f) and the
+    independent speeds ``qd`` (n, f) at the fit's rows; ``wanted``: (kind, place) pairs to keep
+    (None: all)."""
+    n, f = torque.shape
+    out = []
+    for j, c in enumerate(coordinates):
+        if wanted is None or ("load_friction", c) in wanted:
+            columns = np.zeros((n, f, 1))
+            columns[:, j, 0] = np.abs(torque[:, j]) * np.sign(qd[:, j])
+            out.append(Candidate("load_friction", c, (f"mu_{c}",), columns))
+    if (wanted is None or ("delay", "all") in wanted) and n > 2:
+        out.append(Candidate("delay", "all", ("d",), -np.gradient(torque, t, axis=0)[:, :, None]))
+    return out
+
+
+def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,
+                     inertial: np.ndarray, wanted: set | None = None) -> list[Candidate]:
+    """gain per coordinate (columns: the given torque) and mass/payload/body per body (its
+    columns of the inertial regressor ``inertial`` (n, f, 10 bodies))."""
+    n, f = torque.shape
+    out = []
+    for j, c in enumerate(coordinates):
+        if wanted is None or ("gain", c) in wanted:
+            columns = np.zeros((n, f, 1))
+            columns[:, j, 0] = torque[:, j]
+            out.append(Candidate("gain", c, (f"g_{c}",), columns))
+    for k, body in enumerate(mechanism.bodies):
+        name = body_name(mechanism, body.label)
+        block = inertial[:, :, 10 * k: 10 * k + 10]
+        if not np.any(block):
+            continue                                   # the ground, or a body nothing moves
+        for kind, part in BODY_PARTS.items():
+            if wanted is None or (kind, name) in wanted:
+                out.append(Candidate(kind, name, tuple(f"{p}_{name}" for p in COEFFICIENTS[kind]),
+                                     np.ascontiguousarray(block[:, :, part]),
+                                     generalises=GENERALISES.get(kind, ())))
+    return out
