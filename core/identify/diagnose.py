@@ -243,8 +243,9 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
 
     # out of sample: plausibility, block cross-validation, stability over the blocks
     weights = last.fit.weights
+    checks: dict = {}
     kept_named, unsupported = _gate(problem, problem.inertial[rows], candidates, chosen.in_model, named, y[rows],
-                                    weights, alpha, folds)
+                                    weights, alpha, folds, checks)
     in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
     before = _predict(problem.inertial, [], y, chosen.steps[0].fit, train)
     after = _predict(problem.inertial, [full[i] for i in in_model], y, None, train)
@@ -262,8 +263,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
 
     estimates = coefficients(problem.inertial[rows], candidates, in_model, y[rows], after.fit.weights)
     by_index = dict(zip(in_model, estimates))
-    effects = [_effect_entry(candidates, *by_index[i], chosen, i) for i in chosen.added
-               if i not in ambiguous_idx and i in by_index]
+    effects = [{**_effect_entry(candidates, *by_index[i], chosen, i), "checks": checks.get(i, {})}
+               for i in chosen.added if i not in ambiguous_idx and i in by_index]
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added if i in ambiguous_idx]
     unexplained = _unexplained(after, train, problem.coordinates, alpha)
     white = unexplained["white"]
@@ -332,12 +333,13 @@ def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
 
 
 def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int], named: list[int],
-          y: np.ndarray, weights: np.ndarray, alpha: float, folds: int) -> tuple[list[int], list[dict]]:
+          y: np.ndarray, weights: np.ndarray, alpha: float, folds: int, checks: dict) -> tuple[list[int], list[dict]]:
     """The named effects that hold up (physical, predicting held-out blocks, one coefficient for
     the whole recording) and the others with their reasons (:mod:`.outofsample`); ``model``
-    and ``y``: the training rows."""
+    and ``y``: the training rows; ``checks`` receives each kept effect's figures."""
     if not named:
         return [], []
+    checks.clear()
     blocks_ = [model] + [candidates[i].columns for i in in_model]
     X = np.concatenate(blocks_, axis=-1)
     fit = weighted_fit(X, y, weights)
@@ -372,6 +374,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
                         "values": values, "reason": reason, **detail})
         else:
             kept.append(i)
+            checks[i] = detail
     return kept, out
 
 

@@ -298,6 +298,13 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     small = rows / max(rows - dof - r, 1)                   # small-sample factor
     k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
     S = long_run(scores, lags, prewhiten) * small
+    if lags == 0 and prewhiten:
+        # no autocorrelation left: White's variance, but never below the classical one
+        # (sigma^2 I on orthonormal directions), which White's underestimates where few
+        # samples carry a direction (liberal in the tails: 1.7 times at 1 % on the PUMA)
+        classical = float(augmented @ augmented) / max(rows - dof - r, 1)
+        values, vectors = np.linalg.eigh(S)
+        S = (vectors * np.maximum(values, classical)) @ vectors.T
     try:
         stat = float(gamma @ np.linalg.solve(S, gamma))
     except np.linalg.LinAlgError:
