@@ -37,6 +37,7 @@ computed from the fit alone), for diagnosis (its final model's floor) and for th
 
     python benchmarks/bench_diagnose.py            # full campaign (about 20-40 min on 2 cores)
     python benchmarks/bench_diagnose.py --quick    # a small run (a few minutes)
+    python benchmarks/bench_diagnose.py --outside  # issue 21: data as recordings are (about 30 min)
 """
 
 import os
@@ -256,7 +257,15 @@ def main():
     parser.add_argument("--mechanisms", nargs="*", default=MECHANISMS)
     parser.add_argument("--seed", type=int, default=2024)
     parser.add_argument("--samples", type=int, default=1000, help="samples per dataset [1000]")
+    parser.add_argument("--outside", action="store_true",
+                        help="issue 21's campaign instead: coloured noise, new kinds, mismatches outside "
+                             "the catalogue, payloads with --params, the std calibration, the TX40's timing")
+    parser.add_argument("--count", type=int, default=40, help="datasets per scenario with --outside [40]")
     args = parser.parse_args()
+    if args.outside:
+        from bench_diagnose_outside import run_outside
+        run_outside(args)
+        return
     args.null, args.single, args.pairs, args.confusable = (20, 2, 10, 10) if args.quick else (100, 10, 40, 40)
     report = {k: defaultdict(list) for k in ("null", "null_ambiguous", "null_closed", "single", "pairs",
                                               "confusable", "time", "shrink", "identifiable")}

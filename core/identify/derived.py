@@ -7,10 +7,13 @@ predicted torque or from the bodies' inertial columns, so they exist only inside
   or a bus's lag): tau_measured(t) = tau(t - d) = tau(t) - d dtau/dt to first order, so the
   column is -dtau/dt and the coefficient is d in seconds (fractional samples).
 - With ``--params`` (the simulation held as given): ``gain:COORD`` (the torque on a
-  coordinate scaled by 1 + g: a current-to-torque constant off), and a changed body:
-  ``mass:BODY`` (a point mass at the body's frame origin), ``payload:BODY`` (a point mass
-  anywhere on it: m, m c) and ``body:BODY`` (all ten parameters). Each is the next one's
-  special case; selection names the simplest that explains the data (``generalises``).
+  coordinate scaled by 1 + g: a current-to-torque constant off), and a payload or a changed
+  body: ``mass:BODY`` (a point mass at the body's frame origin: one column, exact) and
+  ``body:BODY`` (all ten parameters: a rigid payload anywhere on it, or the body itself
+  changed). The first is the second's special case; selection names the simpler one when
+  the data cannot tell them apart (``generalises``). (A point mass at an unknown position
+  is not linear in its position: its inertia about the origin is m (|c|^2 1 - c c^T); the
+  rigid body covers it.)
 """
 
 import numpy as np
@@ -19,13 +22,12 @@ from baseparams.identify.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
 TORQUE_KINDS = ("load_friction", "delay")
-GIVEN_KINDS = ("gain", "mass", "payload", "body")
+GIVEN_KINDS = ("gain", "mass", "body")
 KINDS = TORQUE_KINDS + GIVEN_KINDS
 COEFFICIENTS = {"load_friction": ("mu",), "delay": ("d",), "gain": ("g",), "mass": ("m",),
-                "payload": ("m", "mx", "my", "mz"),
                 "body": ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")}
-BODY_PARTS = {"mass": slice(0, 1), "payload": slice(0, 4), "body": slice(0, 10)}
-GENERALISES = {"payload": ("mass",), "body": ("mass", "payload")}
+BODY_PARTS = {"mass": slice(0, 1), "body": slice(0, 10)}
+GENERALISES = {"body": ("mass",)}
 
 
 def body_name(mechanism: Mechanism, label: int) -> str:
@@ -61,7 +63,7 @@ def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarra
 
 def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,
                      inertial: np.ndarray, wanted: set | None = None) -> list[Candidate]:
-    """gain per coordinate (columns: the given torque) and mass/payload/body per body (its
+    """gain per coordinate (columns: the given torque) and mass/body per body (its
     columns of the inertial regressor ``inertial`` (n, f, 10 bodies))."""
     n, f = torque.shape
     out = []

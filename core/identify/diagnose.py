@@ -32,7 +32,6 @@ from baseparams.identify import derived
 from baseparams.identify.candidates import library, parse_selection
 from baseparams.identify.derived import KINDS as DERIVED_KINDS
 from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, implausible, stability
-from baseparams.identify.physical import pseudo_inertia
 from baseparams.identify.data import MeasuredData
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
@@ -379,16 +378,14 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
-    """A changed body must stay physical: the given parameters plus the change have a positive
-    semidefinite pseudo-inertia (a payload or point mass is checked by its sign alone)."""
+    """A changed body keeps a positive mass (its other parameters are not all identifiable:
+    the estimate is one of many changes with the same torques, so only the mass is checked)."""
     if cand.kind != "body" or problem.given is None:
         return ""
     k = next(k for k, b in enumerate(problem.mechanism.bodies)
              if derived.body_name(problem.mechanism, b.label) == cand.coordinate)
-    phi = problem.given[10 * k: 10 * k + 10] + np.array([values[c] for c in derived.COEFFICIENTS["body"]])
-    low = float(np.linalg.eigvalsh(pseudo_inertia(phi))[0])
-    scale = max(abs(phi[0]), float(np.abs(phi[4:]).max()), 1e-300)
-    return f"the changed body is not physical (pseudo-inertia eigenvalue {low:.3g})" if low < -1e-6 * scale else ""
+    mass = problem.given[10 * k] + values["m"]
+    return f"the changed body's mass {mass:.3g} is not positive" if mass <= 0 else ""
 
 
 def _cross_validated(model: np.ndarray, added: list[Candidate], y: np.ndarray, tau: np.ndarray,
@@ -659,15 +656,24 @@ def effects_toml(effects: Sequence[EffectSpec], origin: str) -> str:
     return "\n".join(lines)
 
 
+def check_writable(mechanism: Mechanism, path: str | os.PathLike) -> None:
+    """--write needs a TOML mechanism file to append to: refused before the run otherwise."""
+    source = mechanism.path
+    if not source or Path(source).suffix.lower() != ".toml":
+        raise InputError(f"--write needs a TOML mechanism file; {mechanism.name} was read from "
+                         f"{source or 'no file'} (convert it first: baseparams convert MECH FILE.toml)",
+                         key="--write")
+    if Path(path).suffix.lower() != ".toml":
+        raise InputError(f"--write writes a TOML mechanism file, not {Path(path).name}", key="--write")
+
+
 def write_fixed(mechanism: Mechanism, effects: Sequence[EffectSpec], path: str | os.PathLike,
                 origin: str = "") -> Mechanism:
     """Write the mechanism's own TOML text with ``effects`` appended as ``[[effects]]`` tables
     (the user's file stays as it was above them), check that it loads back with them, and
     write it atomically. Returns the mechanism read back."""
+    check_writable(mechanism, path)
     source = mechanism.path
-    if not source or Path(source).suffix.lower() != ".toml":
-        raise InputError(f"--write needs a TOML mechanism file; {mechanism.name} was read from "
-                         f"{source or 'no file'}", key="--write")
     try:
         text = Path(source).read_text(encoding="utf-8")
     except OSError as exc:

@@ -131,7 +131,7 @@ def stability(partial: np.ndarray, columns: np.ndarray, weights: np.ndarray, fol
 # ----- physical plausibility ---------------------------------------------------------------------
 POSITIVE = {"viscous_friction": ("fv",), "coulomb_friction": ("fc",), "stribeck_friction": ("fs",),
             "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",),
-            "payload": ("m",)}
+            }
 
 
 def implausible(kind: str, values: dict) -> str:

@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 from statsmodels.stats.sandwich_covariance import S_hac_simple
-from statsmodels.tsa.stattools import acf
 
 from baseparams.identify.weighting import fixed_point
 
@@ -203,15 +202,16 @@ def hac_lags(residual: np.ndarray) -> int:
     if n < 8:
         return base
     nlags = min(limit, n - 1)
-    mean = np.zeros(nlags + 1)
-    count = 0
-    for column in residual.T:
-        if np.std(column) > 0:
-            mean += acf(column, nlags=nlags, fft=True)
-            count += 1
-    if count == 0:
+    centred = residual - residual.mean(axis=0)
+    energy = np.sum(centred ** 2, axis=0)
+    live = energy > 0
+    if not live.any():
         return base
-    mean /= count
+    # every coordinate's autocorrelation at once (statsmodels' acf, one FFT for all columns)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    spectrum = np.fft.rfft(centred[:, live], n=size, axis=0)
+    autocovariance = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)[:nlags + 1]
+    mean = np.mean(autocovariance / energy[live], axis=1)
     inside = np.nonzero(np.abs(mean[1:]) < 1.96 / np.sqrt(n))[0]
     leading = int(inside[0]) if inside.size else nlags
     if leading == 0:
@@ -470,14 +470,17 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     regrouped: set[int] = set()               # ambiguous groups already resolved again
     regroups: list[tuple[int, int]] = []
     previous = None
+    touched: set = set()                      # places where the model changed since the last step
     while len(steps) < max_steps:
-        refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten)
+        refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten, touched)
+        touched = set()
         current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
         fit = weighted_fit(whiten(current), whiten(y), start=previous)
         previous = fit.weights
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
         bases, tests, variant = {}, [], {}
+        lags = hac_lags(fit.residual.reshape(n, f))     # one window per step: candidates barely change it
         for i, cand in enumerate(candidates):
             if i in excluded:
                 tests.append(NOT_TESTED)
@@ -485,7 +488,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             seen = cand if whiten is _same else whiten.candidate(cand)
             # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
             # variance when the whitened residual is white
-            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not _same)
+            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not _same,
+                                                      lags=lags)
             tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
@@ -505,6 +509,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                 for r in ambiguous.pop(old):
                     companions.remove(r.index)
                 added[added.index(old)] = winner
+                touched |= {candidates[old].coordinate, candidates[winner].coordinate}
                 bars[winner] = bars[old]
                 regrouped.add(winner)
                 entered = next(s for s in steps if s.chosen == old)
@@ -518,6 +523,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                 break
             removed.append(out)
             added.remove(out[0])
+            touched.add(candidates[out[0]].coordinate)
             continue
         winner = max(significant, key=lambda i: tests[i].z)
         rivals = [i for i in tested if tests[i].pvalue <= alpha and i != winner]
@@ -530,6 +536,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                 shaped[i] = candidates[i]
                 candidates[i] = candidates[i].at(variant[i])
         added.append(winner)
+        touched |= {candidates[i].coordinate for i in [winner] + [r.index for r in confusable]}
         bars[winner] = alpha / len(tested)
         if confusable:
             ambiguous[winner] = confusable
@@ -545,31 +552,47 @@ def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
     return relation
 
 
+# A selection is repeated when the complete model's residual asks for a filter differing from
+# the one it ran with by more than this (in any coordinate's AR(1) coefficient).
+RHO_AGREEMENT = 0.01
+
+
 def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
                     max_steps: int = MAX_STEPS) -> Selection:
-    """:func:`select`, then, when the complete model's residual is coloured, :func:`select` again
-    on data, model and candidates whitened by that residual's AR(1) filter (feasible GLS,
-    :class:`Whitening`). The filter comes from the complete model, not from a residual that
-    still holds missing effects (whose AR(1) coefficient would be near 1, a plain difference
-    that hides a step-like effect among a few spikes)."""
-    chosen = select(model, y, candidates, alpha, max_steps)
-    last = chosen.steps[-1].fit
+    """:func:`select` on data, model and candidates whitened (feasible GLS, :class:`Whitening`)
+    when the noise is coloured. The first AR(1) filter comes from the residual of the model
+    plus every candidate at once: the model alone would leave the missing effects in its
+    residual (an AR(1) coefficient near 1, a plain difference that hides a step-like effect
+    among a few spikes). That residual is overfitted, its coefficient a little low (0.86 for
+    0.90 on the PUMA, which made the tests liberal), so the filter is estimated again from the
+    selected model's residual and the selection repeated with it when the two differ
+    (Cochrane-Orcutt, one more round)."""
     n, f = y.shape
-    whiten = Whitening.of(last.residual.reshape(n, f) / last.weights)
-    if whiten is None:
+    complete = weighted_fit(np.concatenate([model] + [c.columns for c in candidates], axis=-1), y)
+    whiten = Whitening.of(complete.residual.reshape(n, f) / complete.weights)
+    chosen = select(model, y, candidates, alpha, max_steps, whiten)
+    final = np.concatenate([model] + [chosen.candidates[i].columns for i in chosen.in_model], axis=-1)
+    fit = weighted_fit(final, y, chosen.steps[-1].fit.weights)
+    again = Whitening.of(fit.residual.reshape(n, f) / fit.weights)
+    before = whiten.rho if whiten is not None else np.zeros(f)
+    after = again.rho if again is not None else np.zeros(f)
+    if np.max(np.abs(after - before)) <= RHO_AGREEMENT:
         return chosen
-    return select(model, y, candidates, alpha, max_steps, whiten)
+    return select(model, y, candidates, alpha, max_steps, again)
 
 
 def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
-                  shaped: dict, weights: np.ndarray | None, whiten: Callable = _same) -> None:
+                  shaped: dict, weights: np.ndarray | None, whiten: Callable = _same,
+                  touched: set | None = None) -> None:
     """Variable projection for the shaped effects in the model: each one's shape is chosen
     again given everything else in the model (the variant that leaves the smallest weighted
     residual), in place. Why: a shape chosen while other effects were still missing fits
     those too (Coulomb friction took a smooth shape, then a Stribeck bump made up the
-    difference)."""
+    difference). ``touched``: the places where the model changed since the last call (a shape
+    is chosen again only where something changed beside it; None: everywhere)."""
     for i in in_model:
-        if i not in shaped:
+        if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
+                               and "all" not in touched):
             continue
         others = [j for j in in_model if j != i]
         fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
@@ -584,17 +607,18 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
             candidates[i] = shaped[i].at(best)
 
 
-def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False
-                 ) -> tuple[np.ndarray, Test, int]:
+def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
+                 lags: int | None = None) -> tuple[np.ndarray, Test, int]:
     """(basis, test, variant index) of the candidate's best shape against ``fit`` (the
     largest normal-equivalent statistic; the one form of an unshaped candidate)."""
     if not cand.variants:
         basis = candidate_basis(cand, fit)
-        return basis, wald(fit.residual, basis, shape, dof, sparse_if_white=sparse_if_white), -1
+        return basis, wald(fit.residual, basis, shape, dof, lags=lags, sparse_if_white=sparse_if_white), -1
     best = None
     for k, columns in enumerate(cand.variants):
         basis = candidate_basis(columns, fit)
-        test = wald(fit.residual, basis, shape, dof, extra_df=cand.extra_df, sparse_if_white=sparse_if_white)
+        test = wald(fit.residual, basis, shape, dof, lags=lags, extra_df=cand.extra_df,
+                    sparse_if_white=sparse_if_white)
         if best is None or test.z > best[1].z:
             best = (basis, test, k)
     return best

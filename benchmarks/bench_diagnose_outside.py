@@ -1,0 +1,124 @@
+"""Issue 21's figures for ``diagnose`` (run through ``bench_diagnose.py --outside``): rates of
+confident wrong names with white and AR(1) noise, with the catalogue's effects, the new kinds
+and mismatches outside the catalogue (scenarios in :mod:`diagnose_campaign`); a payload
+diagnosed with the model held as given; the stated standard deviation against the spread
+over repeated recordings with coloured noise; and diagnose on the real TX40 recording
+against one ``identify`` of the same data in the same run (CPU seconds)."""
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+import diagnose_campaign as C  # noqa: E402
+
+from baseparams.identify.diagnose import diagnose  # noqa: E402
+
+MECHANISMS = ("puma560",)
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tx40"
+
+
+def rates(outcomes):
+    n = len(outcomes)
+    return {k: f"{outcomes.count(k) / n:5.1%}" for k in ("right", "ambiguous", "none", "wrong")}, n
+
+
+def scenario_table(s, args, rng):
+    rows = []
+    for rho in (0.0, 0.9):
+        for label, make in [("nothing hidden", C.nothing)] + list(C.INSIDE.items()) + list(C.NEW.items()) \
+                + [(f"outside: {k}", v) for k, v in C.OUTSIDE.items()]:
+            outcomes = [C.run(s, make, rng, rho=rho)[2] for _ in range(args.count)]
+            r, n = rates(outcomes)
+            rows.append((label, rho, r, n))
+            print(f"  {s.name:10s} {label:28s} AR {rho:3.1f}  n {n:3d}  right {r['right']}  ambiguous {r['ambiguous']}"
+                  f"  none {r['none']}  WRONG {r['wrong']}", flush=True)
+    return rows
+
+
+def payload_table(s, args, rng):
+    hits, within = 0, 0
+    for _ in range(args.count):
+        tau, body, mass, phi = C.payload(s, rng)
+        d = diagnose(C.payload_problem(s, phi), tau)
+        named = [e for e in d.effects if e["kind"] in ("mass", "body") and e["coordinate"] == body]
+        wrong = [e for e in d.effects if e not in named]
+        if named and not wrong:
+            hits += 1
+            estimate = named[0]["coefficients"]["m"]["value"]
+            within += abs(estimate - mass) <= 0.1 * mass
+    print(f"  {s.name:10s} payload on the last body, --params: named on the right body {hits / args.count:5.1%}, "
+          f"mass within 10 % {within / args.count:5.1%} (n {args.count})", flush=True)
+
+
+def spread_table(s, args, rng, rho=0.9, recordings=30):
+    """One robot (one phi, one hidden viscous friction), many recordings with AR(1) noise:
+    the stated std of the named coefficient against the spread of the estimates."""
+    phi, clean, sd = C.base(s, rng)
+    cand = next(c for c in s.problem.candidates if c.kind == "viscous_friction" and c.coordinate == s.coordinates[0])
+    force = C.scaled(cand.columns @ [1.0], sd, 8.0)
+    values, stds = [], []
+    for _ in range(recordings):
+        tau = clean + force + C.noise(rng, clean.shape, sd, rho)
+        d = diagnose(s.problem, tau)
+        e = next((e for e in d.effects if (e["kind"], e["coordinate"]) == (cand.kind, cand.coordinate)), None)
+        if e is not None:
+            values.append(e["value"])
+            stds.append(e["std"])
+    spread, stated = float(np.std(values, ddof=1)), float(np.sqrt(np.mean(np.square(stds))))
+    print(f"  {s.name:10s} viscous_friction:{cand.coordinate}, AR(1) {rho}: named in {len(values)}/{recordings}; "
+          f"spread over recordings {spread:.4g}, stated std (RMS) {stated:.4g}, ratio {stated / spread:.2f} "
+          "(target within 1/1.5 .. 1.5)", flush=True)
+
+
+def tx40_timing():
+    """diagnose and identify on the TX40 recording (every candidate, no cap), CPU seconds."""
+    urdf, recording = SHARED / "tx40_mdh_modified.urdf", Path(__file__).parents[1] / "examples" / "tx40" / "recording.toml"
+    if not urdf.exists():
+        print("  TX40: ../shared/data/tx40 not found, skipped")
+        return
+    from baseparams.identify.diagnose import diagnose_data
+    from baseparams.identify.fit import identify
+    from baseparams.identify.recording import read_data
+    from baseparams.io.loader import resolve
+    mechanism = resolve(str(urdf))
+    started = time.process_time()
+    data, mech = read_data([str(recording)], mechanism)
+    read = time.process_time() - started
+    started = time.process_time()
+    from baseparams import registry
+    from baseparams.identify.base import BaseModel
+    base = BaseModel.from_result(registry.solvers()["vp"].item.solve(mech), mech)    # as identify's default
+    identify(mech, data, base=base)
+    identify_cpu = time.process_time() - started
+    started = time.process_time()
+    d = diagnose_data(mech, data)
+    diagnose_cpu = time.process_time() - started
+    print(f"  TX40 ({data.tau.shape[0]} x {data.tau.shape[1]} fit rows; reading {read:.1f} CPU s): identify "
+          f"{identify_cpu:.2f} CPU s, diagnose {diagnose_cpu:.2f} CPU s ({diagnose_cpu / identify_cpu:.1f} x identify; "
+          f"with reading: {(read + diagnose_cpu):.1f} s vs {(read + identify_cpu):.1f} s, "
+          f"{(read + diagnose_cpu) / (read + identify_cpu):.2f} x); {len(d.steps)} steps; verdict {d.verdict}; "
+          f"named {len(d.effects)}, unsupported {len(d.unsupported)}; cross-validated gap "
+          f"{d.gap['cv_before']:.3f} -> {d.gap['cv_after']:.3f}; implausible named: "
+          f"{[e for e in d.effects if e['kind'] in ('viscous_friction', 'coulomb_friction', 'rotor_inertia') and min(v['value'] for v in e['coefficients'].values()) <= 0]}",
+          flush=True)
+
+
+def run_outside(args):
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    started = time.process_time()
+    print(f"issue 21 campaign: {args.count} datasets per scenario, 1200 samples, noise SD {C.NOISE:.0%} of each "
+          f"coordinate's RMS inertial torque, ratio 5 (effect RMS / noise SD), alpha 0.05, seed {args.seed}")
+    print("\nTX40, real recording")
+    tx40_timing()
+    for name in args.mechanisms if "--mechanisms" in sys.argv else MECHANISMS:
+        rng = np.random.default_rng(args.seed)
+        s = C.setting(name, 1200)
+        print(f"\n{name}: scenarios")
+        scenario_table(s, args, rng)
+        payload_table(s, args, rng)
+        spread_table(s, args, rng)
+    print(f"\ncampaign: {time.process_time() - started:.0f} CPU s")
