@@ -243,7 +243,12 @@ def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settin
         if rebase is None:
             break
         new = rebase(with_x(mechanism, problem, x))
-        same = new.names == base.names and new.B.shape == base.B.shape and np.allclose(new.B, base.B, atol=1e-9)
+        if new.rank != base.rank:
+            notes.append(f"the {new.solver} solver finds rank {new.rank} on the planned motion, {base.rank} on the "
+                         "file's: its rank on one of them is wrong (a certified solver, --solver vp, settles "
+                         f"it); the plan keeps the base parameters of rank {base.rank}")
+            break
+        same = new.names == base.names and np.allclose(new.B, base.B, atol=1e-9)
         base = new
         problem = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=base))
         if same:
