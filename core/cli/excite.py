@@ -1,10 +1,12 @@
 """``baseparams excite``: plan the exciting motion (registered on ``main``; docs/excite.md)."""
 
 import json
+import math
 import sys
 from pathlib import Path
 
 import click
+import numpy as np
 
 from baseparams.cli.commands import _progress, emit, format_option, get_solver, load, main
 from baseparams.errors import InputError
@@ -73,9 +75,11 @@ def parse_separate(text: str, mechanism) -> tuple:
               help="Position range (intersected with the file's limits) [default: the limits, "
                    "else +-pi rad / +-0.5 m; closed loops: the file's trajectory's range].")
 @click.option("--max-velocity", default=None, metavar="V | COORD=V,...",
-              help="Velocity limit [default: the URDF's, else 2 rad/s / 0.5 m/s].")
+              help="Velocity limit [default: the URDF's; closed loops: the file's trajectory's peak; else 2 "
+                   "rad/s / 0.5 m/s].")
 @click.option("--max-acceleration", default=None, metavar="A | COORD=A,...",
-              help="Acceleration limit [default: 4/s x the velocity limit].")
+              help="Acceleration limit [default: closed loops: the file's trajectory's peak; else 4/s x the "
+                   "velocity limit].")
 @click.option("--max-torque", default=None, metavar="T | COORD=T,...",
               help="Torque (force) limit on the model's inverse dynamics [default: the URDF's effort].")
 @click.option("--singularity-margin", type=click.FloatRange(0, 1), default=0.03, show_default=True,
@@ -144,8 +148,12 @@ def excite(mech, output, solver_name, criterion, harmonics, period, samples, eff
         if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
             raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
         weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
-    if mechanism.loops and position_range is None and mechanism.trajectory is not None:
-        position_range = _trajectory_range(mechanism, names)
+    if mechanism.loops and mechanism.trajectory is not None:
+        # closed loops: the file's trajectory is known to stay in the reachable range
+        ranges, velocities, accelerations = _trajectory_limits(mechanism, names)
+        position_range = position_range or ranges
+        max_velocity = max_velocity or velocities
+        max_acceleration = max_acceleration or accelerations
     limits = limits_of(mechanism, positions=position_range, velocity=max_velocity,
                        acceleration=max_acceleration, torque=max_torque)
     solver = get_solver(solver_name)
@@ -202,9 +210,19 @@ def _is_number(text: str) -> bool:
         return False
 
 
-def _trajectory_range(mechanism, names) -> str:
-    """Closed loops without limits: the range the file's trajectory reaches (known to close)."""
+def _trajectory_limits(mechanism, names) -> tuple[str, str, str]:
+    """Closed loops: the position range, peak velocity and peak acceleration of the file's
+    trajectory (its positions are known to close), as option texts."""
     from baseparams.identify.simulate import trajectory_motion
     motion = trajectory_motion(mechanism)
     lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)
-    return ",".join(f"{n}={a!r}:{b!r}" for n, a, b in zip(names, lo, hi) if a < b)
+    ranges = ",".join(f"{n}={float(a)!r}:{float(b)!r}" for n, a, b in zip(names, lo, hi) if a < b) or None
+    peaks = [",".join(f"{n}={_up(v)!r}" for n, v in zip(names, np.max(np.abs(values), axis=0)) if v > 0)
+             or None for values in (motion.qd, motion.qdd)]
+    return ranges, peaks[0], peaks[1]
+
+
+def _up(value: float) -> float:
+    """``value`` rounded up to two significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(value)) - 1)
+    return math.ceil(value / scale - 1e-9) * scale

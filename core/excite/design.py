@@ -34,6 +34,8 @@ from baseparams.identify.model import Motion, evaluate, inertial_columns
 SAFETY = 0.02                  # the optimiser keeps 2 % of each range and limit in reserve
 START_FILL = 0.7               # a random start fills 70 % of the tightest limit
 PENALTY = 1e3                  # criterion value of a motion that does not close
+CANDIDATES = 10                # closed loops: random motions tried for a start ...
+LOOP_FILL = 0.95               # ... filling this much of their limits
 
 
 @dataclass
@@ -117,6 +119,23 @@ def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safe
     bad = [k for k, v in margins.items() if v < 0]
     return Check(value.value, value.condition, value.smallest_angle_deg, value.singular_values, margins,
                  feasible, f"outside the {', '.join(bad)} limits" if bad else "")
+
+
+def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
+    """The start of one optimisation: a random motion (:func:`random_start`); for a
+    derivative-free run (closed loops), the best feasible of CANDIDATES random motions
+    filling LOOP_FILL of their limits (a random motion there is often numerically rank
+    deficient, where the criterion is flat)."""
+    if problem.model.differentiable:
+        return random_start(problem, rng)
+    best, first = None, None
+    for _ in range(CANDIDATES):
+        x = scale_to_limits(problem, random_start(problem, rng), LOOP_FILL)
+        first = x if first is None else first
+        result = check(problem, *problem.form.motion(x, problem.times()), safety=SAFETY)
+        if result.feasible and (best is None or result.value < best[0]):
+            best = (result.value, x)
+    return first if best is None else best[1]
 
 
 def random_start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
@@ -293,11 +312,11 @@ def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
         return np.array(extra or [1.0])
 
     constraints = [{"type": "ineq", "fun": lambda x: G @ x + h}, {"type": "ineq", "fun": nonlinear}]
-    scale = float(np.max(np.abs(x0))) or 1.0
+    scale = float(np.max(np.abs(problem.form.coefficients(x0)[:, 1:]))) or 1.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = scipy.optimize.minimize(objective, x0, method="COBYLA", constraints=constraints,
-                                         options={"maxiter": problem.maxiter * 10, "rhobeg": 0.2 * scale,
+                                         options={"maxiter": problem.maxiter * 5, "rhobeg": 0.2 * scale,
                                                   "tol": 1e-6})
     x = result.x
     q, qd, qdd = form.motion(x, t)

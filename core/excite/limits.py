@@ -97,7 +97,7 @@ def parse_values(text: str | None, names: tuple, option: str, pair: bool = False
             return v
         except ValueError:
             form = "LO:HI with LO < HI" if pair else "a positive number"
-            raise InputError(f"{where}: {raw!r} is not {form}", key=option) from None
+            raise InputError(f"{raw!r} is not {form}", key=option) from None
 
     items = [s.strip() for s in text.split(",") if s.strip()]
     if not items:

@@ -96,7 +96,7 @@ class ExciteJob:
         try:
             problem = problem_of(load(self.mechanism), self.base, self.limits, self.settings)
             x0 = np.array(self.x0) if self.x0 is not None else \
-                design.random_start(problem, np.random.default_rng(self.seed))
+                design.start(problem, np.random.default_rng(self.seed))
             result = design.optimise(problem, x0)
         except BaseparamsError as exc:
             return Outcome(name, self.solver, ERROR, time.perf_counter() - start, message=str(exc))
@@ -272,6 +272,13 @@ def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settin
         except KinematicsError as exc:
             notes.append(f"the file's trajectory cannot be evaluated: {exc}")
     reference = design.independent_states(problem, problem.samples, seed)
+    if before is not None and "singularity" in before.margins and before.margins["singularity"] < 0 \
+            and after.condition > before.condition / 10:
+        nearest = before.margins["singularity"] + problem.margin
+        notes.append(f"the file's trajectory comes nearer a singular configuration (1/cond of the closure "
+                     f"Jacobian {nearest:.3g}) than the margin {problem.margin:g} allows: where the weakest base "
+                     "columns are excited only near it, the condition number is bounded by how near the motion "
+                     "may come (a smaller --singularity-margin lets it come nearer)")
     out = Plan(mechanism.name, problem, x, before, after, finer, reference, summary, converged, factor,
                notes, time.perf_counter() - began)
     out.rounds = used
