@@ -78,6 +78,7 @@ class Model:
     effects: tuple = ()
     weights: np.ndarray | None = None
     phi: np.ndarray | None = None
+    drop: tuple = ()                 # effect columns left out: a combination of the others on any motion
     _bplus: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -85,12 +86,16 @@ class Model:
         self.effects = tuple(self.effects)
 
     @property
-    def names(self) -> tuple:
+    def all_names(self) -> tuple:
         out = list(self.base.names)
         from baseparams import registry
         for spec in self.effects:
             out += registry.effects()[spec.kind].item.coefficient_names(spec.coordinate)
         return tuple(out)
+
+    @property
+    def names(self) -> tuple:
+        return tuple(name for k, name in enumerate(self.all_names) if k not in self.drop)
 
     @property
     def differentiable(self) -> bool:
@@ -123,10 +128,11 @@ class Model:
             blocks.append(block)
             if dK is not None:
                 dblocks.append(self._effect_tangents(spec, q, qd, qdd, block.shape))
-        matrix = np.concatenate(blocks, axis=-1)
+        kept = [k for k in range(len(self.all_names)) if k not in self.drop]
+        matrix = np.concatenate(blocks, axis=-1)[..., kept]
         out = Columns(matrix, self.names)
         if dK is not None:
-            out.tangents = np.concatenate(dblocks, axis=-1)
+            out.tangents = np.concatenate(dblocks, axis=-1)[..., kept]
             if self.phi is not None:
                 out.torque = K @ self.phi
                 out.torque_tangents = dK @ self.phi

@@ -305,26 +305,37 @@ def _verified(problem: design.Problem, x: np.ndarray) -> tuple[np.ndarray, float
 
 
 def _drop_inseparable(problem: design.Problem) -> tuple[design.Problem, list]:
-    """Columns to separate that are exactly a combination of the others on two unrelated
-    random motions (an offset and a spring's constant column) are dropped from the set."""
+    """Effect columns that are a combination of the columns before them on two unrelated
+    random motions (a spring's constant column and an offset) are left out of the model, as
+    identify absorbs them, and out of the set to separate."""
     rng = np.random.default_rng(12345)
-    dead = set()
+    model = problem.model
+    rank = model.base.rank
+    dependent = None
     for _ in range(2):
         x = design.random_start(problem, rng)
         q, qd, qdd = problem.form.motion(x, problem.times())
-        matrix = problem.model.columns(q, qd, qdd).matrix
+        matrix = model.columns(q, qd, qdd).matrix
         A = matrix.reshape(-1, matrix.shape[-1])
         A = A / np.maximum(np.linalg.norm(A, axis=0), 1e-300)
-        for k in problem.separate:
-            others = np.delete(A, k, axis=1)
-            coef, *_ = np.linalg.lstsq(others, A[:, k], rcond=None)
-            if np.linalg.norm(A[:, k] - others @ coef) < 1e-8:
-                dead.add(k)
-    kept = tuple(k for k in problem.separate if k not in dead)
-    if not kept:
+        kept, found = list(range(rank)), set()
+        for k in range(rank, A.shape[1]):
+            coef, *_ = np.linalg.lstsq(A[:, kept], A[:, k], rcond=None)
+            if np.linalg.norm(A[:, k] - A[:, kept] @ coef) < 1e-8:
+                found.add(k)
+            else:
+                kept.append(k)
+        dependent = found if dependent is None else dependent & found
+    if not dependent:
+        return problem, []
+    names = model.names
+    chosen = [names[k] for k in problem.separate]
+    new_model = dataclasses.replace(model, drop=tuple(sorted(dependent)))
+    separate = tuple(k for k, name in enumerate(new_model.names) if name in chosen)
+    if not separate:
         raise InputError("the effects to separate are identical to the other columns on every motion",
                          key="--separate")
-    return dataclasses.replace(problem, separate=kept), [problem.model.names[k] for k in sorted(dead)]
+    return dataclasses.replace(problem, model=new_model, separate=separate), [names[k] for k in sorted(dependent)]
 
 
 def write_csv(path: str | Path, problem: design.Problem, x: np.ndarray, rate: float) -> int:
