@@ -270,3 +270,58 @@ def test_separate_reads_a_diagnose_report(tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps({"effects": []}))
     result = _run("excite", UR5, "-o", tmp_path / "o.toml", "--separate", tmp_path / "bad.json", "--quiet")
     assert result.exit_code == 2 and "ambiguous" in result.output
+
+
+# ----- the figures (slow; the full table: benchmarks/bench_excite.py) ----------------------
+@pytest.mark.slow
+def test_tx40_planned_motion_beats_its_trajectory_and_its_recording(tmp_path):
+    out, report = tmp_path / "tx40.toml", tmp_path / "r.json"
+    result = _run("excite", TX40, "-o", out, "--starts", "2", "--report", report, "--quiet")
+    assert result.exit_code == 0, result.output
+    data = json.loads(report.read_text())
+    from baseparams.identify.recording import read_data
+    mechanism = load_mechanism(TX40)
+    recorded, model = read_data([str(DATA / "tx40" / "recording.toml")], mechanism)
+    recorded_condition = identify(model, recorded, base=_base(mechanism)).condition_number
+    after = data["after"]["condition_number"]
+    assert after <= data["before"]["condition_number"] / 2
+    assert after <= recorded_condition
+    assert after <= 1.5 * data["random_states"]["condition_number"]
+    _limits_hold(load_mechanism(out), limits_of(mechanism))
+
+
+@pytest.mark.slow
+def test_sla_planned_motion_keeps_the_margin_and_rank_41_certified(tmp_path):
+    out, report = tmp_path / "sla.toml", tmp_path / "r.json"
+    result = _run("excite", "sla_suspension", "-o", out, "--starts", "1", "--iterations", "60", "--report", report,
+                  "--quiet")
+    assert result.exit_code == 0, result.output
+    data = json.loads(report.read_text())
+    assert data["verified"]["feasible"] and data["verified"]["margins"]["singularity"] >= 0
+    assert data["after"]["condition_number"] <= 10 * data["random_states"]["condition_number"]
+    written = load_mechanism(out)
+    solved = registry.solvers()["vp"].item.solve(written)
+    assert solved.rank == 41 and solved.certified
+    # the margin recomputed from the written file's own samples, ten times finer
+    from baseparams.identify.model import Motion, evaluate
+    spec = written.trajectory
+    t = np.linspace(0, float(spec.t_end), 10 * (spec.samples - 1) + 1)
+    values = [values_at(spec.expressions[name], Float64(), t) for name in written.independent]
+    q, qd, qdd = (np.stack([np.broadcast_to(v[k], t.shape) for v in values], axis=1) for k in range(3))
+    sample = evaluate(written, Motion(t, q, qd, qdd))
+    assert design.singularity_margin(written, sample).min() >= 0.03
+
+
+@pytest.mark.slow
+def test_multistart_on_two_worker_processes_finds_what_one_process_finds(tmp_path):
+    from baseparams.orchestrate.runners import InProcess, Processes
+    mechanism = load_mechanism(UR5)
+    limits = limits_of(mechanism, acceleration="6")
+    settings = Settings(harmonics=2, samples=30, maxiter=15)
+    text = MechanismText.read("ur5", UR5)
+    base = _base(mechanism)
+    here = plan(mechanism, text, base, limits, settings, starts=3, runner=InProcess())
+    there = plan(mechanism, text, base, limits, settings, starts=3, runner=Processes(2))
+    assert [s["seed"] for s in there.starts] == [0, 1, 2]
+    np.testing.assert_allclose([s["value"] for s in there.starts], [s["value"] for s in here.starts], rtol=1e-6)
+    assert there.after.condition == pytest.approx(here.after.condition, rel=1e-6)

@@ -168,16 +168,25 @@ def excite(mech, output, solver_name, criterion, harmonics, period, samples, eff
     text = MechanismText.read(mechanism.name, Path(mechanism.path))
     runner = make_runner(workers, scheduler)
 
-    def progress(done, total, label):
-        if not quiet:
-            click.echo(f"excite: {done}/{total} starts done ({label})", err=True)
+    def rebase(planned):
+        return BaseModel.from_result(solver.solve(planned, **check_options(solver, {})), planned)
+
+    def run(progress):
+        return planner.plan(mechanism, text, base, limits, settings, starts=starts, runner=runner,
+                            progress=progress, seed=seed, rebase=rebase)
 
     try:
-        def rebase(planned):
-            return BaseModel.from_result(solver.solve(planned, **check_options(solver, {})), planned)
-
-        found = planner.plan(mechanism, text, base, limits, settings, starts=starts, runner=runner,
-                             progress=progress, seed=seed, rebase=rebase)
+        if quiet:
+            found = run(None)
+        elif sys.stderr.isatty():
+            with click.progressbar(length=starts, label="excite", file=sys.stderr, show_eta=True, show_pos=True,
+                                   item_show_func=lambda label: label) as bar:
+                def progress(done, total, label):      # later rounds (one job each) only relabel
+                    bar.update(1 if bar.pos < bar.length else 0, label)
+                found = run(progress)
+        else:
+            found = run(lambda done, total, label: click.echo(f"excite: {done}/{total} starts done ({label})",
+                                                              err=True))
     finally:
         close = getattr(runner, "close", None)
         if close:

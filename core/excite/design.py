@@ -110,8 +110,11 @@ def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safe
             return Check(np.inf, np.inf, None, np.zeros(0), margins, False, str(exc))
         if m.loops:
             margins["singularity"] = float(np.min(singularity_margin(m, sample)) - problem.margin)
-    columns = problem.model.columns(q, qd, qdd, sample=sample) if sample is not None else \
-        problem.model.columns(q, qd, qdd, tangents=False)
+    try:
+        columns = problem.model.columns(q, qd, qdd, sample=sample) if sample is not None else \
+            problem.model.columns(q, qd, qdd, tangents=False)
+    except KinematicsError as exc:                    # a file's coordinate limit (open chains)
+        return Check(np.inf, np.inf, None, np.zeros(0), margins, False, str(exc))
     if columns.torque is not None and np.any(np.isfinite(lim.torque)):
         margins["torque"] = float(np.min((1 - safety) * lim.torque - np.abs(columns.torque)))
     value = criterion(problem.kind, columns.matrix, problem.model.weights, problem.separate)

@@ -60,6 +60,9 @@ def problem_of(mechanism, base: BaseModel, limits: Limits, settings: Settings) -
         phi = standard_parameters(mechanism)
     except InputError:
         phi = None
+        if np.any(np.isfinite(limits.torque)):
+            raise InputError("torque limits need the bodies' inertias, and the file gives none for some "
+                             "bodies", file=mechanism.path, key="--max-torque") from None
     weights = None if settings.weights is None else np.array(settings.weights, dtype=float)
     model = Model(mechanism, base, tuple(effects), weights, phi)
     names = model.names
