@@ -70,7 +70,7 @@ def excite(*args) -> dict:
     with tempfile.TemporaryDirectory() as folder:
         report = Path(folder) / "r.json"
         out = Path(folder) / "m.toml"
-        result = CliRunner().invoke(cli, [str(a) for a in args] + ["-o", str(out), "--report", str(report), "--quiet"])
+        result = CliRunner().invoke(cli, ["excite"] + [str(a) for a in args] + ["-o", str(out), "--report", str(report), "--quiet"])
         if result.exit_code != 0:
             raise SystemExit(f"excite failed: {result.output}")
         data = json.loads(report.read_text())
@@ -288,7 +288,7 @@ def main():
     parser.add_argument("--starts", type=int, default=4)
     parser.add_argument("--runs", type=int, default=40, help="datasets per discrimination case")
     parser.add_argument("--samples", type=int, default=200, help="samples of the discrimination motions")
-    parser.add_argument("--margins", type=float, nargs="+", default=[0.03, 0.005])
+    parser.add_argument("--margins", type=float, nargs="+", default=[0.03])
     args = parser.parse_args()
     parts = {"condition": part_condition, "sla": part_sla, "separate": part_separate, "speed": part_speed}
     for name in args.parts.split(","):

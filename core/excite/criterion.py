@@ -65,8 +65,10 @@ class Columns:
     matrix: np.ndarray
     names: tuple
     tangents: np.ndarray | None = None
-    torque_tangents: np.ndarray | None = None        # (3 n, N, f) of K phi
+    torque_tangents: np.ndarray | None = None        # (3 f, N, f) of K phi
     torque: np.ndarray | None = None                 # (N, f) K phi
+    margin: np.ndarray | None = None                 # closed loops: (N,) 1/cond of J_d ...
+    margin_tangents: np.ndarray | None = None        # ... and its derivatives (3 f, N)
 
 
 @dataclass
@@ -99,9 +101,10 @@ class Model:
 
     @property
     def differentiable(self) -> bool:
-        """Open chain, no couplings, built-in effects on joint coordinates: analytic gradients."""
+        """Analytic gradients: open chains without couplings (built-in effects on joint
+        coordinates), closed loops without effects."""
         m = self.mechanism
-        return (not m.loops and not m.couplings and
+        return (not m.couplings and (not m.loops or not self.effects) and
                 all(s.kind in EFFECT_DERIVATIVES for s in self.effects))
 
     def columns(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tangents: bool = False,
@@ -110,7 +113,14 @@ class Model:
         (open chains only) their derivatives too. ``sample``: an evaluated
         :class:`~baseparams.dynamics.evaluator.Sample` (closed loops)."""
         n = q.shape[0]
-        if tangents:
+        margin = dmargin = None
+        if tangents and self.mechanism.loops:
+            from baseparams.excite.loops import regressor_with_tangents
+            from baseparams.identify.model import Motion, evaluate
+            if sample is None:
+                sample = evaluate(self.mechanism, Motion(np.arange(n, dtype=float), q, qd, qdd))
+            K, dK, margin, dmargin = regressor_with_tangents(self.mechanism, sample, qd, qdd)
+        elif tangents:
             K, dK = tree_regressor_with_tangents(self.mechanism, q, qd, qdd)
         else:
             from baseparams.identify.model import Motion, evaluate, inertial_columns
@@ -130,7 +140,7 @@ class Model:
                 dblocks.append(self._effect_tangents(spec, q, qd, qdd, block.shape))
         kept = [k for k in range(len(self.all_names)) if k not in self.drop]
         matrix = np.concatenate(blocks, axis=-1)[..., kept]
-        out = Columns(matrix, self.names)
+        out = Columns(matrix, self.names, margin=margin, margin_tangents=dmargin)
         if dK is not None:
             out.tangents = np.concatenate(dblocks, axis=-1)[..., kept]
             if self.phi is not None:

@@ -129,7 +129,7 @@ def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     derivative-free run (closed loops), the best feasible of CANDIDATES random motions
     filling LOOP_FILL of their limits (a random motion there is often numerically rank
     deficient, where the criterion is flat)."""
-    if problem.model.differentiable:
+    if problem.model.differentiable and not problem.mechanism.loops:
         return random_start(problem, rng)
     best, first = None, None
     for _ in range(CANDIDATES):
@@ -217,19 +217,18 @@ def optimise(problem: Problem, x0: np.ndarray) -> Outcome:
 
 
 def _chain(problem: Problem, inputs: np.ndarray, rows) -> np.ndarray:
-    """d/dx from d/d(tree inputs) per sample: ``inputs`` (3 n, N, ...) -> (..., f m)."""
+    """d/dx from d/d(independent inputs z, zd, zdd) summed over the samples: ``inputs``
+    (3 f, N, ...) -> (..., f m)."""
     f, m = len(problem.form.names), problem.form.per_coordinate
-    n = len(problem.mechanism.coordinates)
-    parts = inputs.reshape((3, n) + inputs.shape[1:])
-    # open chains without couplings: tree coordinates are the independent ones, in order
+    parts = inputs.reshape((3, f) + inputs.shape[1:])
     out = np.einsum("gin...,gnk->...ik", parts, np.stack(rows))
     return out.reshape(out.shape[:-2] + (f * m,))
 
 
 def _per_sample(problem: Problem, inputs: np.ndarray, rows) -> np.ndarray:
-    """d/dx of per-sample values: ``inputs`` (3 n, N, k) -> (N, k, f m)."""
-    n = len(problem.mechanism.coordinates)
-    parts = inputs.reshape((3, n) + inputs.shape[1:])
+    """d/dx of per-sample values: ``inputs`` (3 f, N, k) -> (N, k, f m)."""
+    f = len(problem.form.names)
+    parts = inputs.reshape((3, f) + inputs.shape[1:])
     out = np.einsum("gink,gnm->nkim", parts, np.stack(rows))
     return out.reshape(out.shape[:2] + (-1,))
 
@@ -248,7 +247,11 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
         if cache.get("key") != key:
             count[0] += 1
             q, qd, qdd = form.motion(x, t)
-            columns = model.columns(q, qd, qdd, tangents=True)
+            try:
+                columns = model.columns(q, qd, qdd, tangents=True)
+            except KinematicsError:            # a closed loop that does not close, a file's limit
+                cache.update(key=key, f=PENALTY, g=np.zeros_like(x), columns=None)
+                return cache
             value = criterion(problem.kind, columns.matrix, model.weights, problem.separate, gradient=True)
             if value.gradient is None:
                 cache.update(key=key, f=PENALTY, g=np.zeros_like(x), columns=columns)
@@ -267,15 +270,35 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
         bound = (1 - SAFETY) * lim.torque[finite]
 
         def torque(x):
-            tau = evaluate_at(x)["columns"].torque[:, finite]
+            columns = evaluate_at(x)["columns"]
+            if columns is None:
+                return -np.ones(2 * len(t) * int(finite.sum()))
+            tau = columns.torque[:, finite]
             return np.concatenate([(bound - tau).ravel(), (bound + tau).ravel()])
 
         def torque_jac(x):
-            d = _per_sample(problem, evaluate_at(x)["columns"].torque_tangents, rows)[:, finite]
+            columns = evaluate_at(x)["columns"]
+            if columns is None:
+                return np.zeros((2 * len(t) * int(finite.sum()), x.size))
+            d = _per_sample(problem, columns.torque_tangents, rows)[:, finite]
             d = d.reshape(-1, d.shape[-1])
             return np.vstack([-d, d])
 
         constraints.append({"type": "ineq", "fun": torque, "jac": torque_jac})
+    if problem.mechanism.loops:
+        least = (1 + SAFETY) * problem.margin
+
+        def margin(x):
+            columns = evaluate_at(x)["columns"]
+            return -np.ones(len(t)) if columns is None else columns.margin - least
+
+        def margin_jac(x):
+            columns = evaluate_at(x)["columns"]
+            if columns is None:
+                return np.zeros((len(t), x.size))
+            return _per_sample(problem, columns.margin_tangents[:, :, None], rows)[:, 0, :]
+
+        constraints.append({"type": "ineq", "fun": margin, "jac": margin_jac})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = scipy.optimize.minimize(objective, x0, jac=True, method="SLSQP", constraints=constraints,

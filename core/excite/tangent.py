@@ -21,12 +21,15 @@ GROUPS = ("q", "qd", "qdd")
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled(mechanism):
-    """(function, slots): the generated value-and-tangent code of K_tree and the flat indices
-    of K's (n, p) entries it returns (every other entry is an exact constant: ``constants``)."""
-    graph, kernels = codegen._traced(mechanism, ("regressor",))
-    kernel = next(k for k in kernels if k.name == "_tree_regressor")
-    layout = codegen.layouts(kernel)["K"]
+def _compiled(mechanism, part: str = "regressor", kernel_name: str = "_tree_regressor", output: str = "K"):
+    """(function, constants, layout, fixed): the generated value-and-tangent code of one output
+    of a traced kernel (K_tree; a closed loop's closure Jacobian or bias), the layout of its
+    entries (the others are exact constants: ``fixed``). Directions: every input of every
+    group the kernel reads, group after group."""
+    graph, kernels = codegen._traced(mechanism, (part,))
+    kernel = next(k for k in kernels if k.name == kernel_name)
+    layout = codegen.layouts(kernel)[output]
+    groups = kernel.inputs
     ops = graph.ops
     writes, live, last = codegen._liveness(graph, kernel)
     n = len(mechanism.coordinates)
@@ -40,7 +43,7 @@ def _compiled(mechanism):
             constants.append(float(key))
         return f"C[{index[key]}]"
 
-    lines = ["def _tangent(q, qd, qdd, E, C, out_v, out_t):"]
+    lines = [f"def _tangent({', '.join(groups)}, E, C, out_v, out_t):"]
     name = {}
     for i, (kind, a, b) in enumerate(ops):
         if not live[i]:
@@ -49,7 +52,7 @@ def _compiled(mechanism):
         name[i] = (v, t)
         if kind == "in":
             group, k = a[1]
-            lines.append(f"    {v} = {group}[{k}]; {t} = E[{GROUPS.index(group) * n + k}]")
+            lines.append(f"    {v} = {group}[{k}]; {t} = E[{groups.index(group) * n + k}]")
             continue
         va, ta = name[a] if isinstance(a, int) else (const(a[1]), None)
         vb, tb = (name[b] if isinstance(b, int) else (const(b[1]), None)) if b is not None else (None, None)
@@ -88,15 +91,13 @@ def _compiled(mechanism):
     return namespace["_tangent"], np.array(constants), layout, fixed
 
 
-def tree_regressor_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
-                                 ) -> tuple[np.ndarray, np.ndarray]:
-    """(K, dK) at samples of the tree coordinates (``q`` etc.: (N, n)): K (N, n, p) as
-    :func:`codegen.tree_regressor` gives it, and dK (3 n, N, n, p), dK[g * n + i] the
-    derivative of K with respect to input i of group g (q, qd, qdd)."""
-    function, constants, layout, fixed = _compiled(mechanism)
-    q, qd, qdd = (np.ascontiguousarray(np.asarray(x, dtype=float).T) for x in (q, qd, qdd))
-    n, count = q.shape
-    directions = 3 * n
+def _run(mechanism, key: tuple, inputs: list) -> tuple[np.ndarray, np.ndarray]:
+    """(value (N, *shape), tangents (directions, N, *shape)) of the output ``key`` names at
+    the samples ``inputs`` (one (N, n) array per input group)."""
+    function, constants, layout, fixed = _compiled(mechanism, *key)
+    inputs = [np.ascontiguousarray(np.asarray(x, dtype=float).T) for x in inputs]
+    n, count = inputs[0].shape
+    directions = len(inputs) * n
     seeds = np.zeros((directions, directions, count))
     for k in range(directions):
         seeds[k, k] = 1.0
@@ -104,13 +105,33 @@ def tree_regressor_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray, qdd: 
     out_v = np.empty((slots, count))
     out_t = np.empty((directions, slots, count))
     if slots:
-        function(q, qd, qdd, seeds, constants, out_v, out_t)
+        function(*inputs, seeds, constants, out_v, out_t)
     size = int(np.prod(layout.shape))
-    K = np.zeros((count, size))
-    dK = np.zeros((directions, count, size))
-    for flat, value in fixed:
-        K[:, flat] = value
+    value = np.zeros((count, size))
+    tangent = np.zeros((directions, count, size))
+    for flat, v in fixed:
+        value[:, flat] = v
     index = np.array(layout.slots, dtype=np.intp)
-    K[:, index] = out_v.T
-    dK[:, :, index] = out_t.transpose(0, 2, 1)
-    return K.reshape((count,) + layout.shape), dK.reshape((directions, count) + layout.shape)
+    value[:, index] = out_v.T
+    tangent[:, :, index] = out_t.transpose(0, 2, 1)
+    return value.reshape((count,) + layout.shape), tangent.reshape((directions, count) + layout.shape)
+
+
+def tree_regressor_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+                                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(K, dK) at samples of the tree coordinates (``q`` etc.: (N, n)): K (N, n, p) as
+    :func:`codegen.tree_regressor` gives it, and dK (3 n, N, n, p), dK[g * n + i] the
+    derivative of K with respect to input i of group g (q, qd, qdd)."""
+    return _run(mechanism, ("regressor", "_tree_regressor", "K"), [q, qd, qdd])
+
+
+def closure_jacobian_with_tangents(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(J (N, m, n), dJ (n, N, m, n)): a closed loop's closure Jacobian and its derivatives
+    with respect to each tree coordinate."""
+    return _run(mechanism, ("closure", "_closure", "jac"), [q])
+
+
+def closure_bias_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gamma (N, m), dgamma (2 n, N, m)): the closure bias (J qdd + gamma = 0 with J the
+    Jacobian) and its derivatives with respect to q, then qd."""
+    return _run(mechanism, ("closure", "_closure_bias", "gamma"), [q, qd])
