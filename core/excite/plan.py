@@ -231,8 +231,9 @@ def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settin
                     if o.status != OK]
         notes += failures
         feasible = [r for r in results if r["feasible"] and math.isfinite(r["value"])]
-        summary += [{"round": round_ + 1, **{k: r[k] for k in ("seed", "value", "feasible", "converged", "message",
-                                                                "iterations", "evaluations")}} for r in results]
+        summary += [{"round": round_ + 1, **{k: r[k] for k in ("seed", "feasible", "converged", "message",
+                                                                "iterations", "evaluations")},
+                     "value": design._finite(r["value"])} for r in results]
         if not feasible:
             if x is not None:
                 break
