@@ -83,7 +83,10 @@ def load(mechanism: MechanismText):
 
 
 def run_job(job: Job) -> Outcome:
-    """Run one job here and now; never raises (every failure is an Outcome)."""
+    """Run one job here and now; never raises (every failure is an Outcome). A job of another
+    kind (``baseparams excite``'s starts) runs itself through its ``execute()``."""
+    if hasattr(job, "execute"):
+        return job.execute()
     start = time.perf_counter()
 
     def outcome(status, result=None, message=""):
