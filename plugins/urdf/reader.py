@@ -96,6 +96,12 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
         if urdf.links[urdf.root].has_inertial:
             notes.append(f"{urdf.links[urdf.root].key}.inertial: the root link is the ground (fixed); its "
                          "inertia does not act and is not kept")
+    if not any(urdf.links[name].has_inertial for name in links):
+        raise InputError("no moving link has an <inertial> element: a visual or collision (mesh-only) "
+                         "description has no dynamic model; add <inertial> elements" + (
+                             "" if floating_base or not urdf.links[urdf.root].has_inertial else
+                             f" (only the root link {urdf.root!r} has one: --floating-base for a free-flying robot)"),
+                         file=urdf.path, key="robot")
     massless = [name for name in links if urdf.links[name].inertia is None]
     if massless:
         notes.append(f"links without <inertial> (mass 0): {', '.join(massless)}")
@@ -106,7 +112,9 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     b = MechanismBuilder(_mechanism_name(urdf.robot), urdf.path, title=f"{urdf.robot} (URDF)",
                          description=f"Read from the URDF file {Path(urdf.path).name}: body k is the k-th "
                                      f"link (file order) after the ground {ground!r} (docs/urdf.md).",
-                         source=f"URDF {urdf.path}")
+                         source=f"URDF {urdf.path}", lenient_inertia=True)
+    for key, text in urdf.warnings:
+        b.warn(key, text)
     for name in links:
         phi = inertia[name]
         b.body(label[name], name, inertia=dict(zip(PARAMETER_KINDS, phi)), key=urdf.links[name].key)
