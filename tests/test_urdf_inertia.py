@@ -156,3 +156,18 @@ def test_dummy_base_inertia_floats_with_a_warning(tmp_path):
     solvers = registry.solvers()
     ranks = {name: solvers[name].item.solve(mech).rank for name in ("dp", "exact")}
     assert ranks["dp"] == ranks["exact"] and np.isfinite(ranks["dp"])
+
+
+def test_follower_limits_that_contradict_the_mimic_are_dropped_with_a_warning(tmp_path):
+    """PR2's gripper: r_parallel = -1 x l_finger, both limited to [0, 0.548]: only 0 meets
+    both, so the default trajectory could not move; the follower's limits are not enforced."""
+    text = ('<robot name="pr2_grip"><link name="base"/>' + link("left") + link("right")
+            + joint("l_finger", "base", "left").replace('lower="-1" upper="1"', 'lower="0" upper="0.548"')
+            + joint("r_parallel", "base", "right", extra='<mimic joint="l_finger" multiplier="-1"/>')
+            .replace('lower="-1" upper="1"', 'lower="0" upper="0.548"') + "</robot>")
+    path = tmp_path / "pr2_grip.urdf"
+    path.write_text(text)
+    mech = read_urdf(path).mechanism
+    assert any("joint[name=r_parallel].limit" in w and "contradict" in w for w in mech.warnings)
+    assert "r_parallel" not in mech.joint_of_coordinate("r_parallel").limits
+    assert registry.solvers()["dp"].item.solve(mech).rank > 0

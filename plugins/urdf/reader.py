@@ -86,6 +86,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     notes = list(urdf.notes)
     inertia = {name: link.inertia if link.inertia is not None else ZERO10 for name, link in urdf.links.items()}
     joints = [_copy(j) for j in urdf.joints]
+    contradictions = _contradicting_limits(joints)
     if floating_base:
         ground = GROUND
         joints.insert(0, UrdfJoint("floating_base", "floating", GROUND, urdf.root, "robot"))
@@ -113,7 +114,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
                          description=f"Read from the URDF file {Path(urdf.path).name}: body k is the k-th "
                                      f"link (file order) after the ground {ground!r} (docs/urdf.md).",
                          source=f"URDF {urdf.path}", lenient_inertia=True)
-    for key, text in urdf.warnings:
+    for key, text in urdf.warnings + contradictions:
         b.warn(key, text)
     for name in links:
         phi = inertia[name]
@@ -159,6 +160,26 @@ def _couplings(b, joints, names) -> set[str]:
         b.coupling(names[j.name], names[leader], multiplier, offset, key=f"{j.key}.mimic")
         followers.add(names[j.name])
     return followers
+
+
+def _contradicting_limits(joints) -> list[tuple[str, str]]:
+    """Followers whose own limits no leader value inside the leader's limits meets (PR2's
+    r_gripper_r_parallel_root_joint = -1 x r_gripper_l_finger_joint, both in [0, 0.548]):
+    their limits are dropped, with a warning, so that the default trajectory exists."""
+    by_name = {j.name: j for j in joints}
+    out = []
+    for j in joints:
+        leader = by_name.get(j.mimic[0]) if j.mimic is not None else None
+        if leader is None or j.limits is None or leader.limits is None:
+            continue
+        _, multiplier, offset = j.mimic
+        ends = sorted((multiplier * leader.limits[0] + offset, multiplier * leader.limits[1] + offset))
+        if max(ends[0], j.limits[0]) >= min(ends[1], j.limits[1]):
+            out.append((f"{j.key}.limit", f"[{j.limits[0]}, {j.limits[1]}] is not reached by {multiplier} x "
+                        f"{leader.name} + {offset} with {leader.name} in [{leader.limits[0]}, {leader.limits[1]}] "
+                        "(the file's limits contradict its <mimic>): these limits are not enforced"))
+            j.limits = None
+    return out
 
 
 def _leader_limits(joint, limits, joints, names, followers):
