@@ -272,7 +272,8 @@ def test_example_robot_data_matches_pinocchio(path, floating):
     assert error <= 1e-9 and off_span <= 1e-12
     rank, gap = ref.rank()
     assert gap > 1e6, f"Pinocchio's own rank is not clear (gap {gap:.3g})"
-    assert registry.solvers()["dp"].item.solve(mech).rank == rank
+    samples = {"samples": 100} if len(mech.bodies) > 100 else {}     # TIAGo dual: 2.6 GiB at 200
+    assert registry.solvers()["dp"].item.solve(mech, **samples).rank == rank
 
 
 def test_so100_dp_rank_is_38_as_pinocchio_and_exact():
