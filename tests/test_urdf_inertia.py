@@ -171,3 +171,16 @@ def test_follower_limits_that_contradict_the_mimic_are_dropped_with_a_warning(tm
     assert any("joint[name=r_parallel].limit" in w and "contradict" in w for w in mech.warnings)
     assert "r_parallel" not in mech.joint_of_coordinate("r_parallel").limits
     assert registry.solvers()["dp"].item.solve(mech).rank > 0
+
+
+def test_ros2_control_transmissions_inside_their_element_are_motors(tmp_path):
+    """ros2_control nests <transmission> inside <ros2_control> (TIAGo Pro): read as ROS 1's."""
+    text = ('<robot name="wheel"><link name="base"/>' + link("rim") + joint("spin", "base", "rim")
+            + '<ros2_control name="hw" type="system"><joint name="spin"><state_interface name="position"/>'
+              '</joint><transmission name="spin_trans"><plugin>transmission_interface/SimpleTransmission'
+              '</plugin><actuator name="spin_motor" role="actuator1"/><joint name="spin" role="joint1">'
+              '<mechanical_reduction>50</mechanical_reduction></joint></transmission></ros2_control></robot>')
+    path = tmp_path / "wheel.urdf"
+    path.write_text(text)
+    (motor,) = read_urdf(path).mechanism.motors
+    assert motor.name == "spin_motor" and motor.ratios == (("spin", Fraction(50)),)

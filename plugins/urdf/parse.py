@@ -316,7 +316,8 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
         raise p.error("robot", f"the joints form a cycle: {_cycle({n: None for n in unreached}, parent_of)}")
     transmissions = [p.transmission(elem, f"transmission[name={elem.get('name')}]" if elem.get("name")
                                     else f"transmission[{i}]")
-                     for i, elem in enumerate(root.findall("transmission"))]
+                     # ROS 1 puts them under <robot>, ros2_control inside <ros2_control> (TIAGo Pro)
+                     for i, elem in enumerate(root.findall("transmission") + root.findall("ros2_control/transmission"))]
     return Urdf(path, robot, links, joints, roots[0], p.notes, transmissions, p.warnings)
 
 

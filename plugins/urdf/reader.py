@@ -7,8 +7,8 @@ the same axis through the link origin, so the child link frame moves exactly as 
 revolute/continuous -> ``R``, prismatic -> ``P``, fixed -> ``Fixed`` (or merged into its
 parent with ``merge_fixed``), floating -> ``Free``. Limits become coordinate limits;
 ``<dynamics damping friction>`` become viscous and Coulomb friction effects;
-``<transmission>`` elements (simple, differential, four-bar linkage) become the motors of
-the drive chain (:func:`motor_ratios`); a default
+``<transmission>`` elements (simple, differential, four-bar linkage; under ``<robot>`` or,
+ros2_control's, inside ``<ros2_control>``) become the motors of the drive chain (:func:`motor_ratios`); a default
 exciting trajectory (a Fourier series inside the limits) is added so that every verb
 works on a bare URDF.
 """
