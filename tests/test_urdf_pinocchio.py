@@ -13,6 +13,9 @@ file's meaning and of the dynamics. Compared, on random states:
 - our dp solver's base-parameter count against the rank of Pinocchio's stacked regressor,
   with fixed links merged and kept.
 
+and on every URDF of example-robot-data that Pinocchio loads (when it is installed), unedited,
+mimic joints projected onto their couplings (tests/urdf_reference.py): torques and dp's count.
+
 Conventions. Pinocchio's continuous joints have q = (cos, sin). Its free-flyer velocity is
 not a coordinate derivative: v = (R^T p', omega in the base frame), and a = dv/dt. Our Free
 joint's coordinates are x, y, z and Cardan angles a, b, c (R = Rx(a) Ry(b) Rz(c)), so
