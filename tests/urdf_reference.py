@@ -221,7 +221,8 @@ def torque_check(ref: Reference, mech, states: int = 3, seed: int = 1) -> tuple[
         qp, v, acc, m = our_state_in_pinocchio(ref, mech, sample)
         tau_pin = m.T @ ref.pin.rnea(ref.model, ref.data, qp, v, acc)
         ours = sample.regressor_array()[0] @ phi
-        worst = max(worst, float(np.max(np.abs(ours - tau_pin), initial=0.0)) / max(1.0, float(np.max(np.abs(tau_pin), initial=0.0))))
+        scale = max(1.0, float(np.max(np.abs(tau_pin), initial=0.0)))
+        worst = max(worst, float(np.max(np.abs(ours - tau_pin), initial=0.0)) / scale)
         if ref.G.size:
             off_span = max(off_span, float(np.max(np.abs(m - ref.G @ (g_pinv @ m)), initial=0.0)))
     return worst, off_span
