@@ -137,5 +137,6 @@ def test_urdf_mimic_joints_are_couplings(tmp_path):
     assert checked["ok"] and {c["name"]: c["ok"] for c in checked["checks"]}["energy balance"]
     bad = tmp_path / "bad.urdf"
     bad.write_text(MIMIC_URDF.replace('mimic joint="finger_left"', 'mimic joint="nope"'))
-    with pytest.raises(InputError, match="mimic.joint"):
-        load_mechanism(bad)
+    loose = load_mechanism(bad)            # as Pinocchio loads it: the follower moves on its own
+    assert not loose.couplings and "finger_right" in loose.independent
+    assert any("mimic.joint" in w and "'nope' is not a joint" in w for w in loose.warnings)

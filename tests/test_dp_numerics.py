@@ -69,8 +69,46 @@ def test_non_finite_matrix_is_a_kinematics_error_naming_columns():
 
 
 def test_svd_non_convergence_is_a_kinematics_error(monkeypatch):
+    import scipy.linalg
+
     def fails(*args, **kwargs):
         raise np.linalg.LinAlgError("SVD did not converge")
     monkeypatch.setattr(gautier.np.linalg, "svd", fails)
+    monkeypatch.setattr(scipy.linalg, "svd", fails)
     with pytest.raises(KinematicsError, match="did not converge"):
         dp_gautier(dependent_matrix(10, 2, 4))
+
+
+def test_divide_and_conquer_failure_falls_back_to_qr_iteration(monkeypatch):
+    """numpy's gesdd can fail to converge where gesvd does not (so100's stacked W):
+    the result is then the same as with a working gesdd."""
+    W = dependent_matrix(30, 3, 6, seed=2)
+    expected = dp_gautier(W)
+
+    def fails(*args, **kwargs):
+        raise np.linalg.LinAlgError("SVD did not converge")
+    monkeypatch.setattr(gautier.np.linalg, "svd", fails)
+    res = dp_gautier(W)
+    assert res.rank == expected.rank == 3
+    assert np.allclose(res.singular_values, expected.singular_values, rtol=1e-12)
+    assert_base_relation(W, res)
+
+
+def test_small_equal_columns_are_not_lifted_into_the_rank():
+    """Two columns of norm 1e-5 of W's equal up to W's rounding (so100's mx1 and mx2): scaled to
+    norm 1 their difference would count as a direction; in the parameters' units it is below
+    W's rounding level, so the rank is that of the unscaled W. A small column that is not
+    a copy (independent, same norm) still counts."""
+    rng = np.random.default_rng(4)
+    W = dependent_matrix(200, 5, 8, seed=5)
+    small = 1e-5 * rng.standard_normal(200)
+    twin = small + 1e-14 * np.abs(W).max() * rng.standard_normal(200) / np.sqrt(200)
+    lifted = np.column_stack([W, small, twin])
+    res = dp_gautier(lifted)
+    unscaled = np.linalg.matrix_rank(lifted)
+    assert res.rank == unscaled == 6 and res.lifted == 1
+    assert set(res.lifted_columns) == {"8", "9"}
+    assert dp_gautier(lifted, scale=False).rank == 6
+    independent = np.column_stack([W, small, 1e-5 * rng.standard_normal(200)])
+    res = dp_gautier(independent)
+    assert res.rank == 7 and res.lifted == 0

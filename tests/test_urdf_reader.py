@@ -227,17 +227,28 @@ BAD = {
                     joint("c", parent="base", child="l1")), "already has a parent joint"),
     "cycle_detached": (robot(link("l1"), link("l2"), joint("a", parent="l1", child="l2"),
                              joint("b", parent="l2", child="l1")), "robot: the joints form a cycle"),
-    "negative_mass": (robot(link("l1", "-1"), joint("j1")), "link[name=l1].inertial.mass.value: negative mass"),
-    "not_pd": (robot(link("l1", inertia=("0.01", "0.02", "0", "0.01", "0", "0.01")), joint("j1")),
-               "link[name=l1].inertial.inertia: not a physical inertia"),
     "mesh_only": (robot('<link name="l1"><visual><geometry><mesh filename="a.stl"/></geometry></visual></link>',
                         joint("j1")), "no moving link has an <inertial>"),
     "bad_rpy": (robot(link("l1"), joint("elbow", rpy="0 zero 0")), "joint[name=elbow].origin.rpy: 'zero' is not a number"),
     "short_rpy": (robot(link("l1"), joint("elbow", rpy="0 0")), "joint[name=elbow].origin.rpy: needs 3 number(s)"),
-    "mimic": (robot(link("l1"), joint("j1", extra='<mimic joint="x"/>')), "joint[name=j1].mimic.joint: joint 'x' is not a revolute"),
     "planar": (robot(link("l1"), joint("j1", "planar")), "planar joints are not supported"),
     "zero_axis": (robot(link("l1"), joint("j1", axis="0 0 0")), "joint[name=j1].axis.xyz: zero-length axis"),
     "two_roots": (robot(link("l1"), link("l2"), joint("j1")), "more than one root link"),
+    "two_inertials": (robot(link("l1").replace("</inertial>", "</inertial>" + link("x").split("<link name=\"x\">")[1]
+                                               .replace("</link>", "")), joint("j1")),
+                      "link[name=l1].inertial: 2 <inertial> elements: URDF allows one"),
+    "two_masses": (robot(link("l1").replace('<mass value="1"/>', '<mass value="1"/><mass value="2"/>'), joint("j1")),
+                   "link[name=l1].inertial.mass: 2 <mass> elements: URDF allows one"),
+    "two_origins": (robot(link("l1"), joint("j1", extra='<origin xyz="1 0 0"/>')),
+                    "joint[name=j1].origin: 2 <origin> elements: URDF allows one"),
+    "two_axes": (robot(link("l1"), joint("j1", extra='<axis xyz="1 0 0"/>')),
+                 "joint[name=j1].axis: 2 <axis> elements: URDF allows one"),
+    "two_mimics": (robot(link("l1"), link("l2"), joint("j1"),
+                         joint("j2", parent="l1", child="l2", extra='<mimic joint="j1"/><mimic joint="j1"/>')),
+                   "joint[name=j2].mimic: 2 <mimic> elements"),
+    "only_the_root": ('<robot name="r"><link name="base"><inertial><mass value="1"/><inertia ixx="1" ixy="0" '
+                      'ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link></robot>',
+                      "robot: no moving link has an <inertial> element"),
 }
 
 
@@ -252,4 +263,4 @@ def test_bad_urdf_exit_2_naming_file_element_reason(tmp_path, case):
     assert message.startswith("error: ") and str(path) in message and expected in message, message
     assert "Traceback" not in message
     with pytest.raises(InputError):
-        parse_urdf(text, path) if case != "mesh_only" else read_urdf(path)
+        parse_urdf(text, path) if case not in ("mesh_only", "only_the_root") else read_urdf(path)

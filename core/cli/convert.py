@@ -54,7 +54,12 @@ def convert(mech, output, merge_fixed, floating_base, inertia_file):
     with atomic_path(output) as temporary:
         notes += writer.write(mechanism, str(temporary)) or []
     for note in notes:
-        click.echo(f"note: {note}", err=True)
+        click.echo(f"{'warning' if note in mechanism.warnings else 'note'}: {note}", err=True)
+    if mechanism.nonphysical and Path(output).suffix == ".toml":
+        count = len(mechanism.nonphysical)
+        click.echo(f"warning: {output}: {count} bod{'y' if count == 1 else 'ies'} with a non-physical "
+                   "inertia: the mechanism-file reader refuses them until the "
+                   "inertia is fixed (or replaced with --inertia)", err=True)
     click.echo(f"wrote {output} ({writer.name}): {len(mechanism.bodies)} bodies, {len(mechanism.joints)} joints, "
                f"{len(mechanism.coordinates)} coordinates")
 

@@ -207,6 +207,8 @@ def identify(mech, data_paths, effects, solver_name, validate_paths, physical, p
     if physical:
         prior, source = None, "least-norm parameters B^+ phi_b"
         if all(b.inertia is not None for b in mechanism.bodies):
+            from baseparams.model.consistency import require_physical
+            require_physical(mechanism, "identify --physical (the file's inertias are its prior)")
             prior, source = standard_parameters(mechanism), "the mechanism file's inertias"
         found = consistency.physical_fit(identification.base_estimates, base,
                                          std=identification.std[:base.rank], prior=prior)

@@ -20,6 +20,7 @@ from baseparams.errors import InputError
 from baseparams.identify.data import MeasuredData
 from baseparams.identify.model import (Motion, design, effect_values, evaluate, independent_names,
                                        standard_parameters)
+from baseparams.model.consistency import require_physical
 from baseparams.model.mechanism import EffectSpec, Mechanism
 from baseparams.model.params import from_mass_properties
 from baseparams.numeric.backends import Float64
@@ -101,6 +102,8 @@ def simulate(mechanism: Mechanism, *, samples: int | None = None, noise_sd: floa
     sd = _noise_vector(noise_sd, coordinates)
     motion = trajectory_motion(mechanism, samples)
     sample = evaluate(mechanism, motion)
+    if not random_inertia:
+        require_physical(mechanism, "simulate (the file's inertias make the torques)")
     phi = random_physical_inertia(mechanism, rng) if random_inertia else standard_parameters(mechanism)
     effects = list(effects)
     inertial, columns = design(mechanism, motion, effects, sample)

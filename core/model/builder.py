@@ -69,12 +69,18 @@ class MechanismBuilder:
     ``path``: the file the mechanism comes from (named in errors; None for a script).
     ``joint_types``: name -> :class:`JointType`; default: the registered joint types.
     ``key``: the key path of the mechanism's header (its name is ``{key}.name``).
+    ``lenient_inertia``: a body whose inertia is not physical is a warning, not an error,
+    and is listed in ``Mechanism.nonphysical`` (for formats as users have them, URDF:
+    base parameters do not depend on inertia values; verbs that use them call
+    :func:`baseparams.model.consistency.require_physical`).
     """
 
     def __init__(self, name: str, path: str | Path | None = None, *, title: str = "",
                  description: str = "", source: str = "",
-                 joint_types: Mapping[str, JointType] | None = None, key: str = "mechanism"):
+                 joint_types: Mapping[str, JointType] | None = None, key: str = "mechanism",
+                 lenient_inertia: bool = False):
         self.path = None if path is None else str(path)
+        self.lenient_inertia = lenient_inertia
         if not isinstance(name, str) or not NAME_RE.match(name):
             raise self.error(f"{key}.name", "required: lower-case letters, digits and _ only")
         for field, text in (("title", title), ("description", description), ("source", source)):
@@ -93,6 +99,7 @@ class MechanismBuilder:
         self._motors: list[tuple[Motor, str]] = []
         self._couplings: list[tuple[Coupling, str]] = []
         self._warnings: list[str] = []
+        self._nonphysical: list[tuple[str, str]] = []
 
     # ----- errors and values ---------------------------------------------------------
     def error(self, key: str | None, reason: str) -> InputError:
@@ -199,7 +206,11 @@ class MechanismBuilder:
             where = f"{key}.inertia" if inertia is not None else (
                 f"{key}.mass" if Fraction(params[0]) < 0 else f"{key}.inertia_com")
             who = f"body {label}" + (f" ({name})" if name else "")
-            if verdict.error:
+            if verdict.error and self.lenient_inertia:
+                self.warn(where, f"{who}: {verdict.error}: not a physical body (accepted: base parameters "
+                                 "do not depend on inertia values; simulate and identification refuse it)")
+                self._nonphysical.append((where, f"{who}: {verdict.error}"))
+            elif verdict.error:
                 raise self.error(where, f"{who}: {verdict.error}: not a physical body")
             if verdict.warning:
                 self.warn(where, f"{who}: {verdict.warning}")
@@ -466,7 +477,7 @@ class MechanismBuilder:
             title=self.title, description=self.description, source=self.source, path=self.path,
             gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects),
             warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors),
-            couplings=couplings)
+            couplings=couplings, nonphysical=tuple(self._nonphysical))
 
     def _spanning_tree(self, bodies):
         """Joints in declaration order; one joining two placed bodies closes a loop."""

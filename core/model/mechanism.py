@@ -126,6 +126,7 @@ class Mechanism:
     warnings: tuple = ()              # remarks on the input that did not stop the build (text)
     motors: tuple = ()                # Motor, file order: the drive chain (may be empty)
     couplings: tuple = ()             # Coupling, file order: coordinates following another
+    nonphysical: tuple = ()           # (key, reason) of bodies accepted with a non-physical inertia
 
     # ----- names and counts -------------------------------------------------
     @property

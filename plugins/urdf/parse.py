@@ -69,15 +69,25 @@ class Urdf:
     root: str
     notes: list = field(default_factory=list)
     transmissions: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)     # (key, text): printed by every verb
 
 
 class _Parser:
     def __init__(self, path: str):
         self.path = path
         self.notes: list[str] = []
+        self.warnings: list[tuple[str, str]] = []
 
     def error(self, key, reason):
         return InputError(reason, file=self.path, key=key)
+
+    def once(self, elem, key, tags):
+        """The URDF spec allows each of ``tags`` at most once inside ``elem``: a second one
+        is an error (which of the two would count is a guess)."""
+        for tag in tags:
+            found = elem.findall(tag)
+            if len(found) > 1:
+                raise self.error(f"{key}.{tag}", f"{len(found)} <{tag}> elements: URDF allows one")
 
     # ----- numbers -------------------------------------------------------------------------
     def decimals(self, text, key, count):
@@ -145,26 +155,24 @@ class _Parser:
 
     def link(self, elem, key):
         name = elem.get("name")
+        self.once(elem, key, ("inertial",))
         inertial = elem.find("inertial")
         if inertial is None:
             return Link(name, key, None)
         ikey = f"{key}.inertial"
+        self.once(inertial, ikey, ("origin", "mass", "inertia"))
         rot, com = self.origin(inertial, ikey)
         mass_elem = inertial.find("mass")
         if mass_elem is None:
             raise self.error(f"{ikey}.mass", "missing (required in <inertial>)")
         mass = Fraction(self.number(mass_elem, "value", f"{ikey}.mass"))
-        if mass < 0:
-            raise self.error(f"{ikey}.mass.value", f"negative mass {float(mass):g}")
         tensor_elem = inertial.find("inertia")
         if tensor_elem is None:
             raise self.error(f"{ikey}.inertia", "missing (required in <inertial>)")
         e = {a: Fraction(self.number(tensor_elem, a, f"{ikey}.inertia"))
              for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
         tensor = ((e["ixx"], e["ixy"], e["ixz"]), (e["ixy"], e["iyy"], e["iyz"]), (e["ixz"], e["iyz"], e["izz"]))
-        problem = semidefinite_problem(tensor)
-        if problem:
-            raise self.error(f"{ikey}.inertia", f"not a physical inertia: {problem}")
+        # physical consistency is the builder's check (a warning for URDF: see reader.build)
         if mass == 0 and any(v for row in tensor for v in row):
             self.notes.append(f"{ikey}: zero mass with a nonzero inertia (kept as written)")
         # the tensor at the COM in the inertial frame's axes, turned into link axes: R I R^T
@@ -179,6 +187,8 @@ class _Parser:
     def joint(self, elem, key, links):
         name = elem.get("name")
         jtype = elem.get("type")
+        self.once(elem, key, ("parent", "child", "origin", "axis", "limit", "dynamics", "mimic", "calibration",
+                              "safety_controller"))
         if jtype not in JOINT_TYPES:
             raise self.error(f"{key}.type", f"unknown joint type {jtype!r} (URDF types: {', '.join(JOINT_TYPES)})")
         if jtype == "planar":
@@ -207,7 +217,10 @@ class _Parser:
             else:
                 joint.axis = (Fraction(1), Fraction(0), Fraction(0))      # the URDF default
         mimic = elem.find("mimic")
-        if mimic is not None:
+        if mimic is not None and jtype == "fixed":
+            self.notes.append(f"{key}.mimic: a fixed joint does not move: its <mimic> is ignored (as "
+                              "urdfdom and Pinocchio do)")
+        elif mimic is not None:
             if jtype not in ("revolute", "continuous", "prismatic"):
                 raise self.error(f"{key}.mimic", f"a {jtype} joint cannot mimic another")
             leader = mimic.get("joint")
@@ -237,25 +250,6 @@ class _Parser:
 def _quarter_text(value):
     k = round(float(value) / 1.5707963267948966)
     return {0: "0", 1: "pi/2", -1: "-pi/2", 2: "pi", -2: "-pi"}.get(k, f"{k}*pi/2")
-
-
-def semidefinite_problem(tensor) -> str | None:
-    """Why a symmetric 3x3 rational matrix is not positive semidefinite (None if it is):
-    exactly, by its principal minors (all must be >= 0)."""
-    t = tensor
-    diag = [t[0][0], t[1][1], t[2][2]]
-    names = ("ixx", "iyy", "izz")
-    for name, d in zip(names, diag):
-        if d < 0:
-            return f"{name} = {float(d):g} is negative"
-    for i, j in ((0, 1), (0, 2), (1, 2)):
-        if t[i][i] * t[j][j] - t[i][j] * t[j][i] < 0:
-            return f"the {names[i]}-{names[j]} minor is negative (a product of inertia too large)"
-    det = (t[0][0] * (t[1][1] * t[2][2] - t[1][2] * t[2][1]) - t[0][1] * (t[1][0] * t[2][2] - t[1][2] * t[2][0])
-           + t[0][2] * (t[1][0] * t[2][1] - t[1][1] * t[2][0]))
-    if det < 0:
-        return "its determinant is negative (not positive semidefinite)"
-    return None
 
 
 def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
@@ -298,8 +292,11 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
     moving = {j.name for j in joints if j.type in ("revolute", "continuous", "prismatic")}
     for j in joints:
         if j.mimic is not None and j.mimic[0] not in moving:
-            raise p.error(f"{j.key}.mimic.joint", f"joint {j.mimic[0]!r} is not a revolute, continuous or "
-                          "prismatic joint of this robot: a mimic joint follows one")
+            what = "not a joint of this robot" if j.mimic[0] not in names else "not a moving joint"
+            p.warnings.append((f"{j.key}.mimic.joint", f"joint {j.mimic[0]!r} is {what}: the <mimic> is "
+                               f"ignored and {j.name!r} moves independently (as Pinocchio without mimic support "
+                               "does); fix the file if it should follow a joint"))
+            j.mimic = None
     roots = [name for name in links if name not in parent_of]
     if not roots:
         raise p.error("robot", f"the joints form a cycle: {_cycle(links, parent_of)}")
@@ -317,13 +314,11 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
     unreached = [name for name in links if name not in reached]
     if unreached:
         raise p.error("robot", f"the joints form a cycle: {_cycle({n: None for n in unreached}, parent_of)}")
-    if not any(link.has_inertial for name, link in links.items() if name != roots[0]):
-        raise p.error("robot", "no moving link has an <inertial> element: a visual or collision "
-                      "(mesh-only) description has no dynamic model; add <inertial> elements")
     transmissions = [p.transmission(elem, f"transmission[name={elem.get('name')}]" if elem.get("name")
                                     else f"transmission[{i}]")
-                     for i, elem in enumerate(root.findall("transmission"))]
-    return Urdf(path, robot, links, joints, roots[0], p.notes, transmissions)
+                     # ROS 1 puts them under <robot>, ros2_control inside <ros2_control> (TIAGo Pro)
+                     for i, elem in enumerate(root.findall("transmission") + root.findall("ros2_control/transmission"))]
+    return Urdf(path, robot, links, joints, roots[0], p.notes, transmissions, p.warnings)
 
 
 def _cycle(links, parent_of):

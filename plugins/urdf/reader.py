@@ -7,8 +7,8 @@ the same axis through the link origin, so the child link frame moves exactly as 
 revolute/continuous -> ``R``, prismatic -> ``P``, fixed -> ``Fixed`` (or merged into its
 parent with ``merge_fixed``), floating -> ``Free``. Limits become coordinate limits;
 ``<dynamics damping friction>`` become viscous and Coulomb friction effects;
-``<transmission>`` elements (simple, differential, four-bar linkage) become the motors of
-the drive chain (:func:`motor_ratios`); a default
+``<transmission>`` elements (simple, differential, four-bar linkage; under ``<robot>`` or,
+ros2_control's, inside ``<ros2_control>``) become the motors of the drive chain (:func:`motor_ratios`); a default
 exciting trajectory (a Fourier series inside the limits) is added so that every verb
 works on a bare URDF.
 """
@@ -86,6 +86,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     notes = list(urdf.notes)
     inertia = {name: link.inertia if link.inertia is not None else ZERO10 for name, link in urdf.links.items()}
     joints = [_copy(j) for j in urdf.joints]
+    contradictions = _contradicting_limits(joints)
     if floating_base:
         ground = GROUND
         joints.insert(0, UrdfJoint("floating_base", "floating", GROUND, urdf.root, "robot"))
@@ -96,6 +97,12 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
         if urdf.links[urdf.root].has_inertial:
             notes.append(f"{urdf.links[urdf.root].key}.inertial: the root link is the ground (fixed); its "
                          "inertia does not act and is not kept")
+    if not any(urdf.links[name].has_inertial for name in links):
+        raise InputError("no moving link has an <inertial> element: a visual or collision (mesh-only) "
+                         "description has no dynamic model; add <inertial> elements" + (
+                             "" if floating_base or not urdf.links[urdf.root].has_inertial else
+                             f" (only the root link {urdf.root!r} has one: --floating-base for a free-flying robot)"),
+                         file=urdf.path, key="robot")
     massless = [name for name in links if urdf.links[name].inertia is None]
     if massless:
         notes.append(f"links without <inertial> (mass 0): {', '.join(massless)}")
@@ -106,7 +113,9 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     b = MechanismBuilder(_mechanism_name(urdf.robot), urdf.path, title=f"{urdf.robot} (URDF)",
                          description=f"Read from the URDF file {Path(urdf.path).name}: body k is the k-th "
                                      f"link (file order) after the ground {ground!r} (docs/urdf.md).",
-                         source=f"URDF {urdf.path}")
+                         source=f"URDF {urdf.path}", lenient_inertia=True)
+    for key, text in urdf.warnings + contradictions:
+        b.warn(key, text)
     for name in links:
         phi = inertia[name]
         b.body(label[name], name, inertia=dict(zip(PARAMETER_KINDS, phi)), key=urdf.links[name].key)
@@ -151,6 +160,26 @@ def _couplings(b, joints, names) -> set[str]:
         b.coupling(names[j.name], names[leader], multiplier, offset, key=f"{j.key}.mimic")
         followers.add(names[j.name])
     return followers
+
+
+def _contradicting_limits(joints) -> list[tuple[str, str]]:
+    """Followers whose own limits no leader value inside the leader's limits meets (PR2's
+    r_gripper_r_parallel_root_joint = -1 x r_gripper_l_finger_joint, both in [0, 0.548]):
+    their limits are dropped, with a warning, so that the default trajectory exists."""
+    by_name = {j.name: j for j in joints}
+    out = []
+    for j in joints:
+        leader = by_name.get(j.mimic[0]) if j.mimic is not None else None
+        if leader is None or j.limits is None or leader.limits is None:
+            continue
+        _, multiplier, offset = j.mimic
+        ends = sorted((multiplier * leader.limits[0] + offset, multiplier * leader.limits[1] + offset))
+        if max(ends[0], j.limits[0]) >= min(ends[1], j.limits[1]):
+            out.append((f"{j.key}.limit", f"[{j.limits[0]}, {j.limits[1]}] is not reached by {multiplier} x "
+                        f"{leader.name} + {offset} with {leader.name} in [{leader.limits[0]}, {leader.limits[1]}] "
+                        "(the file's limits contradict its <mimic>): these limits are not enforced"))
+            j.limits = None
+    return out
 
 
 def _leader_limits(joint, limits, joints, names, followers):

@@ -19,6 +19,14 @@ Choices made here, all reported in the result's diagnostics:
   would invent a rank. Such columns are set to zero and listed.
 - **Rank.** The usual tolerance ``max(shape) * eps * s_max`` on the scaled W
   (numpy's ``matrix_rank`` default).
+- **Directions lifted by scaling.** Rounding errors in W are of the size of W's entries,
+  not of each column's: two small columns equal up to rounding (so100's ``mx1`` and ``mx2``,
+  norm 8e-4 where W's largest is 200, differing by 1e-14) become, scaled to norm 1, a
+  direction with a singular value above the scaled tolerance. So a trailing singular
+  direction ``v`` of the scaled W is not counted when, in the parameters' own units
+  (``x = v / scale``), ``|W x| / |x| = s / |v / scale|`` is at most the unscaled tolerance
+  ``max(shape) * eps * s_max(W)``: below W's rounding level, as the unscaled rule would say.
+  The directions dropped and the columns that carry them are reported.
 - **Ridge.** Ratios ``s_i / s_{i+1}`` of consecutive singular values, for the values
   above the tolerance (the one below the cut is floored at ``eps * s_max``, the noise
   level of a double-precision SVD). The ridge is *clear* when the largest ratio is at
@@ -64,6 +72,8 @@ class DPResult:
     error_estimate: float        # first-order error of beta (scaled units): s_{r+1}/s_r * cond(V22)
     v22_condition: float
     warnings: list = field(default_factory=list)
+    lifted: int = 0              # directions the scaling lifted above the tolerance, not counted
+    lifted_columns: list = field(default_factory=list)   # the columns that carry them most
 
 
 def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> DPResult:
@@ -92,6 +102,18 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
     s_max = s_full[0] if n else 0.0
     tol = max(rows, n) * EPS * s_max
     r_tol = int(np.sum(s_full > tol))
+    lifted = _lifted_by_scaling(W, s_full, vt, s_col, r_tol) if scale and rank is None else 0
+    warnings = []
+    lifted_columns = []
+    if lifted:
+        weight = np.abs(vt[r_tol - lifted:r_tol]).max(axis=0)
+        carriers = [j for j in np.argsort(-weight)[:6] if weight[j] >= 0.1 * weight.max()]
+        lifted_columns = [str(columns[j]) if columns is not None else str(j) for j in carriers]
+        warnings.append(
+            f"{lifted} singular direction(s) of the scaled W above its tolerance are below W's rounding "
+            f"level in the parameters' own units (carried by the small columns {', '.join(lifted_columns)}, "
+            f"lifted by the column scaling): not counted, rank {r_tol - lifted} instead of {r_tol}")
+        r_tol -= lifted
     r = r_tol if rank is None else int(rank)
 
     floor = EPS * s_max
@@ -100,7 +122,6 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
     if r_tol == n and n:
         ratios = ratios[:n - 1]
     largest = int(np.argmax(ratios)) + 1 if ratios.size else 0
-    warnings = []
     clear = bool(ratios.size) and ratios.max() >= RIDGE_RATIO and largest == r_tol
     if ratios.size and ratios.max() < RIDGE_RATIO:
         warnings.append(
@@ -141,7 +162,30 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
         warnings.append(f"beta is uncertain: estimated relative error {err:.2g} "
                         f"(s_{r + 1} = {noise:.3g} / s_{r} = {s_full[r - 1]:.3g} x cond(V22) = {cond22:.3g})")
     return DPResult(r, kept, eliminated, beta, beta_s, s_full, tol, s_col, zero_columns, ratios, largest,
-                    clear, err, cond22, warnings)
+                    clear, err, cond22, warnings, lifted, lifted_columns)
+
+
+def _lifted_by_scaling(W, s, vt, s_col, r_tol) -> int:
+    """How many of the trailing singular directions counted in the scaled W are below the
+    unscaled tolerance in the parameters' own units (see the module doc)."""
+    rows, n = W.shape
+    if not r_tol:
+        return 0
+    big = float(np.max(np.abs(W))) if W.size else 0.0
+    if big == 0.0:
+        return 0
+    unit = W / big                                  # no overflow in the Gram matrix at 1e+-200
+    s_max = big * float(np.sqrt(max(np.linalg.eigvalsh(unit.T @ unit)[-1], 0.0)))
+    tol_units = max(rows, n) * EPS * s_max
+    lifted = 0
+    for k in range(r_tol - 1, -1, -1):
+        x = vt[k] / s_col
+        peak = float(np.max(np.abs(x)))
+        size = peak * float(np.linalg.norm(x / peak)) if peak else 0.0       # no overflow near 1e+-200
+        if size == 0.0 or s[k] / size > tol_units:
+            break
+        lifted += 1
+    return lifted
 
 
 def _check_finite(W: np.ndarray, columns) -> None:
@@ -172,7 +216,15 @@ def _singular_values_and_vt(Ws: np.ndarray):
     rows, n = Ws.shape
     try:
         _, s, vt = np.linalg.svd(Ws, full_matrices=rows < n)
+        return s, vt
     except np.linalg.LinAlgError:
+        pass
+    try:
+        # LAPACK's divide and conquer (gesdd) may fail to converge where the QR iteration
+        # (gesvd) does not (so100's stacked W): the slower driver before giving up
+        import scipy.linalg
+        _, s, vt = scipy.linalg.svd(Ws, full_matrices=rows < n, lapack_driver="gesvd")
+    except (np.linalg.LinAlgError, ValueError):
         raise KinematicsError(
             f"the SVD of the observation matrix W ({rows} x {n}, largest entry "
             f"{float(np.max(np.abs(Ws))):.3g}) did not converge in double precision: the "

@@ -131,6 +131,7 @@ class DoublePrecisionSolver:
             "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
                                "(exact in binary); beta scaled back") if scale else "none",
             "numerically_zero_columns": [params[j] for j in res.zero_columns],
+            "lifted_by_scaling": {"directions": int(res.lifted), "columns": list(res.lifted_columns)},
             "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
             "ridge": {"clear": bool(res.clear_ridge), "criterion":
                       f"largest ratio s_i/s_(i+1) among values above the tolerance (the value below the "
