@@ -108,7 +108,7 @@ def test_effects_table_is_read_exactly():
     ('kind = "viscous"\ncoordinate = "{c}"', "effects[0].kind", "unknown effect 'viscous'"),
     ('kind = "offset"\ncoordinate = "nope"', "effects[0].coordinate", "not a tree coordinate"),
     ('kind = "offset"\ncoordinate = "{c}"\nvalues = {{ fv = "1" }}', "effects[0].values.fv",
-     "not a coefficient of offset"),
+     "not a coefficient or shape parameter of offset"),
     ('kind = "offset"\ncoordinate = "{c}"\nvalue = "1"', "effects[0]", "unknown key"),
     ('kind = "offset"\ncoordinate = "{c}"\nvalues = {{ off = 0.5 }}', None, None),
 ])

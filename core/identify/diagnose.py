@@ -493,7 +493,7 @@ def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[
     r = e - Z @ gamma
     lags = hac_lags(r.reshape(n, f))
     scores = (Z * r[:, None]).reshape(n, f, -1).sum(axis=1)
-    S = long_run(scores, lags) * (n * f) / max(n * f - full.rank, 1)
+    S = long_run(scores, lags, prewhiten=False) * (n * f) / max(n * f - full.rank, 1)
     H = np.linalg.pinv(Z.T @ Z)
     std = np.sqrt(np.maximum(np.diag(H @ S @ H), 0.0))
     out, start = [], 0

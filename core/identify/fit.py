@@ -374,14 +374,15 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
 
 
 def _hac_scores(matrix: np.ndarray, residual: np.ndarray, n: int, f: int, p: int) -> np.ndarray:
-    """The (prewhitened) Newey-West covariance of the least-squares scores summed per sample over
-    the coordinates (Driscoll-Kraay, :func:`baseparams.identify.selection.long_run`), its window from the residual's own autocorrelation
+    """The Newey-West (Bartlett) covariance of the least-squares scores summed per sample over
+    the coordinates (Driscoll-Kraay; not prewhitened: on filtered recordings the VAR(1)
+    prewhitening overstated the spread 1.6 times, tests/test_recordings.py), its window from the residual's own autocorrelation
     (:func:`baseparams.identify.selection.hac_lags`, as diagnosis uses), scaled for the
     unknowns fitted: the middle of the sandwich (A^T A)^-1 S (A^T A)^-1."""
     from baseparams.identify.selection import hac_lags, long_run
     scores = (matrix * residual[:, None]).reshape(n, f, p).sum(axis=1)
     lags = hac_lags(residual.reshape(n, f))
-    return long_run(scores, lags) * (n * f) / max(n * f - p, 1)
+    return long_run(scores, lags, prewhiten=False) * (n * f) / max(n * f - p, 1)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None

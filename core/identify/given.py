@@ -23,7 +23,9 @@ def given_parameters(mechanism: Mechanism, source: str) -> tuple[np.ndarray, lis
     if path.suffix.lower() == ".json":
         return _from_identify(mechanism, path)
     from baseparams.io.loader import resolve
+    from baseparams.model.consistency import require_physical
     other = resolve(source)
+    require_physical(other, "diagnose --params")
     if list(other.parameters) != list(mechanism.parameters):
         raise InputError(f"its bodies do not match {mechanism.name}'s ({len(other.parameters)} standard "
                          f"parameters against {len(mechanism.parameters)}): give the same robot's file",

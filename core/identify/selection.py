@@ -544,11 +544,16 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     return Selection(steps, added, ambiguous, companions, removed, regroups, candidates)
 
 
+# kinds that act on a body, not a coordinate: a kind generalising them may act anywhere
+BODY_KINDS = ("mass", "body")
+
+
 def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
-    """Whether candidate a's kind generalises candidate b's on the same coordinate."""
+    """Whether candidate a's kind generalises candidate b's on the same coordinate (or on the
+    body b acts on: cogging on a joint imitates the gravity of a mass carried beyond it)."""
     def relation(a: int, b: int) -> bool:
         ca, cb = candidates[a], candidates[b]
-        return ca.coordinate == cb.coordinate and cb.kind in ca.generalises
+        return cb.kind in ca.generalises and (ca.coordinate == cb.coordinate or cb.kind in BODY_KINDS)
     return relation
 
 
