@@ -39,9 +39,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
+from scipy.optimize import minimize_scalar
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
-from baseparams.identify.weighting import fixed_point
+from baseparams.identify.weighting import TOLERANCE, fixed_point
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
@@ -50,6 +51,9 @@ RANK_TOL = 1e-6
 # current model is projected out is absorbed by the model.
 ABSORB_TOL = 1e-7
 MAX_STEPS = 12
+# Between steps the noise weights move little: refitted until no SD changes by 2 %, not 0.1 %
+# (a test statistic moves by as little; half the weighted fits of a diagnosis).
+STEP_TOLERANCE = 0.02
 # The tests are asymptotic in the number of samples a candidate acts on: a candidate whose
 # directions spread over fewer samples than this fraction of the data (a Stribeck bump
 # sampled at a few zero crossings) is not tested (its statistic would be one spike).
@@ -93,6 +97,8 @@ class Candidate:
     shapes: tuple = ()                         # shape parameters of each variant
     shape: dict = field(default_factory=dict)  # the shape of ``columns``
     generalises: tuple = ()                    # kinds this one generalises (Effect.generalises)
+    make: Callable | None = field(default=None, compare=False, repr=False)
+    # shape -> columns (N, f, c) at any shape value (None: the grid only)
 
     @property
     def label(self) -> str:
@@ -106,12 +112,13 @@ class Candidate:
     def at(self, k: int) -> "Candidate":
         """The candidate fixed at its ``k``-th shape."""
         return Candidate(self.kind, self.coordinate, self.names, self.variants[k], (), (), dict(self.shapes[k]),
-                         self.generalises)
+                         self.generalises, self.make)
 
     def rows(self, index) -> "Candidate":
         """The candidate restricted to samples ``index`` (a slice or an index array)."""
+        make = None if self.make is None else (lambda shape: self.make(shape)[index])
         return Candidate(self.kind, self.coordinate, self.names, self.columns[index],
-                         tuple(v[index] for v in self.variants), self.shapes, self.shape, self.generalises)
+                         tuple(v[index] for v in self.variants), self.shapes, self.shape, self.generalises, make)
 
 
 @dataclass
@@ -339,16 +346,18 @@ class Fit:
 
 
 def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None,
-                 start: np.ndarray | None = None) -> Fit:
+                 start: np.ndarray | None = None, tolerance: float = TOLERANCE) -> Fit:
     """Least squares of y on ``model``; ``weights`` None: Gautier's per-coordinate noise
-    weighting at its fixed point (:mod:`.weighting`), iterated from the weights ``start``."""
+    weighting at its fixed point (:mod:`.weighting`, to ``tolerance``), iterated from the
+    weights ``start``."""
     n, f, p = model.shape
     if weights is None:
         def fit_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             fit = weighted_fit(model, y, coordinate_weights)
             return fit.residual.reshape(n, f) / coordinate_weights, fit.basis
 
-        weights = 1.0 / fixed_point(fit_at, f, start=None if start is None else 1.0 / start)
+        weights = 1.0 / fixed_point(fit_at, f, start=None if start is None else 1.0 / start,
+                                    tolerance=tolerance)
     A = (model * weights[None, :, None]).reshape(n * f, p)
     b = (y * weights[None, :]).reshape(n * f)
     scale = np.linalg.norm(A, axis=0)
@@ -430,8 +439,9 @@ class Whitening:
         return out
 
     def candidate(self, cand: Candidate) -> Candidate:
+        make = None if cand.make is None else (lambda shape: self(cand.make(shape)))
         return Candidate(cand.kind, cand.coordinate, cand.names, self(cand.columns),
-                         tuple(self(v) for v in cand.variants), cand.shapes, cand.shape, cand.generalises)
+                         tuple(self(v) for v in cand.variants), cand.shapes, cand.shape, cand.generalises, make)
 
 
 def _same(x):
@@ -475,7 +485,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten, touched)
         touched = set()
         current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
-        fit = weighted_fit(whiten(current), whiten(y), start=previous)
+        fit = weighted_fit(whiten(current), whiten(y), start=previous,
+                           tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
         previous = fit.weights
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
@@ -602,14 +613,32 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         others = [j for j in in_model if j != i]
         fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
                            whiten(y), weights)
-        best, gain = None, -1.0
-        for k, columns in enumerate(shaped[i].variants):
+        def explained(columns: np.ndarray) -> float:
             basis = candidate_basis(whiten(columns), fit)
-            explained = float(np.sum((basis.T @ fit.residual) ** 2))
-            if explained > gain:
-                best, gain = k, explained
-        if best is not None and shaped[i].shapes[best] != candidates[i].shape:
-            candidates[i] = shaped[i].at(best)
+            return float(np.sum((basis.T @ fit.residual) ** 2))
+
+        gains = [explained(columns) for columns in shaped[i].variants]
+        best = int(np.argmax(gains))
+        candidates[i] = _between(shaped[i], best, explained) or shaped[i].at(best)
+
+
+def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) -> Candidate | None:
+    """The candidate at the shape value between grid points k - 1 and k + 1 that explains the
+    most (bounded search on its logarithm), when it has one shape, a column maker and a
+    positive value there; else None. Why: between grid points the misfit of the shape was
+    larger than the noise, and a Stribeck bump was named to make up the difference."""
+    if cand.make is None or len(cand.shapes[k]) != 1:
+        return None
+    (name, value), = cand.shapes[k].items()
+    values = [next(iter(s.values())) for s in cand.shapes]
+    if value <= 0:
+        return None
+    low = values[k - 1] if k > 0 and values[k - 1] > 0 else value / 2
+    high = values[k + 1] if k + 1 < len(values) else value * 2
+    found = minimize_scalar(lambda x: -explained(cand.make({name: float(np.exp(x))})),
+                            bounds=(np.log(low), np.log(high)), method="bounded", options={"xatol": 0.02})
+    shape = {name: float(np.exp(found.x))}
+    return Candidate(cand.kind, cand.coordinate, cand.names, cand.make(shape), (), (), shape, cand.generalises)
 
 
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,

@@ -42,14 +42,15 @@ def noise_levels(residual: np.ndarray, basis: np.ndarray, floor: float = 0.0) ->
 
 
 def fixed_point(weighted_fit: WeightedFit, coordinates: int, floor: float = 0.0,
-                start: np.ndarray | None = None) -> np.ndarray:
+                start: np.ndarray | None = None, tolerance: float = TOLERANCE) -> np.ndarray:
     """The noise SDs (f,) at which refitting with weights 1/SD no longer changes them,
     starting from ``start`` (default: equal weights, the ordinary fit; a previous model's
-    SDs save passes when a model grows by one effect at a time)."""
+    SDs save passes when a model grows by one effect at a time); ``tolerance``: the largest
+    relative change of an SD that ends the passes."""
     sigma = np.ones(coordinates) if start is None else np.asarray(start, dtype=float)
     for _ in range(PASSES):
         residual, basis = weighted_fit(1.0 / sigma)
         previous, sigma = sigma, noise_levels(residual, basis, floor)
-        if np.max(np.abs(sigma / previous - 1.0)) < TOLERANCE:
+        if np.max(np.abs(sigma / previous - 1.0)) < tolerance:
             break
     return sigma
