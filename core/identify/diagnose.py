@@ -248,6 +248,15 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
     before = _predict(model, [], y, chosen.steps[0].fit, train)
     after = _predict(model, [full[i] for i in in_model], y, None, train)
+    # structure left beside a named effect: is the effect larger than what is left there?
+    dominated = _dominated(after, train, [full[i] for i in in_model], in_model, kept_named, problem.coordinates,
+                           alpha)
+    if dominated:
+        for i, reason in dominated:
+            unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
+                                "values": {}, "reason": reason})
+        in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
+        after = _predict(model, [full[i] for i in in_model], y, None, train)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
@@ -336,6 +345,44 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
     if problem.bodies is not None:
         out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
                                         problem.wanted)
+    return out
+
+
+# A named effect on a coordinate whose residual still holds structure must be at least this
+# many times the structure left there (RMS), or it may only stand in for what is missing.
+DOMINANCE = 2.0
+
+
+def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_model: list[int], named: list[int],
+               coordinates, alpha: float) -> list[tuple[int, str]]:
+    """Named effects smaller than the structure their coordinate's residual still holds (not
+    white: Ljung-Box; its size: sqrt(residual RMS^2 - noise level^2), the noise level from
+    second differences). Why: on data with something the catalogue lacks (an elastic
+    joint's lag), a small spring, cogging or viscous friction took a part of its signature
+    and was named; the structure left beside it is as large as the effect itself."""
+    if not named:
+        return []
+    un = _unexplained(after, train, coordinates, alpha)
+    pvalues = np.array([un["ljung_box"][c]["pvalue"] for c in coordinates])
+    structured = holm(pvalues) <= alpha
+    if not structured.any():
+        return []
+    rms = np.array([un["residual_rms"][c] for c in coordinates])
+    noise = np.array([un["noise_level"][c] for c in coordinates])
+    left = np.sqrt(np.maximum(rms ** 2 - noise ** 2, 0.0))
+    coefficients = after.fit.coefficients[-sum(c.columns.shape[-1] for c in added):] if added else []
+    out, start = [], 0
+    for index, cand in zip(in_model, added):
+        width = cand.columns.shape[-1]
+        force = cand.columns[:train] @ coefficients[start:start + width]
+        start += width
+        if index not in named:
+            continue
+        size = np.sqrt(np.mean(force ** 2, axis=0))
+        j = int(np.argmax(size / np.where(noise > 0, noise, 1.0)))
+        if structured[j] and size[j] < DOMINANCE * left[j]:
+            out.append((index, f"structure is left on {coordinates[j]} as large as this effect (RMS {size[j]:.3g} "
+                               f"against {left[j]:.3g} left): it may stand in for what is missing there"))
     return out
 
 

@@ -51,6 +51,11 @@ RANK_TOL = 1e-6
 # current model is projected out is absorbed by the model.
 ABSORB_TOL = 1e-7
 MAX_STEPS = 12
+# Rivals are confusable with the winner only when what they explain is this correlated: two
+# weak candidates that explain different things, neither adding over the other (on a residual
+# with structure left, whitened) are not one ambiguous effect (the TX40 made a group of nine
+# with correlations below 0.01).
+CONFUSABLE_CORRELATION = 0.5
 # Between steps the noise weights move little: refitted until no SD changes by 2 %, not 0.1 %
 # (a test statistic moves by as little; half the weighted fits of a diagnosis).
 STEP_TOLERANCE = 0.02
@@ -786,6 +791,8 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
                 # is a fluke of alpha; both at that bar: the rival competes again next step
                 verdict = _verdict(a_adds, b_adds) or _verdict(t_ab.pvalue <= nested_level,
                                                                t_ba.pvalue <= nested_level)
+                if verdict == "confusable" and abs(rival.correlation) < CONFUSABLE_CORRELATION:
+                    verdict = None      # unrelated, each too weak to add over the other: it competes again
                 if verdict == "confusable" and generalises is not None:
                     # a kind that generalises the other (cogging's harmonics an offset over a small
                     # range) is not named for what the simpler kind explains as well
