@@ -6,8 +6,8 @@ from baseparams.dynamics.effects import Effect, Shape
 from baseparams.hookspecs import hookimpl
 
 # Transition speeds diagnosis tries, as multiples of the coordinate's RMS speed (0: sign).
-COULOMB_GRID = (0.0, 0.002, 0.005, 0.01, 0.02, 0.04, 0.07, 0.12, 0.2, 0.3)
-STRIBECK_GRID = (0.01, 0.02, 0.05, 0.1, 0.2, 0.3)
+COULOMB_GRID = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
+STRIBECK_GRID = (0.01, 0.03, 0.1, 0.3)
 
 
 def _coulomb(q, qd, qdd, vs=0.0):
