@@ -2,16 +2,18 @@
 missing, and how much of the gap it closes.
 
 The inertial model (every standard parameter free, fitted through the column space of the
-regressor on the training samples) is fitted on the first part of the data; the last time
-block (``holdout``) is kept out to check that what is named also predicts. Candidate
-effects (:mod:`.candidates`) are added one at a time by the tests of :mod:`.selection`;
-confusable candidates are reported together under ``ambiguous`` with the evidence and the
-excitation that would separate them, never named. The report gives each named effect's
-coefficients with HAC standard deviations, the gap (NRMS) before and after on the fit and
-the holdout (with the holdout's prediction floor, :func:`holdout_floor`: what a correct
-model fitted on the training part reaches there), and what remains: a Ljung-Box whiteness
-test of the residual and the residual compared with the noise level estimated from its
-second differences (which a smooth missing force does not reach).
+regressor; or held as given, ``--params``) is fitted to the data (a last ``holdout``
+fraction may be kept out of everything). Candidate effects (:mod:`.candidates`, and the
+derived ones of :mod:`.derived`) are added one at a time by the tests of :mod:`.selection`
+(coloured noise whitened); confusable candidates are reported together under ``ambiguous``
+with the excitation that would separate them, never named. A candidate that entered the
+model is named only when it also holds out of sample (:mod:`.outofsample`: physical,
+predicting held-out blocks better, one coefficient for the recording) and is larger than
+the structure left beside it; the others are ``unsupported``. The report leads with a
+verdict; it gives each named effect's coefficients with HAC standard deviations, the gap
+(NRMS) before and after, fitted and block cross-validated, where the gap remains (blocks,
+motion regimes), and a Ljung-Box whiteness test of the residual against the noise level
+estimated from its second differences (which a smooth missing force does not reach).
 
 Effects the mechanism already has (``[[effects]]``): with every coefficient given they are
 known forces, subtracted from tau; otherwise their coefficients are fitted with the inertial
