@@ -342,8 +342,11 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
     if model.shape[-1]:
         fit = weighted_fit(model[rows], y[rows])
         torque = torque + model @ fit.coefficients
-    qd = problem.qd if problem.qd is not None else np.gradient(torque, problem.t, axis=0) * 0
-    out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, problem.wanted)
+    wanted = problem.wanted
+    if problem.qd is None:          # a Problem built without speeds: no load friction to build
+        wanted = {("delay", "all")} if wanted is None else {w for w in wanted if w[0] != "load_friction"}
+    qd = problem.qd if problem.qd is not None else np.zeros_like(torque)
+    out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, wanted)
     if problem.bodies is not None:
         out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
                                         problem.wanted)
