@@ -234,3 +234,29 @@ def test_max_steps_when_hit_is_reported(puma):
     assert d.unexplained["significant_candidates_left"] and d.unexplained["max_steps"] == 1
     assert "--max-steps 1" in d.notes[0]
     assert not d.closed
+
+
+@pytest.mark.parametrize("text", ["chain4", "tree1"])
+def test_smooth_coulomb_and_delay_on_generated_mechanisms(text):
+    """Not only the built-ins: a generated chain and tree, a smooth Coulomb law on the first
+    coordinate and a 1.5-sample delay, each named. (On a generated four-bar the delay was named
+    as viscous friction on a dependent joint: docs/diagnosis.md.)"""
+    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    m = parse_mechanism(generate.serial_chain(4) if text == "chain4" else generate.tree(1))
+    motion = trajectory_motion(m, 600)
+    problem = prepare(m, motion, evaluate(m, motion))
+    rng = np.random.default_rng(3)
+    clean = problem.inertial @ random_physical_inertia(m, rng)
+    sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
+    qd = motion.qd[:, 0]
+    force = np.zeros_like(clean)
+    force[:, 0] = np.tanh(qd / (0.05 * np.sqrt(np.mean(qd ** 2))))
+    force *= 6 * sd[0] / np.sqrt(np.mean(force[:, 0] ** 2))
+    d = diagnose(problem, clean + force + rng.standard_normal(clean.shape) * sd)
+    assert _named(d) == {("coulomb_friction", problem.coordinates[0])}
+    t = motion.t
+    lagged = np.stack([np.interp(t - 1.5 * (t[1] - t[0]), t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
+    d = diagnose(problem, lagged + rng.standard_normal(clean.shape) * sd)
+    assert _named(d) == {("delay", "all")}

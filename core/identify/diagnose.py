@@ -251,14 +251,16 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     before = _predict(model, [], y, chosen.steps[0].fit, train)
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
+    unexplained = _unexplained(after, train, problem.coordinates, alpha)
     dominated = _dominated(after, train, [full[i] for i in in_model], in_model, kept_named, problem.coordinates,
-                           alpha)
+                           alpha, unexplained)
     if dominated:
         for i, reason in dominated:
             unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
                                 "values": {}, "reason": reason})
         in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
+        unexplained = _unexplained(after, train, problem.coordinates, alpha)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
@@ -276,7 +278,6 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     effects = [{**_effect_entry(candidates, *by_index[i], chosen, i), "checks": checks.get(i, {})}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added if i in ambiguous_idx]
-    unexplained = _unexplained(after, train, problem.coordinates, alpha)
     white = unexplained["white"]
     closed = bool(white and not remaining and not unsupported)
     unexplained["significant_candidates_left"] = remaining
@@ -359,15 +360,15 @@ DOMINANCE = 2.0
 
 
 def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_model: list[int], named: list[int],
-               coordinates, alpha: float) -> list[tuple[int, str]]:
+               coordinates, alpha: float, un: dict) -> list[tuple[int, str]]:
     """Named effects smaller than the structure their coordinate's residual still holds (not
     white: Ljung-Box; its size: sqrt(residual RMS^2 - noise level^2), the noise level from
     second differences). Why: on data with something the catalogue lacks (an elastic
     joint's lag), a small spring, cogging or viscous friction took a part of its signature
-    and was named; the structure left beside it is as large as the effect itself."""
+    and was named; the structure left beside it is as large as the effect itself. ``un``:
+    :func:`_unexplained` of ``after``."""
     if not named:
         return []
-    un = _unexplained(after, train, coordinates, alpha)
     pvalues = np.array([un["ljung_box"][c]["pvalue"] for c in coordinates])
     structured = holm(pvalues) <= alpha
     if not structured.any():
