@@ -260,3 +260,14 @@ def test_smooth_coulomb_and_delay_on_generated_mechanisms(text):
     lagged = np.stack([np.interp(t - 1.5 * (t[1] - t[0]), t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
     d = diagnose(problem, lagged + rng.standard_normal(clean.shape) * sd)
     assert _named(d) == {("delay", "all")}
+
+
+def test_params_from_a_wrong_source_is_refused(tmp_path):
+    data = tmp_path / "d.csv"
+    assert CliRunner().invoke(main, ["simulate", "planar_2r", "-o", str(data), "--samples", "200"]).exit_code == 0
+    result = CliRunner().invoke(main, ["diagnose", "planar_2r", str(data), "--params", "pendulum"])
+    assert result.exit_code == 2 and "bodies do not match" in result.stderr
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"x": 1}')
+    result = CliRunner().invoke(main, ["diagnose", "planar_2r", str(data), "--params", str(bad)])
+    assert result.exit_code == 2 and "no 'base' list" in result.stderr
