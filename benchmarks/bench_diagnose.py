@@ -52,6 +52,7 @@ from collections import Counter, defaultdict  # noqa: E402
 import numpy as np  # noqa: E402
 
 from baseparams.identify import selection as S  # noqa: E402
+from baseparams.identify.linear import WeightedLinearModel  # noqa: E402
 from baseparams.identify.diagnose import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
 from baseparams.identify.model import evaluate  # noqa: E402
 from baseparams.identify.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
@@ -70,8 +71,8 @@ def testable(problem, phi, rng):
     (single-column summary) directions beyond the inertial model."""
     n, f, _ = problem.inertial.shape
     clean = problem.inertial @ phi
-    fit = S.weighted_fit(problem.inertial, clean + rng.standard_normal(clean.shape) * NOISE *
-                         np.sqrt(np.mean(clean ** 2, axis=0)))
+    fit = WeightedLinearModel(problem.inertial, clean + rng.standard_normal(clean.shape) * NOISE *
+                                  np.sqrt(np.mean(clean ** 2, axis=0))).fit()
     out, skipped = [], Counter()
     for i, cand in enumerate(problem.candidates):
         basis = S.candidate_basis(cand, fit)
@@ -126,7 +127,7 @@ def oracle_holdout(problem, hidden, tau, train):
     the coefficients' own error, extrapolated to the held-out samples; its prediction floor
     (:func:`holdout_floor`, from the fit alone) is what that error is expected to add."""
     model = np.concatenate([problem.inertial] + [problem.candidates[i].columns for i in hidden], axis=-1)
-    fit = S.weighted_fit(model[:train], tau[:train])
+    fit = WeightedLinearModel(model[:train], tau[:train]).fit()
     return (nrms((tau - model @ fit.coefficients)[train:], tau[train:]),
             holdout_floor(fit, model[train:], tau[train:])[0])
 

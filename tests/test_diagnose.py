@@ -16,6 +16,7 @@ from baseparams.dynamics.effects import Effect
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
 from baseparams.identify import selection as S
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify import whiteness
 from baseparams.identify.diagnose import decimal_text, diagnose, prepare, write_fixed
 from baseparams.identify.model import evaluate
@@ -85,7 +86,7 @@ def test_wald_size_on_white_noise_is_near_alpha():
     testable = [c for c in problem.candidates if c.kind in ("viscous_friction", "coulomb_friction", "offset")]
     rejections = []
     for _ in range(150):
-        fit = S.weighted_fit(problem.inertial, clean + rng.standard_normal(clean.shape) * sd)
+        fit = WeightedLinearModel(problem.inertial, clean + rng.standard_normal(clean.shape) * sd).fit()
         for cand in testable:
             rejections.append(S.wald(fit.residual, S.candidate_basis(cand, fit), (n, f), fit.rank).pvalue < 0.05)
     assert 0.02 <= np.mean(rejections) <= 0.085      # 900 tests: 5 % +- 2.5 SE
@@ -114,7 +115,7 @@ def test_whiteness_size_after_a_smooth_fit_where_chi_square_fails():
     model = _smooth_model(200, 24)
     monte_carlo, chi_square = [], []
     for _ in range(120):
-        fit = S.weighted_fit(model, rng.standard_normal((200, 1)))
+        fit = WeightedLinearModel(model, rng.standard_normal((200, 1))).fit()
         residual = fit.residual.reshape(200, 1)
         _, p = whiteness.monte_carlo_pvalues(residual, fit.basis, 10, 0.05, seed=int(rng.integers(1 << 30)))
         monte_carlo.append(p[0] <= 0.05)
@@ -132,7 +133,7 @@ def test_whiteness_detects_coloured_noise_after_the_same_fit():
         coloured = e.copy()
         for k in range(1, 200):
             coloured[k] = 0.5 * coloured[k - 1] + e[k]
-        fit = S.weighted_fit(model, coloured[:, None])
+        fit = WeightedLinearModel(model, coloured[:, None]).fit()
         _, p = whiteness.monte_carlo_pvalues(fit.residual.reshape(200, 1), fit.basis, 10, 0.05)
         rejected += p[0] <= 0.05
     assert rejected >= 27
@@ -158,7 +159,7 @@ def test_absorbed_and_sparse_candidates_are_not_tested():
     assert any(u.startswith("rotor_inertia:") and "absorbed" in u for u in d.untestable)
     # the narrowest Stribeck bump of the shape grid is never sampled: not tested
     stribeck = next(c for c in problem.candidates if c.kind == "stribeck_friction")
-    fit = S.weighted_fit(problem.inertial, tau)
+    fit = WeightedLinearModel(problem.inertial, tau).fit()
     narrow = S.candidate_basis(stribeck.variants[0], fit)
     assert S.wald(fit.residual, narrow, tau.shape, fit.rank).reason == "support"
 

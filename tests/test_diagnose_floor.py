@@ -11,6 +11,7 @@ import statsmodels.api as sm
 
 from baseparams.cli.diagnose import render_text
 from baseparams.identify import selection as S
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.diagnose import Problem, diagnose, holdout_floor, nrms
 from baseparams.io.loader import resolve
 
@@ -41,7 +42,7 @@ def _monte_carlo(leverage: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     mse, predicted, noise_only = (np.empty((DRAWS, 2)) for _ in range(3))
     for k in range(DRAWS):
         y = clean + rng.standard_normal(clean.shape) * SIGMA
-        fit = S.weighted_fit(X[:TRAIN], y[:TRAIN])
+        fit = WeightedLinearModel(X[:TRAIN], y[:TRAIN]).fit()
         error = y[TRAIN:] - X[TRAIN:] @ fit.coefficients
         mse[k] = np.mean(error ** 2, axis=0)
         predicted[k] = np.mean(fit.prediction_variance(X[TRAIN:]), axis=0)
@@ -79,7 +80,7 @@ def test_prediction_variance_is_statsmodels_wls_prediction_variance():
     (statsmodels' ``normalized_cov_params``), plus sigma_c^2."""
     X, theta = _linear_model(30.0)
     y = X @ theta + np.random.default_rng(0).standard_normal((N, 2)) * SIGMA
-    fit = S.weighted_fit(X[:TRAIN], y[:TRAIN])
+    fit = WeightedLinearModel(X[:TRAIN], y[:TRAIN]).fit()
     w2 = np.tile(fit.weights ** 2, TRAIN)
     ols = sm.WLS(y[:TRAIN].reshape(-1), X[:TRAIN].reshape(-1, P), weights=w2).fit()
     np.testing.assert_allclose(fit.coefficients, ols.params, rtol=1e-8)
@@ -101,7 +102,7 @@ def test_diagnose_reports_both_floors_in_the_nrms_normalisation():
     problem = Problem(resolve("pendulum"), ("a", "b"), t, X, np.zeros((N, 2)), [candidate])
     d = diagnose(problem, tau, holdout=1 - TRAIN / N)
     assert d.training == TRAIN and d.effects == []
-    fit = S.weighted_fit(X[:TRAIN], tau[:TRAIN])
+    fit = WeightedLinearModel(X[:TRAIN], tau[:TRAIN]).fit()
     floor, noise_only = holdout_floor(fit, X[TRAIN:], tau[TRAIN:])
     assert d.gap["holdout_floor"] == pytest.approx(floor, rel=1e-3)
     assert d.gap["holdout_noise_floor"] == pytest.approx(noise_only, rel=1e-3)

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from baseparams.cli import main
 from baseparams.identify import selection as S
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.diagnose import diagnose, prepare
 from baseparams.identify.model import evaluate
 from baseparams.identify.outofsample import cross_validate, implausible, stability
@@ -59,9 +60,9 @@ def test_wald_size_after_whitening_with_ar1_noise(puma):
     rejected = []
     for _ in range(25):
         data = C.nothing(puma, rng, rho=0.9)
-        fit = S.weighted_fit(P.inertial, data.tau)
+        fit = WeightedLinearModel(P.inertial, data.tau).fit()
         w = S.Whitening.of(fit.residual.reshape(n, f) / fit.weights)
-        fit = S.weighted_fit(w(P.inertial), w(data.tau))
+        fit = WeightedLinearModel(w(P.inertial), w(data.tau)).fit()
         for c in cands:
             t = S.wald(fit.residual, S.candidate_basis(w(c.columns), fit), (n, f), fit.rank)
             rejected.append(t.pvalue < 0.05)

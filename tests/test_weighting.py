@@ -3,6 +3,7 @@
 import numpy as np
 
 from baseparams.identify import selection as S
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify import weighting
 
 
@@ -13,7 +14,7 @@ def test_each_coordinate_gets_its_own_degrees_of_freedom():
     model = np.zeros((n, 2, p))
     model[:, 0, :] = rng.standard_normal((n, p))
     y = rng.standard_normal((n, 2))
-    fit = S.weighted_fit(model, y, np.ones(2))
+    fit = WeightedLinearModel(model, y).fit(np.ones(2))
     residual = fit.residual.reshape(n, 2)
     levels = weighting.noise_levels(residual, fit.basis)
     expected = np.sqrt(np.sum(residual ** 2, axis=0) / np.array([n - p, n]))
@@ -29,8 +30,8 @@ def test_fixed_point_recovers_very_different_noise_levels():
     model = rng.standard_normal((n, 2, p))
     truth = np.array([1.0, 1e-3])
     y = model @ rng.standard_normal(p) + rng.standard_normal((n, 2)) * truth
-    first = S.weighted_fit(model, y, np.ones(2))
+    first = WeightedLinearModel(model, y).fit(np.ones(2))
     one_pass = weighting.noise_levels(first.residual.reshape(n, 2), first.basis)
-    fit = S.weighted_fit(model, y)
+    fit = WeightedLinearModel(model, y).fit()
     assert np.allclose(1.0 / fit.weights, truth, rtol=0.15)
     assert one_pass[1] > 5 * truth[1]

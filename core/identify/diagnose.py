@@ -37,8 +37,8 @@ from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, impla
 from baseparams.identify.data import MeasuredData
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
-from baseparams.identify.selection import (RANK_TOL, Candidate, long_run, Fit, Rival, Selection, hac_lags,
-                                           project_out, holm, select_whitened, weighted_fit)
+from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel, numerical_rank
+from baseparams.identify.selection import Candidate, Rival, Selection, project_out, holm, select_whitened
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -332,8 +332,8 @@ def reduced_model(columns: np.ndarray, train: int) -> np.ndarray:
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     _, sv, vt = np.linalg.svd(A / scale, full_matrices=False)
-    keep = sv > RANK_TOL * (sv[0] if sv.size else 0.0)
-    return np.ascontiguousarray(columns @ (vt[keep].T / scale[:, None]))
+    rank = numerical_rank(sv, RANK_TOL)
+    return np.ascontiguousarray(columns @ (vt[:rank].T / scale[:, None]))
 
 
 def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) -> list[Candidate]:
@@ -341,7 +341,7 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
     model alone predicts it (with a given simulation: the given torque)."""
     torque = problem.known.copy()
     if model.shape[-1]:
-        fit = weighted_fit(model[rows], y[rows])
+        fit = WeightedLinearModel(model[rows], y[rows]).fit()
         torque = torque + model @ fit.coefficients
     wanted = problem.wanted
     if problem.qd is None:          # a Problem built without speeds: no load friction to build
@@ -413,7 +413,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     checks.clear()
     blocks_ = [model] + [candidates[i].columns for i in in_model]
     X = np.concatenate(blocks_, axis=-1)
-    fit = weighted_fit(X, y, weights)
+    fit = WeightedLinearModel(X, y).fit(weights)
     estimates = coefficients(model, candidates, in_model, y, weights)
     cv_all = cross_validate(X, y, weights, folds)
     widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
@@ -521,7 +521,7 @@ def _predict(inertial: np.ndarray, added: list[Candidate], y: np.ndarray, fit: F
     inertial model plus ``added`` (the selection's own; None: fit it here)."""
     model = np.concatenate([inertial] + [c.columns for c in added], axis=-1)
     if fit is None:
-        fit = weighted_fit(model[:train], y[:train])
+        fit = WeightedLinearModel(model[:train], y[:train]).fit()
     return _Prediction(y - model @ fit.coefficients, fit, model)
 
 
@@ -549,29 +549,19 @@ def nrms(residual: np.ndarray, tau: np.ndarray) -> float:
 
 def coefficients(inertial: np.ndarray, candidates: list[Candidate], added: list[int], y: np.ndarray,
                  weights: np.ndarray | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Each added effect's coefficients and HAC standard deviations in the final model
-    (Frisch-Waugh-Lovell: the effect columns with the inertial model projected out), with
-    the final model's noise ``weights`` (None: estimated here)."""
+    """Each added effect's coefficients and HAC standard deviations in the final model (the
+    sandwich's effect block equals Frisch-Waugh-Lovell's on the effect columns with the
+    inertial model projected out), with the final model's noise ``weights`` (None: estimated
+    here)."""
     if not added:
         return []
-    n, f, _ = inertial.shape
     blocks = [candidates[i].columns for i in added]
-    full = weighted_fit(np.concatenate([inertial] + blocks, axis=-1), y, weights)
-    base = weighted_fit(inertial, y, full.weights)
-    Z = np.concatenate(blocks, axis=-1) * full.weights[None, :, None]
-    Z = project_out(Z.reshape(n * f, -1), base.basis)
-    e = base.residual
-    gamma, *_ = np.linalg.lstsq(Z, e, rcond=None)
-    r = e - Z @ gamma
-    lags = hac_lags(r.reshape(n, f))
-    scores = (Z * r[:, None]).reshape(n, f, -1).sum(axis=1)
-    S = long_run(scores, lags, prewhiten=False) * (n * f) / max(n * f - full.rank, 1)
-    H = np.linalg.pinv(Z.T @ Z)
-    std = np.sqrt(np.maximum(np.diag(H @ S @ H), 0.0))
-    out, start = [], 0
+    full = WeightedLinearModel(np.concatenate([inertial] + blocks, axis=-1), y).fit(weights, cov_type="hac")
+    std = full.std
+    out, start = [], inertial.shape[-1]
     for block in blocks:
         width = block.shape[-1]
-        out.append((gamma[start:start + width], std[start:start + width]))
+        out.append((full.coefficients[start:start + width], std[start:start + width]))
         start += width
     return out
 

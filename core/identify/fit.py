@@ -23,7 +23,7 @@ from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
 from baseparams.identify.model import Design, design, effect_values
-from baseparams.identify.weighting import fixed_point
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # Unit-norm columns whose pivoted-QR diagonal falls below this fraction of the largest are
@@ -246,33 +246,18 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     p = len(kept)
     rms_force = np.sqrt(np.mean(y ** 2, axis=0))
     floor = NOISE_FLOOR * max(float(rms_force.max()), np.finfo(float).tiny)
-    def fit_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        weights = np.tile(coordinate_weights, n)
-        weighted = stacked * weights[:, None]
-        wscale = np.linalg.norm(weighted, axis=0)
-        theta_w, q_factor = _solve(weighted / wscale, target * weights, names, data.path)
-        return (target - stacked @ (theta_w / wscale)).reshape(n, f), q_factor
-
-    sigma = fixed_point(fit_at, f, floor)     # Gautier's weighting (:mod:`.weighting`)
-    weights = np.tile(1 / sigma, n)
-    weighted = stacked * weights[:, None]
-    wscale = np.linalg.norm(weighted, axis=0)
-    theta_w, _ = _solve(weighted / wscale, target * weights, names, data.path)
-    estimates = theta_w / wscale
-    _, r_factor = scipy.linalg.qr(weighted / wscale, mode="economic")
-    wres = target * weights - (weighted / wscale) @ theta_w
-    variance = float(wres @ wres) / (n * f - p)
-    r_inverse = scipy.linalg.solve_triangular(r_factor, np.eye(p))
-    inverse = r_inverse @ r_inverse.T                               # (A^T A)^-1
-    if data.reduced:
-        # filtered rows are correlated (the low-pass passes the noise's band only): the
-        # classical s^2 (A^T A)^-1 understated the spread 1.3-10x on simulated recordings
-        inverse = inverse @ _hac_scores(weighted / wscale, wres, n, f, p) @ inverse
-        covariance = inverse / np.outer(wscale, wscale)
-    else:
-        covariance = variance * inverse / np.outer(wscale, wscale)
-    singular = scipy.linalg.svdvals(weighted / wscale)
-    condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else math.inf
+    fit = WeightedLinearModel(stacked.reshape(n, f, p), y).fit(
+        floor=floor, rank_tol=NOT_EXCITED, cov_type="hac" if data.reduced else "nonrobust")
+    if fit.rank < p:
+        null = fit.null_direction()
+        involved = [names[k] for k in np.argsort(-np.abs(null)) if abs(null[k]) > 0.1 * np.abs(null).max()]
+        raise InputError(f"{', '.join(involved)} cannot be told apart on these data (their columns are "
+                         "collinear): drop one of the effects, or excite the mechanism differently",
+                         file=data.path)
+    # filtered rows are correlated (the low-pass passes the noise's band only): the classical
+    # s^2 (A^T A)^-1 understated the spread 1.3-10x on simulated recordings, hence HAC
+    estimates, covariance, sigma = fit.coefficients, fit.covariance, 1.0 / fit.weights
+    variance, condition = fit.scale_variance, fit.condition_number
     final = y - (stacked @ estimates).reshape(n, f)
     measured_rms = np.sqrt(np.mean(measured_forces(data, names, estimates) ** 2, axis=0))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -373,18 +358,6 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
                       predicted)
 
 
-def _hac_scores(matrix: np.ndarray, residual: np.ndarray, n: int, f: int, p: int) -> np.ndarray:
-    """The Newey-West (Bartlett) covariance of the least-squares scores summed per sample over
-    the coordinates (Driscoll-Kraay; not prewhitened: on filtered recordings the VAR(1)
-    prewhitening overstated the spread 1.6 times, tests/test_recordings.py), its window from the residual's own autocorrelation
-    (:func:`baseparams.identify.selection.hac_lags`, as diagnosis uses), scaled for the
-    unknowns fitted: the middle of the sandwich (A^T A)^-1 S (A^T A)^-1."""
-    from baseparams.identify.selection import hac_lags, long_run
-    scores = (matrix * residual[:, None]).reshape(n, f, p).sum(axis=1)
-    lags = hac_lags(residual.reshape(n, f))
-    return long_run(scores, lags, prewhiten=False) * (n * f) / max(n * f - p, 1)
-
-
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None
                  ) -> tuple[list[int], dict[str, dict[str, float]]]:
     """(kept columns, absorbed): the base columns (all must be excited), then each effect
@@ -414,20 +387,3 @@ def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: st
         basis = np.column_stack([basis, rest / size])
         kept.append(k)
     return kept, absorbed
-
-
-def _solve(matrix: np.ndarray, target: np.ndarray, names: tuple[str, ...], path: str | None
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """Least squares by a pivoted QR of a column-scaled matrix; (solution, Q). Columns that
-    are collinear to working precision are an InputError naming them."""
-    q_factor, r_factor, pivots = scipy.linalg.qr(matrix, mode="economic", pivoting=True)
-    diagonal = np.abs(np.diag(r_factor))
-    if diagonal[-1] <= NOT_EXCITED * diagonal[0]:
-        null = scipy.linalg.svd(matrix, full_matrices=False)[2][-1]
-        involved = [names[k] for k in np.argsort(-np.abs(null)) if abs(null[k]) > 0.1 * np.abs(null).max()]
-        raise InputError(f"{', '.join(involved)} cannot be told apart on these data (their columns are "
-                         "collinear): drop one of the effects, or excite the mechanism differently",
-                         file=path)
-    solution = np.empty(matrix.shape[1])
-    solution[pivots] = scipy.linalg.solve_triangular(r_factor, q_factor.T @ target)
-    return solution, q_factor

@@ -42,11 +42,9 @@ from scipy import stats
 from scipy.optimize import minimize_scalar
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
-from baseparams.identify.weighting import TOLERANCE, fixed_point
+from baseparams.identify.linear import LinearFit as Fit, WeightedLinearModel
+from baseparams.identify.weighting import TOLERANCE
 
-# A model direction is kept when its singular value, columns scaled to unit norm, exceeds
-# RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
-RANK_TOL = 1e-6
 # A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
 # current model is projected out is absorbed by the model.
 ABSORB_TOL = 1e-7
@@ -326,56 +324,6 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
 
 
-# ----- the weighted model ------------------------------------------------------------------
-@dataclass
-class Fit:
-    """A weighted least-squares fit of y (N, f) on model columns (N, f, p)."""
-    weights: np.ndarray           # (f,): 1 / noise level per coordinate
-    basis: np.ndarray             # orthonormal basis of the weighted model's range (N f, rank)
-    residual: np.ndarray          # weighted residual (N f,)
-    coefficients: np.ndarray      # (p,), minimum-norm on the column-scaled model
-    rank: int
-    # (p, rank): Cov(coefficients) = spread @ spread.T, each weighted row's noise variance 1
-    # (what the weighting makes it: s^2 = 1 at its fixed point, fit.py's s^2 (X_w^T X_w)^-1)
-    spread: np.ndarray | None = None
-
-    def prediction_variance(self, rows: np.ndarray) -> np.ndarray:
-        """The variance (m, f) of the error of predicting new measurements at model rows
-        (m, f, p) not in the fit: each coordinate's noise variance plus the coefficients'
-        error propagated to the row, sigma_c^2 + x^T Cov x (linear regression's prediction
-        variance). A held-out row far outside the fitted rows (the SLA's near-toggle sample)
-        amplifies the coefficients' error, so the noise SD alone understates what any fitted
-        model can reach there."""
-        propagated = rows @ self.spread
-        return (1.0 / self.weights ** 2)[None, :] + np.sum(propagated ** 2, axis=-1)
-
-
-def weighted_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None,
-                 start: np.ndarray | None = None, tolerance: float = TOLERANCE) -> Fit:
-    """Least squares of y on ``model``; ``weights`` None: Gautier's per-coordinate noise
-    weighting at its fixed point (:mod:`.weighting`, to ``tolerance``), iterated from the
-    weights ``start``."""
-    n, f, p = model.shape
-    if weights is None:
-        def fit_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            fit = weighted_fit(model, y, coordinate_weights)
-            return fit.residual.reshape(n, f) / coordinate_weights, fit.basis
-
-        weights = 1.0 / fixed_point(fit_at, f, start=None if start is None else 1.0 / start,
-                                    tolerance=tolerance)
-    A = (model * weights[None, :, None]).reshape(n * f, p)
-    b = (y * weights[None, :]).reshape(n * f)
-    scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
-    u, s, vt = np.linalg.svd(A / scale, full_matrices=False)
-    keep = s > RANK_TOL * (s[0] if s.size else 0.0)
-    u, s, vt = u[:, keep], s[keep], vt[keep]
-    proj = u.T @ b
-    coefficients = (vt.T @ (proj / s)) / scale
-    residual = b - u @ proj
-    return Fit(weights, u, residual, coefficients, int(keep.sum()), (vt.T / s) / scale[:, None])
-
-
 def candidate_basis(candidate: "Candidate | np.ndarray", fit: Fit) -> np.ndarray:
     """The candidate's (or columns') directions beyond the current model (weighted, orthonormal)."""
     columns = candidate.columns if isinstance(candidate, Candidate) else candidate
@@ -490,8 +438,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten, touched)
         touched = set()
         current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
-        fit = weighted_fit(whiten(current), whiten(y), start=previous,
-                           tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
+        fit = WeightedLinearModel(whiten(current), whiten(y)).fit(
+            start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
         previous = fit.weights
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
@@ -589,12 +537,12 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
     selected model's residual and the selection repeated with it when the two differ
     (Cochrane-Orcutt, one more round)."""
     n, f = y.shape
-    complete = weighted_fit(np.concatenate([model] + [c.columns for c in candidates], axis=-1), y)
-    whiten = Whitening.of(complete.residual.reshape(n, f) / complete.weights)
+    complete = WeightedLinearModel(np.concatenate([model] + [c.columns for c in candidates], axis=-1), y).fit()
+    whiten = Whitening.of(complete.unweighted_residual())
     chosen = select(model, y, candidates, alpha, max_steps, whiten)
     final = np.concatenate([model] + [chosen.candidates[i].columns for i in chosen.in_model], axis=-1)
-    fit = weighted_fit(final, y, chosen.steps[-1].fit.weights)
-    again = Whitening.of(fit.residual.reshape(n, f) / fit.weights)
+    fit = WeightedLinearModel(final, y).fit(chosen.steps[-1].fit.weights)
+    again = Whitening.of(fit.unweighted_residual())
     before = whiten.rho if whiten is not None else np.zeros(f)
     after = again.rho if again is not None else np.zeros(f)
     if np.max(np.abs(after - before)) <= RHO_AGREEMENT:
@@ -616,8 +564,8 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
                                and "all" not in touched):
             continue
         others = [j for j in in_model if j != i]
-        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
-                           whiten(y), weights)
+        fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                                  whiten(y)).fit(weights)
         def explained(columns: np.ndarray) -> float:
             basis = candidate_basis(whiten(columns), fit)
             return float(np.sum((basis.T @ fit.residual) ** 2))
@@ -688,8 +636,8 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
             continue
         members = [head] + [r.index for r in rivals]
         others = [j for j in added + companions if j not in members]
-        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
-                           whiten(y), weights)
+        fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                                  whiten(y)).fit(weights)
         bases = {i: candidate_basis(whiten(candidates[i].columns), fit) for i in members}
         if any(b.shape[1] == 0 for b in bases.values()):
             continue
@@ -722,8 +670,8 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     worst = None
     for i in named:
         others = [j for j in added + companions if j != i]
-        fit = weighted_fit(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
-                           whiten(y), weights)
+        fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
+                                  whiten(y)).fit(weights)
         basis = candidate_basis(whiten(candidates[i].columns), fit)
         test = wald(fit.residual, basis, (n, f), fit.rank, sparse_if_white=True)
         if not test.tested and test.reason != "absorbed":

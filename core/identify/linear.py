@@ -1,0 +1,169 @@
+"""The one weighted linear model of identification and diagnosis (statsmodels' model/results
+split): :class:`WeightedLinearModel` holds the measured forces y (N, f) and the model's
+columns (N, f, p); :meth:`WeightedLinearModel.fit` factors the weighted, column-scaled matrix
+once (an SVD) and returns a :class:`LinearFit` from which everything else is derived lazily:
+minimum-norm coefficients, the weighted range's orthonormal basis, the residual, the
+covariance, standard errors, prediction variance and the condition number.
+
+Why these choices:
+
+- Rows are sample-major (the f coordinates of sample 1, then of sample 2 ...), each
+  coordinate's rows divided by its noise level (Gautier's weighting, :mod:`.weighting`, at
+  its fixed point when no weights are given), so a coordinate with large forces does not
+  drown the others.
+- One covariance convention: s^2 (X_w^T X_w)^+ with s^2 the weighted residual's sum of
+  squares over its degrees of freedom (rows minus rank). At the weighting's fixed point
+  s^2 = 1 exactly (each coordinate's SD divides its sum of squares by its own degrees of
+  freedom), so the diagnosis's unit-variance spread and identify's classical covariance are
+  the same number there. ``cov_type="hac"`` gives the Driscoll-Kraay Newey-West sandwich
+  (scores summed per sample over the coordinates, Bartlett window from the residual's own
+  autocorrelation), for filtered, decimated recordings whose rows are correlated.
+- The SVD of the unit-norm columns decides the rank (:data:`RANK_TOL` of the largest singular
+  value by default): structural zeros of a regressor sit near 1e-15 in float64, and a
+  direction kept at that level would put noise into the coefficients.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+
+from baseparams.identify.weighting import TOLERANCE, fixed_point
+
+# A model direction is kept when its singular value, columns scaled to unit norm, exceeds
+# RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
+RANK_TOL = 1e-6
+
+CovType = Literal["nonrobust", "hac"]
+
+
+def numerical_rank(singular_values: np.ndarray, tol: float) -> int:  # TODO: numeric's one rank (issue 23b)
+    """How many singular values (largest first) exceed ``tol`` times the largest."""
+    s = singular_values
+    return int(np.sum(s > tol * s[0])) if s.size else 0
+
+
+@dataclass(frozen=True)
+class LinearFit:
+    """A weighted least-squares fit. The SVD factors are kept so that every statistic is
+    derived from the one factorisation, and only when asked for."""
+    weights: np.ndarray            # (f,): 1 / noise level per coordinate
+    samples: int                   # N
+    scale: np.ndarray              # (p,): norms of the weighted columns (1 for a zero column)
+    singular_values: np.ndarray    # (min(N f, p),): all of them, largest first
+    right: np.ndarray              # (min(N f, p), p): right singular vectors (scaled columns)
+    basis: np.ndarray              # (N f, rank): orthonormal basis of the weighted model's range
+    residual: np.ndarray           # (N f,): weighted residual
+    coefficients: np.ndarray       # (p,): minimum-norm solution
+    rank: int
+    cov_type: CovType = "nonrobust"
+    _columns: np.ndarray | None = field(default=None, repr=False)   # weighted (N f, p), for HAC
+
+    @property
+    def coordinates(self) -> int:
+        return len(self.weights)
+
+    @property
+    def dof(self) -> int:
+        """Residual degrees of freedom: rows minus the directions fitted."""
+        return self.samples * self.coordinates - self.rank
+
+    @cached_property
+    def scale_variance(self) -> float:
+        """s^2: the weighted residual's sum of squares over :attr:`dof` (1 at the weighting's
+        fixed point)."""
+        return float(self.residual @ self.residual) / max(self.dof, 1)
+
+    @cached_property
+    def spread(self) -> np.ndarray:
+        """(p, rank) with (X_w^T X_w)^+ = spread spread^T: the coefficients' covariance for
+        unit-variance weighted rows."""
+        s, vt = self.singular_values[: self.rank], self.right[: self.rank]
+        return (vt.T / s) / self.scale[:, None]
+
+    @cached_property
+    def covariance(self) -> np.ndarray:
+        """Cov(coefficients): s^2 (X_w^T X_w)^+, or the HAC sandwich (``cov_type="hac"``)."""
+        bread = self.spread @ self.spread.T
+        if self.cov_type == "nonrobust":
+            return self.scale_variance * bread
+        from baseparams.identify.selection import hac_lags, long_run
+        n, f = self.samples, self.coordinates
+        p = len(self.coefficients)
+        assert self._columns is not None
+        scores = (self._columns * self.residual[:, None]).reshape(n, f, p).sum(axis=1)
+        lags = hac_lags(self.residual.reshape(n, f))
+        # not prewhitened: on filtered recordings the VAR(1) prewhitening overstated the
+        # spread 1.6 times (tests/test_recordings.py); scaled for the unknowns fitted
+        middle = long_run(scores, lags, prewhiten=False) * (n * f) / max(self.dof, 1)
+        return bread @ middle @ bread
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard errors of the coefficients."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+
+    @property
+    def condition_number(self) -> float:
+        """Of the weighted matrix with unit-norm columns (all its singular values)."""
+        s = self.singular_values
+        return float(s[0] / s[-1]) if s.size and s[-1] > 0 else float("inf")
+
+    def null_direction(self) -> np.ndarray:
+        """The unit-norm column combination (p,) with the smallest singular value: which
+        columns a rank deficiency involves."""
+        return self.right[-1]
+
+    def unweighted_residual(self) -> np.ndarray:
+        """The residual (N, f) in the measurement's units."""
+        return self.residual.reshape(self.samples, self.coordinates) / self.weights
+
+    def noise_variance(self) -> np.ndarray:
+        """Each coordinate's noise variance (f,) in the measurement's units: s^2 / w_c^2."""
+        return self.scale_variance / self.weights ** 2
+
+    def prediction_variance(self, rows: np.ndarray) -> np.ndarray:
+        """The variance (m, f) of the error of predicting new measurements at model rows
+        (m, f, p) not in the fit: each coordinate's noise variance plus the coefficients'
+        error propagated to the row, sigma_c^2 + x^T Cov x (linear regression's prediction
+        variance). A held-out row far outside the fitted rows (the SLA's near-toggle sample)
+        amplifies the coefficients' error, so the noise SD alone understates what any fitted
+        model can reach there."""
+        propagated = np.einsum("mfp,pq,mfq->mf", rows, self.covariance, rows)
+        return self.noise_variance()[None, :] + propagated
+
+
+@dataclass(frozen=True)
+class WeightedLinearModel:
+    """y (N, f) ≈ model (N, f, p) @ coefficients, rows weighted per coordinate."""
+    model: np.ndarray
+    y: np.ndarray
+
+    def fit(self, weights: np.ndarray | None = None, *, start: np.ndarray | None = None,
+            tolerance: float = TOLERANCE, floor: float = 0.0, rank_tol: float = RANK_TOL,
+            cov_type: CovType = "nonrobust") -> LinearFit:
+        """Least squares with per-coordinate ``weights`` (f,); None: Gautier's noise weighting
+        iterated to its fixed point (to ``tolerance``, each SD at least ``floor``), starting
+        from the weights ``start``."""
+        n, f, p = self.model.shape
+        if weights is None:
+            def residual_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                trial = self.fit(coordinate_weights, rank_tol=rank_tol)
+                return trial.unweighted_residual(), trial.basis
+
+            weights = 1.0 / fixed_point(residual_at, f, floor, start=None if start is None else 1.0 / start,
+                                        tolerance=tolerance)
+        A = (self.model * weights[None, :, None]).reshape(n * f, p)
+        b = (self.y * weights[None, :]).reshape(n * f)
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        u, s, vt = np.linalg.svd(A / scale, full_matrices=False)
+        rank = numerical_rank(s, rank_tol)
+        proj = u[:, :rank].T @ b
+        coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
+        residual = b - u[:, :rank] @ proj
+        return LinearFit(weights, n, scale, s, vt, u[:, :rank], residual, coefficients, rank, cov_type,
+                         A if cov_type == "hac" else None)
