@@ -15,7 +15,7 @@ from baseparams.cli import main
 from baseparams.dynamics.effects import Effect
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
-from baseparams.identify import selection as S
+from baseparams.identify import longrun, selection as S
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify import whiteness
 from baseparams.identify.diagnose import decimal_text, diagnose, prepare, write_fixed
@@ -145,8 +145,8 @@ def test_hac_window_widens_for_correlated_residuals():
     coloured = np.zeros_like(white)
     for k in range(1, 500):
         coloured[k] = 0.9 * coloured[k - 1] + white[k]
-    assert S.hac_lags(white) <= S.newey_west_lags(500)
-    assert S.hac_lags(coloured) >= 2 * S.newey_west_lags(500)
+    assert longrun.hac_lags(white) <= longrun.newey_west_lags(500)
+    assert longrun.hac_lags(coloured) >= 2 * longrun.newey_west_lags(500)
 
 
 def test_absorbed_and_sparse_candidates_are_not_tested():

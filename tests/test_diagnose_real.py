@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify import selection as S
+from baseparams.identify import longrun, selection as S
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.diagnose import diagnose, prepare
 from baseparams.identify.model import evaluate
@@ -45,7 +45,7 @@ def test_whitening_recovers_the_ar1_coefficient_and_whitens():
     w = S.Whitening.of(e)
     assert w.rho == pytest.approx([0.9, 0.9], abs=0.02)
     white = w(e)
-    assert S.hac_lags(white) <= S.newey_west_lags(4000)
+    assert longrun.hac_lags(white) <= longrun.newey_west_lags(4000)
     assert np.std(white[1:], axis=0) == pytest.approx(np.array([1.0, 2.0]) * np.sqrt(1 - 0.81), rel=0.05)
     assert S.Whitening.of(rng.standard_normal((4000, 2))) is None
 
@@ -76,8 +76,8 @@ def test_prewhitened_long_run_variance_of_an_ar1_mean():
     rho, n = 0.9, 20000
     s = C.noise(rng, (n, 1), np.ones(1), rho=rho)
     truth = (1 + rho) / (1 - rho) * n
-    assert S.long_run(s, 40)[0, 0] == pytest.approx(truth, rel=0.15)
-    assert S.long_run(s, 40, prewhiten=False)[0, 0] < 0.9 * truth
+    assert longrun.long_run(s, 40)[0, 0] == pytest.approx(truth, rel=0.15)
+    assert longrun.long_run(s, 40, prewhiten=False)[0, 0] < 0.9 * truth
 
 
 def test_nothing_hidden_with_coloured_noise_names_nothing(planar):

@@ -31,6 +31,7 @@ from typing import Literal
 
 import numpy as np
 
+from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.weighting import TOLERANCE, fixed_point
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
@@ -90,7 +91,6 @@ class LinearFit:
         bread = self.spread @ self.spread.T
         if self.cov_type == "nonrobust":
             return self.scale_variance * bread
-        from baseparams.identify.selection import hac_lags, long_run
         n, f = self.samples, self.coordinates
         p = len(self.coefficients)
         assert self._columns is not None

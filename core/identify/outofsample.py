@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from baseparams.identify.selection import hac_lags, long_run
+from baseparams.identify.longrun import hac_lags, long_run
 
 FOLDS = 5
 MARGIN = 10                 # samples dropped from the training rows beside a held-out block

@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 from scipy.optimize import minimize_scalar
-from statsmodels.stats.sandwich_covariance import S_hac_simple
 
+from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.linear import LinearFit as Fit, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
 
@@ -193,65 +193,6 @@ def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
     if basis.shape[1] == 0:
         return matrix
     return matrix - basis @ (basis.T @ matrix)
-
-
-def newey_west_lags(n: int) -> int:
-    return int(np.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
-
-
-def hac_lags(residual: np.ndarray) -> int:
-    """The HAC window for a residual (N, f), from its mean autocorrelation over the
-    coordinates: 0 (White's covariance) when already the first lag is inside the 95 % band
-    +-1.96/sqrt(N) of a white sequence; otherwise twice the number of leading lags outside
-    it, at least the Newey-West rule 4 (N/100)^(2/9), at most N/4. (A fixed Newey-West window
-    on a white residual makes small-sample tests reject too often; one too short for a
-    correlated residual makes them reject far too often.)"""
-    n = residual.shape[0]
-    base = newey_west_lags(n)
-    limit = max(base, n // 4)
-    if n < 8:
-        return base
-    nlags = min(limit, n - 1)
-    centred = residual - residual.mean(axis=0)
-    energy = np.sum(centred ** 2, axis=0)
-    live = energy > 0
-    if not live.any():
-        return base
-    # every coordinate's autocorrelation at once (statsmodels' acf, one FFT for all columns)
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    spectrum = np.fft.rfft(centred[:, live], n=size, axis=0)
-    autocovariance = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)[:nlags + 1]
-    mean = np.mean(autocovariance / energy[live], axis=1)
-    inside = np.nonzero(np.abs(mean[1:]) < 1.96 / np.sqrt(n))[0]
-    leading = int(inside[0]) if inside.size else nlags
-    if leading == 0:
-        return 0
-    return int(min(limit, max(base, 2 * leading)))
-
-
-# Andrews and Monahan's bound on the prewhitening filter's singular values: a near-unit
-# root would make (I - A)^-1 explode.
-PREWHITEN_LIMIT = 0.97
-
-
-def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarray:
-    """The long-run covariance of per-sample ``scores`` (n, r): Newey-West (Bartlett) with
-    ``lags``; when ``lags`` > 0 and ``prewhiten``, Andrews and Monahan's (Econometrica 1992)
-    VAR(1)-prewhitened form: fit s_t = A s_(t-1) + e_t, Newey-West on e (window from e's own
-    autocorrelation), recoloured by (I - A)^-1. Why: with strongly autocorrelated residuals
-    (AR(1) at 0.9) the Bartlett kernel alone underestimates the long-run variance by a
-    fifth or more at any practical window, and the tests named effects in noise (4 of 10
-    datasets); prewhitening removes most of that bias."""
-    if lags == 0 or not prewhiten or len(scores) < 20:
-        return S_hac_simple(scores, nlags=lags)
-    before, after = scores[:-1], scores[1:]
-    At, *_ = np.linalg.lstsq(before, after, rcond=None)
-    u, sv, vt = np.linalg.svd(At.T)
-    A = (u * np.minimum(sv, PREWHITEN_LIMIT)) @ vt
-    e = after - before @ A.T
-    S = S_hac_simple(e, nlags=hac_lags(e))
-    B = np.linalg.inv(np.eye(A.shape[0]) - A)
-    return B @ S @ B.T
 
 
 def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
