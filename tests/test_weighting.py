@@ -1,8 +1,8 @@
 """Gautier's noise weighting (baseparams.identify.weighting), shared by identify and diagnose."""
 
 import numpy as np
+import pytest
 
-from baseparams.identify import selection as S
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify import weighting
 
@@ -16,7 +16,7 @@ def test_each_coordinate_gets_its_own_degrees_of_freedom():
     y = rng.standard_normal((n, 2))
     fit = WeightedLinearModel(model, y).fit(np.ones(2))
     residual = fit.residual.reshape(n, 2)
-    levels = weighting.noise_levels(residual, fit.basis)
+    levels = weighting.noise_levels(*weighting.coordinate_statistics(residual, fit.basis), n)
     expected = np.sqrt(np.sum(residual ** 2, axis=0) / np.array([n - p, n]))
     assert np.allclose(levels, expected, rtol=1e-12)
 
@@ -31,7 +31,42 @@ def test_fixed_point_recovers_very_different_noise_levels():
     truth = np.array([1.0, 1e-3])
     y = model @ rng.standard_normal(p) + rng.standard_normal((n, 2)) * truth
     first = WeightedLinearModel(model, y).fit(np.ones(2))
-    one_pass = weighting.noise_levels(first.residual.reshape(n, 2), first.basis)
+    one_pass = weighting.noise_levels(*weighting.coordinate_statistics(first.residual.reshape(n, 2), first.basis), n)
     fit = WeightedLinearModel(model, y).fit()
     assert np.allclose(1.0 / fit.weights, truth, rtol=0.15)
     assert one_pass[1] > 5 * truth[1]
+
+
+def _own_levels(fit, n):
+    return weighting.noise_levels(*weighting.coordinate_statistics(fit.unweighted_residual(), fit.basis), n)
+
+
+def test_the_fit_returned_is_at_its_own_fixed_point_even_when_the_gram_matrices_are_ill_conditioned():
+    """The weights are first found on the Gram matrices (normal equations), whose condition
+    number is squared; the SVD fit returned must still be within the tolerance of its own noise
+    levels. Columns scaled over 1e5 and two nearly collinear (1e-6) put the Gram matrices near
+    the edge of float64."""
+    rng = np.random.default_rng(3)
+    n, f, p = 300, 3, 8
+    model = rng.standard_normal((n, f, p)) * np.logspace(0, 5, p)
+    model[:, :, -1] = model[:, :, 0] + 1e-6 * rng.standard_normal((n, f))
+    truth = np.array([1.0, 1e-2, 1e-4])
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f)) * truth
+    fit = WeightedLinearModel(model, y).fit(tolerance=1e-6)
+    assert np.allclose(_own_levels(fit, n), 1.0 / fit.weights, rtol=1e-5)
+    assert np.allclose(1.0 / fit.weights, truth, rtol=0.2)
+
+
+def test_covariance_is_the_classical_one_and_s2_is_one_at_the_fixed_point():
+    """At the fixed point each coordinate's SD divides its own sum of squares by its own
+    degrees of freedom, so s^2 = 1 and Cov = (X_w^T X_w)^-1, the textbook weighted covariance
+    computed here independently with numpy's inverse."""
+    rng = np.random.default_rng(4)
+    n, f, p = 200, 2, 5
+    model = rng.standard_normal((n, f, p))
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f)) * np.array([0.5, 2.0])
+    fit = WeightedLinearModel(model, y).fit(tolerance=1e-10)
+    assert fit.scale_variance == pytest.approx(1.0, rel=1e-6)
+    X = (model * fit.weights[None, :, None]).reshape(n * f, p)
+    assert np.allclose(fit.covariance, np.linalg.inv(X.T @ X), rtol=1e-6)
+    assert np.allclose(fit.coefficients, np.linalg.lstsq(X, (y * fit.weights).reshape(-1), rcond=None)[0])

@@ -32,7 +32,7 @@ from typing import Literal
 import numpy as np
 
 from baseparams.identify.longrun import hac_lags, long_run
-from baseparams.identify.weighting import TOLERANCE, fixed_point
+from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
@@ -150,12 +150,7 @@ class WeightedLinearModel:
         from the weights ``start``."""
         n, f, p = self.model.shape
         if weights is None:
-            def residual_at(coordinate_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                trial = self.fit(coordinate_weights, rank_tol=rank_tol)
-                return trial.unweighted_residual(), trial.basis
-
-            weights = 1.0 / fixed_point(residual_at, f, floor, start=None if start is None else 1.0 / start,
-                                        tolerance=tolerance)
+            return self._at_fixed_point(start, tolerance, floor, rank_tol, cov_type)
         A = (self.model * weights[None, :, None]).reshape(n * f, p)
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
@@ -167,3 +162,49 @@ class WeightedLinearModel:
         residual = b - u[:, :rank] @ proj
         return LinearFit(weights, n, scale, s, vt, u[:, :rank], residual, coefficients, rank, cov_type,
                          A if cov_type == "hac" else None)
+
+    def _at_fixed_point(self, start: np.ndarray | None, tolerance: float, floor: float, rank_tol: float,
+                        cov_type: CovType) -> LinearFit:
+        """The fit at Gautier's weights: the fixed point is first found on the per-coordinate
+        Gram matrices (p x p: a pass costs no factorisation of the N f rows), then confirmed,
+        and if need be continued, by the SVD fits themselves, so the result is the SVD's
+        whatever the Gram matrices' squared condition number lost."""
+        n, f, _ = self.model.shape
+        sigma, _ = fixed_point(_GramStatistics(self.model, self.y, rank_tol), n, f, floor,
+                               start=None if start is None else 1.0 / start, tolerance=tolerance)
+        for _ in range(PASSES):
+            fit = self.fit(1.0 / sigma, rank_tol=rank_tol, cov_type=cov_type)
+            again = noise_levels(*coordinate_statistics(fit.unweighted_residual(), fit.basis), n, floor)
+            if np.max(np.abs(again / sigma - 1.0)) < tolerance:
+                break
+            sigma = again
+        return fit
+
+
+class _GramStatistics:
+    """Per-coordinate residual sums of squares and leverages of a weighted fit, from the
+    coordinates' Gram matrices X_c^T X_c (the normal equations; accurate enough to find the
+    weights, which the SVD fit then checks)."""
+
+    # the Gram matrix resolves singular values only down to sqrt(eps) of the largest
+    RESOLUTION = 1e-7
+
+    def __init__(self, model: np.ndarray, y: np.ndarray, rank_tol: float) -> None:
+        self.model, self.y = model, y
+        self.gram = np.stack([model[:, c, :].T @ model[:, c, :] for c in range(model.shape[1])])
+        self.moment = np.stack([model[:, c, :].T @ y[:, c] for c in range(model.shape[1])])
+        self.rank_tol = max(rank_tol, self.RESOLUTION)
+
+    def __call__(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w2 = weights ** 2
+        normal = np.tensordot(w2, self.gram, axes=1)
+        scale = np.sqrt(np.diag(normal))
+        scale[scale == 0] = 1.0
+        values, vectors = np.linalg.eigh(normal / np.outer(scale, scale))
+        values, vectors = values[::-1], vectors[:, ::-1]
+        rank = numerical_rank(np.sqrt(np.clip(values, 0.0, None)), self.rank_tol)
+        inverse = (vectors[:, :rank] / values[:rank]) @ vectors[:, :rank].T / np.outer(scale, scale)
+        coefficients = inverse @ np.tensordot(w2, self.moment, axes=1)
+        residual = self.y - self.model @ coefficients
+        leverage = w2 * np.einsum("cpq,pq->c", self.gram, inverse)
+        return np.sum(residual ** 2, axis=0), leverage

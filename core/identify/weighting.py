@@ -23,34 +23,40 @@ import numpy as np
 PASSES = 12
 TOLERANCE = 1e-3
 
-# A weighted fit: given each coordinate's weight (f,), the unweighted residual (n, f) and the
-# orthonormal basis (n f, rank) of the weighted model's range (rows sample-major).
-WeightedFit = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+# A weighted fit's per-coordinate statistics: given each coordinate's weight (f,), the
+# residual sum of squares (f,) in the measurement's units and the leverage (f,) the fit spends
+# on each coordinate's rows (the hat matrix's diagonal summed over them).
+CoordinateStatistics = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def noise_levels(residual: np.ndarray, basis: np.ndarray, floor: float = 0.0) -> np.ndarray:
-    """Per-coordinate noise SD of a fit's residual (n, f), each with its own degrees of
-    freedom n - (leverage of that coordinate's rows); at least ``floor`` (a coordinate fitted
-    exactly must not get an infinite weight)."""
+def coordinate_statistics(residual: np.ndarray, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sum of squares, leverage) per coordinate of a fit's residual (n, f) and the orthonormal
+    basis (n f, rank) of its weighted range (rows sample-major)."""
     n, f = residual.shape
     leverage = np.sum(basis ** 2, axis=1).reshape(n, f).sum(axis=0) if basis.size else np.zeros(f)
-    dof = np.maximum(n - leverage, 1.0)
-    level = np.sqrt(np.sum(residual ** 2, axis=0) / dof)
+    return np.sum(residual ** 2, axis=0), leverage
+
+
+def noise_levels(rss: np.ndarray, leverage: np.ndarray, samples: int, floor: float = 0.0) -> np.ndarray:
+    """Per-coordinate noise SD from its residual sum of squares, each with its own degrees of
+    freedom ``samples`` - (leverage of that coordinate's rows); at least ``floor`` (a
+    coordinate fitted exactly must not get an infinite weight)."""
+    dof = np.maximum(samples - leverage, 1.0)
+    level = np.sqrt(rss / dof)
     positive = level[level > 0]
     tiny = (positive.min() if positive.size else 1.0) * 1e-12 or 1e-300
     return np.maximum(level, max(floor, tiny))
 
 
-def fixed_point(weighted_fit: WeightedFit, coordinates: int, floor: float = 0.0,
-                start: np.ndarray | None = None, tolerance: float = TOLERANCE) -> np.ndarray:
-    """The noise SDs (f,) at which refitting with weights 1/SD no longer changes them,
-    starting from ``start`` (default: equal weights, the ordinary fit; a previous model's
-    SDs save passes when a model grows by one effect at a time); ``tolerance``: the largest
-    relative change of an SD that ends the passes."""
+def fixed_point(statistics: CoordinateStatistics, samples: int, coordinates: int, floor: float = 0.0,
+                start: np.ndarray | None = None, tolerance: float = TOLERANCE) -> tuple[np.ndarray, bool]:
+    """(the noise SDs (f,) at which refitting with weights 1/SD no longer changes them, whether
+    they settled within PASSES), starting from ``start`` (default: equal weights, the ordinary
+    fit; a previous model's SDs save passes when a model grows by one effect at a time);
+    ``tolerance``: the largest relative change of an SD that ends the passes."""
     sigma = np.ones(coordinates) if start is None else np.asarray(start, dtype=float)
     for _ in range(PASSES):
-        residual, basis = weighted_fit(1.0 / sigma)
-        previous, sigma = sigma, noise_levels(residual, basis, floor)
+        previous, sigma = sigma, noise_levels(*statistics(1.0 / sigma), samples, floor)
         if np.max(np.abs(sigma / previous - 1.0)) < tolerance:
-            break
-    return sigma
+            return sigma, True
+    return sigma, False
