@@ -55,18 +55,3 @@ def test_the_fit_returned_is_at_its_own_fixed_point_even_when_the_gram_matrices_
     fit = WeightedLinearModel(model, y).fit(tolerance=1e-6)
     assert np.allclose(_own_levels(fit, n), 1.0 / fit.weights, rtol=1e-5)
     assert np.allclose(1.0 / fit.weights, truth, rtol=0.2)
-
-
-def test_covariance_is_the_classical_one_and_s2_is_one_at_the_fixed_point():
-    """At the fixed point each coordinate's SD divides its own sum of squares by its own
-    degrees of freedom, so s^2 = 1 and Cov = (X_w^T X_w)^-1, the textbook weighted covariance
-    computed here independently with numpy's inverse."""
-    rng = np.random.default_rng(4)
-    n, f, p = 200, 2, 5
-    model = rng.standard_normal((n, f, p))
-    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f)) * np.array([0.5, 2.0])
-    fit = WeightedLinearModel(model, y).fit(tolerance=1e-10)
-    assert fit.scale_variance == pytest.approx(1.0, rel=1e-6)
-    X = (model * fit.weights[None, :, None]).reshape(n * f, p)
-    assert np.allclose(fit.covariance, np.linalg.inv(X.T @ X), rtol=1e-6)
-    assert np.allclose(fit.coefficients, np.linalg.lstsq(X, (y * fit.weights).reshape(-1), rcond=None)[0])

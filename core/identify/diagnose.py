@@ -415,9 +415,11 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     X = np.concatenate(blocks_, axis=-1)
     fit = WeightedLinearModel(X, y).fit(weights)
     estimates = coefficients(model, candidates, in_model, y, weights)
-    cv_all = cross_validate(X, y, weights, folds)
     widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
     offsets = np.cumsum([0] + widths)
+    spans = {i: range(offsets[in_model.index(i) + 1], offsets[in_model.index(i) + 2]) for i in named}
+    cv_all, *cv_without = cross_validate(X, y, weights, folds, leave_out=list(spans.values()))
+    cv_without_of = dict(zip(spans, cv_without))
     kept, out = [], []
     level = alpha / len(named)
     for i in named:
@@ -428,7 +430,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
         detail: dict = {}
         if not reason:
             others = np.r_[0:lo, hi:X.shape[-1]]
-            cv_without = cross_validate(X[:, :, others], y, weights, folds)
+            cv_without = cv_without_of[i]
             gain = (cv_without.total - cv_all.total) / max(cv_all.total, 1e-300)
             partial = y - X[:, :, others] @ fit.coefficients[others]
             stable = stability(partial, candidates[i].columns, weights, folds)
@@ -463,9 +465,8 @@ def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
 def _cross_validated(model: np.ndarray, added: list[Candidate], y: np.ndarray, tau: np.ndarray,
                      weights: np.ndarray, folds: int) -> dict:
     """Block cross-validated NRMS of the model alone and with ``added``, overall and per block."""
-    before = cross_validate(model, y, weights, folds)
     X = np.concatenate([model] + [c.columns for c in added], axis=-1)
-    after = cross_validate(X, y, weights, folds)
+    after, before = cross_validate(X, y, weights, folds, leave_out=[range(model.shape[-1], X.shape[-1])])
     per_block = [{"start": float(b[0]), "before": nrms(before.residual[b], tau[b]),
                   "after": nrms(after.residual[b], tau[b])} for b in blocks(len(tau), folds)]
     return {"cv_before": nrms(before.residual, tau), "cv_after": nrms(after.residual, tau),

@@ -17,7 +17,9 @@ Why these choices:
   freedom), so the diagnosis's unit-variance spread and identify's classical covariance are
   the same number there. ``cov_type="hac"`` gives the Driscoll-Kraay Newey-West sandwich
   (scores summed per sample over the coordinates, Bartlett window from the residual's own
-  autocorrelation), for filtered, decimated recordings whose rows are correlated.
+  autocorrelation), for filtered, decimated recordings whose rows are correlated;
+  ``"hac_prewhitened"`` the same after Andrews and Monahan's VAR(1) prewhitening
+  (:func:`.longrun.long_run`).
 - The SVD of the unit-norm columns decides the rank (:data:`RANK_TOL` of the largest singular
   value by default): structural zeros of a regressor sit near 1e-15 in float64, and a
   direction kept at that level would put noise into the coefficients.
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
@@ -38,7 +41,7 @@ from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statisti
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
 RANK_TOL = 1e-6
 
-CovType = Literal["nonrobust", "hac"]
+CovType = Literal["nonrobust", "hac", "hac_prewhitened"]
 
 
 def numerical_rank(singular_values: np.ndarray, tol: float) -> int:  # TODO: numeric's one rank (issue 23b)
@@ -60,6 +63,7 @@ class LinearFit:
     residual: np.ndarray           # (N f,): weighted residual
     coefficients: np.ndarray       # (p,): minimum-norm solution
     rank: int
+    projection: np.ndarray         # (rank,): the weighted measurements' coordinates on ``basis``
     cov_type: CovType = "nonrobust"
     _columns: np.ndarray | None = field(default=None, repr=False)   # weighted (N f, p), for HAC
 
@@ -96,9 +100,11 @@ class LinearFit:
         assert self._columns is not None
         scores = (self._columns * self.residual[:, None]).reshape(n, f, p).sum(axis=1)
         lags = hac_lags(self.residual.reshape(n, f))
-        # not prewhitened: on filtered recordings the VAR(1) prewhitening overstated the
-        # spread 1.6 times (tests/test_recordings.py); scaled for the unknowns fitted
-        middle = long_run(scores, lags, prewhiten=False) * (n * f) / max(self.dof, 1)
+        # "hac" is not prewhitened: on filtered recordings the VAR(1) prewhitening overstated
+        # the spread 1.6 times (tests/test_recordings.py); "hac_prewhitened" is for short
+        # blocks of strongly coloured residuals (the stability test), where the plain window
+        # understates it; scaled for the unknowns fitted
+        middle = long_run(scores, lags, prewhiten=self.cov_type == "hac_prewhitened") * (n * f) / max(self.dof, 1)
         return bread @ middle @ bread
 
     @property
@@ -117,6 +123,29 @@ class LinearFit:
         columns a rank deficiency involves."""
         return self.right[-1]
 
+    def orthogonal(self, columns: np.ndarray) -> np.ndarray:
+        """``columns`` (N f, k), weighted rows, less their projection on the model's range."""
+        return columns - self.basis @ (self.basis.T @ columns)
+
+    def without(self, columns: Sequence[int]) -> Reduced | None:
+        """The fit of the model with ``columns`` left out, at the same weights, from this
+        fit's factorisation (Frisch-Waugh-Lovell): the left-out columns' part orthogonal to
+        the others is spanned by A (A^T A)^-1 E = U S^-1 V^T E, so the smaller model's range is
+        this one's less that span. None when this fit is rank deficient (the left-out columns
+        may then share directions with the others: refit)."""
+        p = len(self.coefficients)
+        if self.rank < p or not len(columns):
+            return None
+        dual = self.right[:, list(columns)] / self.singular_values[:, None]      # (p, r) in U's coordinates
+        removed, _ = np.linalg.qr(dual)
+        leaving = self.basis @ removed
+        residual = self.residual + leaving @ (leaving.T @ self.weighted_target())
+        return Reduced(self.weights, self.samples, self.rank - removed.shape[1], residual, self.basis, leaving)
+
+    def weighted_target(self) -> np.ndarray:
+        """The weighted measurements (N f,): the residual plus their projection on the range."""
+        return self.residual + self.basis @ self.projection
+
     def unweighted_residual(self) -> np.ndarray:
         """The residual (N, f) in the measurement's units."""
         return self.residual.reshape(self.samples, self.coordinates) / self.weights
@@ -134,6 +163,24 @@ class LinearFit:
         model can reach there."""
         propagated = np.einsum("mfp,pq,mfq->mf", rows, self.covariance, rows)
         return self.noise_variance()[None, :] + propagated
+
+
+@dataclass(frozen=True)
+class Reduced:
+    """A fit with some columns left out, held as the full fit's basis less the directions
+    ``leaving`` (:meth:`LinearFit.without`): what the tests need (weights, residual, rank,
+    projections on the range's complement) without a factorisation of its own."""
+    weights: np.ndarray
+    samples: int
+    rank: int
+    residual: np.ndarray
+    full_basis: np.ndarray
+    leaving: np.ndarray            # (N f, r): orthonormal, inside full_basis's span
+
+    def orthogonal(self, columns: np.ndarray) -> np.ndarray:
+        """``columns`` (N f, k), weighted rows, less their projection on this model's range."""
+        return (columns - self.full_basis @ (self.full_basis.T @ columns)
+                + self.leaving @ (self.leaving.T @ columns))
 
 
 @dataclass(frozen=True)
@@ -160,8 +207,8 @@ class WeightedLinearModel:
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
         residual = b - u[:, :rank] @ proj
-        return LinearFit(weights, n, scale, s, vt, u[:, :rank], residual, coefficients, rank, cov_type,
-                         A if cov_type == "hac" else None)
+        return LinearFit(weights, n, scale, s, vt, u[:, :rank], residual, coefficients, rank, proj, cov_type,
+                         None if cov_type == "nonrobust" else A)
 
     def _at_fixed_point(self, start: np.ndarray | None, tolerance: float, floor: float, rank_tol: float,
                         cov_type: CovType) -> LinearFit:

@@ -16,12 +16,13 @@ must also be large (a third of the coefficient) to count, so that a real frictio
 drifts a little with temperature is still named.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
-from baseparams.identify.longrun import hac_lags, long_run
+from baseparams.identify.linear import LinearFit, WeightedLinearModel
 
 FOLDS = 5
 MARGIN = 10                 # samples dropped from the training rows beside a held-out block
@@ -47,29 +48,48 @@ class CrossValidation:
 
 
 def cross_validate(model: np.ndarray, y: np.ndarray, weights: np.ndarray, folds: int = FOLDS,
-                   margin: int = MARGIN) -> CrossValidation:
+                   margin: int = MARGIN, leave_out: Sequence[Sequence[int]] = ()) -> list[CrossValidation]:
     """Block cross-validation of the weighted least-squares fit of ``y`` (n, f) on ``model``
-    (n, f, p) with fixed per-coordinate ``weights``: each block predicted from the others."""
+    (n, f, p) with fixed per-coordinate ``weights``: each block predicted from the others.
+    The first result is the whole model's; then one for the model without each set of
+    columns in ``leave_out``, from the same fit per block (:func:`_without`)."""
     n, f, p = model.shape
-    X = (model * weights[None, :, None])
-    Y = y * weights[None, :]
-    scale = np.linalg.norm(X.reshape(n * f, p), axis=0)
-    scale[scale == 0] = 1.0
-    X = X / scale
-    residual = np.empty_like(y)
-    sse = []
+    sets: list[np.ndarray | None] = [None] + [np.asarray(list(c), dtype=int) for c in leave_out]
+    residuals = [np.empty_like(y) for _ in sets]
+    sse: list[list[float]] = [[] for _ in sets]
     for block in blocks(n, folds):
         lo, hi = max(block[0] - margin, 0), min(block[-1] + 1 + margin, n)
         train = np.r_[0:lo, hi:n]
-        if p:
-            A = X[train].reshape(-1, p)
-            beta = np.linalg.lstsq(A, Y[train].reshape(-1), rcond=1e-10)[0]
-            r = Y[block] - X[block] @ beta
-        else:
-            r = Y[block]
-        residual[block] = r / weights[None, :]
-        sse.append(float(np.sum(r ** 2)))
-    return CrossValidation(residual, np.array(sse))
+        fit = WeightedLinearModel(model[train], y[train]).fit(weights, rank_tol=CV_RANK_TOL) if p else None
+        for k, drop in enumerate(sets):
+            beta = np.zeros(p) if fit is None else _without(fit, drop, model[train], y[train], weights)
+            r = y[block] - model[block] @ beta
+            residuals[k][block] = r
+            sse[k].append(float(np.sum((r * weights[None, :]) ** 2)))
+    return [CrossValidation(r, np.array(e)) for r, e in zip(residuals, sse)]
+
+
+# directions of the scaled training model below this fraction of the largest are dropped
+CV_RANK_TOL = 1e-10
+
+
+def _without(fit: LinearFit, drop: np.ndarray | None, model: np.ndarray, y: np.ndarray,
+             weights: np.ndarray) -> np.ndarray:
+    """The coefficients (p,) of the fit without the columns ``drop`` (zero there): from the
+    whole fit when it has full rank (partitioned inverse: beta_o - H_od H_dd^-1 beta_d, H the
+    inverse normal matrix), else by a fit of the other columns."""
+    beta = fit.coefficients
+    if drop is None or not drop.size:
+        return beta
+    p = len(beta)
+    keep = np.setdiff1d(np.arange(p), drop)
+    out = np.zeros(p)
+    if fit.rank == p:
+        H = fit.spread @ fit.spread.T
+        out[keep] = beta[keep] - H[np.ix_(keep, drop)] @ np.linalg.solve(H[np.ix_(drop, drop)], beta[drop])
+    elif keep.size:
+        out[keep] = WeightedLinearModel(model[:, :, keep], y).fit(weights, rank_tol=CV_RANK_TOL).coefficients
+    return out
 
 
 def block_coefficients(partial: np.ndarray, columns: np.ndarray, weights: np.ndarray, folds: int = FOLDS
@@ -81,19 +101,13 @@ def block_coefficients(partial: np.ndarray, columns: np.ndarray, weights: np.nda
     estimates, covariances = [], []
     total = np.sum((columns * weights[None, :, None]) ** 2)
     for block in blocks(n, folds):
-        Z = (columns[block] * weights[None, :, None]).reshape(-1, c)
-        r = (partial[block] * weights[None, :]).reshape(-1)
-        if np.sum(Z ** 2) < 1e-3 * total / folds or len(block) < 20:
+        if np.sum((columns[block] * weights[None, :, None]) ** 2) < 1e-3 * total / folds or len(block) < 20:
             estimates.append(np.full(c, np.nan))
             covariances.append(np.full((c, c), np.nan))
             continue
-        gamma, *_ = np.linalg.lstsq(Z, r, rcond=None)
-        e = r - Z @ gamma
-        scores = (Z * e[:, None]).reshape(len(block), f, c).sum(axis=1)
-        S = long_run(scores, hac_lags(e.reshape(len(block), f)))
-        H = np.linalg.pinv(Z.T @ Z)
-        estimates.append(gamma)
-        covariances.append(H @ S @ H * len(block))
+        fit = WeightedLinearModel(columns[block], partial[block]).fit(weights, cov_type="hac_prewhitened")
+        estimates.append(fit.coefficients)
+        covariances.append(fit.covariance)
     return np.array(estimates), covariances
 
 

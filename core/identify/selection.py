@@ -42,7 +42,7 @@ from scipy.special import fdtrc
 from scipy.optimize import minimize_scalar
 
 from baseparams.identify.longrun import hac_lags, long_run
-from baseparams.identify.linear import LinearFit as Fit, WeightedLinearModel
+from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
 
 # A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
@@ -160,6 +160,9 @@ class Selection:
     # ambiguous groups resolved again once the model was complete: (old head, new winner)
     candidates: list = field(default_factory=list)
     # the candidates as selection left them: shaped ones in the model fixed at their shape
+    shaped: dict = field(default_factory=dict)     # shaped ones in the model: index -> every variant
+    bars: dict = field(default_factory=dict)       # named index -> the Bonferroni bar it entered by
+    resolved: set = field(default_factory=set)     # ambiguous groups already resolved again
 
     @property
     def in_model(self) -> list[int]:
@@ -265,12 +268,12 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
 
 
-def candidate_basis(candidate: "Candidate | np.ndarray", fit: Fit) -> np.ndarray:
+def candidate_basis(candidate: "Candidate | np.ndarray", fit: "Fit | Reduced") -> np.ndarray:
     """The candidate's (or columns') directions beyond the current model (weighted, orthonormal)."""
     columns = candidate.columns if isinstance(candidate, Candidate) else candidate
     n, f, c = columns.shape
     Z = (columns * fit.weights[None, :, None]).reshape(n * f, c)
-    return orthonormal_basis(project_out(Z, fit.basis), ABSORB_TOL, reference=Z)
+    return orthonormal_basis(fit.orthogonal(Z), ABSORB_TOL, reference=Z)
 
 
 def conditional(first: np.ndarray, given: np.ndarray) -> np.ndarray:
@@ -344,7 +347,8 @@ def _same(x):
 
 # ----- the forward loop ----------------------------------------------------------------------
 def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
-           max_steps: int = MAX_STEPS, whiten: "Whitening | None" = None) -> Selection:
+           max_steps: int = MAX_STEPS, whiten: "Whitening | None" = None,
+           resume: Selection | None = None) -> Selection:
     """Forward selection: test every candidate against the current model, Holm-correct, add
     the most significant (or, for a confusable group, its strongest member, reported as
     ambiguous), refit and repeat until no candidate is significant. Then backward
@@ -360,7 +364,13 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
 
     ``whiten``: a filter for coloured noise (:class:`Whitening`, estimated from a complete
     model's residual: :func:`select_whitened`) applied to the data, the model and every
-    candidate before each fit and test."""
+    candidate before each fit and test.
+
+    ``resume``: a selection made with another filter (the first round of
+    :func:`select_whitened`), continued from where it stopped: its model is tested again
+    under ``whiten``, effects that no longer clear their bar are taken out and missing ones
+    added, with the same rules; its steps stay in the history. ``max_steps`` counts the new
+    steps only."""
     n, f, _ = model.shape
     whiten = whiten or _same
     candidates = list(candidates)             # shaped ones are fixed at their variant on entry
@@ -375,6 +385,15 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     regroups: list[tuple[int, int]] = []
     previous = None
     touched: set = set()                      # places where the model changed since the last step
+    whitened: dict[int, tuple[Candidate, Candidate]] = {}
+    if resume is not None:
+        candidates, shaped = list(resume.candidates), dict(resume.shaped)
+        added, steps, companions = list(resume.added), list(resume.steps), list(resume.companions)
+        ambiguous = {k: list(v) for k, v in resume.ambiguous.items()}
+        removed, regroups = list(resume.removed), list(resume.regrouped)
+        bars, regrouped = dict(resume.bars), set(resume.resolved)
+        touched = {"all"}                     # every shape is chosen again under the new filter
+        max_steps = len(steps) + max_steps
     while len(steps) < max_steps:
         refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten, touched)
         touched = set()
@@ -390,7 +409,12 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             if i in excluded:
                 tests.append(NOT_TESTED)
                 continue
-            seen = cand if whiten is _same else whiten.candidate(cand)
+            if whiten is _same:
+                seen = cand
+            else:                                 # whitened once a pass (until its shape changes)
+                if i not in whitened or whitened[i][0] is not cand:
+                    whitened[i] = (cand, whiten.candidate(cand))
+                seen = whitened[i][1]
             # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
             # variance when the whitened residual is white
             bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not _same,
@@ -446,7 +470,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         if confusable:
             ambiguous[winner] = confusable
             companions.extend(r.index for r in confusable)
-    return Selection(steps, added, ambiguous, companions, removed, regroups, candidates)
+    return Selection(steps, added, ambiguous, companions, removed, regroups, candidates, shaped, bars, regrouped)
 
 
 # kinds that act on a body, not a coordinate: a kind generalising them may act anywhere
@@ -488,7 +512,7 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
     after = again.rho if again is not None else np.zeros(f)
     if np.max(np.abs(after - before)) <= RHO_AGREEMENT:
         return chosen
-    return select(model, y, candidates, alpha, max_steps, again)
+    return select(model, y, candidates, alpha, max_steps, again, resume=chosen)
 
 
 def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
@@ -529,10 +553,18 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
         return None
     low = values[k - 1] if k > 0 and values[k - 1] > 0 else value / 2
     high = values[k + 1] if k + 1 < len(values) else value * 2
-    found = minimize_scalar(lambda x: -explained(cand.make({name: float(np.exp(x))})),
-                            bounds=(np.log(low), np.log(high)), method="bounded", options={"xatol": 0.02})
+    made: dict[float, np.ndarray] = {}          # each shape's columns, made once (a filtering each)
+
+    def columns(x: float) -> np.ndarray:
+        if x not in made:
+            made[x] = cand.make({name: float(np.exp(x))})
+        return made[x]
+
+    # to 5 % of the value: grid points are 3 times apart, and the fit is flat near its best
+    found = minimize_scalar(lambda x: -explained(columns(x)), bounds=(np.log(low), np.log(high)),
+                            method="bounded", options={"xatol": 0.05})
     shape = {name: float(np.exp(found.x))}
-    return Candidate(cand.kind, cand.coordinate, cand.names, cand.make(shape), (), (), shape, cand.generalises)
+    return Candidate(cand.kind, cand.coordinate, cand.names, columns(found.x), (), (), shape, cand.generalises)
 
 
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
@@ -607,12 +639,19 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     named = [i for i in added if i not in ambiguous]
     if not named:
         return None
-    n, f, _ = model.shape
+    n, f, p = model.shape
+    in_model = added + companions
+    complete = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in in_model],
+                                                         axis=-1)), whiten(y)).fit(weights)
+    offsets = np.cumsum([p] + [candidates[j].columns.shape[-1] for j in in_model])
     worst = None
     for i in named:
-        others = [j for j in added + companions if j != i]
-        fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
-                                  whiten(y)).fit(weights)
+        k = in_model.index(i)
+        fit = complete.without(range(offsets[k], offsets[k + 1]))
+        if fit is None:                      # the complete model is rank deficient: refit without i
+            others = [j for j in in_model if j != i]
+            fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others],
+                                                            axis=-1)), whiten(y)).fit(weights)
         basis = candidate_basis(whiten(candidates[i].columns), fit)
         test = wald(fit.residual, basis, (n, f), fit.rank, sparse_if_white=True)
         if not test.tested and test.reason != "absorbed":

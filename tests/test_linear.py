@@ -1,0 +1,75 @@
+"""The one weighted linear model (baseparams.identify.linear): its covariance against the
+textbook formula, the HAC sandwich against statsmodels, and the fit without some columns
+(Frisch-Waugh-Lovell from one factorisation) against a refit."""
+
+import numpy as np
+import pytest
+from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+from baseparams.identify.linear import WeightedLinearModel
+
+
+def test_covariance_is_the_classical_one_and_s2_is_one_at_the_fixed_point():
+    """At the fixed point each coordinate's SD divides its own sum of squares by its own
+    degrees of freedom, so s^2 = 1 and Cov = (X_w^T X_w)^-1, the textbook weighted covariance
+    computed here independently with numpy's inverse."""
+    rng = np.random.default_rng(4)
+    n, f, p = 200, 2, 5
+    model = rng.standard_normal((n, f, p))
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f)) * np.array([0.5, 2.0])
+    fit = WeightedLinearModel(model, y).fit(tolerance=1e-10)
+    assert fit.scale_variance == pytest.approx(1.0, rel=1e-6)
+    X = (model * fit.weights[None, :, None]).reshape(n * f, p)
+    assert np.allclose(fit.covariance, np.linalg.inv(X.T @ X), rtol=1e-6)
+    assert np.allclose(fit.coefficients, np.linalg.lstsq(X, (y * fit.weights).reshape(-1), rcond=None)[0])
+
+
+def test_hac_covariance_is_the_sandwich_of_the_per_sample_scores():
+    """cov_type="hac": (X^T X)^-1 S (X^T X)^-1 with S statsmodels' Newey-West of the scores
+    summed per sample, scaled by rows / dof, at the lag window the residual asks for."""
+    rng = np.random.default_rng(5)
+    n, f, p = 400, 2, 3
+    model = rng.standard_normal((n, f, p))
+    e = np.zeros((n, f))
+    for t in range(1, n):
+        e[t] = 0.8 * e[t - 1] + rng.standard_normal(f)
+    y = model @ np.ones(p) + e
+    weights = np.array([1.0, 0.5])
+    fit = WeightedLinearModel(model, y).fit(weights, cov_type="hac")
+    X = (model * weights[None, :, None]).reshape(n * f, p)
+    r = (y * weights).reshape(-1) - X @ fit.coefficients
+    from baseparams.identify.longrun import hac_lags
+    lags = hac_lags(r.reshape(n, f))
+    assert lags > 0
+    S = S_hac_simple((X * r[:, None]).reshape(n, f, p).sum(axis=1), nlags=lags) * (n * f) / (n * f - p)
+    bread = np.linalg.inv(X.T @ X)
+    assert np.allclose(fit.covariance, bread @ S @ bread, rtol=1e-8)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_without_equals_a_refit_without_the_columns(seed):
+    """Residual, rank and the projection on the smaller model's complement from the complete
+    fit's factorisation agree with a fit of the smaller model, on random models with columns
+    of very different sizes."""
+    rng = np.random.default_rng(seed)
+    n, f, p = 150, 3, 9
+    model = rng.standard_normal((n, f, p)) * np.logspace(-2, 3, p)
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f))
+    weights = rng.uniform(0.5, 2.0, f)
+    complete = WeightedLinearModel(model, y).fit(weights)
+    drop = sorted(rng.choice(p, size=int(rng.integers(1, 4)), replace=False).tolist())
+    keep = [k for k in range(p) if k not in drop]
+    refit = WeightedLinearModel(model[:, :, keep], y).fit(weights)
+    reduced = complete.without(drop)
+    assert reduced is not None and reduced.rank == refit.rank == len(keep)
+    assert np.allclose(reduced.residual, refit.residual, atol=1e-9 * np.linalg.norm(refit.residual))
+    Z = rng.standard_normal((n * f, 2))
+    assert np.allclose(reduced.orthogonal(Z), refit.orthogonal(Z), atol=1e-9 * np.linalg.norm(Z))
+
+
+def test_without_refuses_a_rank_deficient_fit():
+    rng = np.random.default_rng(6)
+    model = rng.standard_normal((50, 2, 3))
+    model[:, :, 2] = model[:, :, 0]
+    fit = WeightedLinearModel(model, rng.standard_normal((50, 2))).fit(np.ones(2))
+    assert fit.rank == 2 and fit.without([2]) is None
