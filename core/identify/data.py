@@ -17,7 +17,8 @@ import io
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from typing import Any
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -116,7 +117,7 @@ class MeasuredData:
     gain_names: tuple[str, ...] = ()
     gain_columns: np.ndarray | None = field(default=None, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.segments:
             self.segments = (Segment(0, self.motion.count),)
         if not self.runs:
@@ -212,13 +213,18 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
     if len(parts) == 1:
         return parts[0]
     coordinates = parts[0].coordinates
-    motions, segments, runs, payloads, notes, offset = [], [], [], [], [], 0
+    motions: list = []
+    segments: list = []
+    runs: list = []
+    payloads: list = []
+    notes: list[str] = []
+    offset = 0
     gain_names = tuple(dict.fromkeys(name for part in parts for name in part.gain_names))
     gains = []
     for part in parts:
         block = np.zeros(part.tau.shape + (len(gain_names),))
         for k, name in enumerate(part.gain_names):
-            block[:, :, gain_names.index(name)] = part.gain_columns[:, :, k]
+            block[:, :, gain_names.index(name)] = part.gain_columns[:, :, k]  # type: ignore[index]
         gains.append(block)
         if part.coordinates != coordinates:
             raise InputError("the data files are for different coordinates", file=part.path)
@@ -255,7 +261,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     if len(t) < MIN_SAMPLES:
         raise InputError(f"{len(t)} samples; at least {MIN_SAMPLES} are needed", file=path)
 
-    def block(prefix):
+    def block(prefix: str) -> np.ndarray:
         return np.stack([values[:, columns[f"{prefix}_{c}"]] for c in coordinates], axis=1)
 
     q, tau = block("q"), block("tau")
@@ -411,7 +417,7 @@ def _parse_rows(path: str, text: str, delimiter: str = ",", comment: str | None 
                      if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
         delimiter = next((d for d in (",", ";", "\t") if d in head), " " if " " in head.strip() else ",")
     if delimiter == " ":
-        reader = _Whitespace(text)
+        reader: Any = _Whitespace(text)
     else:
         reader = csv.reader(io.StringIO(text, newline=""), strict=True, delimiter=delimiter)
     header, rows = None, []
@@ -449,7 +455,7 @@ class _Whitespace:
         self.lines = text.splitlines()
         self.line_num = 0
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[list[str]]:
         for self.line_num, line in enumerate(self.lines, start=1):
             yield line.split()
 
@@ -459,7 +465,7 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
     for k, name in enumerate(header):
         if not name:
             raise InputError(f"column {k + 1} has no name", file=path, key="header")
-    seen = {}
+    seen: dict[str, int] = {}
     for k, name in enumerate(header):
         if name in seen:
             raise InputError(f"column {name!r} appears twice (columns {seen[name] + 1} and {k + 1})",
@@ -509,7 +515,8 @@ def _check_times(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]]) ->
                          file=path, key=f"row {rows[k][0]}, column t")
 
 
-def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], estimated) -> float:
+def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], estimated: tuple[str, ...]
+                  ) -> float:
     """The sampling step, checked uniform (Savitzky-Golay assumes it)."""
     steps = np.diff(t)
     step = float(np.median(steps))

@@ -38,7 +38,7 @@ from baseparams.identify.data import MeasuredData
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel, numerical_rank
-from baseparams.identify.selection import Candidate, Rival, Selection, project_out, holm, select_whitened
+from baseparams.identify.selection import Candidate, Rival, Selection, Step, project_out, holm, select_whitened
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -262,7 +262,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         after = _predict(model, [full[i] for i in in_model], y, None, train)
         unexplained = _unexplained(after, train, problem.coordinates, alpha)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
-    gap = {"before": nrms(before.residual[rows], tau[rows]),
+    gap: dict = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
            "holdout_before": nrms(before.residual[train:], tau[train:]) if held else None,
            "holdout_after": nrms(after.residual[train:], tau[train:]) if held else None,
@@ -275,7 +275,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
 
     estimates = coefficients(model[rows], candidates, in_model, y[rows], after.fit.weights)
     by_index = dict(zip(in_model, estimates))
-    effects = [{**_effect_entry(candidates, *by_index[i], chosen, i), "checks": checks.get(i, {})}
+    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {})}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added if i in ambiguous_idx]
     white = unexplained["white"]
@@ -360,7 +360,7 @@ DOMINANCE = 2.0
 
 
 def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_model: list[int], named: list[int],
-               coordinates, alpha: float, un: dict) -> list[tuple[int, str]]:
+               coordinates: Sequence[str], alpha: float, un: dict) -> list[tuple[int, str]]:
     """Named effects smaller than the structure their coordinate's residual still holds (not
     white: Ljung-Box; its size: sqrt(residual RMS^2 - noise level^2), the noise level from
     second differences). Why: on data with something the catalogue lacks (an elastic
@@ -473,7 +473,7 @@ def _cross_validated(model: np.ndarray, added: list[Candidate], y: np.ndarray, t
             "cv_folds": folds, "cv_blocks": per_block}
 
 
-def _where(residual: np.ndarray, tau: np.ndarray, qd: np.ndarray | None, t: np.ndarray, coordinates,
+def _where(residual: np.ndarray, tau: np.ndarray, qd: np.ndarray | None, t: np.ndarray, coordinates: Sequence[str],
            noise: dict, folds: int) -> dict:
     """Where the final residual is concentrated: per block of time and per motion regime
     (velocity reversals, high acceleration, slow or static poses), as RMS / the whole
@@ -578,7 +578,8 @@ def _coefficient_map(cand: Candidate, values: np.ndarray, stds: np.ndarray) -> d
     return {name: {"value": float(v), "std": float(s)} for name, v, s in zip(names, values, stds)}
 
 
-def _effect_entry(all_candidates: list[Candidate], values, stds, chosen: Selection, index: int) -> dict:
+def _effect_entry(all_candidates: list[Candidate], values: np.ndarray, stds: np.ndarray, chosen: Selection,
+                  index: int) -> dict:
     cand = all_candidates[index]
     coefficients_ = _coefficient_map(cand, values, stds)
     single = len(coefficients_) == 1
@@ -601,7 +602,8 @@ def _rival_json(rival_candidate: Candidate, rival: Rival) -> dict:
             "pvalue_rival_over_named": rival.rival_over_winner.pvalue}
 
 
-def _ambiguous_entry(all_candidates: list[Candidate], chosen: Selection, index: int, estimate) -> dict:
+def _ambiguous_entry(all_candidates: list[Candidate], chosen: Selection, index: int,
+                     estimate: tuple[np.ndarray, np.ndarray] | None) -> dict:
     step = next(s for s in chosen.steps if s.chosen == index)
     members = [index] + [r.index for r in chosen.ambiguous[index]]
     cands = [all_candidates[i] for i in members]
@@ -635,7 +637,7 @@ def _steps_json(candidates: list[Candidate], chosen: Selection) -> list[dict]:
     return out
 
 
-def _weak(inertial: np.ndarray, candidates: list[Candidate], first) -> list[dict]:
+def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> list[dict]:
     """Candidates nearly collinear with the inertial model: what fraction of them survives
     beyond the first step's (inertial-only) weighted fit."""
     fit = first.fit
@@ -660,7 +662,7 @@ def noise_floor(residual: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(d2 ** 2, axis=0) / 6.0)
 
 
-def _unexplained(prediction: _Prediction, train: int, coordinates, alpha: float) -> dict:
+def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str], alpha: float) -> dict:
     """Whiteness of the final fit's residual per coordinate (Ljung-Box, its null simulated
     through the fit: :mod:`.whiteness`; Holm over the coordinates) and the residual against
     the noise level."""

@@ -22,7 +22,8 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
-from baseparams.identify.model import Design, design, effect_values
+from baseparams.dynamics.evaluator import Sample
+from baseparams.identify.model import Design, Motion, design, effect_values
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
@@ -176,7 +177,8 @@ def split_effects(mechanism: Mechanism, named: Sequence[EffectSpec]) -> tuple[li
     known (their force is subtracted), the others are identified, and so is every effect in
     ``named`` (which overrides a known one of the same kind and coordinate)."""
     named_keys = {(s.kind, s.coordinate) for s in named}
-    identify, known = [], []
+    identify: list[EffectSpec] = []
+    known: list[EffectSpec] = []
     for spec in mechanism.effects:
         if (spec.kind, spec.coordinate) in named_keys:
             continue
@@ -279,7 +281,7 @@ def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence
     p = len(mechanism.parameters)
     names: list[str] = []
 
-    def build(motion, sample, run):
+    def build(motion: Motion, sample: Sample, run: int) -> np.ndarray:
         inertial, columns = design(mechanism, motion, effects, sample)
         names[:] = columns.names
         payload = data.payload_of_run(run)

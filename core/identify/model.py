@@ -67,7 +67,7 @@ def evaluate(mechanism: Mechanism, motion: Motion, where: str = "") -> Sample:
     return sample
 
 
-def _as_batch(value, n: int) -> np.ndarray:
+def _as_batch(value: object, n: int) -> np.ndarray:
     return np.broadcast_to(np.asarray(value, dtype=float), (n,))
 
 
@@ -115,8 +115,8 @@ def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coor
     row = drive_rows(mechanism, [coordinate])[0]
     used = np.nonzero(row)[0]
 
-    def combined(values):
-        return sum(row[i] * _as_batch(values[i], n) for i in used)
+    def combined(values: Sequence[object]) -> np.ndarray:
+        return np.sum([row[i] * _as_batch(values[int(i)], n) for i in used], axis=0)
 
     q, qd, qdd = (combined(values) for values in (sample.q, sample.qd, sample.qdd))
     with np.errstate(all="ignore"):

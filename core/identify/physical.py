@@ -23,13 +23,14 @@ size (mass, first moment, inertia).
 """
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 try:
     import cvxpy as cp
 except ImportError:            # the optional extra is not installed: physical_fit says how to get it
-    cp = None
+    cp = None  # type: ignore[assignment]
 
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
@@ -78,7 +79,7 @@ def pseudo_inertia(phi: np.ndarray) -> np.ndarray:
     return np.block([[sigma, h[:, None]], [h[None, :], np.array([[m]])]])
 
 
-def _pseudo_inertia_expression(phi):
+def _pseudo_inertia_expression(phi: Any) -> Any:
     """The same, as a cvxpy expression of ten affine entries."""
     m, mx, my, mz, ixx, ixy, ixz, iyy, iyz, izz = (phi[k] for k in range(10))
     half = (ixx + iyy + izz) / 2

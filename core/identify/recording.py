@@ -168,7 +168,7 @@ def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
     return replace(mechanism, motors=tuple(mechanism.motors) + tuple(added))
 
 
-def _number(value, path: str, key: str) -> float:
+def _number(value: object, path: str, key: str) -> float:
     """A number or an expression such as ``-pi/2``, as a float."""
     try:
         expr = parse_expression(value, (), time=True)
@@ -332,9 +332,11 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         return np.linalg.solve(matrix, raw.T).T
 
     q = mapped("position")
+    assert q is not None                  # the description requires positions
     for coordinate, value in description.data.get("zero", {}).items():
         q[:, coordinates.index(coordinate)] += _number(value, path, f"zero.{coordinate}")
     qd, qdd, forces = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
+    assert forces is not None             # ... and torques
     gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
     notes = [_drive_note(description)] if any(c.coordinate in mechanism.motor_names
                                               for chans in description.channels.values() for c in chans) else []
@@ -347,7 +349,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         settings["cutoff"], how = auto_cutoff(signal, float(np.median(np.diff(t[a:b]))),
                                               "positions" if qd is None else "velocities")
         settings["how"] = how + " on the run's longest piece"
-    parts = []
+    parts: list[MeasuredData] = []
     for a, b in pieces:
         try:
             part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
@@ -387,7 +389,7 @@ def _table(path: str, delimiter: str = "auto", comment: str | None = None
     return header, _numbers(path, header, rows), [line for line, _ in rows]
 
 
-def _only(tables: dict, channel: Channel, path: str):
+def _only(tables: dict, channel: Channel, path: str) -> str:
     owners = [alias for alias, (header, _, _) in tables.items() if channel.column in header]
     if len(owners) != 1:
         raise InputError(f"column {channel.column!r} is in {len(owners)} of the run's files: write "
@@ -480,7 +482,8 @@ def auto_cutoff(signal: np.ndarray, step: float, what: str) -> tuple[float, str]
     return cutoff, how
 
 
-def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredData, list[str]]:
+def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None, tau: np.ndarray,
+              settings: dict, path: str) -> tuple[MeasuredData, list[str]]:
     """One uniform piece: resampled if irregular, positions filtered and differentiated, the
     parallel filter and decimation planned (:class:`Segment`)."""
     notes = []
@@ -526,7 +529,7 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
         qf = sosfiltfilt(sos, q, axis=0)
         qd = np.gradient(qf, step, axis=0)
         qdd = np.gradient(qd, step, axis=0)
-        estimated = ("qd", "qdd")
+        estimated: tuple[str, ...] = ("qd", "qdd")
         what = "positions"
     else:
         qf = sosfiltfilt(sos, q, axis=0)
@@ -545,7 +548,7 @@ def _filtered(t, q, qd, qdd, tau, settings: dict, path: str) -> tuple[MeasuredDa
     return data, notes
 
 
-def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads,
+def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads: list,
             gain_names: tuple[str, ...]) -> MeasuredData:
     """The pieces of one run as one MeasuredData; ``tau`` of each piece holds the known
     forces and, behind them, one column per unknown gain (split here)."""

@@ -117,9 +117,10 @@ class Candidate:
         return Candidate(self.kind, self.coordinate, self.names, self.variants[k], (), (), dict(self.shapes[k]),
                          self.generalises, self.make)
 
-    def rows(self, index) -> "Candidate":
+    def rows(self, index: slice | np.ndarray) -> "Candidate":
         """The candidate restricted to samples ``index`` (a slice or an index array)."""
-        make = None if self.make is None else (lambda shape: self.make(shape)[index])
+        maker = self.make
+        make = None if maker is None else (lambda shape: maker(shape)[index])
         return Candidate(self.kind, self.coordinate, self.names, self.columns[index],
                          tuple(v[index] for v in self.variants), self.shapes, self.shape, self.generalises, make)
 
@@ -336,12 +337,13 @@ class Whitening:
         return out
 
     def candidate(self, cand: Candidate) -> Candidate:
-        make = None if cand.make is None else (lambda shape: self(cand.make(shape)))
+        maker = cand.make
+        make = None if maker is None else (lambda shape: self(maker(shape)))
         return Candidate(cand.kind, cand.coordinate, cand.names, self(cand.columns),
                          tuple(self(v) for v in cand.variants), cand.shapes, cand.shape, cand.generalises, make)
 
 
-def _same(x):
+def _same(x: np.ndarray) -> np.ndarray:
     return x
 
 
@@ -372,7 +374,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     added, with the same rules; its steps stay in the history. ``max_steps`` counts the new
     steps only."""
     n, f, _ = model.shape
-    whiten = whiten or _same
+    filtered: Callable[[np.ndarray], np.ndarray] = whiten or _same
     candidates = list(candidates)             # shaped ones are fixed at their variant on entry
     shaped: dict[int, Candidate] = {}         # ... and their every variant kept here
     added: list[int] = []
@@ -395,10 +397,10 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         touched = {"all"}                     # every shape is chosen again under the new filter
         max_steps = len(steps) + max_steps
     while len(steps) < max_steps:
-        refine_shapes(model, y, candidates, added + companions, shaped, previous, whiten, touched)
+        refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched)
         touched = set()
         current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
-        fit = WeightedLinearModel(whiten(current), whiten(y)).fit(
+        fit = WeightedLinearModel(filtered(current), filtered(y)).fit(
             start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
         previous = fit.weights
         dof = fit.rank
@@ -409,7 +411,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             if i in excluded:
                 tests.append(NOT_TESTED)
                 continue
-            if whiten is _same:
+            if whiten is None:
                 seen = cand
             else:                                 # whitened once a pass (until its shape changes)
                 if i not in whitened or whitened[i][0] is not cand:
@@ -417,21 +419,21 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                 seen = whitened[i][1]
             # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
             # variance when the whitened residual is white
-            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not _same,
+            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=whiten is not None,
                                                       lags=lags)
             tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
         if tested:
             adjusted[tested] = holm([tests[i].pvalue for i in tested])
-        step = Step(tests, adjusted, fit, whiten=whiten)
+        step = Step(tests, adjusted, fit, whiten=filtered)
         steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
         if not significant:
             if len(steps) >= max_steps:    # no step left to test a changed model: this fit is the last
                 break
             change = regroup(model, y, candidates, added, companions, ambiguous, bars, fit.weights,
-                             alpha, regrouped, whiten)
+                             alpha, regrouped, filtered)
             if change is not None:
                 old, winner, confusable, beaten = change
                 regroups.append((old, winner))
@@ -447,7 +449,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                     ambiguous[winner] = confusable
                     companions.extend(r.index for r in confusable)
                 continue
-            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, whiten)
+            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, filtered)
             if out is None:
                 break
             removed.append(out)
@@ -554,10 +556,11 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
     low = values[k - 1] if k > 0 and values[k - 1] > 0 else value / 2
     high = values[k + 1] if k + 1 < len(values) else value * 2
     made: dict[float, np.ndarray] = {}          # each shape's columns, made once (a filtering each)
+    maker = cand.make
 
     def columns(x: float) -> np.ndarray:
         if x not in made:
-            made[x] = cand.make({name: float(np.exp(x))})
+            made[x] = maker({name: float(np.exp(x))})
         return made[x]
 
     # to 5 % of the value: grid points are 3 times apart, and the fit is flat near its best
@@ -574,13 +577,14 @@ def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, 
     if not cand.variants:
         basis = candidate_basis(cand, fit)
         return basis, wald(fit.residual, basis, shape, dof, lags=lags, sparse_if_white=sparse_if_white), -1
-    best = None
+    best: tuple[np.ndarray, Test, int] | None = None
     for k, columns in enumerate(cand.variants):
         basis = candidate_basis(columns, fit)
         test = wald(fit.residual, basis, shape, dof, lags=lags, extra_df=cand.extra_df,
                     sparse_if_white=sparse_if_white)
         if best is None or test.z > best[1].z:
             best = (basis, test, k)
+    assert best is not None
     return best
 
 
@@ -696,7 +700,9 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
     rivals = [winner] + list(rivals)       # after a switch the first winner is a rival too
     while True:
         A = bases[winner]
-        confusable, beaten, switch = [], [], []
+        confusable: list[Rival] = []
+        beaten: list[Rival] = []
+        switch: list[Rival] = []
         for j in rivals:
             if j == winner:
                 continue
