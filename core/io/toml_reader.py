@@ -13,6 +13,7 @@ import re
 import tomllib
 from decimal import Decimal
 from pathlib import Path
+from typing import Any
 
 from baseparams.errors import InputError
 from baseparams.io.schema import SCHEMA, validate
@@ -33,11 +34,17 @@ class TomlReader:
     """The built-in reader of ``.toml`` mechanism files (registered by baseparams.plugins.readers)."""
 
     name = "toml"
-    suffixes = (".toml",)
+    suffixes: tuple[str, ...] = (".toml",)
     description = "baseparams mechanism files (docs/mechanism-format.md)"
+    options: tuple[str, ...] = ()
 
-    def read(self, path: str | Path) -> Mechanism:
-        """The mechanism in the file at ``path`` (without the mobility check)."""
+    def read_notes(self, path: str | Path, **options: Any) -> tuple[Mechanism, list[str]]:
+        """The mechanism and no notes: the format holds everything the model does."""
+        return self.read(path), []
+
+    def read(self, path: str | Path, **options: Any) -> Mechanism:
+        """The mechanism in the file at ``path`` (without the mobility check). The format
+        has no options (``options`` is empty), so callers pass none."""
         path = Path(path)
         try:
             data = path.read_bytes()

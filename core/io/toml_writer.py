@@ -21,7 +21,7 @@ class TomlWriter:
     """The built-in writer of ``.toml`` mechanism files (registered by baseparams.plugins.readers)."""
 
     name = "toml"
-    suffixes = (".toml",)
+    suffixes: tuple[str, ...] = (".toml",)
     description = "baseparams mechanism files (docs/mechanism-format.md)"
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:

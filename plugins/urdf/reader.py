@@ -54,14 +54,14 @@ class UrdfReader:
     """The reader of ``.urdf`` files (registered by baseparams.plugins.urdf)."""
 
     name = "urdf"
-    suffixes = (".urdf",)
+    suffixes: tuple[str, ...] = (".urdf",)
     description = "URDF robot descriptions (docs/urdf.md)"
-    options = ("merge_fixed", "floating_base")
+    options: tuple[str, ...] = ("merge_fixed", "floating_base")
 
-    def read(self, path: str | Path, **options) -> Mechanism:
+    def read(self, path: str | Path, **options: bool) -> Mechanism:
         return read_urdf(path, **options).mechanism
 
-    def read_notes(self, path: str | Path, **options) -> tuple[Mechanism, list[str]]:
+    def read_notes(self, path: str | Path, **options: bool) -> tuple[Mechanism, list[str]]:
         """The mechanism and the reader's notes (for ``convert``, which prints them)."""
         result = read_urdf(path, **options)
         return result.mechanism, result.notes

@@ -42,7 +42,7 @@ class UrdfWriter:
     """Writes ``.urdf`` files (registered by baseparams.plugins.urdf)."""
 
     name = "urdf"
-    suffixes = (".urdf",)
+    suffixes: tuple[str, ...] = (".urdf",)
     description = "URDF robot descriptions (docs/urdf.md)"
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
