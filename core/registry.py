@@ -77,7 +77,7 @@ def _collect(hook_name: str) -> tuple[Registered[Any], ...]:
     """Every item the plugins return from the list hook ``hook_name``, plugin by plugin in
     registration order, each with its distribution."""
     pm = plugin_manager()
-    found = []
+    found: list[Registered[Any]] = []
     for impl in getattr(pm.hook, hook_name).get_hookimpls():
         others = [p for p in pm.get_plugins() if p is not impl.plugin]
         dist = _distribution_of(pm, impl.plugin)

@@ -40,11 +40,20 @@ class EffectKind(Protocol):
     generalises (where the data cannot tell the two apart, diagnosis names the simpler one).
     """
 
-    name: str
-    description: str
-    coefficients: tuple[str, ...]
-    shapes: tuple[Shape, ...]
-    generalises: tuple[str, ...]
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def description(self) -> str: ...
+
+    @property
+    def coefficients(self) -> tuple[str, ...]: ...
+
+    @property
+    def shapes(self) -> tuple[Shape, ...]: ...
+
+    @property
+    def generalises(self) -> tuple[str, ...]: ...
 
     def columns(self, q: npt.ArrayLike, qd: npt.ArrayLike, qdd: npt.ArrayLike,
                 **options: float) -> list[FloatArray]:

@@ -25,9 +25,14 @@ class Reader(Protocol):
     A bad file is an :class:`baseparams.errors.InputError` naming the file, key and reason.
     """
 
-    name: str
-    suffixes: tuple[str, ...]
-    options: tuple[str, ...]
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def suffixes(self) -> tuple[str, ...]: ...
+
+    @property
+    def options(self) -> tuple[str, ...]: ...
 
     def read(self, path: str | Path, **options: Any) -> Mechanism:
         """The mechanism in the file at ``path`` (the loader checks its mobility)."""
@@ -43,8 +48,11 @@ class Writer(Protocol):
     """Writes one mechanism-file format: ``name``, ``suffixes`` (as a :class:`Reader`'s) and
     ``write(mechanism, path)``, returning notes on what the format could not hold."""
 
-    name: str
-    suffixes: tuple[str, ...]
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def suffixes(self) -> tuple[str, ...]: ...
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
         """Write ``mechanism`` to ``path``; the notes (possibly none) for the user."""

@@ -7,6 +7,7 @@ the floats the model keeps, written by their shortest round-trip text.
 """
 
 import json
+from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 
@@ -34,14 +35,14 @@ def _string(text: str) -> str:
     return json.dumps(text, ensure_ascii=False)
 
 
-def _expr(value) -> str:
-    value = sympy.sympify(value)
-    if value.is_Rational:
-        return _string(exact_text(Fraction(int(value.p), int(value.q))))
-    return _string(str(value))
+def _expr(value: object) -> str:
+    expr = sympy.sympify(value)
+    if expr.is_Rational:
+        return _string(exact_text(Fraction(int(expr.p), int(expr.q))))
+    return _string(str(expr))
 
 
-def _vector(values) -> str:
+def _vector(values: Iterable[object]) -> str:
     return "[" + ", ".join(_expr(v) for v in values) + "]"
 
 

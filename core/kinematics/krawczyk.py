@@ -12,12 +12,19 @@ positions, so every entry of W encloses its exact value: this is what makes the 
 proofs of the `vp` solver cover the mechanism, not just its rounded Newton iterate.
 """
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 from flint import arb, arb_mat
 
 from baseparams.errors import KinematicsError
 
+if TYPE_CHECKING:
+    from baseparams.dynamics.evaluator import Evaluator
 
-def enclose(evaluator, q, where="", at=None):
+
+def enclose(evaluator: "Evaluator", q: Sequence[Any], where: str = "",
+            at: tuple[list[Any], list[list[Any]]] | None = None) -> list[Any]:
     """Tree coordinates with the dependent ones replaced by proven enclosures (arb balls).
     ``at``: the closure values and Jacobian rows at ``q`` when already computed (Newton's last)."""
     st = evaluator.structure
@@ -54,5 +61,5 @@ def enclose(evaluator, q, where="", at=None):
                           f"(Krawczyk test failed); the configuration may be near singular")
 
 
-def _identity(m):
+def _identity(m: int) -> Any:
     return arb_mat(m, m, [1 if i == j else 0 for i in range(m) for j in range(m)])
