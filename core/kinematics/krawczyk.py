@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from flint import arb, arb_mat
 
 from baseparams.errors import KinematicsError
+from baseparams.numeric.backends import Arb
 
 if TYPE_CHECKING:
     from baseparams.dynamics.evaluator import Evaluator
@@ -40,7 +41,9 @@ def enclose(evaluator: "Evaluator", q: Sequence[Any], where: str = "",
     y = arb_mat(m, m, [inverse[i, j].mid() for i in range(m) for j in range(m)])
     step = y * arb_mat(m, 1, residual)
     size = max(abs(step[i, 0]).upper() for i in range(m))
-    floor = arb(10) ** (-(evaluator.backend.digits - 2))
+    backend = evaluator.backend
+    assert isinstance(backend, Arb)              # balls: the evaluator certifies in arb only
+    floor = arb(10) ** (-(backend.digits - 2))
     radius = 4 * size + floor
     for _ in range(4):
         centre = [arb(q[j]).mid() for j in dep]
