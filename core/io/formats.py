@@ -8,8 +8,11 @@ completed by :func:`complete_reader`, so callers never probe for optional attrib
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+from baseparams.hookspecs import hookimpl
 
 if TYPE_CHECKING:
     from baseparams.model.mechanism import Mechanism
@@ -25,14 +28,9 @@ class Reader(Protocol):
     A bad file is an :class:`baseparams.errors.InputError` naming the file, key and reason.
     """
 
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def suffixes(self) -> tuple[str, ...]: ...
-
-    @property
-    def options(self) -> tuple[str, ...]: ...
+    name: str
+    suffixes: tuple[str, ...]
+    options: tuple[str, ...]
 
     def read(self, path: str | Path, **options: Any) -> Mechanism:
         """The mechanism in the file at ``path`` (the loader checks its mobility)."""
@@ -48,11 +46,8 @@ class Writer(Protocol):
     """Writes one mechanism-file format: ``name``, ``suffixes`` (as a :class:`Reader`'s) and
     ``write(mechanism, path)``, returning notes on what the format could not hold."""
 
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def suffixes(self) -> tuple[str, ...]: ...
+    name: str
+    suffixes: tuple[str, ...]
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
         """Write ``mechanism`` to ``path``; the notes (possibly none) for the user."""
@@ -86,3 +81,20 @@ def complete_reader(reader: Any) -> Reader:
     if isinstance(reader, Reader):
         return reader
     return _CompletedReader(reader)
+
+
+def format_hooks(reader: Reader, writer: Writer) -> tuple[Callable[[], list[Reader]], Callable[[], list[Writer]]]:
+    """The two hook implementations of a plugin module that provides one file format (a
+    reader and a writer): ``baseparams_readers, baseparams_writers = format_hooks(r, w)``
+    at the top of the module its entry point names. Writing the two ``@hookimpl``
+    functions by hand registers the same way."""
+
+    @hookimpl
+    def baseparams_readers() -> list[Reader]:
+        return [reader]
+
+    @hookimpl
+    def baseparams_writers() -> list[Writer]:
+        return [writer]
+
+    return baseparams_readers, baseparams_writers
