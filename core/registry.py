@@ -1,10 +1,10 @@
 """The plugin manager: loads every ``baseparams`` entry point and answers registry questions.
 
 Every hook is called through pluggy's hook callers (``pm.hook.<name>``), never by calling
-an implementation's function: pluggy's argument checks, ordering and wrappers apply. List
-hooks are called one plugin at a time (``pm.subset_hook_caller``, the same caller restricted
-to that plugin) so that each item keeps the distribution that provides it, which
-``baseparams plugins`` reports.
+an implementation's function: pluggy's argument checks and hook wrappers apply. List hooks
+are called once per answering plugin (``pm.subset_hook_caller`` without the other
+answering plugins; wrappers stay) so that each item keeps the distribution that provides
+it, which ``baseparams plugins`` reports.
 """
 
 from __future__ import annotations
@@ -78,9 +78,12 @@ def _collect(hook_name: str) -> tuple[Registered[Any], ...]:
     registration order, each with its distribution."""
     pm = plugin_manager()
     found: list[Registered[Any]] = []
-    for impl in getattr(pm.hook, hook_name).get_hookimpls():
-        others = [p for p in pm.get_plugins() if p is not impl.plugin]
-        dist = _distribution_of(pm, impl.plugin)
+    impls = getattr(pm.hook, hook_name).get_hookimpls()
+    answering = [impl.plugin for impl in impls if not (impl.wrapper or impl.hookwrapper)]
+    for plugin in answering:
+        # the hook restricted to this plugin's answer (wrappers still wrap it)
+        others = [p for p in answering if p is not plugin]
+        dist = _distribution_of(pm, plugin)
         for answer in pm.subset_hook_caller(hook_name, remove_plugins=others)():
             found.extend(Registered(item, dist) for item in answer or [])
     return tuple(found)
