@@ -60,7 +60,7 @@ def float64_bytes(mechanism: Mechanism, samples: int) -> int:
     copies, the constant the per-sample scalars."""
     n = len(mechanism.coordinates)
     f = len(mechanism.independent) or n
-    p = len(mechanism.parameters) + 4 * len(getattr(mechanism, "effects", ()))
+    p = len(mechanism.parameters) + 4 * len(mechanism.effects)
     return int(samples) * 8 * (400 + 2 * n * p + 8 * f * p)
 
 

@@ -52,7 +52,7 @@ def _kind(mechanism: Mechanism, name: str) -> str:
 
 def urdf_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
     """{coordinate: {"velocity": v, "effort": e}} from the URDF the mechanism was read from."""
-    path = getattr(mechanism, "path", None)
+    path = mechanism.path
     if not path or not str(path).lower().endswith(".urdf"):
         return {}
     try:

@@ -88,13 +88,13 @@ def mechanism_toml(mech: Mechanism) -> str:
         q = ", ".join(f"{name} = {_expr(e)}" for name, e in spec.expressions.items())
         out += ["", "[trajectory]", f"t_start = {_string(exact_text(spec.t_start))}",
                 f"t_end = {_string(exact_text(spec.t_end))}", f"samples = {spec.samples}", f"q = {{ {q} }}"]
-    for c in getattr(mech, "couplings", ()):
+    for c in mech.couplings:
         out += ["", "[[couplings]]", f"coordinate = {_string(c.coordinate)}", f"leader = {_string(c.leader)}",
                 f"ratio = {_string(exact_text(c.ratio))}", f"offset = {_string(exact_text(c.offset))}"]
-    for motor in getattr(mech, "motors", ()):
+    for motor in mech.motors:
         ratios = ", ".join(f"{c} = {_string(exact_text(r))}" for c, r in motor.ratios)
         out += ["", "[[motors]]", f"name = {_string(motor.name)}", f"ratios = {{ {ratios} }}"]
-    for effect in getattr(mech, "effects", ()):
+    for effect in mech.effects:
         out += ["", "[[effects]]", f"kind = {_string(effect.kind)}", f"coordinate = {_string(effect.coordinate)}"]
         if effect.values:
             values = ", ".join(f"{k} = {_string(exact_text(v))}" for k, v in effect.values.items())
