@@ -16,7 +16,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 from fractions import Fraction
 from pathlib import Path
 
@@ -194,9 +194,10 @@ class Plan:
 
 class StartRunner(Protocol):
     """What runs the starts: ``validate``'s runners (in process, processes, Dask), which run
-    any picklable job with a ``run()`` (orchestrate's ``Runner`` is typed for solver jobs)."""
+    any picklable job with a ``run()`` (orchestrate's ``Runner`` types its jobs as solver
+    jobs; ``Any`` here lets a ``Runner`` be passed)."""
 
-    def run(self, jobs: Sequence[ExciteJob], timeout: float | None = None,
+    def run(self, jobs: Sequence[Any], timeout: float | None = None,
             progress: Progress | None = None) -> list[Outcome]: ...
 
 
