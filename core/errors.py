@@ -1,5 +1,7 @@
 """Errors that carry what a user needs to fix their input: file, key path, reason."""
 
+import os
+
 
 class BaseparamsError(Exception):
     """Base class of all errors baseparams raises on purpose."""
@@ -8,14 +10,14 @@ class BaseparamsError(Exception):
 class InputError(BaseparamsError):
     """Bad user input (a mechanism file, an option, a data file): exit code 2 in the CLI."""
 
-    def __init__(self, reason, file=None, key=None):
+    def __init__(self, reason: str, file: str | os.PathLike[str] | None = None, key: str | None = None) -> None:
         self.reason = reason
         self.file = None if file is None else str(file)
         self.key = key
         super().__init__(self.message)
 
     @property
-    def message(self):
+    def message(self) -> str:
         where = []
         if self.file:
             where.append(self.file)

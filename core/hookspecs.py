@@ -5,14 +5,26 @@ through these same hooks, from modules named in the ``baseparams`` entry-point g
 exactly as a third party's distribution would (see ``pyproject.toml``).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import pluggy
+
+if TYPE_CHECKING:       # annotations only: the registry imports this module
+    from baseparams.dynamics.effects import EffectKind
+    from baseparams.io.formats import Reader, Writer
+    from baseparams.model.joints import JointType
+    from baseparams.model.multipoles import TransferRule
+    from baseparams.registry import MechanismSource
+    from baseparams.solvers.protocol import Solver
 
 hookspec = pluggy.HookspecMarker("baseparams")
 hookimpl = pluggy.HookimplMarker("baseparams")
 
 
 @hookspec
-def baseparams_joint_types():
+def baseparams_joint_types() -> list[JointType]:
     """Return a list of :class:`baseparams.model.joints.JointType` this plugin provides.
 
     A joint type supplies its coordinates (count, names, kinds), its motion (from which the
@@ -22,7 +34,7 @@ def baseparams_joint_types():
 
 
 @hookspec(firstresult=True)
-def baseparams_transfer_rules(joint_type):
+def baseparams_transfer_rules(joint_type: str) -> list[TransferRule] | None:
     """Return the multipole-transfer rules of the joint type named ``joint_type``.
 
     ``joint_type``: the type's name (``"R"``). Return a list of
@@ -34,25 +46,27 @@ def baseparams_transfer_rules(joint_type):
 
 
 @hookspec
-def baseparams_readers():
-    """Return a list of mechanism readers: objects with ``name`` (``"toml"``), ``suffixes``
-    (lower-case, with the dot: ``(".toml",)``) and ``read(path)`` returning a
-    :class:`baseparams.model.mechanism.Mechanism`.
+def baseparams_readers() -> list[Reader]:
+    """Return a list of mechanism readers, :class:`baseparams.io.formats.Reader`: ``name``
+    (``"toml"``), ``suffixes`` (lower-case, with the dot: ``(".toml",)``), ``options``,
+    ``read(path, **options)`` returning a :class:`baseparams.model.mechanism.Mechanism` and
+    ``read_notes(path, **options)`` returning it with notes.
 
     A reader walks its format and builds the mechanism with
     :class:`baseparams.model.builder.MechanismBuilder`, passing each value's key path in
     its format so errors name it; it raises :class:`baseparams.errors.InputError` for a bad
     file. A mechanism file given by path is read by the reader of its suffix; two readers
-    may not claim the same suffix. Optional: ``options`` (names of keyword options ``read``
-    accepts, which ``baseparams convert`` offers as flags: ``merge_fixed``, ``floating_base``)
-    and ``read_notes(path, **options)`` returning ``(mechanism, notes)`` (``convert`` prints
-    the notes).
+    may not claim the same suffix. ``options`` names the keyword options ``read`` accepts,
+    which ``baseparams convert`` offers as flags (``merge_fixed``, ``floating_base``);
+    ``convert`` prints the notes of ``read_notes``. A reader with only ``name``, ``suffixes``
+    and ``read(path)`` is accepted too: the registry completes it with no options and no
+    notes (:func:`baseparams.io.formats.complete_reader`).
     """
 
 
 @hookspec
-def baseparams_writers():
-    """Return a list of mechanism writers: objects with ``name`` (``"urdf"``), ``suffixes``
+def baseparams_writers() -> list[Writer]:
+    """Return a list of mechanism writers, :class:`baseparams.io.formats.Writer`: ``name`` (``"urdf"``), ``suffixes``
     (lower-case, with the dot) and ``write(mechanism, path)``, which writes the mechanism
     in their format (``baseparams convert``) and returns a list of notes (what the format
     could not hold, what was approximated). A bad request is an
@@ -61,12 +75,12 @@ def baseparams_writers():
 
 
 @hookspec
-def baseparams_mechanisms():
+def baseparams_mechanisms() -> list[MechanismSource]:
     """Return a list of :class:`baseparams.registry.MechanismSource` (name + TOML file)."""
 
 
 @hookspec
-def baseparams_solvers():
+def baseparams_solvers() -> list[Solver]:
     """Return a list of solvers, each satisfying :class:`baseparams.solvers.protocol.Solver`:
     ``name``, ``description``, ``capabilities`` (a ``Capabilities``), ``options`` (a tuple of
     ``SolverOption``: every keyword ``solve`` accepts), ``applicable(mechanism)`` (None, or
@@ -77,8 +91,10 @@ def baseparams_solvers():
 
 
 @hookspec
-def baseparams_effects():
-    """Return a list of :class:`baseparams.dynamics.effects.Effect` (friction, spring, offset ...):
-    ``name``, ``description``, ``coefficients`` and ``columns(q, qd, qdd, **options)``, the
-    extra regressor columns (one per coefficient) of a force linear in its coefficients,
-    evaluated on one joint coordinate's samples."""
+def baseparams_effects() -> list[EffectKind]:
+    """Return a list of effect kinds (friction, spring, offset ...) satisfying
+    :class:`baseparams.dynamics.effects.EffectKind`, usually
+    :class:`baseparams.dynamics.effects.Effect` objects: ``name``, ``description``,
+    ``coefficients`` and ``columns(q, qd, qdd, **options)``, the extra regressor columns
+    (one per coefficient) of a force linear in its coefficients, evaluated on one joint
+    coordinate's samples."""

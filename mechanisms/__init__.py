@@ -13,5 +13,5 @@ HERE = Path(__file__).resolve().parent
 
 
 @hookimpl
-def baseparams_mechanisms():
+def baseparams_mechanisms() -> list[MechanismSource]:
     return [MechanismSource(path.stem, path) for path in sorted(HERE.glob("*.toml"))]

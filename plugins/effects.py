@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from baseparams.dynamics.effects import Effect, Shape
+from baseparams.dynamics.effects import Effect, EffectKind, FloatArray, Shape
 from baseparams.hookspecs import hookimpl
 
 # Transition speeds diagnosis tries, as multiples of the coordinate's RMS speed (0: sign).
@@ -10,12 +10,12 @@ COULOMB_GRID = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
 STRIBECK_GRID = (0.01, 0.03, 0.1, 0.3)
 
 
-def _coulomb(q, qd, qdd, vs=0.0):
+def _coulomb(q: FloatArray, qd: FloatArray, qdd: FloatArray, vs: float = 0.0) -> list[FloatArray]:
     """sign(qd), or tanh(qd / vs) with a transition speed vs > 0 (a smooth Coulomb law)."""
     return [np.tanh(qd / vs) if vs > 0 else np.sign(qd)]
 
 
-def _stribeck(q, qd, qdd, vs=0.01):
+def _stribeck(q: FloatArray, qd: FloatArray, qdd: FloatArray, vs: float = 0.01) -> list[FloatArray]:
     """Stribeck bump sign(qd) exp(-(qd/vs)^2): linear in its coefficient at a given vs."""
     return [np.sign(qd) * np.exp(-(qd / vs) ** 2)]
 
@@ -45,5 +45,5 @@ EFFECTS = [
 
 
 @hookimpl
-def baseparams_effects():
+def baseparams_effects() -> list[EffectKind]:
     return list(EFFECTS)

@@ -46,7 +46,7 @@ FREE = JointType(
 # Multipoles that may cross each joint (joint-frame coordinates).
 ORIGIN = (0, 0, 0)
 Z = (0, 0, 1)
-RULES = {
+RULES: dict[str, tuple[TransferRule, ...]] = {
     # Points of the z axis share velocity: mass at the origin and a dipole along z (cond. 1, 2);
     # the bodies' angular velocities differ along z: the axisymmetric quadrupole (cond. 5).
     "R": (TransferRule("monopole", ORIGIN, None, 1), TransferRule("dipole", ORIGIN, Z, 2),
@@ -69,11 +69,11 @@ RULES = {
 
 
 @hookimpl
-def baseparams_joint_types():
+def baseparams_joint_types() -> list[JointType]:
     return [REVOLUTE, PRISMATIC, SPHERICAL, UNIVERSAL, FIXED, FREE]
 
 
 @hookimpl
-def baseparams_transfer_rules(joint_type):
+def baseparams_transfer_rules(joint_type: str) -> list[TransferRule] | None:
     rules = RULES.get(joint_type)
     return None if rules is None else list(rules)

@@ -1,15 +1,7 @@
-"""Built-in mechanism-file readers and writers (TOML), registered like any third party's."""
+"""Built-in mechanism-file reader and writer (TOML), registered like any third party's."""
 
-from baseparams.hookspecs import hookimpl
+from baseparams.io.formats import format_hooks
 from baseparams.io.toml_reader import TomlReader
 from baseparams.io.toml_writer import TomlWriter
 
-
-@hookimpl
-def baseparams_readers():
-    return [TomlReader()]
-
-
-@hookimpl
-def baseparams_writers():
-    return [TomlWriter()]
+baseparams_readers, baseparams_writers = format_hooks(TomlReader(), TomlWriter())

@@ -21,6 +21,7 @@ from baseparams.dynamics.trajectory import observation_matrix
 from baseparams.dynamics.transfers import transfer_generators
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
+from baseparams.io.formats import Reader
 from baseparams.io.loader import check_mobility, load_mechanism, parse_mechanism, readers_by_suffix, resolve
 from baseparams.model import generate
 from baseparams.model.builder import MechanismBuilder, name_problem
@@ -236,6 +237,39 @@ def test_a_reader_registered_at_run_time_is_used_by_suffix(registered, tmp_path)
     with pytest.raises(InputError) as info:
         resolve(str(path))
     assert info.value.message == f"{path}: line 2: unknown key 'colour'"
+
+
+def test_a_reader_with_only_read_is_completed_to_the_reader_protocol(registered, tmp_path):
+    """The hook's minimum (name, suffixes, read) reaches every caller as a full Reader."""
+    registered(PendPlugin())
+    reader = registry.readers()["pend"].item
+    assert isinstance(reader, Reader) and reader.options == () and reader.suffixes == (".pend",)
+    assert registry.readers()["toml"].item.options == ()
+    path = tmp_path / "toy.pend"
+    path.write_text("length 0.8\nmass 2\n")
+    mech, notes = reader.read_notes(path)
+    assert notes == [] and mech.geometry == {"L": Fraction(4, 5)}
+
+
+class EffectsWrapper:
+    """A hook wrapper on the effects hook: it sees every answer the registry collects."""
+
+    def __init__(self):
+        self.seen = []
+
+    @hookimpl(wrapper=True)
+    def baseparams_effects(self):
+        answers = yield
+        self.seen += [effect.name for answer in answers for effect in answer]
+        return answers
+
+
+def test_the_registry_calls_hooks_through_pluggy_so_wrappers_apply(registered):
+    wrapper = EffectsWrapper()
+    registered(wrapper)
+    effects = registry.effects()
+    assert sorted(wrapper.seen) == sorted(effects) and "viscous_friction" in effects
+    assert {reg.distribution for reg in effects.values()} == {"baseparams"}      # the wrapper answers nothing
 
 
 def test_unknown_suffix_and_missing_file(tmp_path):

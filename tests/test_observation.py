@@ -100,6 +100,18 @@ def test_vectorised_float64_equals_state_after_state():
     assert np.allclose(W, one_by_one, rtol=1e-12, atol=1e-12 * np.abs(W).max())
 
 
+@pytest.mark.parametrize("name", ["four_bar", "planar_2r"])
+def test_a_subsets_float64_sample_is_the_sources_at_its_states(name):
+    """Subset.float64_sample (the States protocol) against the whole source's rows."""
+    mech = resolve(name)
+    trajectory = Trajectory.default(mech, samples=12)
+    picked = (1, 4, 9)
+    whole = trajectory.float64_sample(mech).regressor_array()
+    some = observation.Subset(trajectory, picked).float64_sample(mech).regressor_array()
+    assert some.shape == (3,) + whole.shape[1:]
+    assert np.allclose(some, whole[list(picked)], rtol=1e-12, atol=1e-12 * np.abs(whole).max())
+
+
 def test_trajectory_and_batch_rows_stack_alike_in_every_arithmetic():
     mech = resolve("four_bar")
     trajectory = Trajectory.default(mech, samples=6)

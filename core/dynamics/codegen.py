@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import functools
 import math
-from fractions import Fraction
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import sympy
@@ -32,7 +34,15 @@ from flint import arb
 
 from baseparams.dynamics.regressor import generic_tree_regressor, tree_regressor as tree_regressor_rows_generic
 from baseparams.kinematics.tree import TreeKinematics
-from baseparams.numeric.backends import Arb, Exact, Float64, Symbolic
+from baseparams.numeric.backends import Arb, Backend, Exact, Float64, Symbolic
+
+if TYPE_CHECKING:
+    from baseparams.dynamics.evaluator import ClosureStructure
+    from baseparams.kinematics.tree import BodyState
+    from baseparams.model.mechanism import Mechanism
+    from baseparams.solvers.result import BaseParameterResult
+
+Operand = int | tuple[str, Any] | None     # a node id, ("c", exact constant) or ("i", input name)
 
 CHUNK = 8192          # samples per pass of the numpy code at most, ...
 BUDGET = 2 ** 26      # ... its buffers and temporaries within 64 MB (fewer samples per pass on a big mechanism)
@@ -43,13 +53,13 @@ class Graph:
     """Recorded operations: node i is ``ops[i] = (op, a, b)``; an operand is a node id (int)
     or ``("c", value)``, an exact constant (sympy number or int) of the geometry."""
 
-    def __init__(self):
-        self.ops: list[tuple] = []
-        self._memo: dict[tuple, Sym] = {}
+    def __init__(self) -> None:
+        self.ops: list[tuple[Any, ...]] = []
+        self._memo: dict[tuple[Any, ...], Sym] = {}
 
-    def node(self, op, a=None, b=None):
+    def node(self, op: str, a: Any = None, b: Any = None) -> Sym:
         x, y = _operand(a), _operand(b)
-        if op in ("add", "mul") and (isinstance(x, tuple) or (isinstance(y, int) and y < x)):
+        if op in ("add", "mul") and (isinstance(x, tuple) or (isinstance(y, int) and isinstance(x, int) and y < x)):
             x, y = y, x                       # commutative: one node for a+b and b+a, node first
         key = (op, x, y)
         found = self._memo.get(key)
@@ -59,21 +69,21 @@ class Graph:
             self._memo[key] = found
         return found
 
-    def input(self, name):
+    def input(self, name: tuple[str, int]) -> Sym:
         return self.node("in", ("i", name))
 
 
-def _operand(v):
+def _operand(v: Any) -> Operand:
     if v is None or isinstance(v, tuple):
         return v
     return v.index if isinstance(v, Sym) else ("c", sympy.sympify(v))
 
 
-def _const(v):
+def _const(v: Any) -> bool:
     return not isinstance(v, Sym)
 
 
-def _negated(v):
+def _negated(v: Any) -> Sym | None:
     """The x of ``v = -x`` (a traced negation), else None: negations fold into + and -."""
     if isinstance(v, Sym):
         op = v.graph.ops[v.index]
@@ -82,11 +92,11 @@ def _negated(v):
     return None
 
 
-def _graph(a, b):
+def _graph(a: Any, b: Any) -> Graph:
     return (a if isinstance(a, Sym) else b).graph
 
 
-def _add(a, b):
+def _add(a: Any, b: Any) -> Any:
     if _const(a) and _const(b):
         return a + b
     if _const(a) and a == 0:
@@ -100,7 +110,7 @@ def _add(a, b):
     return _graph(a, b).node("add", a, b)
 
 
-def _sub(a, b):
+def _sub(a: Any, b: Any) -> Any:
     if _const(a) and _const(b):
         return a - b
     if _const(b) and b == 0:
@@ -112,7 +122,7 @@ def _sub(a, b):
     return _graph(a, b).node("sub", a, b)
 
 
-def _mul(a, b):
+def _mul(a: Any, b: Any) -> Any:
     if _const(a) and _const(b):
         return a * b
     if _const(a):
@@ -132,7 +142,7 @@ def _mul(a, b):
     return a.graph.node("mul", a, b)
 
 
-def _div(a, b):
+def _div(a: Any, b: Any) -> Any:
     if _const(a) and _const(b):
         return a / b
     if _const(b) and b == 1:
@@ -142,7 +152,7 @@ def _div(a, b):
     return _graph(a, b).node("div", a, b)
 
 
-def _neg(a):
+def _neg(a: Any) -> Any:
     if _const(a):
         return -a
     if _negated(a) is not None:
@@ -150,45 +160,34 @@ def _neg(a):
     return a.graph.node("neg", a)
 
 
+def _reflected(op: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+    """``other op self`` as a method of ``self`` (Python's reflected operators)."""
+    return lambda self, other: op(other, self)
+
+
 class Sym:
     """A traced value: arithmetic records a node of its :class:`Graph`."""
 
     __slots__ = ("graph", "index")
 
-    def __init__(self, graph, index):
+    def __init__(self, graph: Graph, index: int) -> None:
         self.graph = graph
         self.index = index
 
-    __add__ = _add
-
-    def __radd__(self, other):
-        return _add(other, self)
-
-    __sub__ = _sub
-
-    def __rsub__(self, other):
-        return _sub(other, self)
-
-    __mul__ = _mul
-
-    def __rmul__(self, other):
-        return _mul(other, self)
-
-    __truediv__ = _div
-
-    def __rtruediv__(self, other):
-        return _div(other, self)
-
+    __add__, __radd__ = _add, _reflected(_add)
+    __sub__, __rsub__ = _sub, _reflected(_sub)
+    __mul__, __rmul__ = _mul, _reflected(_mul)
+    __truediv__, __rtruediv__ = _div, _reflected(_div)
     __neg__ = _neg
 
-    def __pos__(self):
+    def __pos__(self) -> Sym:
         return self
 
-    def cos(self):
+    def cos(self) -> Any:
         inner = _negated(self)
         return self.graph.node("cos", self if inner is None else inner)
 
-    def sin(self):
+    def sin(self) -> Any:
         inner = _negated(self)
         return self.graph.node("sin", self) if inner is None else _neg(self.graph.node("sin", inner))
 
@@ -197,7 +196,7 @@ class _Tracing(Symbolic):
     """Exact sympy geometry (so a constant is exact in every arithmetic the code runs in);
     angles are traced."""
 
-    def cos_sin(self, x):
+    def cos_sin(self, x: Any) -> tuple[Any, Any]:
         if isinstance(x, Sym):
             return x.cos(), x.sin()
         return super().cos_sin(x)
@@ -209,14 +208,14 @@ class Kernel:
     """One generated function: its inputs (subsets of q, qd, qdd) and the arrays it fills,
     each ``name -> (trailing shape, [(index, traced value)])``."""
     name: str
-    inputs: tuple
-    outputs: dict
+    inputs: tuple[str, ...]
+    outputs: dict[str, tuple[tuple[int, ...], list[tuple[tuple[int, ...], Any]]]]
 
 
 PARTS = ("regressor", "closure")   # what can be generated: K_tree; the loop-closure terms
 
 
-def trace(mechanism, parts=PARTS) -> tuple[Graph, list[Kernel]]:
+def trace(mechanism: Mechanism, parts: Sequence[str] = PARTS) -> tuple[Graph, list[Kernel]]:
     """Run the generic tree regressor (``"regressor"``) and, for a closed loop, the closure
     equations with their Jacobian and bias (``"closure"``, :meth:`TreeKinematics.closure`)
     of ``mechanism`` on tracing numbers: the graph and the kernels to write from it."""
@@ -225,7 +224,7 @@ def trace(mechanism, parts=PARTS) -> tuple[Graph, list[Kernel]]:
     n = kin.n
     q, qd, qdd = ([g.input((name, i)) for i in range(n)] for name in ("q", "qd", "qdd"))
     states = kin.forward(q, qd)
-    kernels = []
+    kernels: list[Kernel] = []
     if "regressor" in parts:
         rows = generic_tree_regressor(kin, states, qdd)
         p = 10 * len(mechanism.body_labels)
@@ -254,16 +253,18 @@ class Layout:
     array of trailing ``shape``) is row j of the buffer the kernel fills, computed by node
     ``nodes[j]``; ``constants`` are (flat index, exact value) pairs, the same for every
     sample; every other entry is exactly zero."""
-    shape: tuple
-    slots: tuple
-    nodes: tuple
-    constants: tuple
+    shape: tuple[int, ...]
+    slots: tuple[int, ...]
+    nodes: tuple[int, ...]
+    constants: tuple[tuple[int, Any], ...]
 
 
 def layouts(kernel: Kernel) -> dict[str, Layout]:
-    out = {}
+    out: dict[str, Layout] = {}
     for name, (shape, entries) in kernel.outputs.items():
-        slots, nodes, constants = [], [], []
+        slots: list[int] = []
+        nodes: list[int] = []
+        constants: list[tuple[int, Any]] = []
         for index, v in entries:
             flat = int(np.ravel_multi_index(index, shape))
             if isinstance(v, Sym):
@@ -278,10 +279,10 @@ def layouts(kernel: Kernel) -> dict[str, Layout]:
 @dataclass
 class Constants:
     """The exact constants the kernels of one module read, numbered in order of use."""
-    values: list = field(default_factory=list)
-    _index: dict = field(default_factory=dict)
+    values: list[Any] = field(default_factory=list)
+    _index: dict[Any, int] = field(default_factory=dict)
 
-    def ref(self, value) -> str:
+    def ref(self, value: Any) -> str:
         k = self._index.get(value)
         if k is None:
             k = self._index[value] = len(self.values)
@@ -302,17 +303,11 @@ def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bo
     reader has run, so a long chain does not keep every temporary alive."""
     if not scalar:
         return _numpy_kernel(graph, kernel, constants)[0]
-    ops = graph.ops
-    writes, live, last = _liveness(graph, kernel)
     lines = [f"def {kernel.name}({', '.join(kernel.inputs + ('C', 'F') + tuple(kernel.outputs))}):"]
     free: list[str] = []
     reg: dict[int, str] = {}
     count = 0
-    for i, op in enumerate(ops):
-        if not live[i]:
-            continue
-        kind, a, b = op
-        rows = [f"{name}[{row}]" for name, row in writes.get(i, [])]
+    for i, (kind, a, b), rows, ends, read_later in _schedule(graph, kernel, lambda name, row: f"{name}[{row}]"):
         if kind == "in":
             expr = f"{a[1][0]}[{a[1][1]}]"
         else:
@@ -324,9 +319,8 @@ def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bo
                 expr = f"-{ra}"
             else:
                 expr = f"F[{('cos', 'sin').index(kind)}]({ra})"
-            for x in set(_operands(op)):
-                if last[x] == i:
-                    free.append(reg.pop(x))
+            for x in ends:
+                free.append(reg.pop(x))
         if free:
             target = free.pop()
         else:
@@ -334,18 +328,18 @@ def kernel_source(graph: Graph, kernel: Kernel, constants: Constants, scalar: bo
         reg[i] = target
         lines.append(f"    {target} = {expr}")
         lines.extend(f"    {row} = {target}" for row in rows)
-        if i not in last:
+        if not read_later:
             free.append(reg.pop(i))
     if len(lines) == 1:
         lines.append("    pass")
     return "\n".join(lines) + "\n"
 
 
-def _liveness(graph: Graph, kernel: Kernel):
+def _liveness(graph: Graph, kernel: Kernel) -> tuple[dict[int, list[tuple[str, int]]], list[bool], dict[int, int]]:
     """Which buffer rows each node fills (``node -> [(buffer, row)]``), which nodes an
     output needs, and each needed node's last reader."""
     ops = graph.ops
-    writes: dict[int, list] = {}
+    writes: dict[int, list[tuple[str, int]]] = {}
     for name, layout in layouts(kernel).items():
         for row, node in enumerate(layout.nodes):
             writes.setdefault(node, []).append((name, row))
@@ -357,7 +351,7 @@ def _liveness(graph: Graph, kernel: Kernel):
             continue
         live[i] = True
         stack.extend(x for x in _operands(ops[i]) if not live[x])
-    last = {}
+    last: dict[int, int] = {}
     for i, op in enumerate(ops):
         if live[i]:
             for x in _operands(op):
@@ -384,25 +378,19 @@ def _numpy_kernel(graph: Graph, kernel: Kernel, constants: Constants) -> tuple[s
     since most operands must be gathered (a copy per row, as dear as the call it saves);
     writing the outputs straight into the samples-first result
     (strided rows) gained 1-13% up to 1 000 samples and lost 1.3-1.6x beyond."""
-    ops = graph.ops
-    writes, live, last = _liveness(graph, kernel)
     body: list[str] = []
     free: list[str] = []
     loc: dict[int, str] = {}
     work = 0
-    for i, op in enumerate(ops):
-        if not live[i]:
-            continue
-        kind, a, b = op
-        rows = [f"{name}_{row}" for name, row in writes.get(i, [])]
+    for i, (kind, a, b), rows, ends, read_later in _schedule(graph, kernel, lambda name, row: f"{name}_{row}"):
         if kind == "in":
             loc[i] = f"i{i}"
             body.append(f"    i{i} = {a[1][0]}[{a[1][1]}]")
             target = loc[i]
         else:
             args = [loc[x] if isinstance(x, int) else constants.ref(x[1]) for x in (a, b) if x is not None]
-            for x in set(_operands(op)):
-                if last[x] == i and loc[x].startswith("w"):
+            for x in ends:
+                if loc[x].startswith("w"):
                     free.append(loc[x])
             if rows:
                 target, rows = rows[0], rows[1:]
@@ -414,7 +402,7 @@ def _numpy_kernel(graph: Graph, kernel: Kernel, constants: Constants) -> tuple[s
             name = _BINARY[kind][1] if kind in _BINARY else _UNARY[kind]
             body.append(f"    _{name}({', '.join(args)}, {target})")
         body.extend(f"    {row}[...] = {target}" for row in rows)
-        if i not in last and target.startswith("w"):
+        if not read_later and target.startswith("w"):
             free.append(target)
     head = [f"def {kernel.name}({', '.join(kernel.inputs + ('C',) + tuple(kernel.outputs) + ('W',))}):"]
     for name, layout in layouts(kernel).items():
@@ -429,11 +417,23 @@ def _numpy_kernel(graph: Graph, kernel: Kernel, constants: Constants) -> tuple[s
     return "\n".join(lines) + "\n", work
 
 
-def _operands(op):
+def _schedule(graph: Graph, kernel: Kernel, row_name: Callable[[str, int], str],
+              ) -> Iterator[tuple[int, tuple[Any, ...], list[str], list[int], bool]]:
+    """The nodes an output of ``kernel`` needs, in order, for both code flavours: (node,
+    its op, the output rows it fills as ``row_name`` writes them, the operands it is the
+    last reader of, whether a later node reads it)."""
+    writes, live, last = _liveness(graph, kernel)
+    for i, op in enumerate(graph.ops):
+        if live[i]:
+            ends = [x for x in set(_operands(op)) if last[x] == i]
+            yield i, op, [row_name(name, row) for name, row in writes.get(i, [])], ends, i in last
+
+
+def _operands(op: tuple[Any, ...]) -> list[int]:
     return [x for x in op[1:] if isinstance(x, int)] if op[0] != "in" else []
 
 
-def _float_literal(value) -> str:
+def _float_literal(value: Any) -> str:
     v = float(sympy.N(value, 30))
     if not math.isfinite(v):
         raise ValueError(f"non-finite constant {value} in the traced code")
@@ -535,7 +535,7 @@ def projection(q):
 '''
 
 
-def module_source(mechanism, parts=PARTS, header: str = "", extra: str = "") -> str:
+def module_source(mechanism: Mechanism, parts: Sequence[str] = PARTS, header: str = "", extra: str = "") -> str:
     """The standalone module (numpy only) of ``mechanism``'s float64 ``parts``: constants,
     the generated kernels, ``tree_regressor`` and, for a closed loop, ``closure``,
     ``closure_bias`` and ``projection``. ``header`` opens the module docstring; ``extra``
@@ -573,7 +573,7 @@ def module_source(mechanism, parts=PARTS, header: str = "", extra: str = "") -> 
     return "\n".join(text) + "\n"
 
 
-def _structure(mechanism):
+def _structure(mechanism: Mechanism) -> ClosureStructure:
     # the evaluator's choice of independent coordinates and closure equations; imported
     # here, not at the top, because the evaluator imports this module
     from baseparams.dynamics.evaluator import closure_structure
@@ -585,18 +585,18 @@ def _structure(mechanism):
 # thousand samples (0.1 s for a 6R arm, 6 s for a 48-body chain), so the float64 paths use
 # the generated code once it is compiled or when the batch is large enough to pay for it.
 GENERATE_AT = {"regressor": 2000, "closure": 50}   # samples
-_CACHE: dict = {}
+_CACHE: dict[tuple[Mechanism, str], dict[str, Any]] = {}
 _CACHE_SIZE = 32
 
 
 @functools.lru_cache(maxsize=_CACHE_SIZE)
-def _traced(mechanism, parts: tuple) -> tuple[Graph, list[Kernel]]:
+def _traced(mechanism: Mechanism, parts: tuple[str, ...]) -> tuple[Graph, list[Kernel]]:
     """:func:`trace`, once per mechanism and parts: the numpy and the scalar (arb, one
     float64 state) code of a closed loop are written from the same graph (0.2 s on the SLA)."""
     return trace(mechanism, parts)
 
 
-def compiled(mechanism, part: str) -> dict:
+def compiled(mechanism: Mechanism, part: str) -> dict[str, Any]:
     """The generated module of one of ``mechanism``'s ``PARTS``, executed once and cached."""
     key = (mechanism, part)
     namespace = _CACHE.get(key)
@@ -610,7 +610,7 @@ def compiled(mechanism, part: str) -> dict:
     return namespace
 
 
-def worthwhile(mechanism, part: str, values) -> bool:
+def worthwhile(mechanism: Mechanism, part: str, values: Sequence[Any]) -> bool:
     """Should a float64 batch (``values``: per-coordinate scalars or arrays) run the
     generated code? Yes once it is compiled, or for at least ``GENERATE_AT[part]`` samples."""
     if (mechanism, part) in _CACHE:
@@ -619,14 +619,14 @@ def worthwhile(mechanism, part: str, values) -> bool:
     return int(np.prod(shape, dtype=int)) >= GENERATE_AT[part]
 
 
-def tree_regressor(mechanism, q, qd, qdd) -> np.ndarray:
+def tree_regressor(mechanism: Mechanism, q: Sequence[Any], qd: Sequence[Any], qdd: Sequence[Any]) -> np.ndarray:
     """K of the tree coordinates (..., n, p) from lists (one entry per coordinate) of
     float64 scalars or arrays of samples, as :class:`~baseparams.dynamics.evaluator.Sample`
     holds them: the generated equivalent of :func:`~.regressor.tree_regressor_array`."""
     return _run(mechanism, "regressor", "_tree_regressor", (q, qd, qdd))[0]
 
 
-def closure(mechanism, q) -> tuple[list, list]:
+def closure(mechanism: Mechanism, q: Sequence[Any]) -> tuple[list[Any], list[list[Any]]]:
     """Closure values and Jacobian rows as :meth:`TreeKinematics.closure` gives them (lists
     of per-sample arrays), from per-coordinate values ``q``."""
     phi, jac = _run(mechanism, "closure", "_closure", (q,))
@@ -634,7 +634,7 @@ def closure(mechanism, q) -> tuple[list, list]:
     return [phi[..., i] for i in range(m)], [[jac[..., i, j] for j in range(n)] for i in range(m)]
 
 
-def closure_arrays(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def closure_arrays(mechanism: Mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closure values (samples, m) and Jacobian (samples, m, n) at tree coordinates ``q``
     given as one (n, samples) array: the batched Newton's form, without per-coordinate lists."""
     module = compiled(mechanism, "closure")
@@ -642,13 +642,13 @@ def closure_arrays(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return phi, jac
 
 
-def closure_bias(mechanism, q, qd) -> list:
+def closure_bias(mechanism: Mechanism, q: Sequence[Any], qd: Sequence[Any]) -> list[np.ndarray]:
     """The closure bias terms (list of per-sample arrays) at positions and velocities q, qd."""
     gamma = _run(mechanism, "closure", "_closure_bias", (q, qd))[0]
     return [gamma[..., i] for i in range(gamma.shape[-1])]
 
 
-def _run(mechanism, part, kernel, groups):
+def _run(mechanism: Mechanism, part: str, kernel: str, groups: Sequence[Sequence[Any]]) -> list[np.ndarray]:
     module = compiled(mechanism, part)
     n = len(mechanism.coordinates)
     values = [np.asarray(v, dtype=float) for group in groups for v in group]
@@ -668,18 +668,19 @@ def _run(mechanism, part, kernel, groups):
 # One state per call, in the backend's own numbers: every operation is the backend's (a ball
 # operation in arb, so each entry's ball still contains its exact value), minus the work on
 # exact zeros and ones and the repeated subexpressions of the generic code.
-_SCALAR: dict = {}
-_SCALAR_CONSTANTS: dict = {}
+ScalarModule = tuple[dict[str, Any], dict[str, dict[str, Layout]], tuple[Any, ...]]
+_SCALAR: dict[tuple[Mechanism, str], ScalarModule] = {}
+_SCALAR_CONSTANTS: dict[tuple[Any, ...], Any] = {}
 
 
-def _scalar_module(mechanism, part):
+def _scalar_module(mechanism: Mechanism, part: str) -> ScalarModule:
     key = (mechanism, part)
     found = _SCALAR.get(key)
     if found is None:
         graph, kernels = _traced(mechanism, (part,))
         constants = Constants()
         source = "\n".join(kernel_source(graph, k, constants, scalar=True) for k in kernels)
-        namespace: dict = {}
+        namespace: dict[str, Any] = {}
         exec(compile(source, f"<baseparams generated {part}, scalar: {mechanism.name}>", "exec"), namespace)
         found = (namespace, {k.name: layouts(k) for k in kernels}, tuple(constants.values))
         if len(_SCALAR) >= _CACHE_SIZE:
@@ -688,7 +689,7 @@ def _scalar_module(mechanism, part):
     return found
 
 
-def _backend_constants(mechanism, part, backend, values):
+def _backend_constants(mechanism: Mechanism, part: str, backend: Backend, values: Sequence[Any]) -> tuple[Any, ...]:
     """The constants in ``backend`` (at its digits), computed once per precision."""
     key = (mechanism, part, backend.name, getattr(backend, "digits", None))
     found = _SCALAR_CONSTANTS.get(key)
@@ -703,7 +704,7 @@ def _backend_constants(mechanism, part, backend, values):
     return found
 
 
-def _trig(backend):
+def _trig(backend: Backend) -> tuple[Callable[[Any], Any], Callable[[Any], Any]]:
     if isinstance(backend, Arb):
         return (arb.cos, arb.sin)
     if isinstance(backend, Float64):
@@ -711,12 +712,13 @@ def _trig(backend):
     return (lambda x: backend.cos_sin(x)[0], lambda x: backend.cos_sin(x)[1])
 
 
-def _scalar_run(mechanism, part, kernel, backend, inputs) -> list:
+def _scalar_run(mechanism: Mechanism, part: str, kernel: str, backend: Backend,
+                inputs: Sequence[Sequence[Any]]) -> list[list[Any]]:
     """The outputs of one scalar kernel at one state, each a flat list in ``backend``'s numbers."""
     namespace, lays, values = _scalar_module(mechanism, part)
     constants = _backend_constants(mechanism, part, backend, values)
     outputs = lays[kernel]
-    buffers = [[None] * len(layout.slots) for layout in outputs.values()]
+    buffers: list[list[Any]] = [[None] * len(layout.slots) for layout in outputs.values()]
     namespace[kernel](*inputs, constants, _trig(backend), *buffers)
     flats = []
     for template, layout, buffer in zip(_fixed_entries(mechanism, part, kernel, backend), outputs.values(), buffers):
@@ -727,7 +729,7 @@ def _scalar_run(mechanism, part, kernel, backend, inputs) -> list:
     return flats
 
 
-def _fixed_entries(mechanism, part, kernel, backend) -> list[list]:
+def _fixed_entries(mechanism: Mechanism, part: str, kernel: str, backend: Backend) -> list[list[Any]]:
     """Per output of ``kernel``: its flat entries with the state-independent ones (exact
     zeros, constants of the geometry) in ``backend``'s numbers, computed once per precision."""
     key = (mechanism, part, kernel, backend.name, getattr(backend, "digits", None))
@@ -748,7 +750,8 @@ def _fixed_entries(mechanism, part, kernel, backend) -> list[list]:
     return found
 
 
-def scalar_tree_regressor(mechanism, backend, q, qd, qdd) -> list:
+def scalar_tree_regressor(mechanism: Mechanism, backend: Backend, q: Sequence[Any], qd: Sequence[Any],
+                          qdd: Sequence[Any]) -> list[list[Any]]:
     """K_tree at one state in ``backend``'s arithmetic (arb, rationals): n rows of 10 *
     bodies entries, as :func:`~.regressor.generic_tree_regressor` gives them. Call within
     the backend's precision."""
@@ -757,7 +760,7 @@ def scalar_tree_regressor(mechanism, backend, q, qd, qdd) -> list:
     return [flat[k * p:(k + 1) * p] for k in range(len(mechanism.coordinates))]
 
 
-def scalar_closure(mechanism, backend, q) -> tuple[list, list]:
+def scalar_closure(mechanism: Mechanism, backend: Backend, q: Sequence[Any]) -> tuple[list[Any], list[list[Any]]]:
     """Closure values and Jacobian rows at one state in ``backend``'s numbers (arb balls,
     Python floats), as :meth:`TreeKinematics.closure` gives them (about 10x faster on the
     SLA: no body states, no work on the frames' exact zeros and ones, no numpy call on one
@@ -768,14 +771,14 @@ def scalar_closure(mechanism, backend, q) -> tuple[list, list]:
     return phi, [jac[i * n:(i + 1) * n] for i in range(len(phi))]
 
 
-def scalar_closure_bias(mechanism, backend, q, qd) -> list:
+def scalar_closure_bias(mechanism: Mechanism, backend: Backend, q: Sequence[Any], qd: Sequence[Any]) -> list[Any]:
     """The closure bias terms gamma at one state (arb balls, Python floats), as
     ``TreeKinematics.closure(states, want_bias=True)`` gives them."""
     gamma, = _scalar_run(mechanism, "closure", "_closure_bias", backend, (q, qd))
     return gamma
 
 
-def regressor_columns(kin) -> list[tuple] | None:
+def regressor_columns(kin: TreeKinematics) -> list[tuple[int, ...]] | None:
     """Per row of :func:`regressor_rows`: the columns that can be nonzero (the others are
     exact zeros in every state), when the generated code gives the rows; else None."""
     if not isinstance(kin.backend, (Arb, Exact)):
@@ -784,17 +787,18 @@ def regressor_columns(kin) -> list[tuple] | None:
 
 
 @functools.lru_cache(maxsize=_CACHE_SIZE)
-def _nonzero_columns(mechanism) -> list[tuple]:
+def _nonzero_columns(mechanism: Mechanism) -> list[tuple[int, ...]]:
     _, lays, _ = _scalar_module(mechanism, "regressor")
     layout = lays["_tree_regressor"]["K"]
     n, p = layout.shape
-    columns: list[set] = [set() for _ in range(n)]
+    columns: list[set[int]] = [set() for _ in range(n)]
     for flat in list(layout.slots) + [slot for slot, _ in layout.constants]:
         columns[flat // p].add(flat % p)
     return [tuple(sorted(c)) for c in columns]
 
 
-def regressor_rows(kin, q, qd, qdd, states) -> list:
+def regressor_rows(kin: TreeKinematics, q: Sequence[Any], qd: Sequence[Any], qdd: Sequence[Any],
+                   states: Mapping[int, BodyState] | Callable[[], Mapping[int, BodyState]]) -> list[list[Any]]:
     """K_tree's rows at one state: generated code in arb and rationals, the generic
     recursion otherwise (float64 and sympy keep :func:`~.regressor.tree_regressor`).
     ``states``: the body states, or a callable giving them (read only by the generic path)."""
@@ -832,7 +836,7 @@ def base_regressor(q, qd, qdd):
 '''
 
 
-def export_source(mechanism, result) -> str:
+def export_source(mechanism: Mechanism, result: BaseParameterResult) -> str:
     """A standalone module (numpy only) with ``regressor(q, qd, qdd) -> K`` and
     ``base_regressor`` (the columns of ``result``'s base parameters), the base parameter
     expressions in its docstring and in ``BASE_PARAMETERS``."""

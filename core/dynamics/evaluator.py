@@ -9,9 +9,13 @@ regressor in the independent coordinates is ``K = R^T K_tree`` (the seed paper's
 projection onto an orthogonal complement of the constraint Jacobian).
 """
 
+from __future__ import annotations
+
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,22 +26,30 @@ from baseparams.kinematics.krawczyk import enclose
 from baseparams.dynamics.regressor import energy_forms, tree_regressor_array
 from baseparams.dynamics import codegen
 
+if TYPE_CHECKING:
+    from baseparams.kinematics.tree import BodyState
+    from baseparams.model.mechanism import Mechanism
+    from baseparams.numeric.backends import Backend
+
+Array = np.ndarray               # float64 (numpy's stubs type most results as floating[Any])
+Rows = list[list[Any]]          # a matrix by rows, entries in the backend (or float64 arrays over samples)
+
 
 @dataclass(frozen=True)
 class ClosureStructure:
-    rows: tuple          # indices of the independent closure equations
-    independent: tuple   # coordinate indices of z
-    dependent: tuple     # coordinate indices of d
+    rows: tuple[int, ...]         # indices of the independent closure equations
+    independent: tuple[int, ...]  # coordinate indices of z
+    dependent: tuple[int, ...]    # coordinate indices of d
     rank: int            # rank of the closure Jacobian
     redundant: int       # closure equations implied by the others
 
     @property
-    def dof(self):
+    def dof(self) -> int:
         return len(self.independent)
 
 
 @functools.lru_cache(maxsize=64)
-def closure_structure(mechanism):
+def closure_structure(mechanism: Mechanism) -> ClosureStructure:
     """Independent closure equations and dependent coordinates, from the Jacobian at q = 0."""
     n = len(mechanism.coordinates)
     names = list(mechanism.coordinates)
@@ -50,9 +62,8 @@ def closure_structure(mechanism):
                              f"coordinate {which}is independent ({', '.join(free)}); omit "
                              f"coordinates.independent or list them all", file=mechanism.path,
                              key="coordinates.independent")
-        indep = tuple(names.index(c) for c in mechanism.independent) if mechanism.independent else \
-            tuple(names.index(c) for c in free)
-        return ClosureStructure((), indep, tuple(followers), 0, 0)
+        given = mechanism.independent if mechanism.independent else free
+        return ClosureStructure((), tuple(names.index(c) for c in given), tuple(followers), 0, 0)
     kin = TreeKinematics(mechanism, Float64())
     _, rows, _ = kin.closure(kin.forward([0.0] * n))
     jac = np.array([[float(v) for v in row] for row in rows])
@@ -75,9 +86,10 @@ def closure_structure(mechanism):
     return ClosureStructure(tuple(chosen), tuple(indep), tuple(dep), rank, len(rows) - rank)
 
 
-def independent_rows(matrix, tol):
+def independent_rows(matrix: Array, tol: float) -> list[int]:
     """Greedy Gram-Schmidt: indices of rows independent of the earlier ones."""
-    chosen, basis = [], []
+    chosen: list[int] = []
+    basis: list[Array] = []
     for i, row in enumerate(matrix):
         r = row.astype(float).copy()
         for b in basis:
@@ -95,29 +107,29 @@ class Sample:
 
     ``states`` (the body states of the generic kinematics) may be given as None: they are
     then computed when first read (the generated float64 regressor does not need them)."""
-    q: list
-    qd: list
-    qdd: list
-    _states: dict | None
-    projection: list     # R: n rows x f columns, qd = R zd
+    q: Sequence[Any]
+    qd: Sequence[Any]
+    qdd: Sequence[Any]
+    _states: dict[int, BodyState] | None
+    projection: Rows     # R: n rows x f columns, qd = R zd
     kin: TreeKinematics
 
     @property
-    def states(self) -> dict:
+    def states(self) -> dict[int, BodyState]:
         if self._states is None:
             with self.kin.backend.activate():
                 self._states = self.kin.forward(self.q, self.qd)
         return self._states
 
     @in_backend_precision
-    def regressor(self):
+    def regressor(self) -> Rows:
         """K in the independent coordinates: f rows of 10 * bodies entries."""
         k_tree = codegen.regressor_rows(self.kin, self.q, self.qd, self.qdd, lambda: self.states)
         if not self.kin.mechanism.loops and not self.kin.mechanism.couplings:
             return k_tree
         return project(self.projection, k_tree, self.kin.zero, codegen.regressor_columns(self.kin))
 
-    def regressor_array(self):
+    def regressor_array(self) -> Array:
         """float64 only: K as an array (samples, f, 10 * bodies), without per-entry Python work."""
         mech = self.kin.mechanism
         if codegen.worthwhile(mech, "regressor", self.q):
@@ -132,25 +144,25 @@ class Sample:
         return np.einsum("...kf,...kp->...fp", r, k_tree)
 
     @in_backend_precision
-    def energies(self):
+    def energies(self) -> tuple[list[Any], list[Any]]:
         return energy_forms(self.kin, self.states)
 
 
-def _one_state(values) -> bool:
+def _one_state(values: Sequence[Any]) -> bool:
     """float64 values of one state (Python floats or numpy float64 scalars, a subclass),
     not arrays over samples."""
     return all(isinstance(v, float) for v in values)
 
 
-def project(r, k_tree, zero, columns=None):
+def project(r: Rows, k_tree: Rows, zero: Any, columns: Sequence[Sequence[int]] | None = None) -> Rows:
     """R^T K_tree. ``columns``: per row of K_tree the columns that can be nonzero; the
     others, exact zeros, are skipped (the same sums: adding an exact zero changes nothing;
     on the SLA 159 of 770 entries are not zero)."""
     f = len(r[0])
+    out: Rows = []
     if columns is not None:
-        out = []
         for j in range(f):
-            row = [None] * len(k_tree[0])
+            row: list[Any] = [None] * len(k_tree[0])
             for k, rk in enumerate(r):
                 coeff = rk[j]
                 if isinstance(coeff, int) and coeff == 0:
@@ -161,25 +173,25 @@ def project(r, k_tree, zero, columns=None):
                     row[c] = term if row[c] is None else row[c] + term
             out.append([zero if v is None else v for v in row])
         return out
-    out = []
     for j in range(f):
-        row = None
+        sums: list[Any] | None = None
         for k, rk in enumerate(r):
             coeff = rk[j]
             if isinstance(coeff, int) and coeff == 0:
                 continue
-            if row is None:
-                row = [coeff * v for v in k_tree[k]]
+            if sums is None:
+                sums = [coeff * v for v in k_tree[k]]
             else:
-                row = [a + coeff * v for a, v in zip(row, k_tree[k])]
-        out.append(row if row is not None else [zero] * len(k_tree[0]))
+                sums = [a + coeff * v for a, v in zip(sums, k_tree[k])]
+        out.append(sums if sums is not None else [zero] * len(k_tree[0]))
     return out
 
 
 class Evaluator:
     """Evaluates a mechanism's states and regressor in one backend."""
 
-    def __init__(self, mechanism, backend, symbolic_geometry=False, certify=False):
+    def __init__(self, mechanism: Mechanism, backend: Backend, symbolic_geometry: bool = False,
+                 certify: bool = False) -> None:
         """``certify`` (arb only): replace Newton's dependent coordinates by balls proven to
         contain the exact loop-closure solution (see :mod:`baseparams.kinematics.krawczyk`)."""
         self.mechanism = mechanism
@@ -190,17 +202,18 @@ class Evaluator:
         self._generated_balls = SCALAR_CLOSURE and isinstance(backend, Arb) and not symbolic_geometry
         self.structure = closure_structure(mechanism)
         self.n = self.kin.n
-        self._solved = None      # (q, closure Jacobian at q) of the last batched assembly
-        self._newton_closure = None   # (closure values, Jacobian rows) at the last Newton result
+        self._solved: tuple[Any, Array] | None = None   # (q, closure Jacobian at q) of the last batched assembly
+        # (closure values, Jacobian rows) at the last Newton result
+        self._newton_closure: tuple[list[Any], Rows] | None = None
 
     # ----- positions ------------------------------------------------------
-    def tolerance(self):
+    def tolerance(self) -> int:
         """Decimal exponent of the closure residual Newton must reach: 10^-(D-5) at D digits."""
         digits = getattr(self.backend, "digits", None)
         return -12 if digits is None else -(digits - 5)
 
     @in_backend_precision
-    def assemble(self, z, guess=None, where=""):
+    def assemble(self, z: Sequence[Any], guess: Sequence[Any] | None = None, where: str = "") -> list[Any]:
         """Tree coordinates with independent values ``z``; dependent ones by Newton-Raphson."""
         st = self.structure
         q = list(guess) if guess is not None else [self.kin.zero] * self.n
@@ -228,7 +241,7 @@ class Evaluator:
         q = self._newton(q, z, self.tolerance(), where)
         return enclose(self, q, where, at=self._newton_closure) if self.certify else q
 
-    def _newton(self, q, z, tol, where):
+    def _newton(self, q: list[Any], z: Sequence[Any], tol: int, where: str) -> list[Any]:
         st = self.structure
         q = list(q)
         for value, i in zip(z, st.independent):
@@ -269,12 +282,12 @@ class Evaluator:
         return q
 
     # ----- float64 batches: continuation on arrays ---------------------------------------
-    def _batched(self, values) -> bool:
+    def _batched(self, values: Sequence[Any]) -> bool:
         """A float64 batch that runs the generated closure code (see :meth:`_closure`)."""
         return (BATCHED_NEWTON and isinstance(self.backend, Float64) and bool(self.mechanism.loops)
                 and codegen.worthwhile(self.mechanism, "closure", values))
 
-    def _assemble_batch(self, z, guess):
+    def _assemble_batch(self, z: Sequence[Any], guess: Sequence[Any] | None) -> list[Any] | None:
         """:meth:`assemble` for a float64 batch, on (coordinates, samples) arrays; None when
         anything is unusual, and the general path then runs (and reports) as before.
 
@@ -321,22 +334,25 @@ class Evaluator:
                     inverse = self._checked_inverse(jac, rows, dep)
                     if inverse is None:
                         return None
+                assert jac is not None
                 tangent = -np.einsum("sij,sjk,ks->is", inverse, jac[:, rows][:, :, ind], zs, optimize=True)
                 path.append((lam_solved, q[dep].copy(), tangent))
                 q[dep] = _predict(path[-2:], lam)
             q[ind] = lam * zs
             lam_solved = lam
-            solved = self._newton_batch(q, tol, phi, jac, inverse)
-            if solved is None:
+            newton = self._newton_batch(q, tol, phi, jac, inverse)
+            if newton is None:
                 return None
-            phi, jac, inverse = solved
+            phi, jac, inverse = newton
+        assert phi is not None and jac is not None          # stages are never empty
         if not np.all(np.abs(phi) <= 10.0 ** (stages[-1][1] + 3)):     # the redundant equations too
             return None
         solved = [zs[ind.index(i)] if i in ind else q[i] for i in range(self.n)]
         self._solved = (solved, jac)
         return solved
 
-    def _newton_batch(self, q, tol, phi, jac, inverse):
+    def _newton_batch(self, q: Array, tol: float, phi: Array | None, jac: Array | None,
+                      inverse: Array | None) -> tuple[Array, Array, Array | None] | None:
         """Newton on the (n, samples) array ``q`` (in place) until every sample's closure
         residual is within 10^tol (below 1e-12: and then one more step for that sample, as
         :meth:`_newton` polishes), stepping only the samples not yet there. Returns the
@@ -352,7 +368,7 @@ class Evaluator:
         active = np.arange(count)
         for _ in range(NEWTON_BUDGET + 1):
             phi_a, jac_a = codegen.closure_arrays(self.mechanism, q[:, active])
-            if phi is None:
+            if phi is None or jac is None:           # both or neither
                 phi, jac = phi_a, jac_a
             else:
                 phi[active], jac[active] = phi_a, jac_a
@@ -374,7 +390,7 @@ class Evaluator:
         return None
 
     @staticmethod
-    def _checked_inverse(jac, rows, dep):
+    def _checked_inverse(jac: Array, rows: Sequence[int], dep: Sequence[int]) -> Array | None:
         """Phi_d^-1 per sample if every Phi_d passes Float64.solve's condition bound
         (cond_2 <= n cond_1 <= 1e13), else None."""
         jd = jac[:, rows][:, :, dep]
@@ -387,7 +403,7 @@ class Evaluator:
             return None
         return inverse if np.all(bound <= 1e13) else None
 
-    def closure(self, q):
+    def closure(self, q: Sequence[Any]) -> tuple[list[Any], Rows]:
         """Closure values and Jacobian rows at q (float64: generated code once it pays, over
         arrays for a batch, on Python floats for one state; arb: generated ball arithmetic)."""
         if self._generated_balls:
@@ -399,7 +415,7 @@ class Evaluator:
         values, rows, _ = self.kin.closure(self.kin.forward(q))
         return values, rows
 
-    def singular_joints(self, jd) -> str:
+    def singular_joints(self, jd: Rows) -> str:
         """Names the joints whose dependent coordinates move along the closure Jacobian's
         weakest direction (the motion the loops no longer fix), e.g. "joints at the
         singularity: J6_7 (damper_s); ". In a batch, at the worst state."""
@@ -424,7 +440,7 @@ class Evaluator:
                            for j in joints)
         return f"joints at the singularity: {labels}; "
 
-    def describe(self, q, only=None):
+    def describe(self, q: Sequence[Any], only: Sequence[int] | None = None) -> str:
         parts = []
         for i, (name, v) in enumerate(zip(self.mechanism.coordinates, q)):
             if only is not None and i not in only:
@@ -435,7 +451,8 @@ class Evaluator:
 
     # ----- full state -----------------------------------------------------
     @in_backend_precision
-    def sample(self, z, zd, zdd, guess=None, where=""):
+    def sample(self, z: Sequence[Any], zd: Sequence[Any], zdd: Sequence[Any],
+               guess: Sequence[Any] | None = None, where: str = "") -> Sample:
         """The state with independent positions, velocities and accelerations z, zd, zdd."""
         q = self.assemble(z, guess, where)
         if self.mechanism.loops:
@@ -451,13 +468,13 @@ class Evaluator:
             r[i] = [ratio * v for v in r[leader]]
         return Sample(q, qd, qdd, self.kin.forward(q, qd), r, self.kin)
 
-    def _couplings(self):
+    def _couplings(self) -> list[tuple[int, int, Any, Any]]:
         """(coordinate index, leader index, ratio, offset) in this backend, per coupling."""
         names = list(self.mechanism.coordinates)
         return [(names.index(c.coordinate), names.index(c.leader), self.backend.rational(c.ratio),
                  self.backend.rational(c.offset)) for c in self.mechanism.couplings]
 
-    def _closed_sample(self, q, zd, zdd, where):
+    def _closed_sample(self, q: list[Any], zd: Sequence[Any], zdd: Sequence[Any], where: str) -> Sample:
         """qd = R zd with R = [I; -Phi_d^-1 Phi_z]; qdd = R zdd - [0; Phi_d^-1 gamma]."""
         solved, self._solved = self._solved, None
         if solved is not None and solved[0] is q:
@@ -497,7 +514,8 @@ class Evaluator:
         qdd = [_dot(r[i], zdd, zero) + extra[i] for i in range(self.n)]
         return Sample(q, qd, qdd, states, r, self.kin)
 
-    def _closed_batch(self, q, jac, zd, zdd, where):
+    def _closed_batch(self, q: list[Any], jac: Array, zd: Sequence[Any], zdd: Sequence[Any],
+                      where: str) -> Sample:
         """:meth:`_closed_sample` for a float64 batch that :meth:`_assemble_batch` solved:
         the Jacobian at q is the one its last evaluation gave, the products are array ones,
         the solves :meth:`Float64.solve_arrays` (the same condition check and messages)."""
@@ -535,7 +553,7 @@ class Evaluator:
         return Sample(q, qd, qdd, None, r, self.kin)
 
 
-def _predict(path, lam):
+def _predict(path: Sequence[tuple[float, Array, Array]], lam: float) -> Array:
     """The dependent coordinates at ``lam`` extrapolated from the last solved stages: cubic
     Hermite through the last two (values and tangents), Euler from a single one."""
     if len(path) == 1:
@@ -556,7 +574,7 @@ BATCHED_NEWTON = True  # False: float64 batches take the general path too (the r
 SCALAR_CLOSURE = True
 
 
-def _dot(row, values, zero):
+def _dot(row: Sequence[Any], values: Sequence[Any], zero: Any) -> Any:
     total = zero
     for a, b in zip(row, values):
         if isinstance(a, int) and a == 0:

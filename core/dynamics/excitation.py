@@ -16,8 +16,10 @@ trajectory's range.
 
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +27,10 @@ from baseparams.dynamics.evaluator import Evaluator
 from baseparams.dynamics.observation import RationalStates
 from baseparams.numeric.backends import Float64
 from baseparams.errors import KinematicsError
+from baseparams.dynamics.trajectory import Trajectory
+from baseparams.model.mechanism import Mechanism
+
+Box = tuple[float, float, float, float]     # (low, high, trajectory low, trajectory high)
 
 WIDEN_ANGLE = 0.3          # rad added on each side of an angle's range on the trajectory
 WIDEN_LENGTH = 0.02        # m added on each side of a length's range
@@ -41,12 +47,12 @@ class RandomBatch(RationalStates):
     name: str = "check state"
 
     @property
-    def states(self):
+    def states(self) -> int:
         """The number of states (as ``count``)."""
         return self.count
 
 
-def random_batch(mechanism, trajectory, seed):
+def random_batch(mechanism: Mechanism, trajectory: Trajectory, seed: int) -> RandomBatch:
     """At least as many rows as parameters (ceil(n / f) states)."""
     f = max(1, len(mechanism.independent))
     count = max(2, math.ceil(len(mechanism.parameters) / f))
@@ -57,19 +63,19 @@ def random_batch(mechanism, trajectory, seed):
     vel, acc = _scales(zd), _scales(zdd)
     rng = random.Random(seed)
     ev = Evaluator(mechanism, Float64())
-    states = []
+    states: list[tuple[tuple[Fraction, ...], tuple[Fraction, ...], tuple[Fraction, ...], list[float]]] = []
     for _ in range(count):
         position, start = _assembled_draw(ev, boxes, rng)
         states.append((position, tuple(_draw(rng, vel)), tuple(_draw(rng, acc)), start))
-    z, zd, zdd, start = (tuple(column) for column in zip(*states))
-    return RandomBatch(z=z, zd=zd, zdd=zdd, start=start, seed=seed)
+    z_, zd_, zdd_, starts = (tuple(column) for column in zip(*states))
+    return RandomBatch(z=z_, zd=zd_, zdd=zdd_, start=starts, seed=seed)
 
 
-def _boxes(mechanism, values):
+def _boxes(mechanism: Mechanism, values: Sequence[Any]) -> list[Box]:
     """Per independent coordinate: (low, high, trajectory low, trajectory high) as floats."""
-    boxes = []
-    for name, v in zip(mechanism.independent, values):
-        v = np.asarray(v, dtype=float)
+    boxes: list[Box] = []
+    for name, raw in zip(mechanism.independent, values):
+        v = np.asarray(raw, dtype=float)
         lo, hi = float(v.min()), float(v.max())
         joint = mechanism.joint_of_coordinate(name)
         kind = joint.type.coordinate_kinds[joint.coordinates.index(name)]
@@ -82,11 +88,11 @@ def _boxes(mechanism, values):
     return boxes
 
 
-def _assembled_draw(ev, boxes, rng):
+def _assembled_draw(ev: Evaluator, boxes: Sequence[Box], rng: random.Random) -> tuple[tuple[Fraction, ...], list[float]]:
     """A random position (Fractions) the mechanism can take, with its float tree coordinates."""
     for attempt in range(REDRAWS + 1):
         shrink = Fraction(attempt, REDRAWS)        # 0: the widened box ... 1: the trajectory's range
-        position = []
+        position: list[Fraction] = []
         for low, high, lo, hi in boxes:
             a = Fraction(low) + (Fraction(lo) - Fraction(low)) * shrink
             b = Fraction(high) + (Fraction(hi) - Fraction(high)) * shrink
@@ -100,11 +106,11 @@ def _assembled_draw(ev, boxes, rng):
                           "inside the trajectory's range of independent coordinates")
 
 
-def _draw(rng, scales):
+def _draw(rng: random.Random, scales: Sequence[Fraction]) -> list[Fraction]:
     return [s * Fraction(rng.randint(-1000, 1000), 1000) for s in scales]
 
 
-def _scales(values):
+def _scales(values: Sequence[Any]) -> list[Fraction]:
     """Per coordinate: the largest |value| on the grid to 2 digits (else the largest of the
     others, else 1), as an exact rational."""
     peaks = [float(np.max(np.abs(np.asarray(v, dtype=float)))) for v in values]

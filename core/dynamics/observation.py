@@ -18,15 +18,16 @@ backend decides how W is built and what matrix it is:
 Rows are sample-major: the ``f`` rows of the first state, then of the second ...
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from flint import arb
 
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import KinematicsError
+from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Arb, Backend, Float64
 
 Progress = Callable[[int, int], None]
@@ -35,8 +36,13 @@ Progress = Callable[[int, int], None]
 class States(Protocol):
     """What the builder needs from a source of states."""
 
-    label: str           # prefixed (with the mechanism file) to kinematics errors; "" for none
-    reports_closure: bool  # arb: report the worst closure residual (one more closure per state)
+    @property
+    def label(self) -> str:
+        """Prefixed (with the mechanism file) to kinematics errors; "" for none."""
+
+    @property
+    def reports_closure(self) -> bool:
+        """arb: report the worst closure residual (one more closure per state)."""
 
     @property
     def count(self) -> int:
@@ -45,13 +51,13 @@ class States(Protocol):
     def where(self, index: int | None) -> str:
         """Message prefix naming state ``index`` (None: all states at once)."""
 
-    def values(self, mechanism, backend: Backend, index: int) -> tuple[list, list, list]:
+    def values(self, mechanism: Mechanism, backend: Backend, index: int) -> tuple[list[Any], list[Any], list[Any]]:
         """State ``index``'s independent positions, velocities, accelerations in ``backend``."""
 
-    def float64_sample(self, mechanism) -> Sample:
+    def float64_sample(self, mechanism: Mechanism) -> Sample:
         """Every state at once in float64 (arrays over states), positions assembled."""
 
-    def starts(self, mechanism) -> list | None:
+    def starts(self, mechanism: Mechanism) -> list[list[float]] | None:
         """Per state, float64 tree coordinates to start Newton from (used for closed loops),
         or None to start from the reference configuration. Called before the per-state
         arithmetics for every mechanism: a trajectory checks its coordinate limits here."""
@@ -64,10 +70,10 @@ class RationalStates:
     backend, rational cos and sin in Exact), one of velocities and one of accelerations;
     for a closed loop, per state the float tree coordinates to start Newton from."""
 
-    z: tuple
-    zd: tuple
-    zdd: tuple
-    start: tuple | None = None
+    z: tuple[tuple[Any, ...], ...]
+    zd: tuple[tuple[Any, ...], ...]
+    zdd: tuple[tuple[Any, ...], ...]
+    start: tuple[Any, ...] | None = None
     name: str = "state"
     label: str = ""
     reports_closure: bool = False
@@ -76,13 +82,14 @@ class RationalStates:
     def count(self) -> int:
         return len(self.z)
 
-    def where(self, index):
+    def where(self, index: int | None) -> str:
         return f"{self.name}s: " if index is None else f"{self.name} {index + 1}: "
 
-    def values(self, mechanism, backend, index):
-        return tuple([backend.number(v) for v in column[index]] for column in (self.z, self.zd, self.zdd))
+    def values(self, mechanism: Mechanism, backend: Backend, index: int) -> tuple[list[Any], list[Any], list[Any]]:
+        z, zd, zdd = ([backend.number(v) for v in column[index]] for column in (self.z, self.zd, self.zdd))
+        return z, zd, zdd
 
-    def float64_sample(self, mechanism):
+    def float64_sample(self, mechanism: Mechanism) -> Sample:
         backend = Float64()
         f = len(self.z[0]) if self.z else 0
         columns = [[np.array([backend.number(s[k]) for s in values]) for k in range(f)]
@@ -92,7 +99,7 @@ class RationalStates:
             start = [np.array([float(v) for v in column]) for column in zip(*self.start)]
         return Evaluator(mechanism, backend).sample(*columns, start, where=self.where(None))
 
-    def starts(self, mechanism):
+    def starts(self, mechanism: Mechanism) -> list[list[float]] | None:
         return None if self.start is None else [[float(v) for v in s] for s in self.start]
 
 
@@ -105,7 +112,7 @@ class Subset:
     :func:`observation_matrix` takes the source's rows."""
 
     source: States
-    indices: tuple
+    indices: tuple[int, ...]
     reports_closure: bool = False      # no closure residual: one closure less per state
 
     @property
@@ -116,19 +123,30 @@ class Subset:
     def count(self) -> int:
         return len(self.indices)
 
-    def where(self, index):
+    def where(self, index: int | None) -> str:
         return self.source.where(None if index is None else self.indices[index])
 
-    def values(self, mechanism, backend, index):
+    def values(self, mechanism: Mechanism, backend: Backend, index: int) -> tuple[list[Any], list[Any], list[Any]]:
         return self.source.values(mechanism, backend, self.indices[index])
 
-    def starts(self, mechanism):
+    def float64_sample(self, mechanism: Mechanism) -> Sample:
+        """The source's float64 states at ``indices`` (arrays over the chosen states)."""
+        whole = self.source.float64_sample(mechanism)
+        pick = list(self.indices)
+
+        def take(v: Any) -> Any:
+            return np.asarray(v)[pick] if np.ndim(v) else v
+
+        return Sample([take(v) for v in whole.q], [take(v) for v in whole.qd], [take(v) for v in whole.qdd],
+                      None, [[take(v) for v in row] for row in whole.projection], whole.kin)
+
+    def starts(self, mechanism: Mechanism) -> list[list[float]] | None:
         starts = self.source.starts(mechanism)
         return None if starts is None else [starts[i] for i in self.indices]
 
 
-def observation_matrix(mechanism, backend: Backend, states: States,
-                       progress: Progress | None = None) -> tuple[object, dict]:
+def observation_matrix(mechanism: Mechanism, backend: Backend, states: States,
+                       progress: Progress | None = None) -> tuple[Any, dict[str, Any]]:
     """W at ``states`` in ``backend``'s arithmetic and matrix type: (W, info).
 
     info: ``samples`` (the number of states); in arb also ``positions_enclosed`` and, when
@@ -147,7 +165,7 @@ def observation_matrix(mechanism, backend: Backend, states: States,
         raise KinematicsError(where + str(exc)) from None
 
 
-def evaluate_states(mechanism, backend: Backend, states: States, certify: bool = True) -> list[Sample]:
+def evaluate_states(mechanism: Mechanism, backend: Backend, states: States, certify: bool = True) -> list[Sample]:
     """The evaluated states themselves (for analyses other than W), state after state in
     ``backend``; ``certify`` (arb): closed-loop positions enclosed by Krawczyk's test."""
     ev = Evaluator(mechanism, backend, certify=certify)
@@ -155,11 +173,11 @@ def evaluate_states(mechanism, backend: Backend, states: States, certify: bool =
         return list(_each_sample(ev, states))
 
 
-def _width(mechanism):
+def _width(mechanism: Mechanism) -> int:
     return len(mechanism.independent) or len(mechanism.coordinates)
 
 
-def _vectorised(mechanism, states):
+def _vectorised(mechanism: Mechanism, states: States) -> tuple[np.ndarray, dict[str, Any]]:
     if isinstance(states, Subset):
         f = _width(mechanism)
         rows = [index * f + k for index in states.indices for k in range(f)]
@@ -168,7 +186,7 @@ def _vectorised(mechanism, states):
     return k.reshape(states.count * _width(mechanism), len(mechanism.parameters)), {"samples": states.count}
 
 
-def _each_sample(ev, states):
+def _each_sample(ev: Evaluator, states: States) -> Iterator[Sample]:
     """Each state evaluated in turn (call within the backend's precision)."""
     mechanism, backend = ev.mechanism, ev.backend
     starts = states.starts(mechanism)
@@ -178,11 +196,12 @@ def _each_sample(ev, states):
         yield ev.sample(z, zd, zdd, guess, where=states.where(index))
 
 
-def _per_state(mechanism, backend, states, progress):
+def _per_state(mechanism: Mechanism, backend: Backend, states: States,
+               progress: Progress | None) -> tuple[Any, dict[str, Any]]:
     ev = Evaluator(mechanism, backend, certify=True)
     enclosing = isinstance(backend, Arb)
     residual = enclosing and states.reports_closure
-    rows = []
+    rows: list[list[Any]] = []
     with backend.activate():
         worst = arb(0)
         for index, sample in enumerate(_each_sample(ev, states)):
@@ -196,7 +215,7 @@ def _per_state(mechanism, backend, states, progress):
             if progress:
                 progress(index + 1, states.count)
         W = backend.matrix(rows, len(mechanism.parameters))
-        info = {"samples": states.count}
+        info: dict[str, Any] = {"samples": states.count}
         if enclosing:
             info["positions_enclosed"] = bool(mechanism.loops)
         if residual:

@@ -11,25 +11,32 @@ and its contribution to the generalized forces of the tree coordinates is
 are computed separately (not from K), so the energy balance is an independent check.
 """
 
+from collections.abc import Mapping, Sequence
+from fractions import Fraction
+from typing import Any
+
 import numpy as np
 
+from baseparams.kinematics.tree import BodyState, Columns, TreeKinematics, Vector
 from baseparams.numeric import vec
 from baseparams.numeric.backends import Float64
+
+Wrench = tuple[Vector, Vector]        # (force, moment), body axes
 
 # d(I w)/d(I entry): which (row, col) pairs each of Ixx Ixy Ixz Iyy Iyz Izz fills.
 _INERTIA_ENTRIES = (((0, 0),), ((0, 1), (1, 0)), ((0, 2), (2, 0)), ((1, 1),), ((1, 2), (2, 1)), ((2, 2),))
 
 
-def _inertia_times(entry, w, zero):
+def _inertia_times(entry: int, w: Vector, zero: Any) -> Vector:
     out = [zero, zero, zero]
     for i, j in _INERTIA_ENTRIES[entry]:
         out[i] = out[i] + w[j]
     return out
 
 
-def body_wrench_columns(w, dw, a, zero):
+def body_wrench_columns(w: Vector, dw: Vector, a: Vector, zero: Any) -> list[Wrench]:
     """The ten (f, n) pairs (body axes) for unit values of each parameter."""
-    cols = [(a, [zero, zero, zero])]
+    cols: list[Wrench] = [(a, [zero, zero, zero])]
     for k in range(3):
         e = [zero, zero, zero]
         e[k] = e[k] + 1
@@ -41,7 +48,7 @@ def body_wrench_columns(w, dw, a, zero):
     return cols
 
 
-def tree_regressor(kin, states, qdd):
+def tree_regressor(kin: TreeKinematics, states: Mapping[int, BodyState], qdd: Sequence[Any]) -> list[list[Any]]:
     """K for the tree coordinates: a list of n rows, each 10 * bodies entries."""
     if isinstance(kin.backend, Float64):
         full = tree_regressor_array(kin, states, qdd)
@@ -49,10 +56,11 @@ def tree_regressor(kin, states, qdd):
     return generic_tree_regressor(kin, states, qdd)
 
 
-def generic_tree_regressor(kin, states, qdd):
+def generic_tree_regressor(kin: TreeKinematics, states: Mapping[int, BodyState],
+                           qdd: Sequence[Any]) -> list[list[Any]]:
     """K's rows in any number type (the definition; float64 runs its generated form)."""
     zero = kin.zero
-    rows = [[] for _ in range(kin.n)]
+    rows: list[list[Any]] = [[] for _ in range(kin.n)]
     for body in kin.mechanism.body_labels:
         jw, jv, cols = _body_terms(kin, states[body], qdd)
         for k in range(kin.n):
@@ -63,7 +71,7 @@ def generic_tree_regressor(kin, states, qdd):
     return rows
 
 
-def _body_terms(kin, s, qdd):
+def _body_terms(kin: TreeKinematics, s: BodyState, qdd: Sequence[Any]) -> tuple[Columns, Columns, list[Wrench]]:
     """Body-axes Jacobian columns and the ten wrench columns of one body."""
     dw, acc = kin.accelerations(s, qdd)
     acc = vec.sub(acc, kin.gravity)
@@ -74,7 +82,7 @@ def _body_terms(kin, s, qdd):
     return jw, jv, cols
 
 
-def tree_regressor_array(kin, states, qdd):
+def tree_regressor_array(kin: TreeKinematics, states: Mapping[int, BodyState], qdd: Sequence[Any]) -> np.ndarray:
     """float64 only: K_tree as an array (..., n, 10 * bodies). Same as the generic path, with the Jacobian-transpose products as one einsum per body:
     over a batch of samples this replaces thousands of small array operations."""
     size = np.broadcast_shapes(*(np.shape(v) for v in qdd))
@@ -93,18 +101,19 @@ def tree_regressor_array(kin, states, qdd):
     return np.concatenate(blocks, axis=-1)
 
 
-def _stack(rows, size):
+def _stack(rows: Sequence[Sequence[Any]], size: tuple[int, ...]) -> np.ndarray:
     return np.stack([np.stack([np.broadcast_to(v, size) for v in row], axis=-1) for row in rows], axis=-2)
 
 
-def energy_forms(kin, states):
+def energy_forms(kin: TreeKinematics, states: Mapping[int, BodyState]) -> tuple[list[Any], list[Any]]:
     """(T, V): kinetic and potential energy as lists of coefficients of phi.
 
     T = 1/2 m v.v + c.(v x w) + 1/2 w.I w, V = -g.(m p + R c), velocities of the origin.
     """
     zero = kin.zero
-    half = kin.backend.rational(1) / kin.backend.rational(2)
-    t_form, v_form = [], []
+    half = kin.backend.rational(Fraction(1)) / kin.backend.rational(Fraction(2))
+    t_form: list[Any] = []
+    v_form: list[Any] = []
     for body in kin.mechanism.body_labels:
         s = states[body]
         wb, vb = vec.tmatvec(s.rot, s.w), vec.tmatvec(s.rot, s.v)

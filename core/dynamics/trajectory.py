@@ -24,20 +24,24 @@ is what the float64 stage every solver runs (dp's W and SVD; vp's starting posit
 measured on the built-in mechanisms (benchmarks/sample_memory.py), rounded up.
 """
 
+from __future__ import annotations
+
 import functools
 import os
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 import sympy
 
 from baseparams.dynamics import observation
-from baseparams.dynamics.evaluator import Evaluator
+from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.numeric.backends import Backend, Float64
 from baseparams.errors import InputError, KinematicsError
-from baseparams.model.mechanism import MAX_SAMPLES
+from baseparams.model.mechanism import MAX_SAMPLES, Mechanism
 
 T = sympy.Symbol("t")
 MEMORY_VARIABLE = "BASEPARAMS_MAX_MEMORY"
@@ -45,7 +49,7 @@ DEFAULT_MEMORY_LIMIT = 2 * 1024 ** 3
 _UNITS = {"": 1, "K": 1024, "M": 1024 ** 2, "G": 1024 ** 3, "T": 1024 ** 4}
 
 
-def float64_bytes(mechanism, samples: int) -> int:
+def float64_bytes(mechanism: Mechanism, samples: int) -> int:
     """Estimated peak working memory (bytes, beyond the interpreter's) of the float64
     observation matrix over ``samples`` samples and its SVD.
 
@@ -56,7 +60,7 @@ def float64_bytes(mechanism, samples: int) -> int:
     copies, the constant the per-sample scalars."""
     n = len(mechanism.coordinates)
     f = len(mechanism.independent) or n
-    p = len(mechanism.parameters) + 4 * len(getattr(mechanism, "effects", ()))
+    p = len(mechanism.parameters) + 4 * len(mechanism.effects)
     return int(samples) * 8 * (400 + 2 * n * p + 8 * f * p)
 
 
@@ -73,7 +77,7 @@ def memory_limit() -> int:
     return int(float(match[1]) * _UNITS[match[2].upper()])
 
 
-def check_sample_count(mechanism, samples: int, key: str | None = "trajectory.samples") -> None:
+def check_sample_count(mechanism: Mechanism, samples: int, key: str | None = "trajectory.samples") -> None:
     """Refuse (InputError) a sample count above MAX_SAMPLES or whose estimated float64 memory
     exceeds :func:`memory_limit`, before anything is allocated; the message gives the
     estimate and how to raise the limit."""
@@ -99,13 +103,14 @@ def _size(n: int) -> str:
 class Trajectory:
     """The independent coordinates as expressions of time, sampled at exact times; its
     samples are a source of states for :mod:`baseparams.dynamics.observation`."""
-    expressions: dict          # independent coordinate -> sympy expression of t
-    times: tuple               # exact sample times (Fractions)
+    expressions: Mapping[str, Any]   # independent coordinate -> sympy expression of t
+    times: tuple[Fraction, ...]      # exact sample times
     label = "trajectory"       # kinematics errors name the trajectory (and the file)
     reports_closure = True     # arb: the worst closure residual along it is reported
 
     @classmethod
-    def default(cls, mechanism, samples=None, t_start=None, t_end=None):
+    def default(cls, mechanism: Mechanism, samples: int | None = None, t_start: Fraction | str | int | None = None,
+                t_end: Fraction | str | int | None = None) -> Trajectory:
         spec = mechanism.trajectory
         if spec is None:
             raise InputError("the mechanism file has no [trajectory] section", file=mechanism.path,
@@ -116,15 +121,16 @@ class Trajectory:
         t1 = spec.t_end if t_end is None else Fraction(t_end)
         return cls(dict(spec.expressions), even_times(t0, t1, n))
 
-    def derivatives(self, names):
+    def derivatives(self, names: Sequence[str]) -> list[tuple[Any, Any, Any]]:
         """For each coordinate name: (q, qd, qdd) as sympy expressions of t (symbolic
         differentiation, slow: for display; values come from :func:`values_at`)."""
         return [_derivatives(self.expressions[name]) for name in names]
 
-    def independent_values(self, mechanism, backend, t):
+    def independent_values(self, mechanism: Mechanism, backend: Backend,
+                           t: Any) -> tuple[list[Any], list[Any], list[Any]]:
         """(z, zd, zdd) at time ``t`` (backend number or, for float64, an array of times)."""
         names = mechanism.independent
-        values = []
+        values: list[list[Any]] = []
         for name in names:
             expression = self.expressions[name]
             try:
@@ -142,27 +148,27 @@ class Trajectory:
 
     # ----- a source of states (baseparams.dynamics.observation.States) -----------------
     @property
-    def count(self):
+    def count(self) -> int:
         return len(self.times)
 
-    def where(self, index):
+    def where(self, index: int | None) -> str:
         return "" if index is None else f"at t = {float(self.times[index]):.6g} s: "
 
-    def values(self, mechanism, backend, index):
+    def values(self, mechanism: Mechanism, backend: Backend, index: int) -> tuple[list[Any], list[Any], list[Any]]:
         """Sample ``index`` computed in ``backend`` from its exact time."""
         return self.independent_values(mechanism, backend, backend.number(self.times[index]))
 
-    def float64_sample(self, mechanism):
+    def float64_sample(self, mechanism: Mechanism) -> Sample:
         return samples_float64(mechanism, self)[0]
 
-    def starts(self, mechanism):
+    def starts(self, mechanism: Mechanism) -> list[list[float]]:
         """The float64 positions of every sample (which also checks the coordinate limits)."""
         sample, t = samples_float64(mechanism, self)
         columns = [np.broadcast_to(np.asarray(v, dtype=float), t.shape) for v in sample.q]
         return [[float(v[k]) for v in columns] for k in range(len(t))]
 
 
-def even_times(t0: Fraction, t1: Fraction, n: int) -> tuple:
+def even_times(t0: Fraction, t1: Fraction, n: int) -> tuple[Fraction, ...]:
     """``n`` exact times evenly spaced from ``t0`` to ``t1``: t0 + (t1 - t0) k / (n - 1),
     over one common denominator (a Fraction per sample, not four Fraction operations)."""
     t0, t1 = Fraction(t0), Fraction(t1)
@@ -171,7 +177,7 @@ def even_times(t0: Fraction, t1: Fraction, n: int) -> tuple:
     return tuple(Fraction(start + span * k, den) for k in range(n))
 
 
-def values_at(expression: sympy.Expr, backend: Backend, t) -> tuple:
+def values_at(expression: sympy.Expr, backend: Backend, t: Any) -> tuple[Any, Any, Any]:
     """(q, qd, qdd) of an expression of t at ``t`` (a backend number; float64: an array of
     times), in ``backend``'s arithmetic, by forward-mode differentiation: exact in
     rationals and sympy, enclosing in arb, as evaluating the symbolic derivatives would be."""
@@ -180,15 +186,15 @@ def values_at(expression: sympy.Expr, backend: Backend, t) -> tuple:
     return jet.v, zero if jet.d1 is None else jet.d1, zero if jet.d2 is None else jet.d2
 
 
-def _plus(a, b):
+def _plus(a: Any, b: Any) -> Any:
     return b if a is None else a if b is None else a + b
 
 
-def _times(a, b):
+def _times(a: Any, b: Any) -> Any:
     return None if a is None or b is None else a * b
 
 
-def _negative(a):
+def _negative(a: Any) -> Any:
     return None if a is None else -a
 
 
@@ -198,19 +204,19 @@ class Jet:
 
     __slots__ = ("v", "d1", "d2")
 
-    def __init__(self, v, d1=None, d2=None):
+    def __init__(self, v: Any, d1: Any = None, d2: Any = None) -> None:
         self.v, self.d1, self.d2 = v, d1, d2
 
-    def __add__(self, other: "Jet") -> "Jet":
+    def __add__(self, other: Jet) -> Jet:
         return Jet(self.v + other.v, _plus(self.d1, other.d1), _plus(self.d2, other.d2))
 
-    def __mul__(self, other: "Jet") -> "Jet":
+    def __mul__(self, other: Jet) -> Jet:
         cross = _times(self.d1, other.d1)
         return Jet(self.v * other.v, _plus(_times(self.d1, other.v), _times(self.v, other.d1)),
                    _plus(_plus(_times(self.d2, other.v), None if cross is None else cross + cross),
                          _times(self.v, other.d2)))
 
-    def __truediv__(self, other: "Jet") -> "Jet":
+    def __truediv__(self, other: Jet) -> Jet:
         # w = u / v: w' = (u' - w v') / v, w'' = (u'' - 2 w' v' - w v'') / v
         w = self.v / other.v
         d1 = _plus(self.d1, _negative(_times(w, other.d1)))
@@ -224,16 +230,16 @@ class _JetBackend(Backend):
     """The functions of an expression (sin, cos, exp, sqrt) on jets, computed by ``base``:
     :meth:`Backend.evaluate` then differentiates while it evaluates."""
 
-    def __init__(self, base: Backend):
+    def __init__(self, base: Backend) -> None:
         self.base = base
 
-    def rational(self, value):
+    def rational(self, value: Fraction) -> Jet:
         return Jet(self.base.rational(value))
 
-    def pi(self):
+    def pi(self) -> Jet:
         return Jet(self.base.pi())
 
-    def cos_sin(self, x: Jet):
+    def cos_sin(self, x: Jet) -> tuple[Jet, Jet]:
         c, s = self.base.cos_sin(x.v)
         if x.d1 is None:
             return Jet(c), Jet(s)
@@ -242,7 +248,7 @@ class _JetBackend(Backend):
         return (Jet(c, -(s * u1), _plus(-(c * u1u1), _times(-s, x.d2))),
                 Jet(s, c * u1, _plus(-(s * u1u1), _times(c, x.d2))))
 
-    def sqrt(self, x: Jet):
+    def sqrt(self, x: Jet) -> Jet:
         r = self.base.sqrt(x.v)
         if x.d1 is None:
             return Jet(r)
@@ -251,7 +257,7 @@ class _JetBackend(Backend):
         d1d1 = d1 * d1
         return Jet(r, d1, _plus(x.d2, -(d1d1 + d1d1)) / (r + r))
 
-    def exp(self, x: Jet):
+    def exp(self, x: Jet) -> Jet:
         e = self.base.exp(x.v)
         if x.d1 is None:
             return Jet(e)
@@ -259,21 +265,21 @@ class _JetBackend(Backend):
 
 
 @functools.lru_cache(maxsize=1024)
-def _derivatives(expression: sympy.Expr) -> tuple:
+def _derivatives(expression: sympy.Expr) -> tuple[Any, Any, Any]:
     """(q, qd, qdd) of one expression of t, differentiated once per process: the per-state
     arithmetics ask for them at every sample (sympy took 3.5 s of a 12-body chain's dp run)."""
     d1 = sympy.diff(expression, T)
     return expression, d1, sympy.diff(d1, T)
 
 
-def samples_float64(mechanism, trajectory):
+def samples_float64(mechanism: Mechanism, trajectory: Trajectory) -> tuple[Sample, np.ndarray]:
     """All samples at once, vectorised; positions followed by continuation from q = 0."""
     backend = Float64()
     ev = Evaluator(mechanism, backend)
     t = np.array([float(x) for x in trajectory.times])
-    z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
+    values = trajectory.independent_values(mechanism, backend, t)
     # a constant expression evaluates to one number: give every coordinate a value per sample
-    z, zd, zdd = ([np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in vals] for vals in (z, zd, zdd))
+    z, zd, zdd = ([np.broadcast_to(np.asarray(v, float), t.shape).copy() for v in vals] for vals in values)
     try:
         sample = ev.sample(z, zd, zdd, None, where="")
     except KinematicsError:
@@ -285,10 +291,11 @@ def samples_float64(mechanism, trajectory):
     return sample, t
 
 
-def _follow_in_time(ev, trajectory, times):
+def _follow_in_time(ev: Evaluator, trajectory: Trajectory, times: np.ndarray) -> list[np.ndarray]:
     """Positions sample after sample, each Newton started from the previous solution."""
     backend, mechanism = ev.backend, ev.mechanism
-    solutions, q = [], None
+    solutions: list[list[float]] = []
+    q: list[Any] | None = None
     for tk in times:
         z, _, _ = trajectory.independent_values(mechanism, backend, float(tk))
         q = ev.assemble([float(v) for v in z], q, where=f"at t = {float(tk):.6g} s: ")
@@ -296,7 +303,8 @@ def _follow_in_time(ev, trajectory, times):
     return [np.array(column) for column in zip(*solutions)]
 
 
-def check_limits(mechanism, q, times):
+def check_limits(mechanism: Mechanism, q: Sequence[Any], times: Any) -> None:
+    """Raise a KinematicsError at the first time a coordinate leaves its joint's limits."""
     for joint in mechanism.joints:
         for name, (lo, hi) in joint.limits.items():
             if name not in mechanism.coordinates:
@@ -310,7 +318,8 @@ def check_limits(mechanism, q, times):
                                       f"leaves its range [{lo:.6g}, {hi:.6g}]")
 
 
-def observation_matrix(mechanism, backend, trajectory=None, progress=None):
+def observation_matrix(mechanism: Mechanism, backend: Backend, trajectory: Trajectory | None = None,
+                       progress: observation.Progress | None = None) -> tuple[Any, dict[str, Any]]:
     """W over ``trajectory`` (the mechanism's default one if None): the one builder,
     :func:`baseparams.dynamics.observation.observation_matrix`, at the trajectory's samples."""
     return observation.observation_matrix(mechanism, backend, trajectory or Trajectory.default(mechanism),

@@ -23,11 +23,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import scipy.linalg
 
 from baseparams.identify.base import BaseModel
+from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.model import drive_rows, effect_columns
 from baseparams.model.mechanism import EffectSpec, Mechanism
 from baseparams.excite.tangent import tree_regressor_with_tangents
@@ -35,11 +37,11 @@ from baseparams.excite.tangent import tree_regressor_with_tangents
 CRITERIA = ("condition", "d-optimal", "separation")
 
 
-def _zeros(x):
+def _zeros(x: np.ndarray) -> np.ndarray:
     return np.zeros_like(x)
 
 
-def _ones(x):
+def _ones(x: np.ndarray) -> np.ndarray:
     return np.ones_like(x)
 
 
@@ -63,7 +65,7 @@ class Columns:
     effects'), ``names``, and optionally ``tangents`` (3 n, N, f, m) with respect to the tree
     inputs (q, qd, qdd of each tree coordinate)."""
     matrix: np.ndarray
-    names: tuple
+    names: tuple[str, ...]
     tangents: np.ndarray | None = None
     torque_tangents: np.ndarray | None = None        # (3 f, N, f) of K phi
     torque: np.ndarray | None = None                 # (N, f) K phi
@@ -77,18 +79,18 @@ class Model:
     coordinate weights and, for torque limits, the file's inertial parameters."""
     mechanism: Mechanism
     base: BaseModel
-    effects: tuple = ()
+    effects: tuple[EffectSpec, ...] = ()
     weights: np.ndarray | None = None
     phi: np.ndarray | None = None
-    drop: tuple = ()                 # effect columns left out: a combination of the others on any motion
+    drop: tuple[int, ...] = ()                 # effect columns left out: a combination of the others on any motion
     _bplus: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self._bplus = np.linalg.pinv(self.base.B) if self.base.rank else np.zeros((self.base.B.shape[1], 0))
         self.effects = tuple(self.effects)
 
     @property
-    def all_names(self) -> tuple:
+    def all_names(self) -> tuple[str, ...]:
         out = list(self.base.names)
         from baseparams import registry
         for spec in self.effects:
@@ -96,7 +98,7 @@ class Model:
         return tuple(out)
 
     @property
-    def names(self) -> tuple:
+    def names(self) -> tuple[str, ...]:
         return tuple(name for k, name in enumerate(self.all_names) if k not in self.drop)
 
     @property
@@ -108,7 +110,7 @@ class Model:
                 all(s.kind in EFFECT_DERIVATIVES for s in self.effects))
 
     def columns(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tangents: bool = False,
-                sample=None) -> Columns:
+                sample: Sample | None = None) -> Columns:
         """The columns at samples of the independent coordinates (N, f); with ``tangents``
         (open chains only) their derivatives too. ``sample``: an evaluated
         :class:`~baseparams.dynamics.evaluator.Sample` (closed loops)."""
@@ -128,13 +130,15 @@ class Model:
                 sample = evaluate(self.mechanism, Motion(np.arange(n, dtype=float), q, qd, qdd))
             K, dK = inertial_columns(sample, n), None
         base = K @ self._bplus
-        if sample is None:
-            sample = SimpleNamespace(q=list(q.T), qd=list(qd.T), qdd=list(qdd.T),
+        source: Any = sample           # the evaluated states, or an open chain's stand-in
+        if source is None:
+            source = SimpleNamespace(q=list(q.T), qd=list(qd.T), qdd=list(qdd.T),
                                      projection=[[1.0 if i == j else 0.0 for j in range(q.shape[1])]
                                                  for i in range(q.shape[1])])
-        blocks, dblocks = [base], [None if dK is None else dK @ self._bplus]
+        blocks = [base]
+        dblocks: list[Any] = [None if dK is None else dK @ self._bplus]
         for spec in self.effects:
-            _, block = effect_columns(self.mechanism, sample, n, spec.kind, spec.coordinate)
+            _, block = effect_columns(self.mechanism, source, n, spec.kind, spec.coordinate)
             blocks.append(block)
             if dK is not None:
                 dblocks.append(self._effect_tangents(spec, q, qd, qdd, block.shape))
@@ -150,7 +154,8 @@ class Model:
             out.torque = K @ self.phi
         return out
 
-    def _effect_tangents(self, spec: EffectSpec, q, qd, qdd, shape) -> np.ndarray:
+    def _effect_tangents(self, spec: EffectSpec, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                         shape: tuple[int, ...]) -> np.ndarray:
         m = self.mechanism
         row = drive_rows(m, [spec.coordinate])[0]
         values = [v @ row for v in (q, qd, qdd)]

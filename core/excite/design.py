@@ -18,18 +18,23 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 import scipy.optimize
 
 from baseparams.dynamics import codegen
-from baseparams.dynamics.evaluator import closure_structure
+from baseparams.dynamics.evaluator import Sample, closure_structure
 from baseparams.errors import KinematicsError
 from baseparams.excite.criterion import Model, criterion
 from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
-from baseparams.identify.model import Motion, evaluate, inertial_columns
+from baseparams.identify.model import Motion, evaluate
+from baseparams.model.mechanism import Mechanism
+
+T = TypeVar("T")
 
 SAFETY = 0.02                  # the optimiser keeps 2 % of each range and limit in reserve
 START_FILL = 0.7               # a random start fills 70 % of the tightest limit
@@ -46,12 +51,12 @@ class Problem:
     form: FourierForm
     samples: int
     kind: str = "condition"
-    separate: tuple = ()
+    separate: tuple[Any, ...] = ()
     margin: float = 0.0              # closed loops: min 1/cond of the dependent closure Jacobian
     maxiter: int = 200
 
     @property
-    def mechanism(self):
+    def mechanism(self) -> Mechanism:
         return self.model.mechanism
 
     def times(self, factor: int = 1) -> np.ndarray:
@@ -66,22 +71,22 @@ class Check:
     condition: float
     angle: float | None
     singular_values: np.ndarray
-    margins: dict
+    margins: dict[str, float]
     feasible: bool
     reason: str = ""
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {"criterion": _finite(self.value), "condition_number": _finite(self.condition),
                 "smallest_angle_deg": self.angle, "singular_values": [float(v) for v in self.singular_values],
                 "margins": {k: _finite(v) for k, v in self.margins.items()}, "feasible": self.feasible,
                 **({"reason": self.reason} if self.reason else {})}
 
 
-def _finite(x):
+def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def singularity_margin(mechanism, sample) -> np.ndarray:
+def singularity_margin(mechanism: Mechanism, sample: Sample) -> np.ndarray:
     """Per sample: 1/cond of the closure Jacobian's block in the dependent coordinates."""
     structure = closure_structure(mechanism)
     n = len(mechanism.coordinates)
@@ -131,13 +136,15 @@ def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     deficient, where the criterion is flat)."""
     if problem.model.differentiable and not problem.mechanism.loops:
         return random_start(problem, rng)
-    best, first = None, None
+    best: tuple[float, np.ndarray] | None = None
+    first: np.ndarray | None = None
     for _ in range(CANDIDATES):
         x = scale_to_limits(problem, random_start(problem, rng), LOOP_FILL)
         first = x if first is None else first
         result = check(problem, *problem.form.motion(x, problem.times()), safety=SAFETY)
         if result.feasible and (best is None or result.value < best[0]):
             best = (result.value, x)
+    assert first is not None                   # CANDIDATES > 0
     return first if best is None else best[1]
 
 
@@ -216,7 +223,7 @@ def optimise(problem: Problem, x0: np.ndarray) -> Outcome:
     return _cobyla(problem, x0)
 
 
-def _chain(problem: Problem, inputs: np.ndarray, rows) -> np.ndarray:
+def _chain(problem: Problem, inputs: np.ndarray, rows: Sequence[np.ndarray]) -> np.ndarray:
     """d/dx from d/d(independent inputs z, zd, zdd) summed over the samples: ``inputs``
     (3 f, N, ...) -> (..., f m)."""
     f, m = len(problem.form.names), problem.form.per_coordinate
@@ -225,7 +232,7 @@ def _chain(problem: Problem, inputs: np.ndarray, rows) -> np.ndarray:
     return out.reshape(out.shape[:-2] + (f * m,))
 
 
-def _per_sample(problem: Problem, inputs: np.ndarray, rows) -> np.ndarray:
+def _per_sample(problem: Problem, inputs: np.ndarray, rows: Sequence[np.ndarray]) -> np.ndarray:
     """d/dx of per-sample values: ``inputs`` (3 f, N, k) -> (N, k, f m)."""
     f = len(problem.form.names)
     parts = inputs.reshape((3, f) + inputs.shape[1:])
@@ -239,44 +246,39 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
     rows = form.rows(t)
     G, h = _linear_constraints(problem)
     torque_limited = model.phi is not None and np.any(np.isfinite(lim.torque))
-    cache: dict = {}
-    count = [0]
 
-    def evaluate_at(x):
-        key = x.tobytes()
-        if cache.get("key") != key:
-            count[0] += 1
-            q, qd, qdd = form.motion(x, t)
-            try:
-                columns = model.columns(q, qd, qdd, tangents=True)
-            except KinematicsError:            # a closed loop that does not close, a file's limit
-                cache.update(key=key, f=PENALTY, g=np.zeros_like(x), columns=None)
-                return cache
-            value = criterion(problem.kind, columns.matrix, model.weights, problem.separate, gradient=True)
-            if value.gradient is None:
-                cache.update(key=key, f=PENALTY, g=np.zeros_like(x), columns=columns)
-            else:
-                inputs = np.einsum("nfm,dnfm->dn", value.gradient, columns.tangents)
-                cache.update(key=key, f=value.value, g=_chain(problem, inputs, rows), columns=columns)
-        return cache
+    def evaluate(x: np.ndarray) -> dict[str, Any]:
+        q, qd, qdd = form.motion(x, t)
+        try:
+            columns = model.columns(q, qd, qdd, tangents=True)
+        except KinematicsError:            # a closed loop that does not close, a file's limit
+            return dict(f=PENALTY, g=np.zeros_like(x), columns=None)
+        value = criterion(problem.kind, columns.matrix, model.weights, problem.separate, gradient=True)
+        if value.gradient is None:
+            return dict(f=PENALTY, g=np.zeros_like(x), columns=columns)
+        assert columns.tangents is not None        # asked for
+        inputs = np.einsum("nfm,dnfm->dn", value.gradient, columns.tangents)
+        return dict(f=value.value, g=_chain(problem, inputs, rows), columns=columns)
 
-    def objective(x):
+    evaluate_at = _LastPoint(evaluate)
+
+    def objective(x: np.ndarray) -> tuple[float, np.ndarray]:
         c = evaluate_at(x)
         return c["f"], c["g"]
 
-    constraints = [{"type": "ineq", "fun": lambda x: G @ x + h, "jac": lambda x: G}]
+    constraints: list[dict[str, Any]] = [{"type": "ineq", "fun": lambda x: G @ x + h, "jac": lambda x: G}]
     if torque_limited:
         finite = np.isfinite(lim.torque)
         bound = (1 - SAFETY) * lim.torque[finite]
 
-        def torque(x):
+        def torque(x: np.ndarray) -> np.ndarray:
             columns = evaluate_at(x)["columns"]
             if columns is None:
                 return -np.ones(2 * len(t) * int(finite.sum()))
             tau = columns.torque[:, finite]
             return np.concatenate([(bound - tau).ravel(), (bound + tau).ravel()])
 
-        def torque_jac(x):
+        def torque_jac(x: np.ndarray) -> np.ndarray:
             columns = evaluate_at(x)["columns"]
             if columns is None:
                 return np.zeros((2 * len(t) * int(finite.sum()), x.size))
@@ -288,11 +290,11 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
     if problem.mechanism.loops:
         least = (1 + SAFETY) * problem.margin
 
-        def margin(x):
+        def margin(x: np.ndarray) -> np.ndarray:
             columns = evaluate_at(x)["columns"]
             return -np.ones(len(t)) if columns is None else columns.margin - least
 
-        def margin_jac(x):
+        def margin_jac(x: np.ndarray) -> np.ndarray:
             columns = evaluate_at(x)["columns"]
             if columns is None:
                 return np.zeros((len(t), x.size))
@@ -307,30 +309,38 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
     q, qd, qdd = form.motion(x, t)
     final = check(problem, q, qd, qdd)
     return Outcome(x, final.value, final.feasible, bool(result.success), str(result.message),
-                   int(getattr(result, "nit", 0)), count[0])
+                   int(getattr(result, "nit", 0)), evaluate_at.count)
+
+
+class _LastPoint(Generic[T]):
+    """``evaluate`` at the last point asked, kept: scipy asks for the objective and each
+    constraint separately at the same x. ``count``: the evaluations made."""
+
+    def __init__(self, evaluate: Callable[[np.ndarray], T]) -> None:
+        self.evaluate = evaluate
+        self.key: bytes | None = None
+        self.value: T | None = None
+        self.count = 0
+
+    def __call__(self, x: np.ndarray) -> T:
+        key = x.tobytes()
+        if self.value is None or key != self.key:
+            self.count += 1
+            self.value, self.key = self.evaluate(x), key
+        return self.value
 
 
 def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
     form = problem.form
     t = problem.times()
     G, h = _linear_constraints(problem)
-    cache: dict = {}
-    count = [0]
+    evaluate_at = _LastPoint(lambda x: check(problem, *form.motion(x, t), safety=SAFETY))
 
-    def evaluate_at(x):
-        key = x.tobytes()
-        if cache.get("key") != key:
-            count[0] += 1
-            q, qd, qdd = form.motion(x, t)
-            result = check(problem, q, qd, qdd, safety=SAFETY)
-            cache.update(key=key, check=result)
-        return cache["check"]
-
-    def objective(x):
+    def objective(x: np.ndarray) -> float:
         result = evaluate_at(x)
         return result.value if math.isfinite(result.value) else PENALTY
 
-    def nonlinear(x):
+    def nonlinear(x: np.ndarray) -> np.ndarray:
         result = evaluate_at(x)
         if not math.isfinite(result.value):
             return np.array([-1.0])
@@ -348,7 +358,7 @@ def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
     q, qd, qdd = form.motion(x, t)
     final = check(problem, q, qd, qdd)
     return Outcome(x, final.value, final.feasible, bool(result.success), str(result.message),
-                   int(getattr(result, "nfev", 0)), count[0])
+                   int(getattr(result, "nfev", 0)), evaluate_at.count)
 
 
 def independent_states(problem: Problem, count: int, seed: int = 0) -> Check:
@@ -364,7 +374,7 @@ def independent_states(problem: Problem, count: int, seed: int = 0) -> Check:
     qdd = rng.uniform(-lim.acceleration, lim.acceleration, size=(count, f))
     sample = None
     if m.loops or m.couplings:
-        kept = []
+        kept: list[np.ndarray] = []
         for k in range(count * 20):
             if len(kept) == count:
                 break

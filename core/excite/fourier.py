@@ -93,8 +93,8 @@ class FourierForm:
             c = _rational(row[0])
             A = [_rational(v) for v in row[1:L + 1]]
             B = [_rational(v) for v in row[L + 1:]]
-            A[0] = -sum(l * a for l, a in enumerate(A[1:], start=2))
-            B[0] = -sum(l * l * b for l, b in enumerate(B[1:], start=2))
+            A[0] = -sum((l * a for l, a in enumerate(A[1:], start=2)), Fraction(0))
+            B[0] = -sum((l * l * b for l, b in enumerate(B[1:], start=2)), Fraction(0))
             out.append([c] + A + B)
         return out
 

@@ -38,7 +38,7 @@ class Limits:
     sources: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
-        def number(v):
+        def number(v: float) -> float | None:
             return float(v) if math.isfinite(v) else None
         return {name: {"position": [float(self.lower[k]), float(self.upper[k])],
                        "velocity": number(self.velocity[k]), "acceleration": number(self.acceleration[k]),
@@ -52,7 +52,7 @@ def _kind(mechanism: Mechanism, name: str) -> str:
 
 def urdf_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
     """{coordinate: {"velocity": v, "effort": e}} from the URDF the mechanism was read from."""
-    path = getattr(mechanism, "path", None)
+    path = mechanism.path
     if not path or not str(path).lower().endswith(".urdf"):
         return {}
     try:
@@ -84,7 +84,7 @@ def parse_values(text: str | None, names: tuple, option: str, pair: bool = False
         return {}
     out = {}
 
-    def value(raw: str, where: str):
+    def value(raw: str, where: str) -> float | tuple[float, float]:
         try:
             if pair:
                 lo, hi = (float(v) for v in raw.split(":"))

@@ -17,18 +17,23 @@ the singular vectors of J_d.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
-from baseparams.dynamics.evaluator import closure_structure
+from baseparams.dynamics.evaluator import Sample, closure_structure
 from baseparams.excite.tangent import (closure_bias_with_tangents, closure_jacobian_with_tangents,
                                        tree_regressor_with_tangents)
+from baseparams.model.mechanism import Mechanism
 
 
-def _columns(values, count: int) -> np.ndarray:
+def _columns(values: Sequence[Any], count: int) -> np.ndarray:
     return np.stack([np.broadcast_to(np.asarray(v, dtype=float), (count,)) for v in values], axis=1)
 
 
-def regressor_with_tangents(mechanism, sample, zd: np.ndarray, zdd: np.ndarray):
+def regressor_with_tangents(mechanism: Mechanism, sample: Sample, zd: np.ndarray,
+                            zdd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(K (N, f, p), dK (3 f, N, f, p), margin (N,), dmargin (3 f, N)) at an evaluated closed
     loop ``sample`` (:class:`~baseparams.dynamics.evaluator.Sample`) with independent velocities
     and accelerations ``zd``, ``zdd`` (N, f); directions: z, zd, zdd of each independent coordinate."""

@@ -14,7 +14,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 from fractions import Fraction
 from pathlib import Path
 
@@ -27,9 +29,9 @@ from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
 from baseparams.identify.base import BaseModel
 from baseparams.identify.model import standard_parameters
-from baseparams.model.mechanism import EffectSpec, TrajectorySpec
+from baseparams.model.mechanism import EffectSpec, Mechanism, TrajectorySpec
 from baseparams.orchestrate.jobs import ERROR, INTERNAL, OK, MechanismText, Outcome, load
-from baseparams.orchestrate.runners import InProcess
+from baseparams.orchestrate.runners import InProcess, Progress
 
 FINER = 10                   # the verification grid is this many times finer
 SHRINK = 0.98                # amplitude factor per verification step
@@ -50,7 +52,7 @@ class Settings:
     weights: tuple | None = None
 
 
-def problem_of(mechanism, base: BaseModel, limits: Limits, settings: Settings) -> design.Problem:
+def problem_of(mechanism: Mechanism, base: BaseModel, limits: Limits, settings: Settings) -> design.Problem:
     """The optimisation problem of ``settings`` (effects to separate are identified too)."""
     effects = [EffectSpec(k, c) for k, c in settings.effects]
     for kind, coordinate in settings.separate:
@@ -66,7 +68,7 @@ def problem_of(mechanism, base: BaseModel, limits: Limits, settings: Settings) -
     weights = None if settings.weights is None else np.array(settings.weights, dtype=float)
     model = Model(mechanism, base, tuple(effects), weights, phi)
     names = model.names
-    separate = ()
+    separate: tuple[int, ...] = ()
     if settings.separate:
         from baseparams import registry
         chosen = set()
@@ -170,7 +172,7 @@ class Plan:
         lines = [f"{self.mechanism}: {p.form.harmonics}-harmonic Fourier motion over {p.form.period:g} s, "
                  f"{p.samples} samples, criterion {p.kind} on {len(p.model.names)} columns"]
 
-        def figures(label, c):
+        def figures(label: str, c: design.Check | None) -> str:
             if c is None:
                 return f"  {label}: (no trajectory)"
             extra = f", smallest angle {c.angle:.3g} deg" if c.angle is not None else ""
@@ -190,7 +192,16 @@ class Plan:
         return "\n".join(lines)
 
 
-def default_motion(mechanism, problem: design.Problem):
+class StartRunner(Protocol):
+    """What runs the starts: ``validate``'s runners (in process, processes, Dask), which run
+    any picklable job with a ``run()`` (orchestrate's ``Runner`` types its jobs as solver
+    jobs; ``Any`` here lets a ``Runner`` be passed)."""
+
+    def run(self, jobs: Sequence[Any], timeout: float | None = None,
+            progress: Progress | None = None) -> list[Outcome]: ...
+
+
+def default_motion(mechanism: Mechanism, problem: design.Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(q, qd, qdd) of the file's own trajectory at its samples, or None."""
     if mechanism.trajectory is None:
         return None
@@ -199,8 +210,9 @@ def default_motion(mechanism, problem: design.Problem):
     return motion.q, motion.qd, motion.qdd
 
 
-def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settings: Settings,
-         starts: int = 4, runner=None, progress=None, seed: int = 0, rebase=None, rounds: int = 3) -> Plan:
+def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Limits, settings: Settings,
+         starts: int = 4, runner: StartRunner | None = None, progress: Progress | None = None,
+         seed: int = 0, rebase: Callable[[Mechanism], BaseModel] | None = None, rounds: int = 3) -> Plan:
     """Run ``starts`` optimisations on ``runner`` and verify the best feasible one.
 
     ``rebase(mechanism)``: the base model the solver gives for a mechanism (with the planned
@@ -264,6 +276,7 @@ def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settin
     if not converged:
         notes.append("no start converged: the best feasible motion found is returned; more --iterations or "
                      "--starts may improve it")
+    assert x is not None                   # set by the first round, or no motion was feasible
     form = problem.form
     after = design.check(problem, *form.motion(x, problem.times()))
     finer = design.check(problem, *form.motion(x, problem.times(FINER)))
@@ -289,7 +302,7 @@ def plan(mechanism, text: MechanismText, base: BaseModel, limits: Limits, settin
     return out
 
 
-def with_x(mechanism, problem: design.Problem, x: np.ndarray):
+def with_x(mechanism: Mechanism, problem: design.Problem, x: np.ndarray) -> Mechanism:
     """The mechanism with the motion ``x`` as its ``[trajectory]``."""
     period = Fraction(f"{problem.form.period:.12g}")
     spec = TrajectorySpec(problem.form.expressions(x), Fraction(0), period, problem.samples)
@@ -357,6 +370,6 @@ def write_csv(path: str | Path, problem: design.Problem, x: np.ndarray, rate: fl
     return count
 
 
-def with_trajectory(mechanism, plan_: Plan):
+def with_trajectory(mechanism: Mechanism, plan_: Plan) -> Mechanism:
     """The mechanism with the planned motion as its ``[trajectory]``."""
     return with_x(mechanism, plan_.problem, plan_.x)

@@ -1,12 +1,15 @@
 """The plan as a figure: the motion (q, qd, qdd per coordinate against its limits) and the
 singular values of the scaled observation matrix before and after (matplotlib, lazily)."""
 
+from pathlib import Path
+
 import numpy as np
 
 from baseparams.excite.plan import FINER, Plan
 
 
-def plot_plan(plan: Plan, path, fmt=None):
+def plot_plan(plan: Plan, path: str | Path, fmt: str | None = None) -> Path:
+    """Draw ``plan`` (motion against its limits, singular values) to ``path``; the path written."""
     from baseparams.cli.plots import _figure, _save
     p = plan.problem
     lim = p.limits

@@ -12,16 +12,20 @@ gradient of a trajectory criterion is then a chain rule through the trajectory's
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from baseparams.dynamics import codegen
+from baseparams.model.mechanism import Mechanism
 
 GROUPS = ("q", "qd", "qdd")
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled(mechanism, part: str = "regressor", kernel_name: str = "_tree_regressor", output: str = "K"):
+def _compiled(mechanism: Mechanism, part: str = "regressor", kernel_name: str = "_tree_regressor",
+              output: str = "K") -> tuple[Callable[..., None], np.ndarray, codegen.Layout, list[tuple[int, float]]]:
     """(function, constants, layout, fixed): the generated value-and-tangent code of one output
     of a traced kernel (K_tree; a closed loop's closure Jacobian or bias), the layout of its
     entries (the others are exact constants: ``fixed``). Directions: every input of every
@@ -34,9 +38,9 @@ def _compiled(mechanism, part: str = "regressor", kernel_name: str = "_tree_regr
     writes, live, last = codegen._liveness(graph, kernel)
     n = len(mechanism.coordinates)
     constants: list[float] = []
-    index: dict = {}
+    index: dict[str, int] = {}
 
-    def const(value) -> str:
+    def const(value: Any) -> str:
         key = codegen._float_literal(value)
         if key not in index:
             index[key] = len(constants)
@@ -91,7 +95,7 @@ def _compiled(mechanism, part: str = "regressor", kernel_name: str = "_tree_regr
     return namespace["_tangent"], np.array(constants), layout, fixed
 
 
-def _run(mechanism, key: tuple, inputs: list) -> tuple[np.ndarray, np.ndarray]:
+def _run(mechanism: Mechanism, key: tuple[str, ...], inputs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """(value (N, *shape), tangents (directions, N, *shape)) of the output ``key`` names at
     the samples ``inputs`` (one (N, n) array per input group)."""
     function, constants, layout, fixed = _compiled(mechanism, *key)
@@ -117,7 +121,7 @@ def _run(mechanism, key: tuple, inputs: list) -> tuple[np.ndarray, np.ndarray]:
     return value.reshape((count,) + layout.shape), tangent.reshape((directions, count) + layout.shape)
 
 
-def tree_regressor_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+def tree_regressor_with_tangents(mechanism: Mechanism, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
                                  ) -> tuple[np.ndarray, np.ndarray]:
     """(K, dK) at samples of the tree coordinates (``q`` etc.: (N, n)): K (N, n, p) as
     :func:`codegen.tree_regressor` gives it, and dK (3 n, N, n, p), dK[g * n + i] the
@@ -125,13 +129,13 @@ def tree_regressor_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray, qdd: 
     return _run(mechanism, ("regressor", "_tree_regressor", "K"), [q, qd, qdd])
 
 
-def closure_jacobian_with_tangents(mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def closure_jacobian_with_tangents(mechanism: Mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(J (N, m, n), dJ (n, N, m, n)): a closed loop's closure Jacobian and its derivatives
     with respect to each tree coordinate."""
     return _run(mechanism, ("closure", "_closure", "jac"), [q])
 
 
-def closure_bias_with_tangents(mechanism, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def closure_bias_with_tangents(mechanism: Mechanism, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(gamma (N, m), dgamma (2 n, N, m)): the closure bias (J qdd + gamma = 0 with J the
     Jacobian) and its derivatives with respect to q, then qd."""
     return _run(mechanism, ("closure", "_closure_bias", "gamma"), [q, qd])

@@ -107,7 +107,7 @@ def _what(what: str) -> str:
     return f" {what}" if what else ""
 
 
-def _error(path, what: str, exc: OSError) -> InputError:
+def _error(path: str | os.PathLike[str], what: str, exc: OSError) -> InputError:
     return InputError(f"cannot write{_what(what)}: {exc.strerror or exc}", file=str(path))
 
 
@@ -147,7 +147,7 @@ def _write_all(fd: int, payload: bytes) -> None:
     os.fsync(fd)
 
 
-def _write_in_place(path, payload: bytes, what: str) -> None:
+def _write_in_place(path: str | os.PathLike[str], payload: bytes, what: str) -> None:
     try:
         fd = os.open(path, os.O_WRONLY | os.O_TRUNC | getattr(os, "O_BINARY", 0))
     except OSError as exc:

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from baseparams import registry
-from baseparams.dynamics.evaluator import closure_structure
+from baseparams.dynamics.evaluator import ClosureStructure, closure_structure
 from baseparams.dynamics.trajectory import Trajectory, samples_float64
 from baseparams.errors import InputError, KinematicsError
+from baseparams.io.formats import Reader
 from baseparams.io.toml_reader import parse_toml
 from baseparams.model.mechanism import Mechanism
 
@@ -30,9 +31,10 @@ def resolve(mech: str | Path) -> Mechanism:
                      f"({', '.join(known) or 'none registered'}) and not a file")
 
 
-def readers_by_suffix() -> dict:
+def readers_by_suffix() -> dict[str, Reader]:
     """Lower-case suffix (".toml") -> the registered reader object that reads it."""
-    out, owner = {}, {}
+    out: dict[str, Reader] = {}
+    owner: dict[str, str] = {}
     for name, reg in registry.readers().items():
         for suffix in reg.item.suffixes:
             suffix = suffix.lower()
@@ -43,7 +45,7 @@ def readers_by_suffix() -> dict:
     return out
 
 
-def reader_for(path: str | Path):
+def reader_for(path: str | Path) -> Reader:
     """The reader registered for ``path``'s suffix, or an InputError listing the known ones."""
     path = Path(path)
     readers = readers_by_suffix()
@@ -82,7 +84,7 @@ def check_mobility(mech: Mechanism) -> None:
     Needs the loop-closure Jacobian, which is why the builder cannot run it (the model does
     not import the kinematics). Keys are the TOML format's (docs/mechanism-format.md).
     """
-    def error(key, reason):
+    def error(key: str, reason: str) -> InputError:
         return InputError(reason, file=mech.path, key=key)
 
     try:
@@ -107,7 +109,7 @@ def check_mobility(mech: Mechanism) -> None:
             raise error("trajectory.q", f"no expression for {', '.join(missing)}")
 
 
-def _check_redundant_joints(mech: Mechanism, structure) -> None:
+def _check_redundant_joints(mech: Mechanism, structure: ClosureStructure) -> None:
     """Refuse a loop-closing joint none of whose closure equations is independent of the
     other joints' (a second coaxial revolute between the same bodies, a duplicated joint):
     it constrains nothing, and Newton would have no equation to solve."""

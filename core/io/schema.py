@@ -14,9 +14,13 @@ editors and other tools; tests/test_builder.py checks that the two agree on ever
 built-in file.
 """
 
+from __future__ import annotations
+
 import difflib
+from collections.abc import Iterable
 from dataclasses import dataclass
 from decimal import Decimal
+from typing import Any
 
 from baseparams.errors import InputError
 
@@ -27,13 +31,13 @@ from baseparams.errors import InputError
 class Scalar:
     """One TOML value of the given kinds: "string", "integer", "number" (a TOML float,
     read as a Decimal) or "boolean"."""
-    kinds: tuple
+    kinds: tuple[str, ...]
     what: str                      # in messages: "a string", "a number or an expression"
 
 
 @dataclass(frozen=True)
 class Array:
-    item: object
+    item: Spec
     length: int | None = None      # exact length, or None: any (at least ``min_length``)
     min_length: int = 0
     what: str = ""
@@ -42,14 +46,14 @@ class Array:
 @dataclass(frozen=True)
 class Table:
     """A table with known keys (``fields``: name -> (spec, required))."""
-    fields: dict
+    fields: dict[str, tuple[Spec, bool]]
     what: str = "a table"
 
 
 @dataclass(frozen=True)
 class Map:
     """A table whose keys are names the file chooses (geometry names, coordinates)."""
-    value: object
+    value: Spec
     what: str = "a table"
 
 
@@ -57,6 +61,9 @@ class Map:
 class ArrayOfTables:
     table: Table
     min_length: int = 0
+
+
+Spec = Scalar | Array | Table | Map | ArrayOfTables
 
 
 STRING = Scalar(("string",), "a string")
@@ -137,7 +144,7 @@ def shown_key(key: object, limit: int = 40) -> str:
     return text if len(text) <= limit else f"{text[:limit - 5]}...' ({len(str(key))} characters)"
 
 
-def suggestion(word: str, known) -> str:
+def suggestion(word: str, known: Iterable[str]) -> str:
     """ " (did you mean 'type'?)" when ``word`` is close to one of ``known``, else ""."""
     close = difflib.get_close_matches(str(word)[:100], list(known), n=1, cutoff=0.6)
     if not close:
@@ -147,13 +154,13 @@ def suggestion(word: str, known) -> str:
 
 
 class _Validator:
-    def __init__(self, path):
+    def __init__(self, path: str | None) -> None:
         self.path = path
 
-    def error(self, key, reason):
+    def error(self, key: str, reason: str) -> InputError:
         return InputError(reason, file=self.path, key=key or None)
 
-    def check(self, spec, value, key):
+    def check(self, spec: Spec, value: object, key: str) -> None:
         if isinstance(spec, Scalar):
             self.scalar(spec, value, key)
         elif isinstance(spec, Array):
@@ -168,13 +175,13 @@ class _Validator:
         else:
             self.array_of_tables(spec, value, key)
 
-    def scalar(self, spec, value, key):
+    def scalar(self, spec: Scalar, value: object, key: str) -> None:
         kind = ("boolean" if isinstance(value, bool) else "integer" if isinstance(value, int)
                 else "number" if isinstance(value, Decimal) else "string" if isinstance(value, str) else None)
         if kind not in spec.kinds:
             raise self.error(key, f"must be {spec.what}, not {type_word(value)}")
 
-    def array(self, spec, value, key):
+    def array(self, spec: Array, value: object, key: str) -> None:
         what = spec.what or "an array"
         if not isinstance(value, list):
             raise self.error(key, f"must be {what}, not {type_word(value)}")
@@ -185,7 +192,7 @@ class _Validator:
         for i, item in enumerate(value):
             self.check(spec.item, item, f"{key}[{i}]")
 
-    def table(self, spec, value, key):
+    def table(self, spec: Table, value: object, key: str) -> None:
         if not isinstance(value, dict):
             raise self.error(key, f"must be {spec.what}, not {type_word(value)}")
         known = tuple(spec.fields)
@@ -199,7 +206,7 @@ class _Validator:
             if required and name not in value:
                 raise self.error(_join(key, name), "missing (required)")
 
-    def array_of_tables(self, spec, value, key):
+    def array_of_tables(self, spec: ArrayOfTables, value: object, key: str) -> None:
         if not isinstance(value, list):
             raise self.error(key, f"must be an array of tables ([[{key}]]), not {type_word(value)}")
         if len(value) < spec.min_length:
@@ -220,7 +227,7 @@ _JSON_KINDS = {"string": {"type": "string"}, "integer": {"type": "integer"},
                "number": {"type": "number"}, "boolean": {"type": "boolean"}}
 
 
-def json_schema() -> dict:
+def json_schema() -> dict[str, Any]:
     """:data:`SCHEMA` as a JSON Schema (draft 2020-12), for tools that read one. TOML floats
     appear as JSON numbers; exact values and names are the builder's to check."""
     out = _json(SCHEMA)
@@ -228,12 +235,12 @@ def json_schema() -> dict:
             "title": "baseparams mechanism file (docs/mechanism-format.md)", **out}
 
 
-def _json(spec) -> dict:
+def _json(spec: Spec) -> dict[str, Any]:
     if isinstance(spec, Scalar):
         kinds = [_JSON_KINDS[k] for k in spec.kinds]
         return kinds[0] if len(kinds) == 1 else {"anyOf": kinds}
     if isinstance(spec, Array):
-        out = {"type": "array", "items": _json(spec.item)}
+        out: dict[str, Any] = {"type": "array", "items": _json(spec.item)}
         if spec.length is not None:
             out["minItems"] = out["maxItems"] = spec.length
         elif spec.min_length:
@@ -244,9 +251,9 @@ def _json(spec) -> dict:
                 "required": [k for k, (_, r) in spec.fields.items() if r], "additionalProperties": False}
     if isinstance(spec, Map):
         return {"type": "object", "additionalProperties": _json(spec.value)}
-    out = {"type": "array", "items": _json(spec.table)}
+    array: dict[str, Any] = {"type": "array", "items": _json(spec.table)}
     if spec.min_length:
-        out["minItems"] = spec.min_length
-    return out
+        array["minItems"] = spec.min_length
+    return array
 
 

@@ -13,18 +13,28 @@ import re
 import tomllib
 from decimal import Decimal
 from pathlib import Path
+from typing import Any
 
 from baseparams.errors import InputError
-from baseparams.io.schema import SCHEMA, validate
+from baseparams.io.schema import SCHEMA, ArrayOfTables, Table, validate
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.mechanism import Mechanism
 
+
+def _keys(section: str) -> tuple[str, ...]:
+    """The keys of a top-level table (or of each table of an array of tables)."""
+    spec = SCHEMA.fields[section][0]
+    table = spec.table if isinstance(spec, ArrayOfTables) else spec
+    assert isinstance(table, Table)
+    return tuple(table.fields)
+
+
 TOP_LEVEL = tuple(SCHEMA.fields)
-HEADER_KEYS = tuple(SCHEMA.fields["mechanism"][0].fields)
-BODY_KEYS = tuple(SCHEMA.fields["bodies"][0].table.fields)
-JOINT_KEYS = tuple(SCHEMA.fields["joints"][0].table.fields)
-TRAJECTORY_KEYS = tuple(SCHEMA.fields["trajectory"][0].fields)
-EFFECT_KEYS = tuple(SCHEMA.fields["effects"][0].table.fields)
+HEADER_KEYS = _keys("mechanism")
+BODY_KEYS = _keys("bodies")
+JOINT_KEYS = _keys("joints")
+TRAJECTORY_KEYS = _keys("trajectory")
+EFFECT_KEYS = _keys("effects")
 BOM = "\ufeff"
 LONG_INTEGER = re.compile(r"[0-9_]{4301,}")
 
@@ -33,11 +43,17 @@ class TomlReader:
     """The built-in reader of ``.toml`` mechanism files (registered by baseparams.plugins.readers)."""
 
     name = "toml"
-    suffixes = (".toml",)
+    suffixes: tuple[str, ...] = (".toml",)
     description = "baseparams mechanism files (docs/mechanism-format.md)"
+    options: tuple[str, ...] = ()
 
-    def read(self, path: str | Path) -> Mechanism:
-        """The mechanism in the file at ``path`` (without the mobility check)."""
+    def read_notes(self, path: str | Path, **options: Any) -> tuple[Mechanism, list[str]]:
+        """The mechanism and no notes: the format holds everything the model does."""
+        return self.read(path), []
+
+    def read(self, path: str | Path, **options: Any) -> Mechanism:
+        """The mechanism in the file at ``path`` (without the mobility check). The format
+        has no options (``options`` is empty), so callers pass none."""
         path = Path(path)
         try:
             data = path.read_bytes()
@@ -75,7 +91,7 @@ class _Walker:
     """Walks the tables of a document the schema accepted, in file order, handing each value
     and its key path to the builder (which checks names, references and values)."""
 
-    def __init__(self, data: dict, path: str):
+    def __init__(self, data: dict[str, Any], path: str) -> None:
         self.data = data
         self.path = path
 

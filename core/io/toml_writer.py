@@ -7,6 +7,7 @@ the floats the model keeps, written by their shortest round-trip text.
 """
 
 import json
+from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 
@@ -21,7 +22,7 @@ class TomlWriter:
     """The built-in writer of ``.toml`` mechanism files (registered by baseparams.plugins.readers)."""
 
     name = "toml"
-    suffixes = (".toml",)
+    suffixes: tuple[str, ...] = (".toml",)
     description = "baseparams mechanism files (docs/mechanism-format.md)"
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
@@ -34,14 +35,14 @@ def _string(text: str) -> str:
     return json.dumps(text, ensure_ascii=False)
 
 
-def _expr(value) -> str:
-    value = sympy.sympify(value)
-    if value.is_Rational:
-        return _string(exact_text(Fraction(int(value.p), int(value.q))))
-    return _string(str(value))
+def _expr(value: object) -> str:
+    expr = sympy.sympify(value)
+    if expr.is_Rational:
+        return _string(exact_text(Fraction(int(expr.p), int(expr.q))))
+    return _string(str(expr))
 
 
-def _vector(values) -> str:
+def _vector(values: Iterable[object]) -> str:
     return "[" + ", ".join(_expr(v) for v in values) + "]"
 
 
@@ -87,13 +88,13 @@ def mechanism_toml(mech: Mechanism) -> str:
         q = ", ".join(f"{name} = {_expr(e)}" for name, e in spec.expressions.items())
         out += ["", "[trajectory]", f"t_start = {_string(exact_text(spec.t_start))}",
                 f"t_end = {_string(exact_text(spec.t_end))}", f"samples = {spec.samples}", f"q = {{ {q} }}"]
-    for c in getattr(mech, "couplings", ()):
+    for c in mech.couplings:
         out += ["", "[[couplings]]", f"coordinate = {_string(c.coordinate)}", f"leader = {_string(c.leader)}",
                 f"ratio = {_string(exact_text(c.ratio))}", f"offset = {_string(exact_text(c.offset))}"]
-    for motor in getattr(mech, "motors", ()):
+    for motor in mech.motors:
         ratios = ", ".join(f"{c} = {_string(exact_text(r))}" for c, r in motor.ratios)
         out += ["", "[[motors]]", f"name = {_string(motor.name)}", f"ratios = {{ {ratios} }}"]
-    for effect in getattr(mech, "effects", ()):
+    for effect in mech.effects:
         out += ["", "[[effects]]", f"kind = {_string(effect.kind)}", f"coordinate = {_string(effect.coordinate)}"]
         if effect.values:
             values = ", ".join(f"{k} = {_string(exact_text(v))}" for k, v in effect.values.items())

@@ -12,12 +12,20 @@ positions, so every entry of W encloses its exact value: this is what makes the 
 proofs of the `vp` solver cover the mechanism, not just its rounded Newton iterate.
 """
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 from flint import arb, arb_mat
 
 from baseparams.errors import KinematicsError
+from baseparams.numeric.backends import Arb
+
+if TYPE_CHECKING:
+    from baseparams.dynamics.evaluator import Evaluator
 
 
-def enclose(evaluator, q, where="", at=None):
+def enclose(evaluator: "Evaluator", q: Sequence[Any], where: str = "",
+            at: tuple[list[Any], list[list[Any]]] | None = None) -> list[Any]:
     """Tree coordinates with the dependent ones replaced by proven enclosures (arb balls).
     ``at``: the closure values and Jacobian rows at ``q`` when already computed (Newton's last)."""
     st = evaluator.structure
@@ -33,7 +41,9 @@ def enclose(evaluator, q, where="", at=None):
     y = arb_mat(m, m, [inverse[i, j].mid() for i in range(m) for j in range(m)])
     step = y * arb_mat(m, 1, residual)
     size = max(abs(step[i, 0]).upper() for i in range(m))
-    floor = arb(10) ** (-(evaluator.backend.digits - 2))
+    backend = evaluator.backend
+    assert isinstance(backend, Arb)              # balls: the evaluator certifies in arb only
+    floor = arb(10) ** (-(backend.digits - 2))
     radius = 4 * size + floor
     for _ in range(4):
         centre = [arb(q[j]).mid() for j in dep]
@@ -54,5 +64,5 @@ def enclose(evaluator, q, where="", at=None):
                           f"(Krawczyk test failed); the configuration may be near singular")
 
 
-def _identity(m):
+def _identity(m: int) -> Any:
     return arb_mat(m, m, [1 if i == j else 0 for i in range(m) for j in range(m)])

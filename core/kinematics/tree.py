@@ -7,27 +7,42 @@ velocities are given, the acceleration terms that do not depend on the accelerat
 ``omega_dot = Jw qdd + bias_w`` and ``a = Jv qdd + bias_a``.
 """
 
+from __future__ import annotations
+
 import weakref
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from fractions import Fraction
+from typing import TYPE_CHECKING, Any
 
 from baseparams.numeric import vec
 from baseparams.model.joints import AXES, elementary_rotation
 
+if TYPE_CHECKING:
+    from baseparams.model.mechanism import Joint, Mechanism
+    from baseparams.numeric.backends import Backend
+
+Vector = list[Any]                   # three numbers of the backend
+Rotation = list[list[Any]]           # three rows
+Columns = dict[int, Vector]          # coordinate index -> a column (world)
+Frame = tuple[Rotation, Vector]
+
 
 @dataclass
 class BodyState:
-    rot: list          # body axes in world (rows); columns are the body's x, y, z
-    pos: list          # origin, world
-    jw: dict           # coordinate index -> angular velocity column (world)
-    jv: dict           # coordinate index -> origin velocity column (world)
-    w: list = None     # angular velocity (world), when qd is given
-    v: list = None     # origin velocity (world)
-    bw: list = None    # bias angular acceleration (qdd = 0)
-    ba: list = None    # bias origin acceleration (qdd = 0)
+    rot: Rotation      # body axes in world (rows); columns are the body's x, y, z
+    pos: Vector        # origin, world
+    jw: Columns        # coordinate index -> angular velocity column (world)
+    jv: Columns        # coordinate index -> origin velocity column (world)
+    w: Vector | None = None    # angular velocity (world), when qd is given
+    v: Vector | None = None    # origin velocity (world)
+    bw: Vector | None = None   # bias angular acceleration (qdd = 0)
+    ba: Vector | None = None   # bias origin acceleration (qdd = 0)
 
 
 # mechanism -> {(backend type, digits, symbolic geometry): (edges, loops, gravity, zero, one)}
-_PREPARED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_PREPARED: weakref.WeakKeyDictionary[Mechanism, dict[tuple[Any, ...], tuple[Any, ...]]] = (
+    weakref.WeakKeyDictionary())
 
 
 class TreeKinematics:
@@ -37,7 +52,13 @@ class TreeKinematics:
     (read only): evaluating them goes through sympy (about 0.2 s for the SLA, which was most
     of its warm float64 W). A backend's numbers depend on nothing but its kind and digits."""
 
-    def __init__(self, mechanism, backend, symbolic_geometry=False):
+    edges: list[tuple[int, int, Frame, list[tuple[str, int, int, int]], Frame]]
+    loops: list[tuple[Joint, Frame, Frame]]
+    gravity: list[Any]
+    zero: Any
+    one: Any
+
+    def __init__(self, mechanism: Mechanism, backend: Backend, symbolic_geometry: bool = False) -> None:
         self.mechanism = mechanism
         self.backend = backend
         self.n = len(mechanism.coordinates)
@@ -51,7 +72,8 @@ class TreeKinematics:
             cached[key] = (self.edges, self.loops, self.gravity, self.zero, self.one)
         self.edges, self.loops, self.gravity, self.zero, self.one = cached[key]
 
-    def _prepare(self, mechanism, backend, symbolic_geometry, index):
+    def _prepare(self, mechanism: Mechanism, backend: Backend, symbolic_geometry: bool,
+                 index: Mapping[str, int]) -> None:
         frame = lambda f: mechanism.numeric_frame(f, backend, symbolic_geometry)  # noqa: E731
         self.edges = []
         for edge in mechanism.tree:
@@ -67,11 +89,11 @@ class TreeKinematics:
             self.edges.append((edge.known, edge.new, known_frame, motions, new_frame))
         self.loops = [(j, frame(j.parent_frame), frame(j.child_frame)) for j in mechanism.loops]
         self.gravity = mechanism.numeric_gravity(backend, symbolic_geometry)
-        self.zero = backend.rational(0)
-        self.one = backend.rational(1)
+        self.zero = backend.rational(Fraction(0))
+        self.one = backend.rational(Fraction(1))
 
     # ------------------------------------------------------------------
-    def forward(self, q, qd=None):
+    def forward(self, q: Sequence[Any], qd: Sequence[Any] | None = None) -> dict[int, BodyState]:
         """Body states for tree coordinates ``q`` (and velocities ``qd``, optional)."""
         z, one = self.zero, self.one
         ground = BodyState([[one, z, z], [z, one, z], [z, z, one]], [z, z, z], {}, {})
@@ -112,13 +134,16 @@ class TreeKinematics:
         return states
 
     # ------------------------------------------------------------------
-    def closure(self, states, want_bias=False):
+    def closure(self, states: Mapping[int, BodyState],
+                want_bias: bool = False) -> tuple[list[Any], list[list[Any]], list[Any]]:
         """Loop-closure equations: values, Jacobian rows (length n) and, optionally, bias terms.
 
         The bias gamma is the second time derivative of the equations with qdd = 0, so that
         ``Phi_q qdd + gamma = 0`` on the constraint manifold. Needs ``forward(q, qd)``.
         """
-        values, rows, biases = [], [], []
+        values: list[Any] = []
+        rows: list[list[Any]] = []
+        biases: list[Any] = []
         n, z = self.n, self.zero
         for joint, (ra, pa), (rb, pb) in self.loops:
             sa, sb = states[joint.parent], states[joint.child]
@@ -156,13 +181,13 @@ class TreeKinematics:
                     biases.append(vec.dot(u_dd, other) + 2 * vec.dot(u_dot, o_dot) + vec.dot(u, o_dd))
         return values, rows, biases
 
-    def accelerations(self, state, qdd):
+    def accelerations(self, state: BodyState, qdd: Sequence[Any]) -> tuple[Vector, Vector]:
         """(omega_dot, a) of a body (world) from its Jacobians, bias terms and ``qdd``."""
         return (vec.add(state.bw, _combine(state.jw, qdd, self.zero)),
                 vec.add(state.ba, _combine(state.jv, qdd, self.zero)))
 
 
-def _offset(st, r):
+def _offset(st: BodyState, r: Vector) -> None:
     """Move the state's reference point by the world vector ``r`` fixed in the moving frame."""
     st.pos = vec.add(st.pos, r)
     for c, w in st.jw.items():
@@ -173,20 +198,20 @@ def _offset(st, r):
         st.v = vec.add(st.v, wr)
 
 
-def _point_columns(state, arm):
+def _point_columns(state: BodyState, arm: Vector) -> Columns:
     return {c: vec.add(state.jv[c], vec.cross(w, arm)) for c, w in state.jw.items()}
 
 
-def _point_velocity(state, arm):
+def _point_velocity(state: BodyState, arm: Vector) -> Vector:
     return vec.add(state.v, vec.cross(state.w, arm))
 
 
-def _point_bias(state, arm):
+def _point_bias(state: BodyState, arm: Vector) -> Vector:
     return vec.add(state.ba, vec.add(vec.cross(state.bw, arm),
                                      vec.cross(state.w, vec.cross(state.w, arm))))
 
 
-def _combine(columns, rates, zero):
+def _combine(columns: Columns, rates: Sequence[Any], zero: Any) -> Vector:
     total = [zero, zero, zero]
     for c, col in columns.items():
         total = vec.add(total, vec.scale(col, rates[c]))

@@ -31,6 +31,7 @@ from collections.abc import Mapping, Sequence
 from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
+from typing import TypeAlias
 
 import sympy
 
@@ -53,7 +54,7 @@ FRAME_KEYS = ("point", "axis", "ref")
 INERTIA_COM_KEYS = ("Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")
 TIME = sympy.Symbol("t")
 
-Value = str | int | Fraction | Decimal | sympy.Expr
+Value: TypeAlias = str | int | Fraction | Decimal | sympy.Expr
 """An exact value: a number or an expression in the geometry names (never a float)."""
 
 
@@ -78,7 +79,7 @@ class MechanismBuilder:
     def __init__(self, name: str, path: str | Path | None = None, *, title: str = "",
                  description: str = "", source: str = "",
                  joint_types: Mapping[str, JointType] | None = None, key: str = "mechanism",
-                 lenient_inertia: bool = False):
+                 lenient_inertia: bool = False) -> None:
         self.path = None if path is None else str(path)
         self.lenient_inertia = lenient_inertia
         if not isinstance(name, str) or not NAME_RE.match(name):
@@ -131,7 +132,7 @@ class MechanismBuilder:
         except ExpressionError as exc:
             raise self.error(key, str(exc)) from None
 
-    def _sympy_expression(self, value, key, time):
+    def _sympy_expression(self, value: object, key: str, time: bool) -> sympy.Expr:
         if not isinstance(value, sympy.Expr):
             raise self.error(key, f"{value!r} is not an expression")
         if value.atoms(sympy.Float):
@@ -146,8 +147,8 @@ class MechanismBuilder:
             raise self.error(key, f"unknown name {unknown[0]!r} (geometry names: {known})")
         return value
 
-    def vector(self, value: Sequence[Value], key: str) -> tuple:
-        """Three exact expressions."""
+    def vector(self, value: object, key: str) -> tuple[sympy.Expr, ...]:
+        """Three exact expressions (``value``: a list or tuple of three values, checked)."""
         if not isinstance(value, (list, tuple)) or len(value) != 3:
             got = f"{len(value)} items" if isinstance(value, (list, tuple)) else _type_word(value)
             raise self.error(key, f"must be a list of 3 numbers or expressions, got {got}")
@@ -218,7 +219,9 @@ class MechanismBuilder:
         self._bodies.append(body)
         return body
 
-    def _inertia(self, key, mass, com, inertia_com, inertia):
+    def _inertia(self, key: str, mass: Value | None, com: Sequence[Value] | None,
+                 inertia_com: Sequence[Value] | None,
+                 inertia: Mapping[str, Value] | None) -> tuple[Fraction, ...] | None:
         given = mass is not None or com is not None or inertia_com is not None
         if inertia is not None and given:
             raise self.error(key, "give either inertia (about the origin) or mass/com/inertia_com, not both")
@@ -241,7 +244,7 @@ class MechanismBuilder:
         """A joint frame with exact components, checked: ``point``; ``axis`` (z, default
         0 0 1, not zero); ``ref`` (x, optional, perpendicular to the axis)."""
         if isinstance(frame, Frame):
-            raw = {"point": frame.point, "axis": frame.axis, "ref": frame.ref}
+            raw: dict[str, object] = {"point": frame.point, "axis": frame.axis, "ref": frame.ref}
         elif isinstance(frame, Mapping):
             raw = dict(frame)
             unknown = set(raw) - set(FRAME_KEYS)
@@ -303,7 +306,7 @@ class MechanismBuilder:
         self._coordinates.update(cnames)
         return joint
 
-    def _joint_type(self, value, key):
+    def _joint_type(self, value: object, key: str) -> JointType:
         if isinstance(value, JointType):
             return value
         if self._joint_types is None:
@@ -312,7 +315,8 @@ class MechanismBuilder:
             raise self.error(key, f"unknown joint type {value!r}; known: {', '.join(self._joint_types)}")
         return self._joint_types[value]
 
-    def _coordinate_names(self, coordinates, key, name, jtype):
+    def _coordinate_names(self, coordinates: object, key: str, name: str,
+                          jtype: JointType) -> tuple[str, ...]:
         if coordinates is None:
             cnames = (name,) if jtype.dof == 1 else tuple(f"{name}_{s}" for s in jtype.suffixes)
         elif (not isinstance(coordinates, (list, tuple)) or len(coordinates) != jtype.dof
@@ -329,7 +333,7 @@ class MechanismBuilder:
                 raise self.error(key, f"coordinate name {c!r} is already used")
         return cnames
 
-    def _limits(self, raw, key, cnames):
+    def _limits(self, raw: object, key: str, cnames: tuple[str, ...]) -> dict[str, tuple[float, float]]:
         if not isinstance(raw, Mapping):
             raise self.error(key, "must be a table: coordinate = [low, high]")
         out = {}
@@ -479,10 +483,11 @@ class MechanismBuilder:
             warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors),
             couplings=couplings, nonphysical=tuple(self._nonphysical))
 
-    def _spanning_tree(self, bodies):
+    def _spanning_tree(self, bodies: Sequence[Body]) -> tuple[list[TreeEdge], list[Joint]]:
         """Joints in declaration order; one joining two placed bodies closes a loop."""
         placed = {0}
-        tree, loops = [], []
+        tree: list[TreeEdge] = []
+        loops: list[Joint] = []
         remaining = [j for j in self._joints if not j.loop]
         progress = True
         while remaining and progress:
@@ -507,7 +512,7 @@ class MechanismBuilder:
         loops.extend(j for j in self._joints if j.loop)
         return tree, loops
 
-    def _checked_couplings(self, coordinates, loops):
+    def _checked_couplings(self, coordinates: Sequence[str], loops: Sequence[Joint]) -> tuple[Coupling, ...]:
         followers = {c.coordinate for c, _ in self._couplings}
         for coupling, key in self._couplings:
             if loops:
@@ -523,7 +528,8 @@ class MechanismBuilder:
                                  "name the coordinate it follows (chains of couplings are not read)")
         return tuple(c for c, _ in self._couplings)
 
-    def _checked_independent(self, coordinates, loops, couplings=()):
+    def _checked_independent(self, coordinates: Sequence[str], loops: Sequence[Joint],
+                             couplings: Sequence[Coupling] = ()) -> tuple[str, ...]:
         followers = {c.coordinate for c in couplings}
         if self._independent is None:
             return () if loops else tuple(c for c in coordinates if c not in followers)
@@ -538,7 +544,7 @@ class MechanismBuilder:
                              f"that follow no other: {', '.join(c for c in coordinates if c not in followers)}")
         return names
 
-    def _checked_trajectory(self, independent):
+    def _checked_trajectory(self, independent: Sequence[str]) -> TrajectorySpec | None:
         if self._trajectory is None:
             return None
         spec, key = self._trajectory

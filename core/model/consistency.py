@@ -24,13 +24,20 @@ one check that verbs whose answer uses the values (simulate, identification prio
 ``--physical``, diagnose ``--params``) call before they start.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from itertools import combinations
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from baseparams.errors import InputError
+
+if TYPE_CHECKING:       # the mechanism module does not import this one, but the builder does
+    from baseparams.model.mechanism import Mechanism
 
 ROUNDING = Fraction(1, 10 ** 13)       # a thousand double-precision roundings
 
@@ -43,7 +50,7 @@ class Verdict:
     warning: str | None = None
 
 
-def check_body(params) -> Verdict:
+def check_body(params: Sequence[Fraction]) -> Verdict:
     """The verdict on (m, mx, my, mz, Ixx, Ixy, Ixz, Iyy, Iyz, Izz) about the body origin,
     with ``I..`` the tensor entries (``Ixy = -integral of x y dm``)."""
     m, mx, my, mz, ixx, ixy, ixz, iyy, iyz, izz = (Fraction(v) for v in params)
@@ -52,7 +59,7 @@ def check_body(params) -> Verdict:
     if m < 0:
         return Verdict(f"negative mass {float(m):.6g}")
     if m == 0:
-        if (mx, my, mz) != (0, 0, 0):
+        if mx or my or mz:
             return Verdict("first moments (mx, my, mz) without mass: a centre of mass needs a mass")
         if all(v == 0 for row in tensor for v in row):
             return Verdict()
@@ -67,7 +74,7 @@ def check_body(params) -> Verdict:
     return Verdict(_tensor_problem(at_com, "the inertia at the centre of mass", slack))
 
 
-def require_physical(mechanism, use: str) -> None:
+def require_physical(mechanism: Mechanism, use: str) -> None:
     """Raise the ``error:`` for the first body of ``mechanism`` whose inertia is not
     physical (``Mechanism.nonphysical``), saying that ``use`` needs the values: for verbs
     whose answer depends on inertia values (simulate, identification priors and
@@ -82,7 +89,7 @@ def require_physical(mechanism, use: str) -> None:
                      file=mechanism.path, key=key)
 
 
-def principal_moments(tensor) -> list[float]:
+def principal_moments(tensor: Sequence[Sequence[Fraction]]) -> list[float]:
     """The eigenvalues of a symmetric 3 x 3 tensor of Fractions, ascending (for messages):
     from its exact characteristic polynomial, so an exact zero prints as 0, not 1e-22."""
     t = [[Fraction(v) for v in row] for row in tensor]
@@ -98,7 +105,7 @@ def principal_moments(tensor) -> list[float]:
     return sorted([0.0] + pair)
 
 
-def _tensor_problem(tensor, what: str, slack: Fraction = Fraction(0)) -> str | None:
+def _tensor_problem(tensor: Sequence[Sequence[Fraction]], what: str, slack: Fraction = Fraction(0)) -> str | None:
     trace = tensor[0][0] + tensor[1][1] + tensor[2][2]
     sigma = [[(trace / 2 if i == j else 0) - tensor[i][j] for j in range(3)] for i in range(3)]
     if _semidefinite(sigma, slack):
@@ -110,7 +117,7 @@ def _tensor_problem(tensor, what: str, slack: Fraction = Fraction(0)) -> str | N
             f"most the sum of the other two")
 
 
-def _semidefinite(matrix, slack: Fraction = Fraction(0)) -> bool:
+def _semidefinite(matrix: Sequence[Sequence[Fraction]], slack: Fraction = Fraction(0)) -> bool:
     """Every principal minor of ``matrix + slack * 1`` >= 0 (exact, for a symmetric 3 x 3
     matrix of Fractions)."""
     if slack:
@@ -122,7 +129,7 @@ def _semidefinite(matrix, slack: Fraction = Fraction(0)) -> bool:
     return True
 
 
-def _det(a) -> Fraction:
+def _det(a: Sequence[Sequence[Fraction]]) -> Fraction:
     if len(a) == 1:
         return a[0][0]
     if len(a) == 2:

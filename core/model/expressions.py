@@ -38,6 +38,7 @@ import ast
 import math
 import operator
 import re
+from collections.abc import Iterable
 from decimal import Decimal
 from fractions import Fraction
 
@@ -106,7 +107,7 @@ def parse_decimal(text: object) -> Fraction:
     return _number_from_match(match, source)
 
 
-def parse_expression(text: object, names=(), *, time: bool = False) -> sympy.Expr:
+def parse_expression(text: object, names: Iterable[str] = (), *, time: bool = False) -> sympy.Expr:
     """Parse ``text`` into an exact sympy expression, within the module's resource limits.
 
     ``names``: allowed symbol names (geometry parameters). With ``time=True`` the variable
@@ -150,7 +151,7 @@ def to_fraction(expr: sympy.Expr) -> Fraction:
     return _checked_magnitude(Fraction(int(expr.p), int(expr.q)), None)
 
 
-def exact_text(value) -> str:
+def exact_text(value: Fraction | int) -> str:
     """An exact rational as a decimal string when it has one ("0.3196"), else "p/q".
 
     The inverse of :func:`parse_decimal`: geometry written back (JSON, reports) stays exact.
@@ -292,10 +293,10 @@ class _Converter:
     """AST -> (sympy expression, degree bound). The degree bound is the polynomial degree in
     the names (and t): what substituting geometry values can cost later."""
 
-    def __init__(self, source: str, names: set, time: bool):
+    def __init__(self, source: str, names: set[str], time: bool) -> None:
         self.source, self.names, self.time = source, names, time
 
-    def convert(self, node: ast.AST):
+    def convert(self, node: ast.AST) -> tuple[sympy.Expr, int]:
         if isinstance(node, ast.Constant):
             return self.constant(node), 0
         if isinstance(node, ast.Name):
@@ -319,7 +320,7 @@ class _Converter:
         literal = ast.get_source_segment(self.source, node) or repr(node.value)
         return sympy.Rational(parse_decimal(literal))
 
-    def name(self, node: ast.Name):
+    def name(self, node: ast.Name) -> tuple[sympy.Expr, int]:
         if node.id in self.names:
             return sympy.Symbol(node.id), 1
         if self.time and node.id == "t":
@@ -331,7 +332,8 @@ class _Converter:
         known = ", ".join(sorted(self.names)) or "none"
         raise ExpressionError(f"unknown name {_shown(node.id)} (geometry names: {known})")
 
-    def call(self, node: ast.Call):
+    def call(self, node: ast.Call) -> tuple[sympy.Expr, int]:
+        assert isinstance(node.func, ast.Name)          # convert() sends only calls of a name
         fname = node.func.id
         if fname not in FUNCTIONS or len(node.args) != 1 or node.keywords:
             raise ExpressionError(f"function {_shown(fname)} with these arguments is not allowed "
@@ -341,7 +343,7 @@ class _Converter:
             raise ExpressionError("the square root of a negative number is not real")
         return FUNCTIONS[fname](arg), max(1, degree)
 
-    def binop(self, node: ast.BinOp):
+    def binop(self, node: ast.BinOp) -> tuple[sympy.Expr, int]:
         op = type(node.op)
         if op not in (ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow):
             raise ExpressionError(f"the operator {_OPERATORS.get(op, op.__name__)} is not allowed "
@@ -357,7 +359,7 @@ class _Converter:
         degree = max(ldeg, rdeg) if op in (ast.Add, ast.Sub) else ldeg + rdeg
         return self.checked(value, degree)
 
-    def power(self, base, bdeg, exponent, edeg):
+    def power(self, base: sympy.Expr, bdeg: int, exponent: sympy.Expr, edeg: int) -> tuple[sympy.Expr, int]:
         if exponent.free_symbols:
             if not (self.time and _T in exponent.free_symbols):
                 raise ExpressionError("an exponent must be a number" + (" or depend on t" if self.time else ""))
@@ -382,7 +384,7 @@ class _Converter:
         return self.checked(base ** exponent, bdeg * times)
 
     @staticmethod
-    def checked(value: sympy.Expr, degree: int):
+    def checked(value: sympy.Expr, degree: int) -> tuple[sympy.Expr, int]:
         if degree > MAX_DEGREE:
             raise ExpressionError(f"an expression of degree {degree} in its names: at most {MAX_DEGREE} "
                                   f"is accepted (nested powers or long products)")

@@ -34,6 +34,7 @@ reference configuration, and a crank motion that stays well inside its assembly 
 import math
 import random
 import re
+from collections.abc import Sequence
 from fractions import Fraction
 
 from baseparams.model.expressions import exact_text
@@ -43,36 +44,41 @@ _PYTHAGOREAN = [(3, 4, 5), (5, 12, 13), (8, 15, 17), (7, 24, 25), (20, 21, 29)]
 
 
 # ----- exact little vectors ---------------------------------------------------------------
-def _dot(a, b):
+Q = Fraction | int                   # an exact rational
+Vec = tuple[Q, ...]                  # three of them
+Rows = tuple[Vec, ...]               # a 3 x 3 matrix by rows
+
+
+def _dot(a: Vec, b: Vec) -> Q:
     return sum(x * y for x, y in zip(a, b))
 
 
-def _scale(v, s):
+def _scale(v: Vec, s: Q) -> Vec:
     return tuple(x * s for x in v)
 
 
-def _sub(a, b):
+def _sub(a: Vec, b: Vec) -> Vec:
     return tuple(x - y for x, y in zip(a, b))
 
 
-def _add(a, b):
+def _add(a: Vec, b: Vec) -> Vec:
     return tuple(x + y for x, y in zip(a, b))
 
 
-def _matvec(rows, v):
+def _matvec(rows: Rows, v: Vec) -> Vec:
     return tuple(_dot(row, v) for row in rows)
 
 
-def _transpose(rows):
+def _transpose(rows: Rows) -> Rows:
     return tuple(tuple(rows[i][j] for i in range(3)) for j in range(3))
 
 
-def _matmul(a, b):
+def _matmul(a: Rows, b: Rows) -> Rows:
     bt = _transpose(b)
     return tuple(tuple(_dot(a[i], bt[j]) for j in range(3)) for i in range(3))
 
 
-def _integer_multiple(v):
+def _integer_multiple(v: Vec) -> tuple[int, ...]:
     """The shortest integer vector along the rational vector ``v``."""
     fr = [Fraction(x) for x in v]
     den = math.lcm(*(x.denominator for x in fr))
@@ -81,29 +87,29 @@ def _integer_multiple(v):
     return tuple(x // g for x in ints)
 
 
-def _text(x):
+def _text(x: Q) -> str:
     return exact_text(Fraction(x))
 
 
-def _vector(v):
+def _vector(v: Sequence[Q]) -> str:
     return "[" + ", ".join(f'"{_text(x)}"' for x in v) + "]"
 
 
 class _Draw:
     """The seeded random source, with the rational draws the generators share."""
 
-    def __init__(self, seed):
+    def __init__(self, seed: int | str) -> None:
         self.rng = random.Random(seed)
 
-    def decimal(self, lo, hi, places=2):
+    def decimal(self, lo: Q | float, hi: Q | float, places: int = 2) -> Fraction:
         """A decimal with ``places`` places in [lo, hi]."""
         k = 10 ** places
         return Fraction(self.rng.randint(round(lo * k), round(hi * k)), k)
 
-    def sign(self):
+    def sign(self) -> int:
         return self.rng.choice((1, -1))
 
-    def rotation(self, small=3):
+    def rotation(self, small: int = 3) -> Rows:
         """A rational rotation (rows) from an integer quaternion: entries p/n, n = |q|^2."""
         while True:
             a, b, c, d = (self.rng.randint(-small, small) for _ in range(4))
@@ -115,7 +121,7 @@ class _Draw:
              (2 * (b * d - a * c), 2 * (c * d + a * b), a * a - b * b - c * c + d * d))
         return tuple(tuple(Fraction(x, n) for x in row) for row in r)
 
-    def signed_permutation(self):
+    def signed_permutation(self) -> Rows:
         """A rotation (rows) that maps body axes onto body axes."""
         while True:
             perm = self.rng.sample(range(3), 3)
@@ -125,7 +131,7 @@ class _Draw:
             if _det(rows) == 1:
                 return rows
 
-    def pythagorean_rotation(self):
+    def pythagorean_rotation(self) -> Rows:
         """A rotation about a body axis by an angle with rational cosine and sine."""
         a, b, c = self.rng.choice(_PYTHAGOREAN)
         co, si = Fraction(a, c) * self.sign(), Fraction(b, c) * self.sign()
@@ -136,31 +142,31 @@ class _Draw:
         return tuple(tuple(row) for row in rows)
 
 
-def _det(r):
+def _det(r: Rows) -> Q:
     return (r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
             - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
             + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]))
 
 
 # ----- frames -------------------------------------------------------------------------------
-def _frame_text(point, rot, draw, irrational=False):
+def _frame_text(point: Vec, rot: Rows, draw: _Draw, irrational: bool = False) -> str:
     """A joint frame (inline table) with origin ``point`` and axes the columns of ``rot``;
     ``ref`` is usually left out when the loader's default x axis is the frame's own.
     ``irrational``: instead an axis with no zero component and no ``ref`` (its default x
     axis, made perpendicular to it, has an irrational length)."""
     x, z = _transpose(rot)[0], _transpose(rot)[2]
     if irrational:
-        axis = tuple(draw.sign() * draw.rng.randint(1, 3) for _ in range(3))
-        return f"{{ point = {_vector(point)}, axis = {_vector(axis)} }}"
+        skew = tuple(draw.sign() * draw.rng.randint(1, 3) for _ in range(3))
+        return f"{{ point = {_vector(point)}, axis = {_vector(skew)} }}"
     unnormalised = draw.rng.random() < 0.5
-    axis = _integer_multiple(z) if unnormalised else z
-    ref = _integer_multiple(x) if unnormalised else x
+    axis: Vec = _integer_multiple(z) if unnormalised else z
+    ref: Vec = _integer_multiple(x) if unnormalised else x
     if x == _default_x(z) and draw.rng.random() < 0.7:
         return f"{{ point = {_vector(point)}, axis = {_vector(axis)} }}"
     return f"{{ point = {_vector(point)}, axis = {_vector(axis)}, ref = {_vector(ref)} }}"
 
 
-def _default_x(z):
+def _default_x(z: Vec) -> Vec | None:
     """The loader's default x axis for the unit axis ``z`` when it is rational, else None
     (docs/mechanism-format.md: the body axis least aligned with z, made perpendicular)."""
     k = min(range(3), key=lambda i: (abs(z[i]), i))
@@ -174,7 +180,7 @@ def _default_x(z):
     return _scale(v, 1 / root)
 
 
-def _random_rotation(draw):
+def _random_rotation(draw: _Draw) -> Rows:
     """A frame orientation: body axes (often), a rational turn about a body axis, or general."""
     u = draw.rng.random()
     if u < 0.5:
@@ -184,7 +190,7 @@ def _random_rotation(draw):
     return draw.rotation()
 
 
-def _default_frame(draw, rot):
+def _default_frame(draw: _Draw, rot: Rows) -> Rows:
     """``rot`` with its x axis replaced by the loader's default when that is rational and a
     coin says so (a frame written without ``ref``)."""
     cols = _transpose(rot)
@@ -195,17 +201,17 @@ def _default_frame(draw, rot):
     return _transpose((x, y, cols[2]))
 
 
-def _cross(a, b):
+def _cross(a: Vec, b: Vec) -> Vec:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def _point(draw, zero_offset, scale=Fraction(3, 10)):
+def _point(draw: _Draw, zero_offset: float, scale: Fraction = Fraction(3, 10)) -> Vec:
     return tuple(Fraction(0) if draw.rng.random() < zero_offset else draw.decimal(-scale, scale)
                  for _ in range(3))
 
 
 # ----- bodies, trajectory, gravity ----------------------------------------------------------
-def _body_text(label, draw):
+def _body_text(label: int, draw: _Draw) -> str:
     """Mass, COM and an inertia at the COM that is positive definite (triangle inequalities)."""
     mass = draw.decimal(Fraction(1, 2), 5, 1)
     com = tuple(draw.decimal(Fraction(-2, 10), Fraction(2, 10)) for _ in range(3))
@@ -219,7 +225,7 @@ def _body_text(label, draw):
             f"inertia_com = {_vector(entries)}\n")
 
 
-def _fourier(draw, amplitude, offset=Fraction(0)):
+def _fourier(draw: _Draw, amplitude: Q, offset: Q = Fraction(0)) -> str:
     """An offset plus three sines of distinct frequencies, total amplitude <= ``amplitude``."""
     freqs = draw.rng.sample([Fraction(k, 10) for k in range(5, 31)], 3)
     weights = [draw.decimal(Fraction(2, 10), 1) for _ in range(3)]
@@ -235,7 +241,7 @@ def _fourier(draw, amplitude, offset=Fraction(0)):
 AMPLITUDE = {"R": Fraction(12, 10), "P": Fraction(2, 10), "U": Fraction(1)}
 
 
-def _trajectory(draw, coordinates, samples):
+def _trajectory(draw: _Draw, coordinates: Sequence[tuple[str, str]], samples: int) -> str:
     q = []
     for name, kind in coordinates:
         if kind == "S":          # Cardan angles: b stays within 0.6 rad of 0, far from 90 deg
@@ -249,7 +255,7 @@ def _trajectory(draw, coordinates, samples):
             f"q = {{ {', '.join(q)} }}\n")
 
 
-def _gravity(draw):
+def _gravity(draw: _Draw) -> Vec:
     u = draw.rng.random()
     if u < 0.5:
         return (Fraction(0), Fraction(0), Fraction(-981, 100))
@@ -295,7 +301,8 @@ def tree(seed: int, bodies: int | None = None, max_bodies: int = 6, types: str =
     return _open(f"gen_tree_{seed}", draw, parents, types, spherical, irrational, zero_offset, samples)
 
 
-def _open(name, draw, parents, types, spherical, irrational, zero_offset, samples):
+def _open(name: str, draw: _Draw, parents: Sequence[int], types: str, spherical: float, irrational: float,
+          zero_offset: float, samples: int) -> str:
     """Mechanism text for the tree given by ``parents`` (body b + 1 hangs from parents[b];
     a serial chain when parents[b] == b)."""
     pool = [t for t in types for _ in range(3 if t == "R" else 1)]
@@ -346,7 +353,7 @@ def coupled_chain(seed: int, bodies: int | None = None, max_bodies: int = 6, typ
 
 
 # ----- a closed loop ------------------------------------------------------------------------
-def _unit_2d(draw):
+def _unit_2d(draw: _Draw) -> Vec:
     """A rational unit vector of the plane (a Pythagorean direction, or an axis)."""
     if draw.rng.random() < 0.2:
         return draw.rng.choice([(1, 0), (0, 1), (-1, 0), (0, -1)])
@@ -356,7 +363,8 @@ def _unit_2d(draw):
     return (Fraction(a, c) * draw.sign(), Fraction(b, c) * draw.sign())
 
 
-def _four_bar_ok(a, b, c, d, swing):
+def _four_bar_ok(a: tuple[float, ...], b: tuple[float, ...], c: tuple[float, ...], d: tuple[float, ...],
+                 swing: float) -> bool:
     """Float check that the crank can swing by +-``swing`` rad from the reference with the
     coupler-rocker angle (transmission) kept within 25..155 degrees (no dead point)."""
     l1, l2, l3 = math.dist((0, 0), b), math.dist(b, c), math.dist(c, d)
@@ -388,12 +396,13 @@ def four_bar(seed: int, samples: int = 100) -> str:
         b = _scale(u1, lengths[0])
         c = _add(b, _scale(u2, lengths[1]))
         d = _sub(c, _scale(u3, lengths[2]))
-        if math.dist((0, 0), d) > 0.05 and _four_bar_ok(*[tuple(map(float, p)) for p in ((0, 0), b, c, d)], 0.5):
+        a_, b_, c_, d_ = (tuple(map(float, p)) for p in ((0, 0), b, c, d))
+        if math.dist((0, 0), d) > 0.05 and _four_bar_ok(a_, b_, c_, d_, 0.5):
             break
     plane = _random_rotation(draw)              # the plane's axes (x, y in plane, z normal) in ground
     origin = _point(draw, 0.5)
 
-    def world(p2):                               # a plane point in ground coordinates
+    def world(p2: Vec) -> Vec:                               # a plane point in ground coordinates
         return _add(origin, _matvec(plane, (p2[0], p2[1], 0)))
 
     # body frames (in the plane's axes): origin at the proximal joint, x along the link,
@@ -429,7 +438,13 @@ def four_bar(seed: int, samples: int = 100) -> str:
     return "\n".join(out)
 
 
-def _random_turn_about_z(draw):
+def _found(match: re.Match[str] | None) -> re.Match[str]:
+    """A match in text :func:`four_bar` wrote (always there)."""
+    assert match is not None
+    return match
+
+
+def _random_turn_about_z(draw: _Draw) -> Rows:
     """A rotation about z by a rational-cosine angle (or none)."""
     if draw.rng.random() < 0.4:
         return ((1, 0, 0), (0, 1, 0), (0, 0, 1))
@@ -446,10 +461,10 @@ def ladder(n: int, seed: int = 1, samples: int = 100) -> str:
     gravity = None
     for k in range(n):
         text = four_bar(seed + k, samples=samples)
-        gravity = gravity or re.search(r"^gravity = .*$", text, re.M).group(0)
+        gravity = gravity or _found(re.search(r"^gravity = .*$", text, re.M)).group(0)
         base = 0 if k == 0 else 3 * k
 
-        def label(b, k=k, base=base):
+        def label(b: int, k: int = k, base: int = base) -> int:
             return base if b == 0 else 3 * k + b
 
         for block in re.findall(r"\[\[bodies\]\]\n(?:(?!\n\n).)*", text, re.S):
@@ -459,7 +474,7 @@ def ladder(n: int, seed: int = 1, samples: int = 100) -> str:
             block = re.sub(r"(parent|child) = (\d+)", lambda m: f"{m.group(1)} = {label(int(m.group(2)))}", block)
             block = re.sub(r'coordinates = \["(\w+)"\]', lambda m: f'coordinates = ["{m.group(1)}{k}"]', block)
             joints.append(block)
-        motion = re.search(r'qa = "([^"]*)"', text).group(1)
+        motion = _found(re.search(r'qa = "([^"]*)"', text)).group(1)
         trajectory.append(f'qa{k} = "{motion}"')
     independent = ", ".join(f'"qa{k}"' for k in range(n))
     return "\n\n".join([f'[mechanism]\nname = "ladder_{n}"\ntitle = "{n} four-bars in series"\n{gravity}']

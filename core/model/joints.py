@@ -12,10 +12,18 @@ is ``u_parent . w_child``, for axis names u, w in "x", "y", "z". When all coordi
 zero the two frames coincide, so every equation is zero there.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 from dataclasses import dataclass
+from fractions import Fraction
+from typing import TYPE_CHECKING, Any
 
 from baseparams.numeric import vec
 from baseparams.model.multipoles import TransferRule
+
+if TYPE_CHECKING:
+    from baseparams.numeric.backends import Backend
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -24,12 +32,12 @@ AXES = {"x": 0, "y": 1, "z": 2}
 class JointType:
     name: str
     description: str
-    motions: tuple = ()            # (("R" | "P", "x" | "y" | "z"), ...)
-    suffixes: tuple = ()           # coordinate name suffixes, one per motion
-    closure: tuple = ()            # (("gap", u) | ("dot", u, w), ...)
+    motions: tuple[tuple[str, str], ...] = ()   # (("R" | "P", "x" | "y" | "z"), ...)
+    suffixes: tuple[str, ...] = ()  # coordinate name suffixes, one per motion
+    closure: tuple[tuple[str, ...], ...] = ()   # (("gap", u) | ("dot", u, w), ...)
     uses_axis: bool = True         # whether the frames' axes matter to this joint
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if len(self.suffixes) != len(self.motions):
             raise ValueError(f"joint type {self.name}: one suffix per motion")
         for kind, axis in self.motions:
@@ -43,16 +51,16 @@ class JointType:
             raise ValueError(f"joint type {self.name}: bad closure equation {eq!r}")
 
     @property
-    def dof(self):
+    def dof(self) -> int:
         return len(self.motions)
 
     @property
-    def coordinate_kinds(self):
+    def coordinate_kinds(self) -> tuple[str, ...]:
         return tuple("angle" if kind == "R" else "length" for kind, _ in self.motions)
 
-    def transform(self, q, backend):
+    def transform(self, q: Sequence[Any], backend: Backend) -> tuple[list[list[Any]], list[Any]]:
         """Child joint frame in the parent joint frame: (R, p), R as 3 rows, p as 3 numbers."""
-        one, zero = backend.rational(1), backend.rational(0)
+        one, zero = backend.rational(Fraction(1)), backend.rational(Fraction(0))
         rot = [[one, zero, zero], [zero, one, zero], [zero, zero, one]]
         pos = [zero, zero, zero]
         for (kind, axis), value in zip(self.motions, q):
@@ -61,11 +69,12 @@ class JointType:
             if kind == "P":
                 pos = [pos[i] + column[i] * value for i in range(3)]
             else:
-                rot = vec.matmul(rot, elementary_rotation(k, *backend.cos_sin(value), one, zero))
+                c, s = backend.cos_sin(value)
+                rot = vec.matmul(rot, elementary_rotation(k, c, s, one, zero))
         return rot, pos
 
 
-def elementary_rotation(axis, c, s, one, zero):
+def elementary_rotation(axis: int, c: Any, s: Any, one: Any, zero: Any) -> list[list[Any]]:
     """Rotation matrix about coordinate axis ``axis`` with cos c and sin s (rows)."""
     if axis == 0:
         return [[one, zero, zero], [zero, c, -s], [zero, s, c]]

@@ -6,8 +6,12 @@ on demand by :meth:`Mechanism.numeric_frame` (and cached per backend), in the sp
 Pinocchio's split between an immutable ``Model`` and per-evaluation ``Data``.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import TYPE_CHECKING, Any
 
 import sympy
 
@@ -15,20 +19,26 @@ from baseparams.model.expressions import exact_text
 from baseparams.model.joints import JointType
 from baseparams.model.params import parameter_names
 
+if TYPE_CHECKING:
+    from baseparams.numeric.backends import Backend
+
+Vector = tuple[Any, ...]              # three exact sympy expressions
+Limits = tuple[float, float]
+
 
 @dataclass(frozen=True)
 class Frame:
     """A joint frame on one body: origin, z axis, x axis (None: default), as sympy exprs."""
-    point: tuple
-    axis: tuple = (sympy.Integer(0), sympy.Integer(0), sympy.Integer(1))
-    ref: tuple | None = None
+    point: Vector
+    axis: Vector = (sympy.Integer(0), sympy.Integer(0), sympy.Integer(1))
+    ref: Vector | None = None
 
 
 @dataclass(frozen=True)
 class Body:
     label: int
     name: str = ""
-    inertia: tuple | None = None      # ten exact parameters about the origin, or None
+    inertia: tuple[Fraction, ...] | None = None   # ten exact parameters about the origin, or None
 
 
 @dataclass(frozen=True)
@@ -39,8 +49,8 @@ class Joint:
     child: int
     parent_frame: Frame
     child_frame: Frame
-    coordinates: tuple                # coordinate names, one per motion
-    limits: dict = field(default_factory=dict, compare=False)  # name -> (lo, hi) floats
+    coordinates: tuple[str, ...]      # coordinate names, one per motion
+    limits: Mapping[str, Limits] = field(default_factory=dict, compare=False)  # name -> (lo, hi) floats
     loop: bool = False                # requested as loop-closing
 
 
@@ -51,11 +61,11 @@ class TreeEdge:
     reversed: bool
 
     @property
-    def known(self):
+    def known(self) -> int:
         return self.joint.child if self.reversed else self.joint.parent
 
     @property
-    def new(self):
+    def new(self) -> int:
         return self.joint.parent if self.reversed else self.joint.child
 
 
@@ -68,7 +78,7 @@ a row per sample and independent coordinate, and the float64 working memory is e
 @dataclass(frozen=True)
 class TrajectorySpec:
     """Default exciting trajectory: one expression of t per independent coordinate."""
-    expressions: dict                 # name -> sympy expression in t
+    expressions: Mapping[str, Any]    # name -> sympy expression in t
     t_start: Fraction = Fraction(0)
     t_end: Fraction = Fraction(10)
     samples: int = 200
@@ -80,7 +90,7 @@ class EffectSpec:
     coordinate it acts on, and the coefficients already known (name -> exact value)."""
     kind: str
     coordinate: str
-    values: dict = field(default_factory=dict, compare=False)
+    values: Mapping[str, Fraction] = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)
@@ -91,7 +101,7 @@ class Motor:
     it (rotor inertia, friction), and a recording may measure it (motor encoders, motor
     torques); its generalized force maps to the joints by the same ratios (power balance)."""
     name: str
-    ratios: tuple                     # ((coordinate, Fraction), ...), file order
+    ratios: tuple[tuple[str, Fraction], ...]   # ((coordinate, ratio), ...), file order
 
 
 @dataclass(frozen=True)
@@ -108,41 +118,41 @@ class Coupling:
 @dataclass(frozen=True, eq=False)
 class Mechanism:
     name: str
-    bodies: tuple                     # Body, ordered by label
-    joints: tuple                     # Joint, file order
-    tree: tuple                       # TreeEdge, traversal order
-    loops: tuple                      # Joint, loop-closing
-    coordinates: tuple                # tree coordinate names, traversal order
-    independent: tuple                # chosen independent coordinates
-    geometry: dict                    # name -> Fraction
-    gravity: tuple                    # sympy exprs, ground axes
+    bodies: tuple[Body, ...]          # ordered by label
+    joints: tuple[Joint, ...]         # file order
+    tree: tuple[TreeEdge, ...]        # traversal order
+    loops: tuple[Joint, ...]          # loop-closing
+    coordinates: tuple[str, ...]      # tree coordinate names, traversal order
+    independent: tuple[str, ...]      # chosen independent coordinates
+    geometry: Mapping[str, Fraction]  # name -> exact value
+    gravity: Vector                   # sympy exprs, ground axes
     trajectory: TrajectorySpec | None = None
     title: str = ""
     description: str = ""
     source: str = ""
     path: str | None = None
     gruebler: int = 0
-    effects: tuple = ()               # EffectSpec, file order
-    warnings: tuple = ()              # remarks on the input that did not stop the build (text)
-    motors: tuple = ()                # Motor, file order: the drive chain (may be empty)
-    couplings: tuple = ()             # Coupling, file order: coordinates following another
-    nonphysical: tuple = ()           # (key, reason) of bodies accepted with a non-physical inertia
+    effects: tuple[EffectSpec, ...] = ()      # file order
+    warnings: tuple[str, ...] = ()            # remarks on the input that did not stop the build
+    motors: tuple[Motor, ...] = ()            # file order: the drive chain (may be empty)
+    couplings: tuple[Coupling, ...] = ()      # file order: coordinates following another
+    nonphysical: tuple[tuple[str, str], ...] = ()   # (key, reason) of bodies accepted with a non-physical inertia
 
     # ----- names and counts -------------------------------------------------
     @property
-    def body_labels(self):
+    def body_labels(self) -> list[int]:
         return [b.label for b in self.bodies]
 
     @property
-    def parameters(self):
+    def parameters(self) -> list[str]:
         return parameter_names(self.body_labels)
 
     @property
-    def closure_equation_count(self):
+    def closure_equation_count(self) -> int:
         return sum(len(j.type.closure) for j in self.loops)
 
     @property
-    def motor_names(self) -> tuple:
+    def motor_names(self) -> tuple[str, ...]:
         return tuple(m.name for m in self.motors)
 
     def motor(self, name: str) -> Motor:
@@ -151,36 +161,37 @@ class Mechanism:
                 return m
         raise KeyError(name)
 
-    def joint_of_coordinate(self, name):
+    def joint_of_coordinate(self, name: str) -> Joint:
         for joint in self.joints:
             if name in joint.coordinates:
                 return joint
         raise KeyError(name)
 
-    def body(self, label):
+    def body(self, label: int) -> Body:
         for b in self.bodies:
             if b.label == label:
                 return b
         raise KeyError(label)
 
     @property
-    def geometry_text(self):
+    def geometry_text(self) -> dict[str, str]:
         """{name: exact decimal string}: the geometry as results and reports print it."""
         return {name: exact_text(value) for name, value in self.geometry.items()}
 
     @property
-    def geometry_subs(self):
+    def geometry_subs(self) -> dict[Any, Any]:
         """{sympy symbol: exact sympy rational}: substitutes the geometry into expressions."""
         return {sympy.Symbol(k): sympy.Rational(v.numerator, v.denominator) for k, v in self.geometry.items()}
 
     # ----- numbers in a backend --------------------------------------------
-    def geometry_env(self, backend, symbolic=False):
+    def geometry_env(self, backend: Backend, symbolic: bool = False) -> dict[str, Any]:
         """Geometry values in ``backend`` (or sympy symbols when ``symbolic``)."""
         if symbolic:
             return {name: sympy.Symbol(name) for name in self.geometry}
         return {name: backend.rational(value) for name, value in self.geometry.items()}
 
-    def numeric_frame(self, frame, backend, symbolic=False):
+    def numeric_frame(self, frame: Frame, backend: Backend,
+                      symbolic: bool = False) -> tuple[list[list[Any]], list[Any]]:
         """(R, p): rotation (rows; columns are the frame's x, y, z) and origin in ``backend``."""
         env = self.geometry_env(backend, symbolic)
         p = [backend.evaluate(c, env) for c in frame.point]
@@ -196,12 +207,12 @@ class Mechanism:
         rot = [[x[i], y[i], z[i]] for i in range(3)]
         return rot, p
 
-    def numeric_gravity(self, backend, symbolic=False):
+    def numeric_gravity(self, backend: Backend, symbolic: bool = False) -> list[Any]:
         env = self.geometry_env(backend, symbolic)
         return [backend.evaluate(c, env) for c in self.gravity]
 
 
-def _rescaled(vector, subs, spread=20):
+def _rescaled(vector: Vector, subs: Mapping[Any, Any], spread: int = 20) -> Vector:
     """``vector`` (exact expressions) times an exact power of two that brings its largest
     component into [1, 2), when that component lies outside [2^-spread, 2^spread]: a
     direction does not depend on its length, and an axis such as (1e-300, 0, 0) would
@@ -220,14 +231,14 @@ def _rescaled(vector, subs, spread=20):
     return tuple(sympy.sympify(c) * scale for c in vector)
 
 
-def _normalize(backend, v):
+def _normalize(backend: Backend, v: list[Any]) -> list[Any]:
     n2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
     one = backend.rational(Fraction(1))
     inv = one / backend.sqrt(n2)
     return [v[0] * inv, v[1] * inv, v[2] * inv]
 
 
-def _default_ref(axis, subs, backend):
+def _default_ref(axis: Vector, subs: Mapping[Any, Any], backend: Backend) -> list[Any]:
     """The body axis least aligned with ``axis`` (first in x, y, z order on ties)."""
     values = [abs(sympy.sympify(c).xreplace(subs)) for c in axis]
     k = min(range(3), key=lambda i: (values[i], i))

@@ -17,16 +17,19 @@ instantiates, for derivation reports.
 """
 
 from dataclasses import dataclass
+from fractions import Fraction
+
+Exact = Fraction | int             # an exact number of a rule's point or direction
 
 
 @dataclass(frozen=True)
 class TransferRule:
     multipole: str                   # "monopole" | "dipole" | "quadrupole"
-    point: tuple = (0, 0, 0)         # in the joint frame (exact numbers)
-    direction: tuple | None = None   # in the joint frame (exact numbers)
+    point: tuple[Exact, ...] = (0, 0, 0)           # in the joint frame
+    direction: tuple[Exact, ...] | None = None    # in the joint frame
     condition: int = 0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.multipole not in ("monopole", "dipole", "quadrupole"):
             raise ValueError(f"unknown multipole {self.multipole!r}")
         if self.multipole == "dipole" and self.direction is None:

@@ -10,6 +10,7 @@ the file, the element (``joint[name=elbow].origin.rpy``) and the reason.
 """
 
 import xml.etree.ElementTree as ET
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from fractions import Fraction
@@ -28,7 +29,7 @@ ZERO3 = (Fraction(0), Fraction(0), Fraction(0))
 class Link:
     name: str
     key: str
-    inertia: tuple | None            # ten parameters about the link origin, link axes (Fractions)
+    inertia: tuple[Fraction, ...] | None   # ten parameters about the link origin, link axes (Fractions)
     has_inertial: bool = False
 
 
@@ -40,12 +41,12 @@ class UrdfJoint:
     child: str
     key: str
     rotation: Rotation = IDENTITY     # joint frame (= child link frame) in the parent link frame
-    origin: tuple = ZERO3
-    axis: tuple = (Fraction(0), Fraction(0), Fraction(1))
-    limits: tuple | None = None       # (lower, upper) Decimals
+    origin: tuple[Fraction, ...] = ZERO3
+    axis: tuple[Fraction, ...] = (Fraction(0), Fraction(0), Fraction(1))
+    limits: tuple[Decimal, Decimal] | None = None       # (lower, upper)
     damping: Decimal | None = None
     friction: Decimal | None = None
-    mimic: tuple | None = None        # (leader joint name, multiplier, offset) Decimals
+    mimic: tuple[str, Decimal, Decimal] | None = None   # (leader joint name, multiplier, offset)
 
 
 @dataclass
@@ -54,8 +55,8 @@ class UrdfTransmission:
     reductions of its joints and actuators, in file order."""
     name: str
     type: str
-    joints: list                      # [(joint name, reduction Decimal)]
-    actuators: list                   # [(actuator name, reduction Decimal)]
+    joints: list[tuple[str, Decimal]]      # [(joint name, reduction)]
+    actuators: list[tuple[str, Decimal]]   # [(actuator name, reduction)]
     key: str
 
 
@@ -64,24 +65,24 @@ class Urdf:
     """A parsed, checked URDF: links in file order, joints in file order, the root link."""
     path: str
     robot: str
-    links: dict                       # name -> Link (file order)
-    joints: list                      # UrdfJoint (file order)
+    links: dict[str, Link]            # file order
+    joints: list[UrdfJoint]           # file order
     root: str
-    notes: list = field(default_factory=list)
-    transmissions: list = field(default_factory=list)
-    warnings: list = field(default_factory=list)     # (key, text): printed by every verb
+    notes: list[str] = field(default_factory=list)
+    transmissions: list[UrdfTransmission] = field(default_factory=list)
+    warnings: list[tuple[str, str]] = field(default_factory=list)     # (key, text): printed by every verb
 
 
 class _Parser:
-    def __init__(self, path: str):
+    def __init__(self, path: str) -> None:
         self.path = path
         self.notes: list[str] = []
         self.warnings: list[tuple[str, str]] = []
 
-    def error(self, key, reason):
+    def error(self, key: str, reason: str) -> InputError:
         return InputError(reason, file=self.path, key=key)
 
-    def once(self, elem, key, tags):
+    def once(self, elem: ET.Element, key: str, tags: tuple[str, ...]) -> None:
         """The URDF spec allows each of ``tags`` at most once inside ``elem``: a second one
         is an error (which of the two would count is a guess)."""
         for tag in tags:
@@ -90,11 +91,11 @@ class _Parser:
                 raise self.error(f"{key}.{tag}", f"{len(found)} <{tag}> elements: URDF allows one")
 
     # ----- numbers -------------------------------------------------------------------------
-    def decimals(self, text, key, count):
+    def decimals(self, text: str | None, key: str, count: int) -> list[Decimal]:
         parts = (text or "").split()
         if len(parts) != count:
             raise self.error(key, f"needs {count} number(s), got {text!r}")
-        out = []
+        out: list[Decimal] = []
         for part in parts:
             try:
                 value = Decimal(part)
@@ -105,7 +106,7 @@ class _Parser:
             out.append(value)
         return out
 
-    def number(self, elem, attr, key, default=None):
+    def number(self, elem: ET.Element, attr: str, key: str, default: Decimal | None = None) -> Decimal:
         text = elem.get(attr)
         if text is None:
             if default is None:
@@ -113,7 +114,7 @@ class _Parser:
             return default
         return self.decimals(text, f"{key}.{attr}", 1)[0]
 
-    def origin(self, parent, key):
+    def origin(self, parent: ET.Element, key: str) -> tuple[Rotation, tuple[Fraction, ...]]:
         """(R, p) of an ``<origin>`` child (identity when absent)."""
         elem = parent.find("origin")
         if elem is None:
@@ -132,12 +133,12 @@ class _Parser:
         return rot, tuple(xyz)
 
     # ----- elements ------------------------------------------------------------------------
-    def transmission(self, elem, key):
+    def transmission(self, elem: ET.Element, key: str) -> UrdfTransmission:
         """A ``<transmission>``: ``<type>`` (ROS 1) or ``<plugin>`` (ros2_control), and each
         ``<joint>``/``<actuator>`` with its ``<mechanicalReduction>`` or
         ``<mechanical_reduction>`` (default 1), on the element or inside it."""
         kind = (elem.findtext("type") or elem.findtext("plugin") or "").strip()
-        parts = {"joint": [], "actuator": []}
+        parts: dict[str, list[tuple[str, Decimal]]] = {"joint": [], "actuator": []}
         for tag in parts:
             for i, child in enumerate(elem.findall(tag)):
                 name = child.get("name")
@@ -153,8 +154,8 @@ class _Parser:
         return UrdfTransmission(elem.get("name") or "", kind.rsplit("/", 1)[-1].rsplit(":", 1)[-1],
                                 parts["joint"], parts["actuator"], key)
 
-    def link(self, elem, key):
-        name = elem.get("name")
+    def link(self, elem: ET.Element, key: str) -> Link:
+        name = elem.get("name") or ""       # parse_urdf checked it
         self.once(elem, key, ("inertial",))
         inertial = elem.find("inertial")
         if inertial is None:
@@ -184,12 +185,12 @@ class _Parser:
                               "frame's rotation is approximate)")
         return Link(name, key, tuple(rounded(v) for v in phi), True)
 
-    def joint(self, elem, key, links):
-        name = elem.get("name")
+    def joint(self, elem: ET.Element, key: str, links: Collection[str]) -> UrdfJoint:
+        name = elem.get("name") or ""       # parse_urdf checked it
         jtype = elem.get("type")
         self.once(elem, key, ("parent", "child", "origin", "axis", "limit", "dynamics", "mimic", "calibration",
                               "safety_controller"))
-        if jtype not in JOINT_TYPES:
+        if jtype is None or jtype not in JOINT_TYPES:
             raise self.error(f"{key}.type", f"unknown joint type {jtype!r} (URDF types: {', '.join(JOINT_TYPES)})")
         if jtype == "planar":
             raise self.error(f"{key}.type", "planar joints are not supported (docs/urdf.md): model the "
@@ -247,7 +248,7 @@ class _Parser:
         return joint
 
 
-def _quarter_text(value):
+def _quarter_text(value: Decimal) -> str:
     k = round(float(value) / 1.5707963267948966)
     return {0: "0", 1: "pi/2", -1: "-pi/2", 2: "pi", -2: "-pi"}.get(k, f"{k}*pi/2")
 
@@ -263,25 +264,17 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
     if root.tag != "robot":
         raise p.error(root.tag, "the top element must be <robot>")
     robot = root.get("name") or Path(path).stem
-    links = {}
+    links: dict[str, Link] = {}
     for i, elem in enumerate(root.findall("link")):
-        name = elem.get("name")
-        key = f"link[name={name}]" if name else f"link[{i}]"
-        if not name:
-            raise p.error(f"{key}.name", "missing (required)")
-        if name in links:
-            raise p.error(key, f"link {name!r} is defined twice")
+        name, key = _named(p, elem, "link", i, links)
         links[name] = p.link(elem, key)
     if not links:
         raise p.error("robot", "no <link> element")
-    joints, names, parent_of = [], set(), {}
+    joints: list[UrdfJoint] = []
+    names: set[str] = set()
+    parent_of: dict[str, UrdfJoint] = {}
     for i, elem in enumerate(root.findall("joint")):
-        name = elem.get("name")
-        key = f"joint[name={name}]" if name else f"joint[{i}]"
-        if not name:
-            raise p.error(f"{key}.name", "missing (required)")
-        if name in names:
-            raise p.error(key, f"joint {name!r} is defined twice")
+        name, key = _named(p, elem, "joint", i, names)
         names.add(name)
         joint = p.joint(elem, key, links)
         if joint.child in parent_of:
@@ -321,7 +314,19 @@ def parse_urdf(text: str, path: str | Path = "<string>") -> Urdf:
     return Urdf(path, robot, links, joints, roots[0], p.notes, transmissions, p.warnings)
 
 
-def _cycle(links, parent_of):
+def _named(p: _Parser, elem: ET.Element, tag: str, index: int, seen: Collection[str]) -> tuple[str, str]:
+    """A ``<link>``'s or ``<joint>``'s name and its key path (``link[name=base]``, or
+    ``link[3]`` without a name), checked: present, and not one of ``seen``."""
+    name = elem.get("name")
+    key = f"{tag}[name={name}]" if name else f"{tag}[{index}]"
+    if not name:
+        raise p.error(f"{key}.name", "missing (required)")
+    if name in seen:
+        raise p.error(key, f"{tag} {name!r} is defined twice")
+    return name, key
+
+
+def _cycle(links: Mapping[str, object], parent_of: Mapping[str, UrdfJoint]) -> str:
     start = next(iter(links))
     seen, name = [], start
     while name not in seen:
@@ -332,7 +337,7 @@ def _cycle(links, parent_of):
 
 
 # ----- rigid transforms of ten inertial parameters -----------------------------------------------
-def transform_parameters(phi, rot, p):
+def transform_parameters(phi: Sequence[Fraction], rot: Rotation, p: Sequence[Fraction]) -> tuple[Fraction, ...]:
     """Ten parameters about a frame B (B axes) -> about frame A (A axes), where B's axes are
     ``rot``'s columns in A and B's origin is ``p`` in A. Exact for exact inputs (mass
     distribution: x_A = rot x_B + p, so h_A = rot h + m p and the second moments follow)."""

@@ -15,18 +15,20 @@ works on a bare URDF.
 
 import random
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 from baseparams.errors import InputError
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.expressions import exact_text
-from baseparams.model.mechanism import Mechanism
+from baseparams.model.mechanism import Joint, Mechanism
 from baseparams.model.params import PARAMETER_KINDS
 
-from .parse import Urdf, UrdfJoint, parse_urdf, transform_parameters
+from .parse import Urdf, UrdfJoint, UrdfTransmission, parse_urdf, transform_parameters
 from .rotations import bounded_rotation, matmul, matvec, rounded
 
 TYPE_OF = {"revolute": "R", "continuous": "R", "prismatic": "P", "fixed": "Fixed", "floating": "Free"}
@@ -38,6 +40,7 @@ FREE_AMPLITUDE = {"R": Fraction(12, 10), "P": Fraction(2, 10)}
 FLOATING_AMPLITUDE = (Fraction(2, 10),) * 3 + (Fraction(6, 10),) * 3   # Cardan b stays far from pi/2
 RANGE_SHARE = Fraction(8, 10)      # of the half range, within the limits
 T_END, SAMPLES = 10, 200
+Bounds = tuple[Decimal, Decimal]   # a joint's (lower, upper) limits as the file writes them
 
 
 @dataclass
@@ -45,8 +48,8 @@ class UrdfResult:
     """What reading a URDF gives: the mechanism, the notes (snapped or approximate angles,
     renamed joints, merged links ...), and which link each body label is."""
     mechanism: Mechanism
-    notes: list
-    links: dict                    # body label -> link name
+    notes: list[str]
+    links: dict[int, str]          # body label -> link name
     merged: bool
 
 
@@ -54,14 +57,14 @@ class UrdfReader:
     """The reader of ``.urdf`` files (registered by baseparams.plugins.urdf)."""
 
     name = "urdf"
-    suffixes = (".urdf",)
+    suffixes: tuple[str, ...] = (".urdf",)
     description = "URDF robot descriptions (docs/urdf.md)"
-    options = ("merge_fixed", "floating_base")
+    options: tuple[str, ...] = ("merge_fixed", "floating_base")
 
-    def read(self, path: str | Path, **options) -> Mechanism:
+    def read(self, path: str | Path, **options: bool) -> Mechanism:
         return read_urdf(path, **options).mechanism
 
-    def read_notes(self, path: str | Path, **options) -> tuple[Mechanism, list[str]]:
+    def read_notes(self, path: str | Path, **options: bool) -> tuple[Mechanism, list[str]]:
         """The mechanism and the reader's notes (for ``convert``, which prints them)."""
         result = read_urdf(path, **options)
         return result.mechanism, result.notes
@@ -147,7 +150,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed)
 
 
-def _couplings(b, joints, names) -> set[str]:
+def _couplings(b: MechanismBuilder, joints: Sequence[UrdfJoint], names: Mapping[str, str]) -> set[str]:
     """``<mimic>`` joints as couplings: the coordinate = multiplier * the leader's + offset."""
     followers = set()
     for j in joints:
@@ -162,7 +165,7 @@ def _couplings(b, joints, names) -> set[str]:
     return followers
 
 
-def _contradicting_limits(joints) -> list[tuple[str, str]]:
+def _contradicting_limits(joints: Sequence[UrdfJoint]) -> list[tuple[str, str]]:
     """Followers whose own limits no leader value inside the leader's limits meets (PR2's
     r_gripper_r_parallel_root_joint = -1 x r_gripper_l_finger_joint, both in [0, 0.548]):
     their limits are dropped, with a warning, so that the default trajectory exists."""
@@ -170,7 +173,7 @@ def _contradicting_limits(joints) -> list[tuple[str, str]]:
     out = []
     for j in joints:
         leader = by_name.get(j.mimic[0]) if j.mimic is not None else None
-        if leader is None or j.limits is None or leader.limits is None:
+        if leader is None or j.mimic is None or j.limits is None or leader.limits is None:
             continue
         _, multiplier, offset = j.mimic
         ends = sorted((multiplier * leader.limits[0] + offset, multiplier * leader.limits[1] + offset))
@@ -182,7 +185,8 @@ def _contradicting_limits(joints) -> list[tuple[str, str]]:
     return out
 
 
-def _leader_limits(joint, limits, joints, names, followers):
+def _leader_limits(joint: Joint, limits: Bounds | None, joints: Sequence[UrdfJoint], names: Mapping[str, str],
+                   followers: set[str]) -> Bounds | None:
     """The leader's range for the default trajectory, narrowed so that every joint mimicking it
     stays inside its own limits (follower = multiplier * leader + offset)."""
     if not followers:
@@ -198,7 +202,7 @@ def _leader_limits(joint, limits, joints, names, followers):
     return (lo, hi) if lo is not None and hi is not None and lo < hi else limits
 
 
-def motor_ratios(transmission) -> list[tuple[str, dict]] | str:
+def motor_ratios(transmission: UrdfTransmission) -> list[tuple[str, dict[str, Decimal]]] | str:
     """Each actuator's position as gear ratios of its joints' positions, or why the
     transmission is not understood. ros_control's conventions (actuator a, joint j,
     reductions ar, jr): simple a = ar jr j (jr = 1 when not given); differential
@@ -218,7 +222,8 @@ def motor_ratios(transmission) -> list[tuple[str, dict]] | str:
             "is not one this reader maps (simple, differential, four-bar linkage)")
 
 
-def _motors(b, transmissions, names, used, notes) -> None:
+def _motors(b: MechanismBuilder, transmissions: Sequence[UrdfTransmission], names: Mapping[str, str],
+            used: set[str], notes: list[str]) -> None:
     """The transmissions' actuators as motors of the drive chain (docs/urdf.md)."""
     from baseparams.model.builder import name_problem
     for t in transmissions:
@@ -240,11 +245,12 @@ def _motors(b, transmissions, names, used, notes) -> None:
             b.motor(name, {names[j]: r for j, r in ratios.items()}, key=t.key)
 
 
-def _copy(j):
+def _copy(j: UrdfJoint) -> UrdfJoint:
     return type(j)(**vars(j))
 
 
-def _merge_fixed(ground, joints, links, inertia, notes):
+def _merge_fixed(ground: str, joints: list[UrdfJoint], links: list[str], inertia: dict[str, tuple[Fraction, ...]],
+                 notes: list[str]) -> tuple[list[UrdfJoint], list[str]]:
     """Fixed joints removed: each child link's parameters moved exactly into its parent's
     frame and added (parameters are linear in the mass distribution); its children hang
     from the parent with composed origins. A link fixed to the root joins the ground."""
@@ -270,7 +276,7 @@ def _merge_fixed(ground, joints, links, inertia, notes):
         links = [name for name in links if name != child]
 
 
-def _frames(j, jtype):
+def _frames(j: UrdfJoint, jtype: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
     """(parent_frame, child_frame): z along the joint axis, the same axes on both sides."""
     if jtype in ("R", "P"):
         axis = j.axis
@@ -282,11 +288,11 @@ def _frames(j, jtype):
         axis = (Fraction(0), Fraction(0), Fraction(1))
         ref = (Fraction(1), Fraction(0), Fraction(0))
     parent = {"point": list(j.origin), "axis": list(matvec(j.rotation, axis)), "ref": list(matvec(j.rotation, ref))}
-    child = {"point": [0, 0, 0], "axis": list(axis), "ref": list(ref)}
+    child: dict[str, list[Any]] = {"point": [0, 0, 0], "axis": list(axis), "ref": list(ref)}
     return parent, child
 
 
-def _identifier(name, used):
+def _identifier(name: str, used: set[str]) -> str:
     text = re.sub(r"[^A-Za-z0-9_]", "_", name)
     if not text or text[0].isdigit() or text in RESERVED:
         text = "j_" + text
@@ -297,11 +303,11 @@ def _identifier(name, used):
     return text
 
 
-def _mechanism_name(robot):
+def _mechanism_name(robot: str) -> str:
     return re.sub(r"[^a-z0-9_]", "_", robot.lower()) or "robot"
 
 
-def default_trajectory(robot: str, motions) -> dict:
+def default_trajectory(robot: str, motions: Sequence[tuple[Joint, str, Bounds | None]]) -> dict[str, str]:
     """A Fourier series per coordinate (an offset and three sines of distinct frequencies)
     inside its limits: centred in the range and reaching ``RANGE_SHARE`` of the half range
     (at most 1.2 rad or 0.2 m); free joints 0.2 m and 0.6 rad. Deterministic per robot."""
@@ -321,7 +327,7 @@ def default_trajectory(robot: str, motions) -> dict:
     return q
 
 
-def _fourier(rng, amplitude, centre):
+def _fourier(rng: random.Random, amplitude: Fraction, centre: Fraction) -> str:
     freqs = rng.sample([Fraction(k, 10) for k in range(5, 31)], 3)
     weights = [Fraction(rng.randint(20, 100), 100) for _ in range(3)]
     total = sum(weights)

@@ -17,7 +17,9 @@ a rotation must have rational entries to be held exactly. URDF gives decimal ang
 """
 
 from decimal import Decimal
+from collections.abc import Sequence
 from fractions import Fraction
+from typing import Any
 
 import mpmath
 
@@ -25,8 +27,9 @@ SNAP_TOLERANCE = 1e-9          # |theta - k pi/2| below this: exactly k pi/2
 TAN_HALF_TOLERANCE = Fraction(1, 10 ** 17)
 DIGITS = 40
 
-Rotation = tuple[tuple[Fraction, Fraction, Fraction], ...]
+Rotation = tuple[tuple[Fraction, ...], ...]      # 3 x 3, rows
 """Rows of a 3x3 rotation matrix with exact rational entries."""
+Matrix = Sequence[Sequence[Fraction | int]]       # 3 x 3 exact, rows (ints where an entry is 0 or 1)
 
 _QUARTER = ((Fraction(1), Fraction(0)), (Fraction(0), Fraction(1)),
             (Fraction(-1), Fraction(0)), (Fraction(0), Fraction(-1)))
@@ -46,7 +49,7 @@ def cos_sin(angle: Decimal) -> tuple[Fraction, Fraction, str]:
     return (1 - t2) / (1 + t2), 2 * t / (1 + t2), "rational"
 
 
-def _rationalise(x) -> Fraction:
+def _rationalise(x: Any) -> Fraction:
     """The fraction of smallest denominator (by continued fractions) within the tolerance of x."""
     exact = Fraction(mpmath.nstr(x, DIGITS, min_fixed=-mpmath.inf, max_fixed=mpmath.inf))
     bound = 1
@@ -67,23 +70,23 @@ def rpy_matrix(roll: Decimal, pitch: Decimal, yaw: Decimal) -> tuple[Rotation, l
     return matmul(rz, matmul(ry, rx)), how
 
 
-def matmul(a, b) -> Rotation:
+def matmul(a: Matrix, b: Matrix) -> Rotation:
     return tuple(tuple(Fraction(sum(a[i][k] * b[k][j] for k in range(3))) for j in range(3)) for i in range(3))
 
 
-def transpose(a) -> Rotation:
+def transpose(a: Rotation) -> Rotation:
     return tuple(tuple(a[j][i] for j in range(3)) for i in range(3))
 
 
-def matvec(a, v) -> tuple:
-    return tuple(sum(a[i][k] * v[k] for k in range(3)) for i in range(3))
+def matvec(a: Matrix, v: Sequence[Fraction]) -> tuple[Fraction, ...]:
+    return tuple(sum((a[i][k] * v[k] for k in range(3)), Fraction(0)) for i in range(3))
 
 
 IDENTITY: Rotation = tuple(tuple(Fraction(int(i == j)) for j in range(3)) for i in range(3))
 
 
 # ----- back: a rotation (any exact or numeric entries) to rpy text ------------------------------
-def matrix_rpy(rows) -> tuple:
+def matrix_rpy(rows: Sequence[Sequence[Any]]) -> tuple[Any, Any, Any]:
     """(roll, pitch, yaw) as mpmath numbers at 40 digits for a rotation matrix (rows of
     numbers mpmath accepts); exact multiples of pi/2 for a signed permutation."""
     with mpmath.workdps(DIGITS):

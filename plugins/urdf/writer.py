@@ -18,15 +18,17 @@ Numbers are exact decimals when the value has one, else 25 significant digits.
 """
 
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Mapping, Sequence
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import mpmath
 import sympy
 
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.model.mechanism import Mechanism
+from baseparams.model.mechanism import Frame, Mechanism
 from baseparams.numeric.backends import Symbolic
 
 from .parse import transform_parameters
@@ -42,7 +44,7 @@ class UrdfWriter:
     """Writes ``.urdf`` files (registered by baseparams.plugins.urdf)."""
 
     name = "urdf"
-    suffixes = (".urdf",)
+    suffixes: tuple[str, ...] = (".urdf",)
     description = "URDF robot descriptions (docs/urdf.md)"
 
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
@@ -56,27 +58,27 @@ class UrdfWriter:
 
 
 # ----- numbers ------------------------------------------------------------------------------
-def number(value) -> str:
+def number(value: object) -> str:
     """Exact decimal text when the value has one, else 25 significant digits."""
-    value = sympy.sympify(value)
-    if value.is_Rational:
-        exact = exact_text(Fraction(int(value.p), int(value.q)))
+    expr = sympy.sympify(value)
+    if expr.is_Rational:
+        exact = exact_text(Fraction(int(expr.p), int(expr.q)))
         if "/" not in exact:
             return exact
-    return _digits(sympy.N(value, DIGITS + 5))
+    return _digits(sympy.N(expr, DIGITS + 5))
 
 
-def _digits(x) -> str:
+def _digits(x: object) -> str:
     with mpmath.workdps(DIGITS + 5):
         return mpmath.nstr(mpmath.mpf(str(x)), DIGITS, strip_zeros=True)
 
 
-def _triple(values) -> str:
+def _triple(values: Iterable[object]) -> str:
     return " ".join(number(v) for v in values)
 
 
 # ----- patch mode -----------------------------------------------------------------------------
-def _source_links(mech: Mechanism):
+def _source_links(mech: Mechanism) -> dict[int, str] | None:
     """{label: link name} when ``mech`` came from a URDF file whose links are its bodies."""
     if not mech.path or Path(mech.path).suffix.lower() != ".urdf" or not Path(mech.path).exists():
         return None
@@ -90,8 +92,9 @@ def _source_links(mech: Mechanism):
     return original.links if same else None
 
 
-def patch_inertials(mech: Mechanism, links: dict) -> tuple[str, list[str]]:
+def patch_inertials(mech: Mechanism, links: Mapping[int, str]) -> tuple[str, list[str]]:
     """The source URDF with each body's ``<inertial>`` replaced (comments kept)."""
+    assert mech.path is not None                # read from that file (_source_links)
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     root = ET.fromstring(Path(mech.path).read_text(encoding="utf-8"), parser=parser)
     by_name = {elem.get("name"): elem for elem in root.findall("link")}
@@ -109,7 +112,7 @@ def patch_inertials(mech: Mechanism, links: dict) -> tuple[str, list[str]]:
     return text, [f"kept {mech.path}; replaced the <inertial> of {len(mech.bodies)} link(s)"]
 
 
-def _inertial(phi, key, path) -> ET.Element:
+def _inertial(phi: Sequence[Fraction], key: str, path: str | None) -> ET.Element:
     """``<inertial>`` of ten parameters about the link origin (link axes): COM and the tensor at it."""
     m, hx, hy, hz = phi[:4]
     if m < 0:
@@ -126,14 +129,14 @@ def _inertial(phi, key, path) -> ET.Element:
     ET.SubElement(elem, "origin", xyz=_triple(c), rpy="0 0 0")
     ET.SubElement(elem, "mass", value=number(m))
     names = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-    ET.SubElement(elem, "inertia", **{n: number(v) for n, v in zip(names, at_com[4:])})
+    ET.SubElement(elem, "inertia", {n: number(v) for n, v in zip(names, at_com[4:])})
     return elem
 
 
 # ----- generate mode --------------------------------------------------------------------------
 def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
     """URDF text of a tree mechanism, and notes on what URDF could not hold."""
-    notes = []
+    notes: list[str] = []
     if mech.loops:
         raise InputError(f"URDF describes trees; {mech.name} has loop-closing joint(s) "
                          f"{', '.join(j.name for j in mech.loops)}", file=mech.path, key="joints")
@@ -176,8 +179,9 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
     for body in mech.bodies:
         link = ET.SubElement(robot, "link", name=names[body.label])
         if body.inertia is not None:
-            s = tuple(Fraction(int(v.p), int(v.q)) if v.is_Rational else None for v in map(sympy.nsimplify, shift[body.label]))
-            if any(v is None for v in s):
+            exact = [Fraction(int(v.p), int(v.q)) if v.is_Rational else None for v in map(sympy.nsimplify, shift[body.label])]
+            s = tuple(v for v in exact if v is not None)
+            if len(s) != len(exact):
                 raise InputError(f"the axis of body {body.label}'s joint does not pass through a rational point "
                                  "near its origin: cannot shift its inertia exactly", file=mech.path)
             phi = transform_parameters(body.inertia, IDENTITY, tuple(-v for v in s))
@@ -201,8 +205,8 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
                 lo, hi = joint.limits[joint.coordinates[0]]
                 limit.update(lower=repr(lo), upper=repr(hi))
             if kind != "continuous":
-                ET.SubElement(elem, "limit", **limit)
-            dynamics = {}
+                ET.SubElement(elem, "limit", limit)
+            dynamics: dict[str, str] = {}
             for effect_kind, attr, coefficient in (("viscous_friction", "damping", "fv"),
                                                    ("coulomb_friction", "friction", "fc")):
                 spec = effects.pop((effect_kind, joint.coordinates[0]), None)
@@ -211,7 +215,7 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
                 elif spec is not None:
                     notes.append(f"{effect_kind} on {joint.coordinates[0]}: no known value, not written")
             if dynamics:
-                ET.SubElement(elem, "dynamics", **dynamics)
+                ET.SubElement(elem, "dynamics", dynamics)
     for (kind, coordinate) in effects:
         notes.append(f"{kind} on {coordinate}: URDF has no such element, not written")
     if mech.geometry:
@@ -222,13 +226,14 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n", notes
 
 
-def _frame(mech, frame, backend, subs):
+def _frame(mech: Mechanism, frame: Frame, backend: Symbolic, subs: Mapping[Any, Any]) -> tuple[Any, Any]:
+    """(R, p) of ``frame`` as exact sympy matrices (geometry substituted)."""
     rot, p = mech.numeric_frame(frame, backend)
     rot = sympy.Matrix(rot).subs(subs)
     return rot, sympy.Matrix(p).subs(subs)
 
 
-def _written_axis(unit, raw, notes, name):
+def _written_axis(unit: Any, raw: Any, notes: list[str], name: str) -> list[Any]:
     """The axis as written: the unit vector when its entries are exact decimals, else the
     direction as the shortest integer vector when it is rational (exact; readers normalise
     it, as Pinocchio and ours do), else the unit vector to 25 digits."""
@@ -243,8 +248,9 @@ def _written_axis(unit, raw, notes, name):
     return list(unit)
 
 
-def _rpy(rot) -> str:
-    entries = [[rot[i, j] for j in range(3)] for i in range(3)]
+def _rpy(rot: Any) -> str:
+    """URDF's ``rpy`` text of a sympy rotation matrix."""
+    entries: list[list[Any]] = [[rot[i, j] for j in range(3)] for i in range(3)]
     if all(sympy.sympify(v).is_Rational for row in entries for v in row):
         entries = [[Fraction(int(v.p), int(v.q)) for v in map(sympy.Rational, row)] for row in entries]
     else:
@@ -252,7 +258,7 @@ def _rpy(rot) -> str:
     return " ".join(_digits(a) if abs(a) > mpmath.mpf(10) ** -35 else "0" for a in matrix_rpy(entries))
 
 
-def _gravity_turn(mech):
+def _gravity_turn(mech: Mechanism) -> Any:
     """The rotation that turns the ground's axes so gravity is along -z (URDF's convention)."""
     g = sympy.Matrix([sympy.sympify(v).subs(mech.geometry_subs) for v in mech.gravity])
     norm = sympy.sqrt(g.dot(g))
@@ -271,8 +277,10 @@ def _gravity_turn(mech):
     return sympy.eye(3) + wx + wx * wx / (1 + u.dot(v))
 
 
-def _link_names(mech):
-    names, used = {}, set()
+def _link_names(mech: Mechanism) -> dict[int, str]:
+    """Link name per body label (0: the ground, ``world``): the body's name, else ``body<k>``."""
+    names: dict[int, str] = {}
+    used: set[str] = set()
     root = "world" if all(b.name != "world" for b in mech.bodies) else "ground"
     names[0] = root
     used.add(root)
