@@ -287,6 +287,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
                      f"and last {trim} samples are dropped (their derivatives would be extrapolated)")
         keep = slice(trim, len(t) - trim)
         t, q, qd, qdd, tau, rows = t[keep], q[keep], qd[keep], qdd[keep], tau[keep], rows[keep]
+    assert qd is not None and qdd is not None      # given, or estimated above
     motion = Motion(t, q, qd, qdd)
     data = MeasuredData(motion, tau, coordinates, path, tuple(notes), estimated)
     if check_kinematics:
@@ -294,7 +295,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     return data
 
 
-def kinematics(mechanism: Mechanism, data: MeasuredData, rows: list[int] | None = None) -> Sample:
+def kinematics(mechanism: Mechanism, data: MeasuredData, rows: list[int] | None = None) -> Sample | None:
     """The kinematics at every sample, loops closed; a sample that cannot close (or leaves a
     coordinate's range) is an InputError naming the file's row (``rows``: each sample's line;
     default: sample k on line k + 2) and the time."""

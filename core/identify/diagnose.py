@@ -24,6 +24,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -370,13 +371,13 @@ def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_mode
     if not named:
         return []
     pvalues = np.array([un["ljung_box"][c]["pvalue"] for c in coordinates])
-    structured = holm(pvalues) <= alpha
+    structured = holm(pvalues.tolist()) <= alpha
     if not structured.any():
         return []
     rms = np.array([un["residual_rms"][c] for c in coordinates])
     noise = np.array([un["noise_level"][c] for c in coordinates])
     left = np.sqrt(np.maximum(rms ** 2 - noise ** 2, 0.0))
-    coefficients = after.fit.coefficients[-sum(c.columns.shape[-1] for c in added):] if added else []
+    coefficients = after.fit.coefficients[-sum(c.columns.shape[-1] for c in added):] if added else np.zeros(0)
     out, start = [], 0
     for index, cand in zip(in_model, added):
         width = cand.columns.shape[-1]
@@ -399,6 +400,7 @@ def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
     k = next((k for k, shape in enumerate(original.shapes) if dict(shape) == chosen.shape), None)
     if k is not None:
         return original.at(k)
+    assert original.make is not None
     return Candidate(original.kind, original.coordinate, original.names, original.make(chosen.shape), (), (),
                      dict(chosen.shape), original.generalises, original.make)
 
@@ -418,8 +420,8 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
     offsets = np.cumsum([0] + widths)
     spans = {i: range(offsets[in_model.index(i) + 1], offsets[in_model.index(i) + 2]) for i in named}
-    cv_all, *cv_without = cross_validate(X, y, weights, folds, leave_out=list(spans.values()))
-    cv_without_of = dict(zip(spans, cv_without))
+    cv_all, *cv_drops = cross_validate(X, y, weights, folds, leave_out=list(spans.values()))
+    cv_without_of = dict(zip(spans, cv_drops))
     kept, out = [], []
     level = alpha / len(named)
     for i in named:
@@ -633,7 +635,7 @@ def _steps_json(candidates: list[Candidate], chosen: Selection) -> list[dict]:
                  for c, t, a in zip(candidates, step.tests, step.adjusted) if t.tested]
         out.append({"chosen": candidates[step.chosen].label if step.chosen is not None else None,
                     "ambiguous_with": [candidates[r.index].label for r in step.confusable],
-                    "tests": sorted(tests, key=lambda d: -(d["z"] if d["z"] is not None else -1e300))})
+                    "tests": sorted(tests, key=lambda d: -(float(d["z"]) if d["z"] is not None else -1e300))})
     return out
 
 
@@ -646,7 +648,7 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> lis
     for cand, test in zip(candidates, first.tests):
         if not test.tested:
             continue
-        Z = (first.whiten(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
+        Z = ((first.whiten or _identity)(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1.0
         kept = float(np.linalg.svd(project_out(Z / norms, fit.basis), compute_uv=False).min())
@@ -677,7 +679,7 @@ def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str]
     count = replicates(len(coordinates), alpha)
     boxes = {c: {"stat": float(stats[j]), "pvalue": float(pvalues[j]), "lags": lags, "replicates": count}
              for j, c in enumerate(coordinates)}
-    reject = holm(pvalues) <= alpha
+    reject = holm(pvalues.tolist()) <= alpha
     rms = np.sqrt(np.mean(fit_part ** 2, axis=0))
     hold_rms = np.sqrt(np.mean(hold_part ** 2, axis=0)) if len(hold_part) else None
     safe = np.where(sigma > 0, sigma, np.nan)
@@ -706,7 +708,11 @@ def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequen
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------
-def decimal_text(value: float) -> str:
+def _identity(x: np.ndarray) -> np.ndarray:
+    return x
+
+
+def decimal_text(value: float | Fraction) -> str:
     """A float as a plain decimal string (exact in the mechanism format, no exponent)."""
     return format(Decimal(repr(float(value))), "f")
 
@@ -740,7 +746,7 @@ def write_fixed(mechanism: Mechanism, effects: Sequence[EffectSpec], path: str |
     check_writable(mechanism, path)
     source = mechanism.path
     try:
-        text = Path(source).read_text(encoding="utf-8")
+        text = Path(str(source)).read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror or exc}", file=source) from None
     fixed = text.rstrip("\n") + "\n" + effects_toml(effects, origin)

@@ -213,6 +213,7 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
             raise InputError(f"every torque channel's gain is unknown ({', '.join(data.gain_names)}) and no "
                              "force is known: add a run with a known payload ([runs.payload]) or give "
                              "one gain", file=data.path)
+        assert data.gain_columns is not None
         X = np.concatenate([X, -data.gain_columns], axis=-1)
         all_names += tuple(data.gain_names)
     notes = list(data.notes)
@@ -281,7 +282,7 @@ def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence
     p = len(mechanism.parameters)
     names: list[str] = []
 
-    def build(motion: Motion, sample: Sample, run: int) -> np.ndarray:
+    def build(motion: Motion, sample: Sample | None, run: int) -> np.ndarray:
         inertial, columns = design(mechanism, motion, effects, sample)
         names[:] = columns.names
         payload = data.payload_of_run(run)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baseparams import registry
-from baseparams.dynamics.effects import Effect
+from baseparams.dynamics.effects import EffectKind
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.dynamics.trajectory import check_limits
 from baseparams.errors import InputError, KinematicsError
@@ -77,7 +77,7 @@ def inertial_columns(sample: Sample, n: int) -> np.ndarray:
     return np.broadcast_to(k, (n,) + k.shape[-2:]) if k.ndim == 2 else k
 
 
-def checked_effect(mechanism: Mechanism, kind: str, coordinate: str, key: str = "effect") -> Effect:
+def checked_effect(mechanism: Mechanism, kind: str, coordinate: str, key: str = "effect") -> EffectKind:
     """The registered effect ``kind``, once ``coordinate`` is known to be a tree coordinate
     or a motor of ``mechanism`` (InputError naming ``key`` otherwise)."""
     effects = registry.effects()
@@ -131,7 +131,7 @@ def coordinate_speed_rms(mechanism: Mechanism, sample: Sample, n: int, coordinat
     """RMS speed of a joint coordinate or a motor over the samples (the scale of friction
     shapes: a transition speed is a fraction of it)."""
     row = drive_rows(mechanism, [coordinate])[0]
-    qd = sum(row[i] * _as_batch(sample.qd[i], n) for i in np.nonzero(row)[0])
+    qd = np.sum([row[i] * _as_batch(sample.qd[int(i)], n) for i in np.nonzero(row)[0]], axis=0)
     return float(np.sqrt(np.mean(np.square(qd))))
 
 
@@ -171,7 +171,7 @@ def standard_parameters(mechanism: Mechanism) -> np.ndarray:
         raise InputError(f"bodies {missing} have no inertia: give mass, com and inertia_com (or "
                          "inertia), or use random physically consistent ones", file=mechanism.path,
                          key="bodies")
-    return np.array([float(v) for b in mechanism.bodies for v in b.inertia])
+    return np.array([float(v) for b in mechanism.bodies for v in b.inertia or ()])
 
 
 def effect_values(mechanism: Mechanism, effects: Sequence[EffectSpec]) -> np.ndarray:

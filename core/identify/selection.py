@@ -651,7 +651,7 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     worst = None
     for i in named:
         k = in_model.index(i)
-        fit = complete.without(range(offsets[k], offsets[k + 1]))
+        fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
         if fit is None:                      # the complete model is rank deficient: refit without i
             others = [j for j in in_model if j != i]
             fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others],
