@@ -358,6 +358,11 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
 # A named effect on a coordinate whose residual still holds structure must be at least this
 # many times the structure left there (RMS), or it may only stand in for what is missing.
 DOMINANCE = 2.0
+# A named effect must improve the block cross-validated weighted residual (about N f: each
+# coordinate's weighted noise variance is 1) by what an effect of at least this RMS, in noise
+# SDs of one coordinate, gives (N ratio^2): below it, stand-ins for effects outside the
+# catalogue (an offset or Coulomb friction for an elastic joint's lag, 0.02-3 %) were named.
+MIN_EFFECT_TO_NOISE = 0.5
 
 
 def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_model: list[int], named: list[int],
@@ -441,6 +446,10 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
             if gain <= 0:
                 reason = ("does not predict held-out blocks better: block cross-validation without it is "
                           f"as good ({100 * gain:+.2g} %)")
+            elif gain < MIN_EFFECT_TO_NOISE ** 2 / y.shape[1]:
+                reason = (f"too small to name: held-out blocks improve by {100 * gain:.2g} % of the residual, "
+                          f"what an effect of RMS under {MIN_EFFECT_TO_NOISE:g} times one coordinate's noise "
+                          "SD gives")
             elif stable.unstable(level):
                 reason = (f"its coefficient changes from block to block (spread {stable.spread:.2g} of its value, "
                           f"p = {stable.pvalue:.2g}): it stands in for something the catalogue lacks")
