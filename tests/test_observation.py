@@ -14,7 +14,7 @@ from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
 
 from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator, Sample
-from baseparams.dynamics.exact_states import exact_observation_matrix, random_rational_states
+from baseparams.plugins.solvers.exact.states import exact_observation_matrix, random_rational_states
 from baseparams.dynamics.excitation import RandomBatch, random_batch
 from baseparams.dynamics.observation import RationalStates, evaluate_states, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
@@ -22,6 +22,7 @@ from baseparams.dynamics.trajectory import observation_matrix as trajectory_matr
 from baseparams.errors import KinematicsError
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.numeric import certify
+from baseparams.plugins.solvers.vp import balls
 from baseparams.numeric.backends import Arb, Exact, Float64, TanHalf, precision
 
 DIGITS = 40
@@ -59,7 +60,7 @@ def test_open_chain_same_states_same_W_in_float64_arb_and_exact(name):
     for i in range(w_exact.nrows()):
         for j in range(w_exact.ncols()):
             q = w_exact[i, j]
-            assert certify.contains_rational(w_arb[i, j], Fraction(int(q.p), int(q.q))), (i, j)
+            assert balls.contains_rational(w_arb[i, j], Fraction(int(q.p), int(q.q))), (i, j)
     # the exact solver's own W is the builder's at its random states
     assert exact_observation_matrix(mech, 3, seed=11) == w_exact
 
@@ -189,14 +190,14 @@ def _public_arb_calls():
                                      Arb(DIGITS).number(TanHalf(Fraction(2, 9)))]),
         ("analyse", lambda: certify.analyse(W, DIGITS)),
         ("analyse imposed", lambda: certify.analyse(W, DIGITS, kept=a.kept)),
-        ("excitation_check", lambda: certify.excitation_check(Wc, a)),
-        ("tail_singular_values", lambda: certify.tail_singular_values(W, a)),
+        ("excitation_check", lambda: balls.excitation_check(Wc, a)),
+        ("tail_singular_values", lambda: balls.tail_singular_values(W, a)),
         ("log10", lambda: certify.log10(x)),
-        ("radius_digits", lambda: certify.radius_digits(x)),
-        ("agreement_digits", lambda: certify.agreement_digits(x, y)),
+        ("radius_digits", lambda: balls.radius_digits(x)),
+        ("agreement_digits", lambda: balls.agreement_digits(x, y)),
         ("decimal_string", lambda: certify.decimal_string(x, 20)),
-        ("recover_rational", lambda: certify.recover_rational(x, 20)),
-        ("contains_rational", lambda: certify.contains_rational(x, Fraction(1, 3))),
+        ("recover_rational", lambda: balls.recover_rational(x, 20)),
+        ("contains_rational", lambda: balls.contains_rational(x, Fraction(1, 3))),
         ("ridge_log10", lambda: a.ridge_log10),
     ]
 

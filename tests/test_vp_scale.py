@@ -22,12 +22,13 @@ import pytest
 from flint import arb, arb_mat, fmpq, fmpq_mat, fmpz_mat
 
 from baseparams import registry
-from baseparams.dynamics.exact_states import rref_pivots
+from baseparams.plugins.solvers.exact.states import rref_pivots
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.numeric import certify
+from baseparams.plugins.solvers.vp import balls
 from baseparams.numeric.backends import Arb, precision
 from baseparams.plugins.solvers.vp import solver as vp_solver
 
@@ -148,10 +149,10 @@ def test_frobenius_bound_contains_and_hugs_the_exact_norm():
             mid = arb(rng.uniform(-1, 1)) * arb(10) ** rng.randint(-30, 0)
             values.append(arb(mid, arb(10) ** -32 * rng.random()))
         M = arb_mat(60, 40, values)
-        bound = certify._frobenius_upper(M)
+        bound = certify.frobenius_upper(M)
     # the largest sum of squares over the balls: (|mid| + rad)^2 per entry, exactly
-    exact = sum((abs(certify._dyadic(x.mid())) + certify._dyadic(arb(x.rad()))) ** 2 for x in values)
-    b = certify._dyadic(bound)
+    exact = sum((abs(balls._dyadic(x.mid())) + balls._dyadic(arb(x.rad()))) ** 2 for x in values)
+    b = balls._dyadic(bound)
     assert b * b >= exact
     assert b * b <= exact * Fraction(1001, 1000)
 
@@ -171,7 +172,7 @@ def test_fast_decisions_agree_with_working_precision_ones_and_the_exact_solver(c
         for j in range(fast.beta.ncols()):
             x = fast.beta[i, j]
             assert x.overlaps(slow.beta[i, j])
-            assert certify.contains_rational(x, exact_fraction(R[i, fast.eliminated[j]])), (i, j)
+            assert balls.contains_rational(x, exact_fraction(R[i, fast.eliminated[j]])), (i, j)
 
 
 def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W, exact_result, monkeypatch):
@@ -190,7 +191,7 @@ def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W
     assert hinted.rows == first.rows and hinted.kept == first.kept
     for i in range(hinted.beta.nrows()):
         for j in range(hinted.beta.ncols()):
-            assert certify.contains_rational(hinted.beta[i, j], exact_fraction(R[i, hinted.eliminated[j]]))
+            assert balls.contains_rational(hinted.beta[i, j], exact_fraction(R[i, hinted.eliminated[j]]))
     # a useless hint (a block of one repeated row) falls back to a proper choice
     useless = copy.copy(first)
     useless.rows = [0] * len(first.rows)
@@ -200,9 +201,9 @@ def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W
 
 def test_tail_values_are_the_residual_of_the_analysed_W(chain, chain_W):
     a = certify.analyse(chain_W, DIGITS)
-    cached = certify.tail_singular_values(chain_W, a)
+    cached = balls.tail_singular_values(chain_W, a)
     copy = arb_mat(chain_W.nrows(), chain_W.ncols(), chain_W.entries())     # another object: recomputed
-    recomputed = certify.tail_singular_values(copy, a)
+    recomputed = balls.tail_singular_values(copy, a)
     assert cached == recomputed
     assert len(cached) == len(a.eliminated)
     assert all(float(v) <= 10 * float(a.tail_bound.mid()) for v in cached)     # Weyl: below the tail bound
@@ -236,7 +237,7 @@ def test_beta_from_rows_encloses_the_exact_beta_at_higher_precision(chain, exact
     for i in range(beta.nrows()):
         for j in range(beta.ncols()):
             x = beta[i, j]
-            assert certify.contains_rational(x, exact_fraction(R[i, a.eliminated[j]]))
+            assert balls.contains_rational(x, exact_fraction(R[i, a.eliminated[j]]))
             assert x.rad() < a.beta[i, j].rad() or a.beta[i, j].rad() == 0
 
 

@@ -173,7 +173,7 @@ def _column_exponents(W, entries=None, mids=None):
     return power_of_two_exponents(log2_norms), zero
 
 
-def _scaled_entries(entries, cols, exponents):
+def scaled_entries(entries, cols, exponents):
     """W's entries (row-major) with column j divided by 2^exponents[j]: exact."""
     two = arb(2)
     powers = [two ** (-e) for e in exponents]
@@ -183,7 +183,7 @@ def _scaled_entries(entries, cols, exponents):
     return [x * p for x, p in zip(entries, repeated)]
 
 
-def _block(entries, cols, rows, picked):
+def block(entries, cols, rows, picked):
     """The submatrix (``rows`` x ``picked`` columns) of the row-major ``entries`` of a
     matrix with ``cols`` columns, as an arb_mat (copied, not rounded)."""
     if not rows or not picked:
@@ -215,7 +215,7 @@ def _gram(Ws):
     return (Y.transpose() * Y).mid()
 
 
-def _frobenius_upper(M):
+def frobenius_upper(M):
     """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits):
     the entries as one row vector v, ``v v^T`` in ball arithmetic (one dot product, in C)
     encloses the sum of squares of every matrix inside M."""
@@ -410,12 +410,12 @@ def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
     eliminated = [j for j in range(n) if j not in set(kept)]
     if not kept:
         return [], arb_mat(0, len(eliminated)), arb_mat(m, 0), arb_mat(0, 0)
-    Wk = _block(scaled, n, range(m), kept)
+    Wk = block(scaled, n, range(m), kept)
     fast = n > FAST_DECISIONS_ABOVE
     tried = []
     if fast and hint is not None and hint[0] == list(kept) and all(0 <= i < m for i in hint[1]):
         tried.append(list(hint[1]))
-        found = _solve_block(scaled, n, tried[-1], kept, eliminated)
+        found = solve_block(scaled, n, tried[-1], kept, eliminated)
         if found is not None:
             return (tried[-1], found[0], Wk, found[1])
     if R is None:
@@ -424,20 +424,20 @@ def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
         rows = _select_rows_float64(Wk, R, None if scaled64 is None else scaled64[:, kept])
         if rows is not None and rows not in tried:
             tried.append(rows)
-            found = _solve_block(scaled, n, rows, kept, eliminated)
+            found = solve_block(scaled, n, rows, kept, eliminated)
             if found is not None:
                 return (rows, found[0], Wk, found[1])
     rows = _select_rows(Wk, R)
     if len(rows) < len(kept) or rows in tried:
         return None
-    found = _solve_block(scaled, n, rows, kept, eliminated)
+    found = solve_block(scaled, n, rows, kept, eliminated)
     return None if found is None else (rows, found[0], Wk, found[1])
 
 
-def _solve_block(scaled, n, rows, kept, eliminated):
+def solve_block(scaled, n, rows, kept, eliminated):
     """(beta_s, Ws_RK^-1) by one verified solve, or None when Ws_RK is not proven nonsingular."""
     r, e = len(kept), len(eliminated)
-    Wrk = _block(scaled, n, rows, kept)
+    Wrk = block(scaled, n, rows, kept)
     identity = [0] * r
     right = []
     for a, i in enumerate(rows):
@@ -476,7 +476,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     entries = W.entries()
     mids = _float_mids(entries, m, n) if m else None
     exponents, zero = _column_exponents(W, entries, mids)
-    scaled = _scaled_entries(entries, n, exponents)
+    scaled = scaled_entries(entries, n, exponents)
     # the scaled midpoints in float64 (for choices and the approximate spectrum only)
     scaled64 = np.ldexp(mids, -np.array(exponents, dtype=int)) if m else np.zeros((0, n))
     del entries, mids
@@ -526,7 +526,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     if eliminated and kept and n > FAST_DECISIONS_ABOVE:
         B, residual, tail = _refined_fast(scaled, (m, n), gm, kept, eliminated, Wk, beta_s)
     elif eliminated and kept:
-        We = _block(scaled, n, range(m), eliminated)
+        We = block(scaled, n, range(m), eliminated)
         B = _mid(beta_s)
         try:                            # one least-squares refinement of B on all rows
             E = _mid(We - Wk * B)
@@ -535,11 +535,11 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
         except ZeroDivisionError:
             pass
         residual = We - Wk * B
-        tail = _frobenius_upper(residual)
+        tail = frobenius_upper(residual)
     elif eliminated:
         B = arb_mat(0, len(eliminated))
-        residual = _block(scaled, n, range(m), eliminated)
-        tail = _frobenius_upper(residual)
+        residual = block(scaled, n, range(m), eliminated)
+        tail = frobenius_upper(residual)
     else:
         B = arb_mat(len(kept), 0)
         tail = arb(0)
@@ -547,10 +547,10 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     # s_r >= s_min(Ws_K) >= s_min(Ws_RK) >= 1 / ||Ws_RK^-1||_F
     sigma_lower = arb(0)
     if kept:
-        f = _frobenius_upper(inverse)
+        f = frobenius_upper(inverse)
         sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
 
-    beta = _unscaled(beta_s, kept, eliminated, exponents)
+    beta = unscaled(beta_s, kept, eliminated, exponents)
 
     svals = _approximate_singular_values(G, scaled64) if approximate_spectrum else []
     analysis = BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
@@ -570,42 +570,26 @@ def _refined_fast(scaled, shape, gm, kept, eliminated, Wk, beta_s):
     balls' radii dominate, no B does better), and kept only if its bound is smaller. Both
     bounds are rigorous for their own exact B, so the smaller one is a valid claim."""
     m, n = shape
-    We = _block(scaled, n, range(m), eliminated)
+    We = block(scaled, n, range(m), eliminated)
     B = _mid(beta_s)
     residual = We - Wk * B
-    tail = _frobenius_upper(residual)
+    tail = frobenius_upper(residual)
     E = _mid(residual)
-    if 4 * _frobenius_upper(E) > tail:
+    if 4 * frobenius_upper(E) > tail:
         Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
         try:
             B1 = _mid(B + Gkk.solve(_mid(Wk.transpose() * E), algorithm="approx"))
         except ZeroDivisionError:
             return B, residual, tail
         other = We - Wk * B1
-        bound = _frobenius_upper(other)
+        bound = frobenius_upper(other)
         if bound < tail:
             return B1, other, bound
     return B, residual, tail
 
 
-def block_beta(Wr, digits, kept, rows, exponents):
-    """beta (unscaled, ``arb_mat``) from the square block of the rows ``rows`` of ``Wr``:
-    ``Ws_RK beta_s = Ws_RE`` solved in ball arithmetic at ``digits``, columns scaled by
-    ``2^exponents`` as in the analysis that chose K and R. For W of rank r = |K| this
-    encloses W's beta (every nonsingular r x r block of W_K gives the same one); the rank
-    is the analysis' claim. ValueError if the block is not proven nonsingular."""
-    with precision(digits):
-        n = Wr.ncols()
-        eliminated = [j for j in range(n) if j not in set(kept)]
-        scaled = _scaled_entries(Wr.entries(), n, exponents)
-        found = _solve_block(scaled, n, list(rows), list(kept), eliminated) if kept else None
-        if kept and found is None:
-            raise ValueError(f"the square block of W is not proven nonsingular at {digits} digits")
-        beta_s = found[0] if kept else arb_mat(0, len(eliminated))
-        return _unscaled(beta_s, kept, eliminated, exponents)
 
-
-def _unscaled(beta_s, kept, eliminated, exponents):
+def unscaled(beta_s, kept, eliminated, exponents):
     """beta = D_K^-1 beta_s D_E entry by entry (powers of two: exact)."""
     two = arb(2)
     values = beta_s.entries()
@@ -614,92 +598,6 @@ def _unscaled(beta_s, kept, eliminated, exponents):
         return arb_mat(len(kept), ne)
     return arb_mat(len(kept), ne, [values[a * ne + b] * two ** (exponents[j] - exponents[i])
                                    for a, i in enumerate(kept) for b, j in enumerate(eliminated)])
-
-
-def excitation_check(Wc, a):
-    """An independent batch of rows ``Wc`` (W at other states) against the analysis ``a``
-    of W: ``(bound, proven_nonzero, ridge_decades)``.
-
-    - ``bound``: a rigorous upper bound of ``||Wcs_E - Wcs_K B||_F`` (B = ``a.refined``,
-      exact; Wcs scaled with W's exponents). As for the tail bound, Weyl gives
-      ``s_(r+1)([Ws; Wcs]) <= sqrt(tail_bound^2 + bound^2)``, and adding rows never lowers
-      ``s_r``: ``ridge_decades`` is the ridge proven on W and the batch together.
-    - ``proven_nonzero``: entries of ``Wcs_E - Wcs_K beta_s`` whose ball excludes 0. Each
-      proves ``rank([W; Wc]) > r``: if rank W = r, beta_s encloses W's exact null space and
-      the batch leaves it; if rank W > r, r was already only a lower bound.
-
-    A trajectory that does not excite the mechanism gives W a clean ridge at too low a
-    rank (all the missing directions are exact zeros of W); only other states show it.
-    Computed at the analysis' digits.
-    """
-    with precision(a.digits):
-        return _excitation_check(Wc, a)
-
-
-def _excitation_check(Wc, a):
-    if not a.eliminated:
-        return arb(0), 0, math.inf
-    m, n = Wc.nrows(), Wc.ncols()
-    scaled = _scaled_entries(Wc.entries(), n, a.exponents)
-    We = _block(scaled, n, range(m), a.eliminated)
-    if a.kept:
-        Wk = _block(scaled, n, range(m), a.kept)
-        bound = _frobenius_upper(We - Wk * a.refined)
-        E = We - Wk * a.beta_s
-    else:
-        bound, E = _frobenius_upper(We), We
-    nonzero = sum(1 for x in E.entries() if not x.contains(0))
-    combined = arb((a.tail_bound ** 2 + bound ** 2).sqrt().upper())
-    if a.rank == 0 or not a.sigma_r_lower > 0:
-        decades = math.inf if combined == 0 else -math.inf
-    elif combined == 0:
-        decades = math.inf
-    else:
-        decades = log10(a.sigma_r_lower) - log10(combined)
-    return bound, nonzero, decades
-
-
-def tail_singular_values(W, a):
-    """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
-    largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
-    singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
-    Computed at the analysis' digits (E is the analysis' own when W is the matrix analysed)."""
-    with precision(a.digits):
-        return _tail_singular_values(W, a)
-
-
-def _tail_singular_values(W, a):
-    if not a.eliminated:
-        return []
-    source, E = a._residual if a._residual is not None else (None, None)
-    if source is not W:
-        m, n = W.nrows(), W.ncols()
-        scaled = _scaled_entries(W.entries(), n, a.exponents)
-        We = _block(scaled, n, range(m), a.eliminated)
-        E = _mid(We - _block(scaled, n, range(m), a.kept) * a.refined) if a.kept else _mid(We)
-    rows, cols = E.nrows(), E.ncols()
-    values = E.entries()
-    live = [j for j in range(cols) if any(values[i * cols + j] != 0 for i in range(rows))]
-    out = []
-    if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
-        picked = [values[i * cols + j] for i in range(rows) for j in live]
-        a64 = np.array([float(x) for x in picked]).reshape(rows, len(live))
-        exponent = 0
-        biggest64 = float(np.max(np.abs(a64)))
-        if not 1e-280 < biggest64 < 1e280:      # out of float range: scaled by 2^-exponent first
-            biggest = max(abs(x) for x in picked)
-            exponent = int(math.floor(log10(biggest) / math.log10(2)))
-            scale = arb(2) ** (-exponent)
-            a64 = np.array([float(x * scale) for x in picked]).reshape(rows, len(live))
-        out = np.linalg.svd(a64, compute_uv=False)
-        two = arb(2) ** exponent
-        out = [arb(float(v)) * two for v in out] + [arb(0)] * (len(live) - len(out))
-    elif live:
-        Ml = _block(values, cols, range(rows), live)
-        M = Ml.transpose() * Ml
-        out = [abs(e.real.mid()).sqrt() for e in acb_mat(M).eig(algorithm="approx")]
-        out.sort(key=lambda v: -log10(v))
-    return [v.str(6, radius=False) for v in out] + ["0"] * (cols - len(live))
 
 
 def _approximate_singular_values(G, scaled64):
@@ -724,65 +622,7 @@ def _approximate_singular_values(G, scaled64):
     return [v.str(12, radius=False) for v in values]
 
 
-# ----- digits, agreement, rationals ------------------------------------------------
-def radius_digits(x):
-    """Significant decimal digits a ball proves about its midpoint (inf when exact, 0 when
-    it contains zero)."""
-    if x.rad() == 0:
-        return math.inf
-    if x.contains(0):
-        return 0
-    return max(0, math.floor(log10(x.mid()) - log10(arb(x.rad()))))
-
-
-def agreement_digits(a, b):
-    """Leading decimal digits on which two balls' midpoints agree (relative to ``b``). The
-    difference of the exact midpoints is rounded once, at FLOAT_BITS: enough for an integer."""
-    da, db = a.mid(), b.mid()
-    if da == db:
-        return math.inf
-    if db == 0:
-        return 0
-    with precision(bits=FLOAT_BITS):
-        difference = da - db
-    return max(0, math.floor(log10(db) - log10(difference)))
-
-
 def decimal_string(x, digits):
     """The midpoint with ``digits`` significant digits, without the radius."""
     digits = max(1, min(int(digits), 100_000))
     return x.mid().str(digits, radius=False).replace("e+", "e")
-
-
-def recover_rational(x, digits):
-    """The simplest rational agreeing with ``digits`` significant digits of a ball's
-    midpoint (continued fractions, ``Fraction.limit_denominator``), or None.
-
-    Denominators up to about 10^(digits/2) are searched: below that bound a rational is
-    determined uniquely by ``digits`` correct digits.
-    """
-    digits = int(digits)
-    mid = Fraction(x.mid().str(digits + 10, radius=False))
-    if mid == 0:
-        return Fraction(0)
-    bound = 10 ** max(1, (digits - 2) // 2)
-    candidate = mid.limit_denominator(bound)
-    if abs(candidate - mid) <= abs(mid) * Fraction(10) ** (1 - digits):
-        return candidate
-    return None
-
-
-def contains_rational(x, q):
-    """Does the ball ``x`` contain the rational ``q``? Decided exactly, from the ball's
-    exact (binary) midpoint and radius: no precision, no rounding of ``q``."""
-    if not x.is_finite():
-        return not x.mid().is_nan()          # an infinite radius contains every real
-    q = Fraction(q)
-    return abs(q - _dyadic(x.mid())) <= _dyadic(x.rad())
-
-
-def _dyadic(x):
-    """An exact arb (a binary floating-point number) as a Fraction."""
-    man, exp = x.man_exp()
-    man, exp = int(man), int(exp)
-    return Fraction(man * 2 ** exp) if exp >= 0 else Fraction(man, 2 ** -exp)

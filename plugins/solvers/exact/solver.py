@@ -1,10 +1,10 @@
 """The ``exact`` solver: W over the rationals at random rational states of an open chain,
-its exact rank and rref (:mod:`baseparams.dynamics.exact_states`)."""
+its exact rank and rref (:mod:`baseparams.plugins.solvers.exact.states`)."""
 
 import math
 import time
 
-from baseparams.dynamics.exact_states import exact_observation_matrix, rref_base
+from .states import exact_observation_matrix, rref_base
 from baseparams.numeric.backends import Exact
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text

@@ -30,6 +30,8 @@ from baseparams.dynamics.trajectory import memory_limit
 from baseparams.solvers.support import (base_rows, check_memory, decimal_coefficients, raised_warning, say,
                                         size_text, untrusted_warning)
 
+from . import balls
+
 RIDGE_DECADES = 3          # a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
 MIN_DIGITS = 10            # coefficients must agree to 10 digits between two precisions
 LADDER = (30, 60, 120, 240, 500)
@@ -75,7 +77,7 @@ def _digits_of(beta):
     """Per entry of beta (rows of lists): the digits its ball proves (radius_digits)."""
     cols = beta.ncols()
     values = beta.entries()
-    return [[certify.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
+    return [[balls.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
 
 
 def peak_memory_mb():
@@ -126,7 +128,7 @@ class BallRun:
     @functools.cached_property
     def tail_values(self):
         """Approximate singular values after the ridge (only the final run's are reported)."""
-        return certify.tail_singular_values(self.W, self.analysis)
+        return balls.tail_singular_values(self.W, self.analysis)
 
     @property
     def rank(self):
@@ -149,7 +151,7 @@ class BallRun:
 def _beta_from_rows(mechanism, digits, trajectory, batches, a):
     """beta at ``digits`` from the square block of the analysis ``a``: W evaluated only at
     the states its rows R come from, then ``W_RK beta = W_RE`` solved in ball arithmetic
-    (:func:`baseparams.numeric.certify.block_beta`). For W of rank r every nonsingular
+    (:func:`baseparams.plugins.solvers.vp.balls.block_beta`). For W of rank r every nonsingular
     r x r block gives the same beta, so these balls enclose the beta that the whole W at
     ``digits`` would give; the rank itself was proven at the final precision."""
     f = max(1, len(mechanism.independent) or len(mechanism.coordinates))
@@ -175,7 +177,7 @@ def _beta_from_rows(mechanism, digits, trajectory, batches, a):
         blocks.append(observation_matrix(mechanism, backend, Subset(source, tuple(picked)))[0])
     W = backend.stack(*blocks) if blocks else backend.matrix([], len(mechanism.parameters))
     rows = [position[k, state] * f + within for k, state, within in located]
-    return certify.block_beta(W, digits, a.kept, rows, a.exponents)
+    return balls.block_beta(W, digits, a.kept, rows, a.exponents)
 
 
 def _finite(x):
@@ -218,7 +220,7 @@ def compare_runs(prev, cur):
             if x.contains(0) != y.contains(0):
                 worst = 0
                 continue
-            worst = min(worst, certify.agreement_digits(x, y))
+            worst = min(worst, balls.agreement_digits(x, y))
     if worst < MIN_DIGITS:
         reasons.append(f"coefficients agree to only {worst} digits between {prev.digits} and "
                        f"{cur.digits} digits (need {MIN_DIGITS})")
@@ -244,7 +246,7 @@ def _vp_coefficients(final, prev, params):
         for j in range(cols):
             d = final.digits_of[i][j]
             if same and d > 0:          # (a ball containing 0 has no digit to cap)
-                d = min(d, certify.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
+                d = min(d, balls.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
             trusted[i, j] = max(0, min(d, final.digits))
 
     def coefficient(i, j):
@@ -469,7 +471,7 @@ class VariablePrecisionSolver:
     @staticmethod
     def _excitation_check(mechanism, trajectory, final, seed, progress):
         """An independent random batch at the final precision against the null space of the
-        final analysis (:func:`baseparams.numeric.certify.excitation_check`): (diagnostics, batch)."""
+        final analysis (:func:`baseparams.plugins.solvers.vp.balls.excitation_check`): (diagnostics, batch)."""
         a = final.analysis
         batch = random_batch(mechanism, trajectory, seed)
         say(progress, f"vp: excitation check: {batch.states} random states at {final.digits} digits")
@@ -479,7 +481,7 @@ class VariablePrecisionSolver:
             Wc, _ = observation_matrix(mechanism, backend, batch)
         except KinematicsError as exc:
             return {**out, "passed": False, "error": str(exc)}, batch
-        bound, nonzero, decades = certify.excitation_check(Wc, a)
+        bound, nonzero, decades = balls.excitation_check(Wc, a)
         bound = bound.str(3, radius=False)
         passed = nonzero == 0 and decades >= RIDGE_DECADES
         return {**out, "rows": Wc.nrows(), "residual_bound": bound, "proven_nonzero": nonzero,
@@ -499,7 +501,7 @@ class VariablePrecisionSolver:
                 if digits < 8:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"a coefficient has only {digits} proven digits"}
-                q = certify.recover_rational(x, digits)
+                q = balls.recover_rational(x, digits)
                 if q is None:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"no rational with a denominator below 10^{max(1, (digits - 2) // 2)} "
@@ -521,7 +523,7 @@ class VariablePrecisionSolver:
                 if q is None and not b[i, j].contains(0):
                     return {"attempted": True, "succeeded": False,
                             "reason": f"a coefficient zero at {final.digits} digits is not zero at {D2}"}
-                if q is not None and not certify.contains_rational(b[i, j], q):
+                if q is not None and not balls.contains_rational(b[i, j], q):
                     return {"attempted": True, "succeeded": False,
                             "reason": f"{q} is outside the ball at {D2} digits"}
         rows = base_rows(params, a.kept, a.eliminated,
