@@ -37,6 +37,7 @@ from baseparams.plugins.solvers.exact import solver as exact_solver
 from baseparams.plugins.solvers.vp import solver as vp_solver
 from baseparams.plugins.solvers.vp.solver import compare_runs
 from baseparams.solvers.compare import same_row_space
+from baseparams.solvers.run import run_solver
 from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 from seed_tables import symbolic_base_matrix
@@ -200,10 +201,16 @@ def test_certify_excitation_check_on_synthetic_rows():
         assert nonzero > 0 and decades < 3
 
 
-def test_exact_and_dp_warn_about_digits():
+def test_exact_and_dp_declare_no_digits_and_the_front_door_says_it_ignores_it():
+    """Solvers declare only the options they use: dp and exact work in double precision
+    and in rationals, so they declare no ``digits``; offered as a common option,
+    run_solver drops it and says so; given as their own option, it is refused."""
     for name in ("dp", "exact"):
-        res = solver(name).solve(resolve("pendulum"), digits=40)
-        assert any("ignores --digits" in w for w in res.warnings), name
+        assert "digits" not in {o.name for o in solver(name).options}, name
+        res = run_solver(name, resolve("pendulum"), common={"digits": 40})
+        assert any(w.startswith(f"{name} ignores digits") for w in res.warnings), name
+        with pytest.raises(InputError, match="has no option 'digits'"):
+            run_solver(name, resolve("pendulum"), {"digits": 40})
 
 
 def test_vp_untrusted_coefficients_are_listed_not_printed():

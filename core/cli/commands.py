@@ -27,6 +27,7 @@ from baseparams import registry
 from baseparams.errors import BaseparamsError
 from baseparams.solvers.protocol import (Capabilities, Solver, check_options, describe_solver,
                                          options_from_text, require_applicable)
+from baseparams.solvers.run import run_solver, solver_options
 
 
 class UserError(click.ClickException):
@@ -377,7 +378,7 @@ class SolverListCommand(click.Command):
               help="A registered solver (all are listed below).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=None,
               help="Fix the working precision of a variable-precision solver [default: automatic]; "
-                   "dp and exact ignore it with a warning.")
+                   "a solver without a digits option (dp, exact) ignores it with a warning.")
 @click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
               help="Samples of the exciting trajectory (or random states, for exact) "
                    "[default: the mechanism file's].")
@@ -397,16 +398,9 @@ def solve(mech, solver_name, digits, samples, extra, fmt):
     """
     solver = get_solver(solver_name)
     given = options_from_text(solver, extra)
-    for name, value in (("digits", digits), ("samples", samples)):
-        if value is not None:
-            if name in given:
-                raise UserError(f"--{name} and -O {name}=... both given; give one")
-            given[name] = value
-    check_options(solver, given)                 # the option's own range, before reading the file
-    mechanism = load(mech)
-    options = check_options(solver, given, mechanism)       # bounds that depend on the mechanism
-    require_applicable(solver, mechanism)
-    result = solver.solve(mechanism, progress=_progress, **options)
+    common = {"digits": digits, "samples": samples}      # passed to a solver that declares them
+    solver_options(solver, given, common=common)         # the options' own ranges, before reading the file
+    result = run_solver(solver, load(mech), given, common=common, progress=_progress)
     for warning in result.warnings:
         click.echo(f"warning: {warning}", err=True)
 

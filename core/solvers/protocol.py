@@ -12,12 +12,19 @@ A solver is any object registered through the ``baseparams_solvers`` hook that s
   reason it cannot (a sentence for the user), found without solving;
 - ``solve(mechanism, *, progress=None, **options)``: a
   :class:`~baseparams.solvers.result.BaseParameterResult`. ``options`` are keywords named
-  in ``options``; ``progress``, when given, receives one-line messages. A solver raises
-  :class:`NotApplicable` (:func:`require_applicable`) when asked to solve a mechanism it
-  does not take, and :class:`~baseparams.errors.InputError` for bad options.
+  in ``options`` (a solver spells them as typed keyword parameters with the declared
+  defaults); ``progress``, when given, receives one-line messages.
 
-Keyword options (not one dict) keep the library call short:
-``solver.solve(mech, digits=30, recover=False)``.
+The generic checks are not the solver's: :func:`baseparams.solvers.run.run_solver` (the one
+sequence every caller uses) checks the options against the declarations
+(:func:`check_options`: unknown names, types, ranges, the mechanism's bounds), refuses a
+mechanism the solver does not take (:func:`require_applicable`: :class:`NotApplicable`)
+and only then calls ``solve`` with every declared option. ``solve`` itself checks only
+what depends on its own work (dp: a rank above W's row count, known once W is built) and
+raises :class:`~baseparams.errors.InputError` for it.
+
+The library call is ``run_solver("vp", mech, {"digits": 30, "recover": False})``;
+``solver.solve(mech, digits=30, recover=False)`` skips the checks (values known valid).
 """
 
 import math
@@ -131,9 +138,11 @@ class Solver(Protocol):
     def applicable(self, mechanism: Mechanism) -> str | None:
         """None if this solver takes ``mechanism``, else the reason it does not."""
 
-    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None,
-              **options: Any) -> BaseParameterResult:
-        """The base parameters of ``mechanism``; ``options`` as declared in ``options``."""
+    def solve(self, mechanism: Mechanism, *args: Any, **options: Any) -> BaseParameterResult:
+        """The base parameters of ``mechanism``: called as ``solve(mechanism,
+        progress=..., **options)`` with every option declared in ``options``, checked
+        (``*args: Any, **options: Any`` lets each solver spell its options as typed
+        keyword parameters)."""
 
 
 class NotApplicable(InputError):

@@ -14,8 +14,9 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
 from baseparams.numeric.backends import Float64
 from baseparams.numeric.certify import decimal_string
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, parameter_count, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import (MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
+                                         parameter_count)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
@@ -43,23 +44,18 @@ class DoublePrecisionSolver:
                      "the excitation check is skipped)", minimum=1, maximum=parameter_count,
                      maximum_text="the number of parameters"),
         SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch", minimum=0, maximum=MAX_SEED),
-        SolverOption("digits", int, None, "ignored (dp always works in double precision); "
-                     "a warning says so", minimum=10, maximum=MAX_DIGITS),
     )
 
     def applicable(self, mechanism):
         """Any mechanism: the SVD needs nothing of the geometry."""
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """The base parameters in float64; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        samples, scale, rank, seed = (chosen[k] for k in ("samples", "scale", "rank", "seed"))
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, samples: int | None = None,
+              scale: bool = True, rank: int | None = None, seed: int = CHECK_SEED) -> BaseParameterResult:
+        """The base parameters in float64; the options as declared in ``options`` (checked
+        by :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
-        warnings = []
-        if chosen["digits"]:
-            warnings.append("dp ignores --digits: it always works in double precision")
+        warnings: list[str] = []
         trajectory = Trajectory.default(mechanism, samples=samples)
         W, info = observation_matrix(mechanism, Float64(), trajectory)
         say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")

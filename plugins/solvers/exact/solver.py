@@ -8,12 +8,13 @@ from .states import exact_observation_matrix, rref_base
 from baseparams.numeric.backends import Exact
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import (base_rows, check_memory, exact_coefficients, say, seconds_text,
                                         size_text)
 
+SEED = 2024               # seed of the random rational states
 EXACT_ROUNDS = 6           # independent batches before the rank is declared unsettled
 
 
@@ -41,9 +42,7 @@ class ExactSolver:
     options = (
         SolverOption("samples", int, None, "random rational states of the first batch (default: "
                      "enough for 1.5 rows per parameter)", minimum=1, maximum=MAX_SAMPLES),
-        SolverOption("seed", int, 2024, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
-        SolverOption("digits", int, None, "ignored (the arithmetic is exact); a warning says so",
-                     minimum=10, maximum=MAX_DIGITS),
+        SolverOption("seed", int, SEED, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
     )
 
     def applicable(self, mechanism):
@@ -56,15 +55,12 @@ class ExactSolver:
             return exc.reason
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """Exact rank and beta; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        samples, seed = chosen["samples"], chosen["seed"]
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, samples: int | None = None,
+              seed: int = SEED) -> BaseParameterResult:
+        """Exact rank and beta; the options as declared in ``options`` (checked by
+        :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
-        warnings = []
-        if chosen["digits"]:
-            warnings.append("exact ignores --digits: its arithmetic is exact (rationals)")
+        warnings: list[str] = []
         params = mechanism.parameters
         f = max(1, len(mechanism.independent or mechanism.coordinates))
         n = len(params)

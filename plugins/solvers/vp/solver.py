@@ -23,8 +23,9 @@ from baseparams.errors import InputError, KinematicsError
 from baseparams.model.expressions import exact_text
 from baseparams.numeric import certify
 from baseparams.numeric.backends import Arb
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, last_parameter_index, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
+                                         last_parameter_index)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.dynamics.trajectory import memory_limit
 from baseparams.solvers.support import (base_rows, check_memory, decimal_coefficients, raised_warning, say,
@@ -295,12 +296,12 @@ class VariablePrecisionSolver:
         """Any mechanism: ball arithmetic evaluates square roots and closed loops alike."""
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """Certified base parameters; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        digits, samples, ladder, pivoting, recover, kept, seed = (
-            chosen[k] for k in ("digits", "samples", "ladder", "pivoting", "recover", "kept", "seed"))
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, digits: int | None = None,
+              samples: int | None = None, ladder: tuple[int, ...] = LADDER, pivoting: str = "natural",
+              recover: bool = True, kept: tuple[int, ...] | None = None,
+              seed: int = CHECK_SEED) -> BaseParameterResult:
+        """Certified base parameters; the options as declared in ``options`` (checked by
+        :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
         trajectory = Trajectory.default(mechanism, samples=samples or default_samples(mechanism))
         params = mechanism.parameters
