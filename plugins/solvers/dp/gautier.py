@@ -50,6 +50,7 @@ import numpy as np
 
 from baseparams.errors import KinematicsError
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
+from baseparams.numeric.rank import numerical_rank
 
 RIDGE_RATIO = 1e3
 EPS = np.finfo(float).eps
@@ -101,7 +102,7 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
     s_full[:len(s)] = s
     s_max = s_full[0] if n else 0.0
     tol = max(rows, n) * EPS * s_max
-    r_tol = int(np.sum(s_full > tol))
+    r_tol = numerical_rank(singular_values=s_full, tol=max(rows, n) * EPS)     # s_i > tol
     lifted = _lifted_by_scaling(W, s_full, vt, s_col, r_tol) if scale and rank is None else 0
     warnings = []
     lifted_columns = []

@@ -29,14 +29,17 @@ across joints use the same states: :mod:`baseparams.plugins.solvers.symbolic.sam
 import random
 import weakref
 from dataclasses import dataclass, field
+from collections.abc import Sequence
 from fractions import Fraction
 
 import mpmath
 import numpy as np
 import sympy
-from flint import fmpq, fmpq_mat
+from flint import arb, fmpq_mat
 
+from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric.rank import numerical_rank, to_fmpq
 from baseparams.dynamics.evaluator import Evaluator, independent_rows
 from baseparams.dynamics.observation import RationalStates, evaluate_states
 from baseparams.errors import InputError
@@ -113,10 +116,11 @@ def random_states(mechanism, count=12, digits=30, seed=1):
     return evaluate_states(mechanism, backend, states, certify=False), backend
 
 
-def to_mpf(x):
-    """An arb ball's midpoint (or any real number) as an mpmath number."""
-    if hasattr(x, "mid"):
-        return mpmath.mpf(x.mid().str(mpmath.mp.dps + 5, radius=False))
+def to_mpf(x: arb | float | int | Fraction, dps: int) -> mpmath.mpf:
+    """An arb ball's midpoint (or any real number) as an mpmath number, read to ``dps``
+    digits and 5 more (call inside ``mpmath.workdps(dps)``)."""
+    if isinstance(x, arb):
+        return mpmath.mpf(x.mid().str(dps + 5, radius=False))
     return mpmath.mpf(x)
 
 
@@ -134,108 +138,24 @@ class Rows(list):
         return self._exact
 
 
-def to_fmpq(x) -> fmpq:
-    """An mpmath number, int or Fraction as the exact rational it is (an mpf is m 2^e)."""
-    if isinstance(x, int):
-        return fmpq(x)
-    if isinstance(x, Fraction):
-        return fmpq(x.numerator, x.denominator)
-    sign, man, exp, _ = mpmath.mpf(x)._mpf_
-    if not man:
-        if exp:
-            raise ValueError(f"{x} is not a finite number")
-        return fmpq(0)
-    man = -man if sign else man
-    return fmpq(man << exp) if exp >= 0 else fmpq(man, 1 << -exp)
-
-
-def exact_matrix(rows) -> fmpq_mat:
+def exact_matrix(rows: Sequence[Sequence[mpmath.mpf]]) -> fmpq_mat:
     if not rows:
         return fmpq_mat(0, 0)
     return fmpq_mat(len(rows), len(rows[0]), [to_fmpq(v) for row in rows for v in row])
 
 
-def _normalized_rows(rows):
-    """Rows scaled to unit max-norm; rows that are zero to working precision are dropped."""
+def _normalized_rows(rows: Sequence[Sequence[mpmath.mpf]], dps: int) -> Rows:
+    """Rows scaled to unit max-norm; rows that are zero at ``dps`` digits are dropped."""
     peaks = [max(abs(v) for v in row) for row in rows]
     scale = max(peaks, default=mpmath.mpf(0))
     if scale == 0:
         return Rows()
     out = Rows()
-    floor = scale * mpmath.mpf(10) ** (-(mpmath.mp.dps - 8))
+    floor = scale * mpmath.mpf(10) ** (-(dps - 8))
     for row, m in zip(rows, peaks):
         if m > floor:
             out.append([v / m for v in row])
     return out
-
-
-def numeric_rank(rows, tol=NULL_TOL):
-    """The number of singular values of ``rows`` above ``tol`` times the largest.
-
-    Decided in exact arithmetic on the Gram matrix when the margin is clear
-    (:func:`pivot_rank`, the usual case: a few ms), else by mpmath's SVD (0.1-0.2 s)."""
-    if not rows:
-        return 0
-    count = pivot_rank(rows, tol)
-    return svd_rank(rows, tol) if count is None else count
-
-
-def svd_rank(rows, tol=NULL_TOL):
-    s = mpmath.svd_r(mpmath.matrix(rows), compute_uv=False)
-    s = [abs(x) for x in s]
-    top = max(s)
-    return sum(1 for x in s if x > tol * top) if top > 0 else 0
-
-
-def pivot_rank(rows, tol=NULL_TOL):
-    """The SVD's count of singular values above ``tol`` s_max, decided in exact rational
-    arithmetic (``rows`` taken as the exact rationals they are), or None when the margin
-    is too thin to be sure of agreeing with the SVD.
-
-    G = A^T A, LDL^T with complete pivoting (largest remaining diagonal first) until a
-    pivot d < tol^2 d_max / (100 n), d_max the largest diagonal entry (d_max <= s_max^2):
-
-    - every singular value from there on is below tol s_max / 10 (the remaining Schur
-      complement S has s^2 <= trace S <= n d);
-    - for the r pivots kept, the principal block G_KK bounds s_r^2 >= lambda_min(G_KK)
-      (interlacing) >= 1 / ||G_KK^-1||_F (exact inverse): the count is returned only if
-      that is >= 100 tol^2 trace G >= 100 tol^2 s_max^2, i.e. s_r >= 10 tol s_max.
-
-    Either way the count is the SVD's, with a margin of 10 in s."""
-    a = rows.exact() if isinstance(rows, Rows) else exact_matrix(rows)
-    n = a.ncols()
-    g = a.transpose() * a
-    G = [[g[i, j] for j in range(n)] for i in range(n)]
-    trace = sum((G[i][i] for i in range(n)), fmpq(0))
-    dmax = max((G[i][i] for i in range(n)), default=fmpq(0))
-    if dmax == 0:
-        return 0
-    tol2 = to_fmpq(tol) ** 2
-    low = tol2 * dmax / (100 * n)
-    open_, kept = list(range(n)), []
-    while open_:
-        j = max(open_, key=lambda k: G[k][k])
-        d = G[j][j]
-        if d < low:
-            break
-        open_.remove(j)
-        kept.append(j)
-        for i in open_:
-            f = G[i][j] / d
-            if f:
-                row_i, row_j = G[i], G[j]
-                for k in open_:
-                    row_i[k] -= f * row_j[k]
-    if not kept:
-        return 0
-    try:
-        inverse = fmpq_mat(len(kept), len(kept), [g[i, j] for i in kept for j in kept]).inv()
-    except ZeroDivisionError:
-        return None
-    flat = fmpq_mat(1, len(kept) ** 2, inverse.entries())
-    frobenius2 = (flat * flat.transpose())[0, 0]
-    bound = 100 * tol2 * trace
-    return len(kept) if bound * bound * frobenius2 <= 1 else None
 
 
 def null_basis(rows, ncols, tol=NULL_TOL):
@@ -277,8 +197,9 @@ def independent(vectors):
 
 
 # ----- exact candidates ------------------------------------------------------------------
-def to_number(expr, subs):
-    """An exact expression at the geometry ``subs``, as an mpmath number (working precision).
+def to_number(expr: object, subs: dict, dps: int) -> mpmath.mpf:
+    """An exact expression at the geometry ``subs``, as an mpmath number to ``dps`` digits
+    (call inside ``mpmath.workdps(dps)``).
     A rational (int, Fraction, sympy Rational: most entries) is divided out directly,
     without sympy's substitution and evaluation."""
     if isinstance(expr, int):
@@ -287,7 +208,7 @@ def to_number(expr, subs):
         return mpmath.mpf(expr.numerator) / expr.denominator
     if isinstance(expr, sympy.Rational):
         return mpmath.mpf(int(expr.p)) / int(expr.q)
-    return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), mpmath.mp.dps + 5))
+    return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), dps + 5))
 
 
 _CANDIDATES = weakref.WeakKeyDictionary()      # mechanism -> {label: (points, dirs)}
@@ -360,17 +281,18 @@ def same_rotation(mechanism, label: int) -> list:
     return list(found.items())
 
 
-def dedupe(items, subs, directions: bool = False) -> list:
+def dedupe(items: list, subs: dict, dps: int, directions: bool = False) -> list:
     """(name, exact vector, numeric vector) for the items whose vector (or, for
     ``directions``, its line) at the geometry ``subs`` differs from every earlier one.
 
-    Duplicates are decided at working precision (1e-20); a float64 copy of the keys only
+    Numbers at ``dps`` digits (call inside ``mpmath.workdps(dps)``). Duplicates are
+    decided at that precision (1e-20); a float64 copy of the keys only
     spares that comparison for the pairs it shows far apart (by more than 1e-8, a thousand
     million times float64's error), so the decisions are the working-precision ones."""
     out, seen, seen_float = [], [], []
     tiny = mpmath.mpf(10) ** -20
     for name, vec in items:
-        num = [to_number(c, subs) for c in vec]
+        num = [to_number(c, subs, dps) for c in vec]
         key = num
         if directions:
             norm = mpmath.sqrt(sum(x * x for x in num))
@@ -433,20 +355,22 @@ def _quadrupole_family(span, span_num):
     return out
 
 
-def lagrangian_forms(states):
-    """Per state: (T form, V form, {body: rotation rows}, {body: omega}) as mpmath numbers."""
+def lagrangian_forms(states: list, dps: int) -> list:
+    """Per state: (T form, V form, {body: rotation rows}, {body: omega}) as mpmath numbers
+    to ``dps`` digits (call inside ``mpmath.workdps(dps)``)."""
     out = []
     for sample in states:
         t_form, v_form = sample.energies()
-        rots = {b: [[to_mpf(x) for x in row] for row in st.rot] for b, st in sample.states.items() if b}
-        omegas = {b: [to_mpf(x) for x in st.w] for b, st in sample.states.items() if b}
-        out.append(([to_mpf(x) for x in t_form], [to_mpf(x) for x in v_form], rots, omegas))
+        rots = {b: [[to_mpf(x, dps) for x in row] for row in st.rot] for b, st in sample.states.items() if b}
+        omegas = {b: [to_mpf(x, dps) for x in st.w] for b, st in sample.states.items() if b}
+        out.append(([to_mpf(x, dps) for x in t_form], [to_mpf(x, dps) for x in v_form], rots, omegas))
     return out
 
 
-def lagrangian_rows(mechanism, labels, forms):
+def lagrangian_rows(mechanism: Mechanism, labels: list[int], forms: list, dps: int) -> Rows:
     """Rows whose common null space holds the parameter directions of ``labels`` without
-    effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized."""
+    effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized (the
+    forms' ``dps`` digits)."""
     cols = []
     for label in labels:
         i = mechanism.body_labels.index(label)
@@ -454,24 +378,25 @@ def lagrangian_rows(mechanism, labels, forms):
     t_rows = [[t[c] for c in cols] for t, _, _, _ in forms]
     v_rows = [[v[c] for c in cols] for _, v, _, _ in forms]
     rows = t_rows + [[a - b for a, b in zip(r, v_rows[0])] for r in v_rows[1:]]
-    return _normalized_rows(rows)
+    return _normalized_rows(rows, dps)
 
 
-def analyse_body(mechanism, label, forms):
-    """Classify one body's motion from sampled states and build its exact generators."""
-    rows = lagrangian_rows(mechanism, [label], forms)
+def analyse_body(mechanism: Mechanism, label: int, forms: list, dps: int) -> BodyMotion:
+    """Classify one body's motion from sampled states (``forms`` at ``dps`` digits; call
+    inside ``mpmath.workdps(dps)``) and build its exact generators."""
+    rows = lagrangian_rows(mechanism, [label], forms, dps)
     omegas = []
     for _, _, rots, ws in forms:
         rot, w = rots[label], ws[label]
         omegas.append([mpmath.fsum(rot[k][i] * w[k] for k in range(3)) for i in range(3)])
-    null_dim = 10 - numeric_rank(rows)
-    omega_rows = _normalized_rows(omegas)
-    omega_rank = numeric_rank(omega_rows) if omega_rows else 0
+    null_dim = 10 - numerical_rank(rows.exact(), NULL_TOL) if rows else 10
+    omega_rows = _normalized_rows(omegas, dps)
+    omega_rank = numerical_rank(omega_rows.exact(), NULL_TOL) if omega_rows else 0
 
     subs = mechanism.geometry_subs
     points, dirs = body_candidates(mechanism, label)
-    points = dedupe(points, subs)
-    dirs = dedupe(dirs, subs, directions=True)
+    points = dedupe(points, subs, dps)
+    dirs = dedupe(dirs, subs, dps, directions=True)
     motion = BodyMotion(label, omega_rank, null_dim)
     names = body_parameter_names(label)
 
@@ -528,7 +453,7 @@ def analyse_body(mechanism, label, forms):
     valid = []
     for multipole, cond, values, pref, side, text in candidates:
         vector = as_vector(label, values)
-        num = [to_number(vector.get(n, 0), subs) for n in names]
+        num = [to_number(vector.get(n, 0), subs, dps) for n in names]
         if residual(rows, num) >= NULL_TOL * 100:
             continue           # a quadrupole of a wrongly identified span: never trust it
         valid.append((num, vector, multipole, cond, pref, side, text))
@@ -540,10 +465,14 @@ def analyse_body(mechanism, label, forms):
     return motion
 
 
-def analyse_bodies(mechanism, states=None, count=12, digits=30, seed=1):
-    """(BodyMotion for every moving body, the sampled Lagrangian forms for reuse)."""
+def analyse_bodies(mechanism: Mechanism, states: list | None = None, count: int = 12, digits: int = 30,
+                   seed: int = 1) -> tuple[list[BodyMotion], list]:
+    """(BodyMotion for every moving body, the sampled Lagrangian forms for reuse), in
+    mpmath numbers at ``digits - 2`` digits (a local ``mpmath.workdps``: the caller's
+    precision is neither read nor changed)."""
     if states is None:
         states, _ = random_states(mechanism, count=count, digits=digits, seed=seed)
-    with mpmath.workdps(digits - 2):
-        forms = lagrangian_forms(states)
-        return [analyse_body(mechanism, label, forms) for label in mechanism.body_labels], forms
+    dps = digits - 2
+    with mpmath.workdps(dps):
+        forms = lagrangian_forms(states, dps)
+        return [analyse_body(mechanism, label, forms, dps) for label in mechanism.body_labels], forms
