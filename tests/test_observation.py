@@ -23,7 +23,7 @@ from baseparams.errors import KinematicsError
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.numeric import certify
 from baseparams.plugins.solvers.vp import balls
-from baseparams.numeric.backends import Arb, Exact, Float64, TanHalf, precision
+from baseparams.numeric.backends import Arb, Exact, Float64, TanHalf
 
 DIGITS = 40
 ODD_PRECISION = 77          # bits: what a careless caller might have left set
@@ -69,7 +69,7 @@ def test_tan_half_angles_are_the_same_angle_in_every_backend():
     angle = TanHalf(Fraction(-3, 7))
     c, s = angle.cos_sin()
     assert np.isclose(np.cos(Float64().number(angle)), float(Fraction(int(c.p), int(c.q))), rtol=1e-15)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         x = Arb(DIGITS).number(angle)
         assert x.cos().contains(arb(c)) and x.sin().contains(arb(s))
     assert Exact().number(angle) is angle
@@ -137,7 +137,7 @@ def test_evaluate_states_gives_the_samples_of_W():
     samples = evaluate_states(mech, Arb(DIGITS), batch)
     W, _ = observation_matrix(mech, Arb(DIGITS), batch)
     rows = [row for s in samples for row in s.regressor()]
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         for i, row in enumerate(rows):
             for j, v in enumerate(row):
                 assert W[i, j].overlaps(arb(v))
@@ -149,7 +149,7 @@ def test_matrices_and_stacking_per_backend():
     assert Exact().stack(E, E).nrows() == 4 and Exact().stack(E, E)[3, 0] == fmpq(-5, 7)
     assert Exact().matrix([], 3).ncols() == 3 and Arb(20).matrix([], 3).nrows() == 0
     assert Float64().matrix([], 3).shape == (0, 3)
-    with precision(30):
+    with ctx.workdps(30):
         A = Arb(30).matrix([[arb(1) / 3, arb(2)]])
     assert Arb(30).stack(A, A).nrows() == 2 and Arb(30).stack(A, A)[1, 0].rad() == A[0, 0].rad()
 
@@ -267,7 +267,7 @@ def test_precision_is_restored_after_an_error():
             observation_matrix(mech, Arb(DIGITS), Trajectory.default(mech, samples=5))
         assert ctx.prec == ODD_PRECISION
         with pytest.raises(RuntimeError):
-            with precision(DIGITS):
+            with ctx.workdps(DIGITS):
                 raise RuntimeError
         assert ctx.prec == ODD_PRECISION
     finally:
@@ -276,9 +276,9 @@ def test_precision_is_restored_after_an_error():
 
 def test_precision_context_nests_and_takes_bits():
     saved = ctx.prec
-    with precision(50):
+    with ctx.workdps(50):
         outer = ctx.prec
-        with precision(bits=300):
+        with ctx.workprec(300):
             assert ctx.prec == 300
         assert ctx.prec == outer
     assert ctx.prec == saved

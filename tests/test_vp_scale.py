@@ -19,7 +19,7 @@ from fractions import Fraction
 
 import mpmath
 import pytest
-from flint import arb, arb_mat, fmpq, fmpq_mat, fmpz_mat
+from flint import arb, arb_mat, ctx, fmpq, fmpq_mat, fmpz_mat
 
 from baseparams import registry
 from baseparams.plugins.solvers.exact.states import rref_pivots
@@ -29,7 +29,7 @@ from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.numeric import certify
 from baseparams.plugins.solvers.vp import balls
-from baseparams.numeric.backends import Arb, precision
+from baseparams.numeric.backends import Arb
 from baseparams.plugins.solvers.vp import solver as vp_solver
 
 DIGITS = 30
@@ -86,7 +86,7 @@ def test_eliminations_give_the_exact_rank_and_leftmost_basis(seed, m, n, k):
     rank = exact.rank()
     R, r2 = fmpq_mat(A).rref()
     leftmost = rref_pivots(R, r2)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         W = arb_mat(A)
         G = W.transpose() * W
         gmax = max(float(G[i, i].mid()) for i in range(n))
@@ -109,7 +109,7 @@ def test_eliminations_give_the_exact_rank_and_leftmost_basis(seed, m, n, k):
 
 def test_cholesky_of_a_dependent_set_is_refused():
     A = _low_rank_integer_matrix(4, 80, 70, 30)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         W = arb_mat(A)
         G = W.transpose() * W
         assert certify._cholesky_mid(G, list(range(40))) is None       # 40 columns of rank 30
@@ -117,7 +117,7 @@ def test_cholesky_of_a_dependent_set_is_refused():
 
 # ----- column exponents against mpmath -----------------------------------------------------
 def test_column_exponents_fast_rule_equals_the_entrywise_rule():
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         half = arb(2) ** arb(fmpq(10 ** 9 + 2, 2 * 10 ** 9))    # 2^(1/2 + 1e-9): log2 just above k + 1/2
         columns = [
             [arb(3), arb(-4), arb(0)],                                  # norm 5
@@ -131,19 +131,19 @@ def test_column_exponents_fast_rule_equals_the_entrywise_rule():
         W = arb_mat([[col[i] for col in columns] for i in range(3)])
         exponents, zero = certify._column_exponents(W)
     assert zero == [1, 6]
-    mpmath.mp.dps = 50
-    for j, col in enumerate(columns):
-        if j in zero:
-            assert exponents[j] == 0
-            continue
-        norm = mpmath.sqrt(sum(mpmath.mpf(x.mid().str(60, radius=False)) ** 2 for x in col))
-        assert exponents[j] == int(mpmath.nint(mpmath.log(norm, 2))), j
+    with mpmath.workdps(50):           # local: the global precision is neither read nor left changed
+        for j, col in enumerate(columns):
+            if j in zero:
+                assert exponents[j] == 0
+                continue
+            norm = mpmath.sqrt(sum(mpmath.mpf(x.mid().str(60, radius=False)) ** 2 for x in col))
+            assert exponents[j] == int(mpmath.nint(mpmath.log(norm, 2))), j
 
 
 # ----- the Frobenius bound against exact arithmetic ------------------------------------------
 def test_frobenius_bound_contains_and_hugs_the_exact_norm():
     rng = random.Random(5)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         values = []
         for _ in range(60 * 40):
             mid = arb(rng.uniform(-1, 1)) * arb(10) ** rng.randint(-30, 0)
@@ -242,11 +242,11 @@ def test_beta_from_rows_encloses_the_exact_beta_at_higher_precision(chain, exact
 
 
 def test_log10_matches_mpmath_far_outside_float_range():
-    mpmath.mp.dps = 40
     rng = random.Random(9)
     for _ in range(200):
         e = rng.randint(-100000, 100000)
         x = arb(rng.uniform(1, 10)) * arb(10) ** e
-        expected = float(mpmath.log10(mpmath.mpf(x.mid().str(40, radius=False))))
+        with mpmath.workdps(40):
+            expected = float(mpmath.log10(mpmath.mpf(x.mid().str(40, radius=False))))
         assert certify.log10(x) == pytest.approx(expected, rel=1e-13, abs=1e-9)
     assert certify.log10(arb(0)) == -math.inf

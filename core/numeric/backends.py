@@ -10,7 +10,7 @@ give the backend's matrix type (numpy array, ``arb_mat``, ``fmpq_mat``, sympy Ma
 - :class:`Arb`: python-flint ``arb`` balls at a chosen number of decimal digits; every
   result carries a rigorous error bound. flint's precision is a process-wide setting, so
   every public function that computes in arb enters its own with ``backend.activate()``
-  (that is, :func:`precision`), which restores the caller's on exit.
+  (python-flint's own ``ctx.workprec``), which restores the caller's on exit.
 - :class:`Exact`: python-flint ``fmpq`` rationals. Angles are given as
   :class:`TanHalf` (the rational point of the unit circle ``t = tan(theta/2)``).
 - :class:`Symbolic`: sympy expressions, for small mechanisms and for geometry symbols.
@@ -26,22 +26,6 @@ import sympy
 from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
 
 from baseparams.errors import KinematicsError
-
-
-@contextlib.contextmanager
-def precision(digits: int | None = None, *, bits: int | None = None):
-    """flint's working precision for the block (decimal ``digits`` or binary ``bits``),
-    restored exactly on exit: the one place a precision is entered, so no function
-    depends on a precision some caller happened to leave set."""
-    saved = ctx.prec
-    if bits is not None:
-        ctx.prec = int(bits)
-    else:
-        ctx.dps = int(digits)
-    try:
-        yield
-    finally:
-        ctx.prec = saved
 
 
 def in_backend_precision(method):
@@ -271,17 +255,17 @@ class Arb(Backend):
 
     def __init__(self, digits=50):
         self.digits = int(digits)
-        with precision(self.digits):
+        with ctx.workdps(self.digits):
             self.bits = ctx.prec
 
-    def activate(self):
-        return precision(self.digits)
+    def activate(self) -> contextlib.AbstractContextManager[None]:
+        return ctx.workprec(self.bits)
 
     def _made(self, make):
         """``make()`` at this backend's precision (cheap when it is already current)."""
         if ctx.prec == self.bits:
             return make()
-        with precision(bits=self.bits):
+        with ctx.workprec(self.bits):
             return make()
 
     def rational(self, value):

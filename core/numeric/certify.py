@@ -57,7 +57,6 @@ from fractions import Fraction
 import numpy as np
 from flint import acb_mat, arb, arb_mat, ctx
 
-from baseparams.numeric.backends import precision
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
@@ -108,7 +107,7 @@ def log10(x):
         man, exp = m.man_exp()
         man = int(man)
         return math.log10(abs(man)) + int(exp) * LOG10_2 if man else -math.inf
-    with precision(bits=FLOAT_BITS):
+    with ctx.workprec(FLOAT_BITS):
         x = abs(arb(x).mid())
         if x == 0:
             return -math.inf
@@ -200,7 +199,7 @@ def _on_grid(M, extra_bits=GRID_EXTRA_BITS, four=None):
     integer matrix instead of many (W's midpoints reach 1e-96 where an entry is noise)."""
     if not M.nrows() or not M.ncols():
         return M
-    with precision(bits=ctx.prec + extra_bits):
+    with ctx.extraprec(extra_bits):
         if four is None:            # the matrix of 4s of M's shape (callers may pass it)
             four = arb_mat(M.nrows(), 1, [1] * M.nrows()) * arb_mat(1, M.ncols(), [4] * M.ncols())
         return (M + four) - four
@@ -467,7 +466,7 @@ def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True,
     FAST_DECISIONS_ABOVE columns).
     """
     hint = None if earlier is None else (list(earlier.kept), list(earlier.rows))
-    with precision(digits):
+    with ctx.workdps(digits):
         return _analyse(W, digits, kept, pivoting, approximate_spectrum, hint)
 
 

@@ -48,7 +48,8 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import (INERTIA_KINDS, TENSOR_INDEX, Generator, as_vector, dipole_params,
                         monopole_params, quadrupole_params, symbolic_frame)
 
-NULL_TOL = mpmath.mpf(10) ** -14      # relative size of a null singular value / residual
+with mpmath.workprec(53):              # a fixed constant, whatever precision is current at import
+    NULL_TOL = mpmath.mpf(10) ** -14  # relative size of a null singular value / residual
 INDEPENDENCE_TOL = 1e-10              # relative norm left after projecting out a basis
 
 

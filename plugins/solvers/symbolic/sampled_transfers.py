@@ -27,7 +27,8 @@ from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.transfers import (Generator, as_vector, dipole_params, joint_frames, map_direction, map_point,
                         monopole_params)
 
-PREFILTER = NULL_TOL * 1000     # a try whose numeric residual is above this is not null
+with mpmath.workprec(53):       # a fixed constant, whatever precision is current at import
+    PREFILTER = NULL_TOL * 1000  # a try whose numeric residual is above this is not null
 
 
 def sampled_joint_transfers(mechanism: Mechanism, joint: Joint, forms: list, known: set[str],
