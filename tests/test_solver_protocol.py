@@ -444,7 +444,8 @@ def test_the_documented_example_solver_works():
     assert r.rank == 10 and set(JSON_KEYS) <= set(r.to_json())
     assert r.to_json()["diagnostics"] == {"seed": 2, "summary": ["no reduction attempted"]}
     with pytest.raises(InputError, match="'seeds'"):
-        example.solve(resolve("pendulum"), seeds=2)
+        run_solver(example, resolve("pendulum"), {"seeds": 2})
+    assert run_solver(example, resolve("pendulum"), {"seed": 2}).to_json()["diagnostics"]["seed"] == 2
 
 
 def test_run_solver_finds_checks_and_refuses_in_one_sequence():
