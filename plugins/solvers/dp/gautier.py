@@ -44,6 +44,7 @@ Choices made here, all reported in the result's diagnostics:
   :class:`baseparams.errors.KinematicsError` saying where, never numpy's LinAlgError.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,7 +78,8 @@ class DPResult:
     lifted_columns: list = field(default_factory=list)   # the columns that carry them most
 
 
-def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> DPResult:
+def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
+               columns: Sequence[str] | None = None) -> DPResult:
     """Gautier's method on a float64 observation matrix ``W`` (rows x parameters).
 
     ``rank``: force the rank (to study what DP gives at a rank known from elsewhere);
@@ -166,7 +168,7 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
                     clear, err, cond22, warnings, lifted, lifted_columns)
 
 
-def _lifted_by_scaling(W, s, vt, s_col, r_tol) -> int:
+def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.ndarray, r_tol: int) -> int:
     """How many of the trailing singular directions counted in the scaled W are below the
     unscaled tolerance in the parameters' own units (see the module doc)."""
     rows, n = W.shape
@@ -189,7 +191,7 @@ def _lifted_by_scaling(W, s, vt, s_col, r_tol) -> int:
     return lifted
 
 
-def _check_finite(W: np.ndarray, columns) -> None:
+def _check_finite(W: np.ndarray, columns: Sequence[str] | None) -> None:
     """Refuse a W with NaN or infinite entries, naming the columns (parameters) and rows hit."""
     finite = np.isfinite(W)
     if finite.all():
@@ -212,7 +214,7 @@ def _column_norms(W: np.ndarray) -> np.ndarray:
         return largest * np.linalg.norm(W / safe, axis=0)
 
 
-def _singular_values_and_vt(Ws: np.ndarray):
+def _singular_values_and_vt(Ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Singular values and the full n x n V^T; economy SVD when W is tall (see the module doc)."""
     rows, n = Ws.shape
     try:

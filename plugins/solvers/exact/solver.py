@@ -23,7 +23,7 @@ PER_BODY_BYTES = 32         # (measured: pendulum ~100 B, 6-body chain ~250 B an
 SECONDS_PER_STATE = 7e-5    # x bodies^2 (measured: pendulum 0.07 ms, 6-body chain 2.8 ms a state)
 
 
-def exact_cost(mechanism, states: int) -> tuple[float, float]:
+def exact_cost(mechanism: Mechanism, states: int) -> tuple[float, float]:
     """(bytes, seconds) that W over the rationals at ``states`` states should take: printed
     up front, and the bytes checked against BASEPARAMS_MAX_MEMORY before any is spent."""
     f = max(1, len(mechanism.independent or mechanism.coordinates))
@@ -39,13 +39,13 @@ class ExactSolver:
     description = ("exact rational arithmetic (fmpq) at random rational states: exact rank and "
                    "beta by rref; open chains with rational geometry only")
     capabilities = Capabilities(needs_rational_geometry=True, certifies=True, exact_coefficients=True)
-    options = (
+    options: tuple[SolverOption, ...] = (
         SolverOption("samples", int, None, "random rational states of the first batch (default: "
                      "enough for 1.5 rows per parameter)", minimum=1, maximum=MAX_SAMPLES),
         SolverOption("seed", int, SEED, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
     )
 
-    def applicable(self, mechanism):
+    def applicable(self, mechanism: Mechanism) -> str | None:
         """An open chain whose kinematics stays rational at rational states: refused for a
         closed loop (algebraic dependent coordinates) or irrational geometry, found by
         evaluating one random state."""

@@ -30,6 +30,7 @@ import random
 import weakref
 from dataclasses import dataclass, field
 from collections.abc import Sequence
+from typing import Any
 from fractions import Fraction
 
 import mpmath
@@ -64,7 +65,7 @@ class BodyMotion:
     generators: list = field(default_factory=list)
 
     @property
-    def motion(self):
+    def motion(self) -> str:
         if self.omega_rank == 0:
             return "translation" if not self.rest_points else "at rest"
         if self.omega_rank == 1:
@@ -74,12 +75,12 @@ class BodyMotion:
         return "general"
 
     @property
-    def missing(self):
+    def missing(self) -> int:
         return self.null_dimension - len(self.generators)
 
 
 # ----- random states ---------------------------------------------------------------------
-def random_states(mechanism, count=12, digits=30, seed=1):
+def random_states(mechanism: Mechanism, count: int = 12, digits: int = 30, seed: int = 1) -> tuple[list, Arb]:
     """``count`` random states (Arb samples) on the constraint manifold.
 
     Positions: the default trajectory's positions at random times (so closed loops close
@@ -105,15 +106,15 @@ def random_states(mechanism, count=12, digits=30, seed=1):
         zs = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
     zds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
     zdds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
-    guesses = [None] * count
+    guesses: list[Any] = [None] * count
     if mechanism.loops:
         fl = Evaluator(mechanism, Float64())
         zarr = [np.array([float(zs[k][j]) for k in range(count)]) for j in range(f)]
         q = fl.assemble(zarr, where="random states: ")
         guesses = [[Fraction(float(np.atleast_1d(v)[k])) for v in q] for k in range(count)]
     backend = Arb(digits)
-    states = RationalStates(*(tuple(map(tuple, v)) for v in (zs, zds, zdds)),
-                            start=tuple(guesses) if mechanism.loops else None, name="random state")
+    z, zd, zdd = (tuple(map(tuple, v)) for v in (zs, zds, zdds))
+    states: Any = RationalStates(z, zd, zdd, start=tuple(guesses) if mechanism.loops else None, name="random state")
     return evaluate_states(mechanism, backend, states, certify=False), backend
 
 
@@ -133,7 +134,7 @@ class Rows(list):
 
     _exact = None
 
-    def exact(self):
+    def exact(self) -> fmpq_mat:
         if self._exact is None:
             self._exact = exact_matrix(self)
         return self._exact
@@ -159,20 +160,20 @@ def _normalized_rows(rows: Sequence[Sequence[mpmath.mpf]], dps: int) -> Rows:
     return out
 
 
-def null_basis(rows, ncols, tol=NULL_TOL):
+def null_basis(rows: Sequence[Sequence[mpmath.mpf]], ncols: int, tol: mpmath.mpf = NULL_TOL) -> list[list[mpmath.mpf]]:
     """Orthonormal basis (list of vectors) of the numeric null space of ``rows``."""
     if not rows:
         return [[mpmath.mpf(int(i == j)) for i in range(ncols)] for j in range(ncols)]
     a = mpmath.matrix(rows)
     if a.rows < ncols:
-        a = mpmath.matrix(rows + [[0] * ncols] * (ncols - a.rows))
+        a = mpmath.matrix(list(rows) + [[0] * ncols] * (ncols - a.rows))
     _, s, v = mpmath.svd_r(a)
     top = max(abs(x) for x in s) or 1
     return [[v[k, i] for i in range(ncols)] for k in range(ncols)
             if k >= len(s) or abs(s[k]) <= tol * top]
 
 
-def residual(rows, n):
+def residual(rows: Sequence[Sequence[mpmath.mpf]], n: Sequence[mpmath.mpf]) -> mpmath.mpf:
     """max |row . n| / |n| over ``rows`` (each scaled to unit max-norm): how far n is from null.
     The dot products are exact (rationals, in C), then rounded once to working precision."""
     norm = mpmath.sqrt(sum(x * x for x in n))
@@ -184,7 +185,7 @@ def residual(rows, n):
     return mpmath.mpf(int(top.p)) / int(top.q) / norm
 
 
-def independent(vectors):
+def independent(vectors: Sequence[Sequence[Any]]) -> list[int]:
     """Indices of the vectors independent of the earlier ones, in order (greedy
     Gram-Schmidt on unit vectors, so the tolerance is relative: a candidate is dependent
     when less than ``INDEPENDENCE_TOL`` of it is left). Float64 is enough: the vectors
@@ -212,10 +213,10 @@ def to_number(expr: object, subs: dict, dps: int) -> mpmath.mpf:
     return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), dps + 5))
 
 
-_CANDIDATES = weakref.WeakKeyDictionary()      # mechanism -> {label: (points, dirs)}
+_CANDIDATES: weakref.WeakKeyDictionary[Mechanism, dict[int, tuple[tuple, tuple]]] = weakref.WeakKeyDictionary()
 
 
-def body_candidates(mechanism, label):
+def body_candidates(mechanism: Mechanism, label: int) -> tuple[tuple, tuple]:
     """Exact candidate points and unit directions of a body (body axes), as tuples: computed
     once per mechanism and body (the body conditions and every sampled transfer across the
     body's joints ask for them; a Mechanism is immutable)."""
@@ -226,7 +227,7 @@ def body_candidates(mechanism, label):
     return known[label]
 
 
-def _body_candidates(mechanism, label):
+def _body_candidates(mechanism: Mechanism, label: int) -> tuple[list, list]:
     """Exact candidate points and unit directions of a body (body axes).
 
     Points: the origin and the body's joint points. Directions: the body axes, its joint
@@ -253,7 +254,7 @@ def _body_candidates(mechanism, label):
     return points, dirs
 
 
-def same_rotation(mechanism, label: int) -> list:
+def same_rotation(mechanism: Mechanism, label: int) -> list:
     """[(body, M)]: the bodies that always turn with ``label`` (through joints whose motions
     are all translations), with M the exact rotation from that body's axes to ``label``'s
     (``label`` itself first, M = 1). Ground is left out: its directions are not the body's."""
@@ -290,7 +291,9 @@ def dedupe(items: list, subs: dict, dps: int, directions: bool = False) -> list:
     decided at that precision (1e-20); a float64 copy of the keys only
     spares that comparison for the pairs it shows far apart (by more than 1e-8, a thousand
     million times float64's error), so the decisions are the working-precision ones."""
-    out, seen, seen_float = [], [], []
+    out: list[tuple[str, Any, list[mpmath.mpf]]] = []
+    seen: list[list[mpmath.mpf]] = []
+    seen_float: list[np.ndarray] = []
     tiny = mpmath.mpf(10) ** -20
     for name, vec in items:
         num = [to_number(c, subs, dps) for c in vec]
@@ -326,10 +329,10 @@ def dedupe(items: list, subs: dict, dps: int, directions: bool = False) -> list:
     return out
 
 
-def _quadrupole_family(span, span_num):
+def _quadrupole_family(span: Sequence[Sequence[Any]], span_num: Sequence[Sequence[mpmath.mpf]]) -> list[tuple[list, int]]:
     """Exact symmetric tensors Q (six entries) with s_a^T Q s_b = 0 for a basis s of the span,
     and for each the entry it is designated to eliminate (a free variable)."""
-    def coeffs(a, b):
+    def coeffs(a: Sequence[Any], b: Sequence[Any]) -> list[Any]:
         row = []
         for i, j in TENSOR_INDEX:
             row.append(a[i] * b[i] if i == j else a[i] * b[j] + a[j] * b[i])
@@ -372,7 +375,7 @@ def lagrangian_rows(mechanism: Mechanism, labels: list[int], forms: list, dps: i
     """Rows whose common null space holds the parameter directions of ``labels`` without
     effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized (the
     forms' ``dps`` digits)."""
-    cols = []
+    cols: list[int] = []
     for label in labels:
         i = mechanism.body_labels.index(label)
         cols.extend(range(10 * i, 10 * i + 10))
@@ -395,13 +398,13 @@ def analyse_body(mechanism: Mechanism, label: int, forms: list, dps: int) -> Bod
     omega_rank = numerical_rank(omega_rows.exact(), NULL_TOL) if omega_rows else 0
 
     subs = mechanism.geometry_subs
-    points, dirs = body_candidates(mechanism, label)
-    points = dedupe(points, subs, dps)
-    dirs = dedupe(dirs, subs, dps, directions=True)
+    point_candidates, direction_candidates = body_candidates(mechanism, label)
+    points = dedupe(list(point_candidates), subs, dps)
+    dirs = dedupe(list(direction_candidates), subs, dps, directions=True)
     motion = BodyMotion(label, omega_rank, null_dim)
     names = body_parameter_names(label)
 
-    def norm(v):
+    def norm(v: Sequence[mpmath.mpf]) -> list[mpmath.mpf]:
         n = mpmath.sqrt(sum(x * x for x in v))
         return [x / n for x in v]
 

@@ -18,6 +18,9 @@ most are far from null, and only those whose residual is below ``PREFILTER`` (1e
 the tolerance, far beyond any rounding) are built exactly in sympy and tested as before.
 """
 
+from collections.abc import Callable
+from typing import Any
+
 import mpmath
 
 from baseparams.plugins.solvers.symbolic.body_conditions import (NULL_TOL, body_candidates, dedupe, lagrangian_rows,
@@ -49,7 +52,7 @@ def sampled_joint_transfers(mechanism: Mechanism, joint: Joint, forms: list, kno
         # each try: its exact vector's maker, and the same in working-precision numbers on
         # the numeric frames (rotation rows, point): most tries are far from null (residual
         # >= 1e3 NULL_TOL, beyond any rounding) and need no exact vector at all
-        tries = []
+        tries: list[tuple[str, Any, Callable[..., Any], Callable[..., Any]]] = []
         if "monopole" not in known:
             tries.append(("monopole", None, lambda fr: monopole_params(map_point(fr, zero)),
                           lambda fr: monopole_params(fr[1])))
@@ -66,7 +69,7 @@ def sampled_joint_transfers(mechanism: Mechanism, joint: Joint, forms: list, kno
             num = [v * sign for body, sign in ((joint.parent, 1), (joint.child, -1)) for v in make_num(numeric[body])]
             if residual(rows, num) >= PREFILTER:
                 continue
-            vector = {}
+            vector: dict[str, Any] = {}
             for body, sign in ((joint.parent, 1), (joint.child, -1)):
                 for name, v in as_vector(body, make(frames[body]), sign).items():
                     vector[name] = vector.get(name, 0) + v

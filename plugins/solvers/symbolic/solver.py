@@ -19,7 +19,7 @@ class SymbolicSolver:
                    "symbols, rank checked on W in ball arithmetic")
     capabilities = Capabilities(closed_loops=True, certifies=True, exact_coefficients=True,
                                 symbolic_coefficients=True, derivation=True)
-    options = (
+    options: tuple[SolverOption, ...] = (
         SolverOption("keep", tuple, (), "parameters never to eliminate (names; text: comma or "
                      "space separated)", item=str),
         SolverOption("eliminate_first", tuple, (), "parameters to eliminate whenever a transfer "
@@ -33,7 +33,7 @@ class SymbolicSolver:
                      maximum=MAX_SEED),
     )
 
-    def applicable(self, mechanism):
+    def applicable(self, mechanism: Mechanism) -> str | None:
         """Any mechanism without couplings between joint coordinates: a joint type without
         transfer rules makes the rank an upper bound, which the result says. A coupled joint
         moves with its leader, so the per-joint transfer rules (which assume every joint

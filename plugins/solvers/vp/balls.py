@@ -9,16 +9,19 @@ Every function that computes in ball arithmetic enters its own precision (python
 """
 
 import math
+from collections.abc import Sequence
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 from flint import acb_mat, arb, arb_mat, ctx
 
-from baseparams.numeric.certify import (FLOAT_BITS, SPECTRUM_IN_ARB_UP_TO, block, frobenius_upper, log10,
-                                        scaled_entries, solve_block, unscaled)
+from baseparams.numeric.certify import (FLOAT_BITS, SPECTRUM_IN_ARB_UP_TO, BallAnalysis, block, frobenius_upper,
+                                        log10, scaled_entries, solve_block, unscaled)
 
 
-def block_beta(Wr, digits, kept, rows, exponents):
+def block_beta(Wr: arb_mat, digits: int, kept: Sequence[int], rows: Sequence[int],
+               exponents: Sequence[int]) -> arb_mat:
     """beta (unscaled, ``arb_mat``) from the square block of the rows ``rows`` of ``Wr``:
     ``Ws_RK beta_s = Ws_RE`` solved in ball arithmetic at ``digits``, columns scaled by
     ``2^exponents`` as in the analysis that chose K and R. For W of rank r = |K| this
@@ -31,12 +34,12 @@ def block_beta(Wr, digits, kept, rows, exponents):
         found = solve_block(scaled, n, list(rows), list(kept), eliminated) if kept else None
         if kept and found is None:
             raise ValueError(f"the square block of W is not proven nonsingular at {digits} digits")
-        beta_s = found[0] if kept else arb_mat(0, len(eliminated))
+        beta_s = found[0] if found is not None else arb_mat(0, len(eliminated))
         return unscaled(beta_s, kept, eliminated, exponents)
 
 
 
-def excitation_check(Wc, a):
+def excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
     """An independent batch of rows ``Wc`` (W at other states) against the analysis ``a``
     of W: ``(bound, proven_nonzero, ridge_decades)``.
 
@@ -56,7 +59,7 @@ def excitation_check(Wc, a):
         return _excitation_check(Wc, a)
 
 
-def _excitation_check(Wc, a):
+def _excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
     if not a.eliminated:
         return arb(0), 0, math.inf
     m, n = Wc.nrows(), Wc.ncols()
@@ -64,6 +67,7 @@ def _excitation_check(Wc, a):
     We = block(scaled, n, range(m), a.eliminated)
     if a.kept:
         Wk = block(scaled, n, range(m), a.kept)
+        assert a.refined is not None            # every analysis with kept columns has its B
         bound = frobenius_upper(We - Wk * a.refined)
         E = We - Wk * a.beta_s
     else:
@@ -79,7 +83,7 @@ def _excitation_check(Wc, a):
     return bound, nonzero, decades
 
 
-def tail_singular_values(W, a):
+def tail_singular_values(W: arb_mat, a: BallAnalysis) -> list[str]:
     """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
     largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
     singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
@@ -88,19 +92,21 @@ def tail_singular_values(W, a):
         return _tail_singular_values(W, a)
 
 
-def _tail_singular_values(W, a):
+def _tail_singular_values(W: arb_mat, a: BallAnalysis) -> list[str]:
     if not a.eliminated:
         return []
     source, E = a._residual if a._residual is not None else (None, None)
-    if source is not W:
+    if source is not W or E is None:
+        assert a.refined is not None or not a.kept
         m, n = W.nrows(), W.ncols()
         scaled = scaled_entries(W.entries(), n, a.exponents)
         We = block(scaled, n, range(m), a.eliminated)
-        E = (We - block(scaled, n, range(m), a.kept) * a.refined).mid() if a.kept else We.mid()
+        E = (We - block(scaled, n, range(m), a.kept) * a.refined).mid() if a.refined is not None and a.kept \
+            else We.mid()
     rows, cols = E.nrows(), E.ncols()
     values = E.entries()
     live = [j for j in range(cols) if any(values[i * cols + j] != 0 for i in range(rows))]
-    out = []
+    out: list[Any] = []
     if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
         picked = [values[i * cols + j] for i in range(rows) for j in live]
         a64 = np.array([float(x) for x in picked]).reshape(rows, len(live))
@@ -111,9 +117,9 @@ def _tail_singular_values(W, a):
             exponent = int(math.floor(log10(biggest) / math.log10(2)))
             scale = arb(2) ** (-exponent)
             a64 = np.array([float(x * scale) for x in picked]).reshape(rows, len(live))
-        out = np.linalg.svd(a64, compute_uv=False)
+        sv = np.linalg.svd(a64, compute_uv=False)
         two = arb(2) ** exponent
-        out = [arb(float(v)) * two for v in out] + [arb(0)] * (len(live) - len(out))
+        out = [arb(float(v)) * two for v in sv] + [arb(0)] * (len(live) - len(sv))
     elif live:
         Ml = block(values, cols, range(rows), live)
         M = Ml.transpose() * Ml
@@ -125,7 +131,7 @@ def _tail_singular_values(W, a):
 
 
 # ----- digits, agreement, rationals ------------------------------------------------
-def radius_digits(x):
+def radius_digits(x: arb) -> float:
     """Significant decimal digits a ball proves about its midpoint (inf when exact, 0 when
     it contains zero)."""
     if x.rad() == 0:
@@ -135,7 +141,7 @@ def radius_digits(x):
     return max(0, math.floor(log10(x.mid()) - log10(arb(x.rad()))))
 
 
-def agreement_digits(a, b):
+def agreement_digits(a: arb, b: arb) -> float:
     """Leading decimal digits on which two balls' midpoints agree (relative to ``b``). The
     difference of the exact midpoints is rounded once, at FLOAT_BITS: enough for an integer."""
     da, db = a.mid(), b.mid()
@@ -150,7 +156,7 @@ def agreement_digits(a, b):
 
 
 
-def recover_rational(x, digits):
+def recover_rational(x: arb, digits: int) -> Fraction | None:
     """The simplest rational agreeing with ``digits`` significant digits of a ball's
     midpoint (continued fractions, ``Fraction.limit_denominator``), or None.
 
@@ -168,7 +174,7 @@ def recover_rational(x, digits):
     return None
 
 
-def contains_rational(x, q):
+def contains_rational(x: arb, q: Fraction | int) -> bool:
     """Does the ball ``x`` contain the rational ``q``? Decided exactly, from the ball's
     exact (binary) midpoint and radius: no precision, no rounding of ``q``."""
     if not x.is_finite():
@@ -177,8 +183,8 @@ def contains_rational(x, q):
     return abs(q - _dyadic(x.mid())) <= _dyadic(x.rad())
 
 
-def _dyadic(x):
+def _dyadic(x: arb) -> Fraction:
     """An exact arb (a binary floating-point number) as a Fraction."""
     man, exp = x.man_exp()
-    man, exp = int(man), int(exp)
-    return Fraction(man * 2 ** exp) if exp >= 0 else Fraction(man, 2 ** -exp)
+    mantissa, exponent = int(man), int(exp)
+    return Fraction(mantissa * 2 ** exponent) if exponent >= 0 else Fraction(mantissa, 2 ** -exponent)
