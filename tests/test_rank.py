@@ -12,6 +12,7 @@ from flint import fmpq_mat
 
 from baseparams.numeric import rank
 from baseparams.numeric.rank import numerical_rank
+from baseparams.plugins.solvers.symbolic.body_conditions import NULL_TOL, Rows
 
 
 def _with_singular_values(rows, cols, singular, seed, dps=60):
@@ -86,3 +87,33 @@ def test_singular_values_are_counted_as_given():
     assert numerical_rank(singular_values=[], tol=tol) == 0
     with pytest.raises(ValueError):
         numerical_rank([[1]], 1e-3, singular_values=[1.0])
+
+
+# ----- the symbolic solver's use: its sampled rows as they are, at NULL_TOL ---------------
+@pytest.mark.parametrize("singular,expected", [
+    ([1, 0.5, 0.1], 3),
+    ([1, 1e-3, 1e-8, 1e-12], 4),                       # 1e-12 > 1e-14: counted
+    ([1, 1e-2] + [mpmath.mpf(10) ** -24] * 3, 2),      # 1e-24: noise
+    ([1] * 10, 10),
+    ([], 0),
+])
+def test_the_exact_pivot_count_is_the_svd_count(singular, expected):
+    """The symbolic solver's rank (the one numerical rank, on the rows as they are): its
+    exact-rational step decides alone, and agrees with mpmath's SVD."""
+    tol = NULL_TOL
+    with mpmath.workdps(28):
+        rows = Rows(_with_singular_values(23, 10, singular, seed=len(singular), dps=60))
+        assert _svd_count(rows, tol, dps=28) == expected
+        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) == expected
+        assert rank.numerical_rank(rows.exact(), tol) == expected
+
+
+def test_the_pivot_count_declines_near_the_threshold_and_the_precise_count_decides():
+    tol = NULL_TOL
+    with mpmath.workdps(28):
+        rows = Rows(_with_singular_values(23, 10, [1, 0.3, mpmath.mpf(10) ** -14 * 1.5], seed=5))     # near the tolerance
+        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) is None
+        assert rank.numerical_rank(rows.exact(), tol) == _svd_count(rows, tol, dps=28) == 3
+        rows = Rows(_with_singular_values(23, 10, [1, 0.3, mpmath.mpf(10) ** -14 / 1.5], seed=5))
+        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) is None
+        assert rank.numerical_rank(rows.exact(), tol) == _svd_count(rows, tol, dps=28) == 2

@@ -7,8 +7,8 @@
   (sympy's field, balls at every state and the shared ball analysis, mpmath's SVD, every
   try built exactly), except where the certificate's balls were computed (states, rows)
   and the residual they give.
-- Pieces, each against an independent computation: the rank's exact pivot count against mpmath's SVD on
-  matrices of known rank; columns_independent against dependent columns (it must refuse)
+- Pieces, each against an independent computation (the rank's exact pivot count against
+  mpmath's SVD: tests/test_rank.py); columns_independent against dependent columns (it must refuse)
   and against the shared analysis; residual against mpmath's dot products; dedupe against
   the pairwise working-precision comparison it abbreviates; to_fmpq exactly.
 """
@@ -101,54 +101,6 @@ def test_the_reference_field_is_sympys_and_the_fast_one_rational():
 
 
 # ----- pieces ------------------------------------------------------------------------------
-def _low_rank(rows, cols, singular, seed):
-    """rows x cols with the given singular values (the rest exactly 0 before rounding)."""
-    rng = random.Random(seed)
-    with mpmath.workdps(60):
-        u, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(rows)] for _ in range(rows)]))
-        v, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(cols)] for _ in range(cols)]))
-        s = mpmath.zeros(rows, cols)
-        for k, x in enumerate(singular):
-            s[k, k] = x
-        a = u * s * v.T
-    return body_conditions.Rows([[+a[i, j] for j in range(cols)] for i in range(rows)])
-
-
-def _svd_count(rows, tol):
-    """The reference: mpmath's SVD at the rows' working precision."""
-    s = [abs(x) for x in mpmath.svd_r(mpmath.matrix(rows), compute_uv=False)]
-    return sum(1 for x in s if x > tol * max(s)) if s and max(s) > 0 else 0
-
-
-@pytest.mark.parametrize("singular,expected", [
-    ([1, 0.5, 0.1], 3),
-    ([1, 1e-3, 1e-8, 1e-12], 4),                       # 1e-12 > 1e-14: counted
-    ([1, 1e-2] + [mpmath.mpf(10) ** -24] * 3, 2),      # 1e-24: noise
-    ([1] * 10, 10),
-    ([], 0),
-])
-def test_the_exact_pivot_count_is_the_svd_count(singular, expected):
-    """The symbolic solver's rank (the one numerical rank, on the rows as they are): its
-    exact-rational step decides alone, and agrees with mpmath's SVD."""
-    tol = body_conditions.NULL_TOL
-    with mpmath.workdps(28):
-        rows = _low_rank(23, 10, singular, seed=len(singular))
-        assert _svd_count(rows, tol) == expected
-        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) == expected
-        assert rank.numerical_rank(rows.exact(), tol) == expected
-
-
-def test_the_pivot_count_declines_near_the_threshold_and_the_precise_count_decides():
-    tol = body_conditions.NULL_TOL
-    with mpmath.workdps(28):
-        rows = _low_rank(23, 10, [1, 0.3, mpmath.mpf(10) ** -14 * 1.5], seed=5)     # near the tolerance
-        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) is None
-        assert rank.numerical_rank(rows.exact(), tol) == _svd_count(rows, tol) == 3
-        rows = _low_rank(23, 10, [1, 0.3, mpmath.mpf(10) ** -14 / 1.5], seed=5)
-        assert rank._pivot_count(rows.exact(), rank._fraction(tol)) is None
-        assert rank.numerical_rank(rows.exact(), tol) == _svd_count(rows, tol) == 2
-
-
 def test_residual_is_the_dot_products_rounded_once():
     rng = random.Random(3)
     with mpmath.workdps(28):

@@ -27,7 +27,7 @@ from baseparams import registry
 from baseparams.errors import BaseparamsError
 from baseparams.solvers.protocol import (Capabilities, Solver, check_options, describe_solver,
                                          options_from_text, require_applicable)
-from baseparams.solvers.run import run_solver, solver_options
+from baseparams.solvers.run import find_solver, run_solver, solver_options
 
 
 class UserError(click.ClickException):
@@ -316,19 +316,10 @@ def plugins(fmt):
 
 # ----- solve --------------------------------------------------------------------
 def get_solver(name):
-    """A registered solver by name; a UserError listing the registered ones otherwise, or
-    naming the distribution whose solver does not implement the Solver protocol."""
-    solvers = registry.solvers()
-    if name not in solvers:
-        raise UserError(f"unknown solver {name!r}; registered solvers: {', '.join(solvers) or '(none)'} "
-                        f"(see `baseparams plugins`)")
-    reg = solvers[name]
-    if not isinstance(reg.item, Solver):
-        missing = [m for m in ("name", "description", "capabilities", "options", "applicable", "solve")
-                   if not hasattr(reg.item, m)]
-        raise UserError(f"solver {name!r} (distribution {reg.distribution}) does not implement the "
-                        f"solver protocol (baseparams.solvers.protocol.Solver): missing {', '.join(missing)}")
-    return reg.item
+    """A registered solver by name (:func:`baseparams.solvers.run.find_solver`): an error
+    listing the registered ones otherwise, or naming the distribution whose solver does not
+    implement the Solver protocol (exit code 2)."""
+    return find_solver(name)
 
 
 def _progress(message):
