@@ -37,9 +37,9 @@ def test_import_baseparams_loads_no_plugin():
 
 
 def test_built_in_solvers_live_under_plugins_solvers_and_keep_the_protocol():
-    for name, reg in registry.solvers().items():
-        if reg.distribution != "baseparams":
-            continue
+    built_in = {name: reg for name, reg in registry.solvers().items() if reg.distribution == "baseparams"}
+    assert built_in, "no built-in solver registered: the loop below would check nothing"
+    for name, reg in built_in.items():
         solver = reg.item
         assert isinstance(solver, Solver), name
         # plugins/solvers/ is installed as baseparams.plugins.solvers (editable or not)
