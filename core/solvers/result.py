@@ -258,12 +258,13 @@ def parse_coefficient(text: object, geometry: Mapping[str, str] | None = None) -
 
 
 def format_number(value: Fraction | mpmath.mpf | float, max_digits: int = 8) -> str:
-    """Short decimal for text tables."""
-    if isinstance(value, Fraction):
-        if value.denominator == 1:
-            return str(value.numerator)
-        value = mpmath.mpf(value.numerator) / value.denominator
-    return mpmath.nstr(mpmath.mpf(value), max_digits)
+    """Short decimal for text tables (at its own precision: mpmath's global one is not read)."""
+    if isinstance(value, Fraction) and value.denominator == 1:
+        return str(value.numerator)
+    with mpmath.workdps(max(15, max_digits + 5)):
+        if isinstance(value, Fraction):
+            value = mpmath.mpf(value.numerator) / value.denominator
+        return mpmath.nstr(mpmath.mpf(value), max_digits)
 
 
 def format_expression(expression: Mapping[str, object], max_digits: int = 8) -> str:
