@@ -15,6 +15,7 @@ from baseparams.cli.commands import main
 from baseparams.errors import InputError
 from baseparams.io.loader import resolve
 from baseparams.solvers.protocol import SolverOption, check_options, options_from_text
+from baseparams.solvers.run import run_solver
 
 SOLVERS = ("dp", "vp", "exact", "symbolic")
 
@@ -98,10 +99,11 @@ def test_every_number_option_declares_a_range(name):
 
 
 @pytest.mark.parametrize("name", SOLVERS)
-def test_the_solver_itself_refuses_out_of_range_values(name):
-    """A library caller that skips the CLI gets the same InputError from solve()."""
+def test_run_solver_refuses_out_of_range_values(name):
+    """A library caller that skips the CLI gets the same InputError from run_solver (the
+    one sequence: options checked, applicability, then solve)."""
     with pytest.raises(InputError, match="option 'seed' must be at least 0"):
-        solver(name).solve(resolve("pendulum"), seed=-1)
+        run_solver(name, resolve("pendulum"), {"seed": -1})
 
 
 def test_a_bound_that_depends_on_the_mechanism_needs_the_mechanism():

@@ -14,7 +14,7 @@ from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
 
 from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator, Sample
-from baseparams.dynamics.exact_states import exact_observation_matrix, random_rational_states
+from baseparams.plugins.solvers.exact.states import exact_observation_matrix, random_rational_states
 from baseparams.dynamics.excitation import RandomBatch, random_batch
 from baseparams.dynamics.observation import RationalStates, evaluate_states, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
@@ -22,7 +22,8 @@ from baseparams.dynamics.trajectory import observation_matrix as trajectory_matr
 from baseparams.errors import KinematicsError
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.numeric import certify
-from baseparams.numeric.backends import Arb, Exact, Float64, TanHalf, precision
+from baseparams.plugins.solvers.vp import balls
+from baseparams.numeric.backends import Arb, Exact, Float64, TanHalf
 
 DIGITS = 40
 ODD_PRECISION = 77          # bits: what a careless caller might have left set
@@ -59,7 +60,7 @@ def test_open_chain_same_states_same_W_in_float64_arb_and_exact(name):
     for i in range(w_exact.nrows()):
         for j in range(w_exact.ncols()):
             q = w_exact[i, j]
-            assert certify.contains_rational(w_arb[i, j], Fraction(int(q.p), int(q.q))), (i, j)
+            assert balls.contains_rational(w_arb[i, j], Fraction(int(q.p), int(q.q))), (i, j)
     # the exact solver's own W is the builder's at its random states
     assert exact_observation_matrix(mech, 3, seed=11) == w_exact
 
@@ -68,7 +69,7 @@ def test_tan_half_angles_are_the_same_angle_in_every_backend():
     angle = TanHalf(Fraction(-3, 7))
     c, s = angle.cos_sin()
     assert np.isclose(np.cos(Float64().number(angle)), float(Fraction(int(c.p), int(c.q))), rtol=1e-15)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         x = Arb(DIGITS).number(angle)
         assert x.cos().contains(arb(c)) and x.sin().contains(arb(s))
     assert Exact().number(angle) is angle
@@ -148,7 +149,7 @@ def test_evaluate_states_gives_the_samples_of_W():
     samples = evaluate_states(mech, Arb(DIGITS), batch)
     W, _ = observation_matrix(mech, Arb(DIGITS), batch)
     rows = [row for s in samples for row in s.regressor()]
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         for i, row in enumerate(rows):
             for j, v in enumerate(row):
                 assert W[i, j].overlaps(arb(v))
@@ -160,7 +161,7 @@ def test_matrices_and_stacking_per_backend():
     assert Exact().stack(E, E).nrows() == 4 and Exact().stack(E, E)[3, 0] == fmpq(-5, 7)
     assert Exact().matrix([], 3).ncols() == 3 and Arb(20).matrix([], 3).nrows() == 0
     assert Float64().matrix([], 3).shape == (0, 3)
-    with precision(30):
+    with ctx.workdps(30):
         A = Arb(30).matrix([[arb(1) / 3, arb(2)]])
     assert Arb(30).stack(A, A).nrows() == 2 and Arb(30).stack(A, A)[1, 0].rad() == A[0, 0].rad()
 
@@ -201,14 +202,14 @@ def _public_arb_calls():
                                      Arb(DIGITS).number(TanHalf(Fraction(2, 9)))]),
         ("analyse", lambda: certify.analyse(W, DIGITS)),
         ("analyse imposed", lambda: certify.analyse(W, DIGITS, kept=a.kept)),
-        ("excitation_check", lambda: certify.excitation_check(Wc, a)),
-        ("tail_singular_values", lambda: certify.tail_singular_values(W, a)),
+        ("excitation_check", lambda: balls.excitation_check(Wc, a)),
+        ("tail_singular_values", lambda: balls.tail_singular_values(W, a)),
         ("log10", lambda: certify.log10(x)),
-        ("radius_digits", lambda: certify.radius_digits(x)),
-        ("agreement_digits", lambda: certify.agreement_digits(x, y)),
+        ("radius_digits", lambda: balls.radius_digits(x)),
+        ("agreement_digits", lambda: balls.agreement_digits(x, y)),
         ("decimal_string", lambda: certify.decimal_string(x, 20)),
-        ("recover_rational", lambda: certify.recover_rational(x, 20)),
-        ("contains_rational", lambda: certify.contains_rational(x, Fraction(1, 3))),
+        ("recover_rational", lambda: balls.recover_rational(x, 20)),
+        ("contains_rational", lambda: balls.contains_rational(x, Fraction(1, 3))),
         ("ridge_log10", lambda: a.ridge_log10),
     ]
 
@@ -278,7 +279,7 @@ def test_precision_is_restored_after_an_error():
             observation_matrix(mech, Arb(DIGITS), Trajectory.default(mech, samples=5))
         assert ctx.prec == ODD_PRECISION
         with pytest.raises(RuntimeError):
-            with precision(DIGITS):
+            with ctx.workdps(DIGITS):
                 raise RuntimeError
         assert ctx.prec == ODD_PRECISION
     finally:
@@ -287,9 +288,9 @@ def test_precision_is_restored_after_an_error():
 
 def test_precision_context_nests_and_takes_bits():
     saved = ctx.prec
-    with precision(50):
+    with ctx.workdps(50):
         outer = ctx.prec
-        with precision(bits=300):
+        with ctx.workprec(300):
             assert ctx.prec == 300
         assert ctx.prec == outer
     assert ctx.prec == saved

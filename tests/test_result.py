@@ -9,7 +9,8 @@ from fractions import Fraction
 import mpmath
 import pytest
 
-from baseparams.solvers.compare import numerical_rank, same_row_space
+from baseparams.numeric.rank import numerical_rank
+from baseparams.solvers.compare import same_row_space
 
 
 def exact(rows):
@@ -57,13 +58,13 @@ def test_numerical_rank_at_high_precision():
     """A direction 1e-30 long counts at tol 1e-40 (beyond float64) and not at 1e-20;
     an mpmath value keeps its 50 digits (1/3 rounded to 53 bits would count at 1e-40)."""
     rows = [[1, 0], [1, Fraction(1, 10 ** 30)]]
-    assert numerical_rank(rows, Fraction(1, 10 ** 40)) == 2
-    assert numerical_rank(rows, Fraction(1, 10 ** 20)) == 1
+    assert numerical_rank(rows, Fraction(1, 10 ** 40), unit_rows=True) == 2
+    assert numerical_rank(rows, Fraction(1, 10 ** 20), unit_rows=True) == 1
     with mpmath.workdps(50):
         third = mpmath.mpf(1) / 3
-    assert numerical_rank([[third, 1], [Fraction(1, 3), 1]], Fraction(1, 10 ** 40)) == 1
-    assert numerical_rank([[1 / 3, 1], [Fraction(1, 3), 1]], Fraction(1, 10 ** 40)) == 2
-    assert numerical_rank([[0, 0], [0, 0]], TOL) == 0
+    assert numerical_rank([[third, 1], [Fraction(1, 3), 1]], Fraction(1, 10 ** 40), unit_rows=True) == 1
+    assert numerical_rank([[1 / 3, 1], [Fraction(1, 3), 1]], Fraction(1, 10 ** 40), unit_rows=True) == 2
+    assert numerical_rank([[0, 0], [0, 0]], TOL, unit_rows=True) == 0
 
 
 def _known_rank(rank, rows, cols, seed):
@@ -86,8 +87,8 @@ def test_numerical_rank_is_the_svd_count_with_clustered_zeros(rank, rows, cols, 
                        / np.linalg.norm(np.array([[float(v) for v in row] for row in a]), axis=1)[:, None],
                        compute_uv=False)
     assert int(np.sum(sv > 1e-6 * sv[0])) == rank
-    assert numerical_rank(a, 1e-6) == rank               # float64 decides
-    assert numerical_rank(a, Fraction(1, 10 ** 20)) == rank      # beyond float64: mpmath's eigsy
+    assert numerical_rank(a, 1e-6, unit_rows=True) == rank               # float64 decides
+    assert numerical_rank(a, Fraction(1, 10 ** 20), unit_rows=True) == rank      # beyond float64: mpmath's eigsy
 
 
 def test_clustered_zero_eigenvalues_are_not_miscounted():
@@ -103,5 +104,5 @@ def test_clustered_zero_eigenvalues_are_not_miscounted():
                for name in ("dp", "exact")}
     a, b = results["dp"].coefficient_matrix(), results["exact"].coefficient_matrix()
     assert len(a) == len(b) == 35
-    assert numerical_rank(a + b, 1e-6) == 35
+    assert numerical_rank(a + b, 1e-6, unit_rows=True) == 35
     assert same_row_space(a, b, tol=1e-6)

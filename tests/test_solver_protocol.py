@@ -11,6 +11,7 @@
 - The JSON of every solver has every documented key (docs/cli.md lists them).
 """
 
+import inspect
 import json
 import math
 from fractions import Fraction
@@ -27,6 +28,7 @@ from baseparams.errors import InputError
 from baseparams.io.loader import resolve
 from baseparams.solvers.protocol import (Capabilities, NotApplicable, Solver, SolverOption,
                                          check_options, options_from_text, require_applicable)
+from baseparams.solvers.run import run_solver
 from baseparams.solvers.result import (JSON_KEYS, OPTIONAL_JSON_KEYS, BaseParameterResult,
                                        Coefficient, Diagnostics, significant_digits)
 
@@ -101,8 +103,21 @@ def test_unknown_option_is_an_input_error_naming_it(name):
     message = str(caught.value)
     assert repr(name) in message and "'colour'" in message
     assert all(o.name in message for o in s.options)       # the accepted ones
-    with pytest.raises(InputError, match="colour"):          # the solver itself refuses too
-        s.solve(resolve("pendulum"), colour="blue")
+    with pytest.raises(InputError, match="colour"):          # the front door's one sequence refuses too
+        run_solver(s, resolve("pendulum"), {"colour": "blue"})
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_solve_takes_exactly_the_declared_options_with_their_defaults(name):
+    """``solve``'s keyword parameters are the declared options (and progress), each with
+    its declared default: a direct call without options solves with the defaults, and an
+    option declared but not used (dp's and exact's former ``digits``) cannot hide."""
+    s = solver(name)
+    params = inspect.signature(s.solve).parameters
+    declared = {o.name: o.default for o in s.options}
+    keywords = {k: p.default for k, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    assert keywords.pop("progress") is None
+    assert keywords == declared
 
 
 @pytest.mark.parametrize("name, option, value, want", [
@@ -149,7 +164,9 @@ def test_exact_is_not_applicable_to_a_closed_loop():
     assert isinstance(caught.value, InputError)
     assert caught.value.file == four_bar.path and reason in caught.value.message
     with pytest.raises(NotApplicable, match="closed loop"):
-        exact.solve(four_bar)
+        run_solver(exact, four_bar)
+    with pytest.raises(NotApplicable, match="closed loop"):
+        run_solver("exact", four_bar)
     for name in ("dp", "vp", "symbolic"):
         assert solver(name).applicable(four_bar) is None
 
@@ -175,9 +192,11 @@ def test_cli_unknown_and_wrong_options_exit_2():
 
 
 def test_cli_digits_to_dp_is_a_warning():
-    """--digits means nothing to dp: kept as a warning (not an error), as before."""
+    """--digits means nothing to dp (it declares no digits option): a warning, not an
+    error, and dp is not passed it; -O digits=30, an option meant for dp itself, is an error."""
     result = run("solve", "pendulum", "--solver", "dp", "--digits", "30")
-    assert "warning: dp ignores --digits" in result.stderr
+    assert "warning: dp ignores digits: not one of its options" in result.stderr
+    assert "'digits'" in run("solve", "pendulum", "--solver", "dp", "-O", "digits=30", code=2).stderr
 
 
 def test_cli_passes_declared_options():
@@ -425,4 +444,18 @@ def test_the_documented_example_solver_works():
     assert r.rank == 10 and set(JSON_KEYS) <= set(r.to_json())
     assert r.to_json()["diagnostics"] == {"seed": 2, "summary": ["no reduction attempted"]}
     with pytest.raises(InputError, match="'seeds'"):
-        example.solve(resolve("pendulum"), seeds=2)
+        run_solver(example, resolve("pendulum"), {"seeds": 2})
+    assert run_solver(example, resolve("pendulum"), {"seed": 2}).to_json()["diagnostics"]["seed"] == 2
+
+
+def test_run_solver_finds_checks_and_refuses_in_one_sequence():
+    """run_solver: an unknown name lists the registered solvers; an option given both as
+    a common and as the solver's own is refused; a common option the solver declares is
+    passed (vp at 40 digits), and the checked defaults reach solve."""
+    with pytest.raises(InputError, match="unknown solver 'nope'; registered solvers: .*vp"):
+        run_solver("nope", resolve("pendulum"))
+    with pytest.raises(InputError, match="'seed' both given"):
+        run_solver("dp", resolve("pendulum"), {"seed": 3}, common={"seed": 4})
+    result = run_solver("vp", resolve("pendulum"), {"recover": False}, common={"digits": 40, "samples": None})
+    assert result.digits == 40 and not any("ignores" in w for w in result.warnings)
+    assert result.diagnostics["rational_recovery"] == {"attempted": False}

@@ -25,17 +25,19 @@ from click.testing import CliRunner
 from flint import arb, arb_mat, fmpq, fmpq_mat
 
 from baseparams.numeric import certify
+from baseparams.plugins.solvers.vp import balls
 from baseparams import registry
 from baseparams.numeric.backends import Arb, Float64
 from baseparams.cli.commands import main
 from baseparams.errors import InputError
 from baseparams.plugins.solvers.dp.gautier import dp_gautier
-from baseparams.dynamics.exact_states import rref_pivots as pivots_of
+from baseparams.plugins.solvers.exact.states import rref_pivots as pivots_of
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.plugins.solvers.exact import solver as exact_solver
 from baseparams.plugins.solvers.vp import solver as vp_solver
 from baseparams.plugins.solvers.vp.solver import compare_runs
 from baseparams.solvers.compare import same_row_space
+from baseparams.solvers.run import run_solver
 from baseparams.dynamics.trajectory import Trajectory, observation_matrix
 
 from seed_tables import symbolic_base_matrix
@@ -193,16 +195,22 @@ def test_certify_excitation_check_on_synthetic_rows():
     with Arb(30).activate():
         a = certify.analyse(_arb_matrix(W, 30), 30)
         assert a.rank == 2 and a.ridge_log10 > 10
-        _, nonzero, decades = certify.excitation_check(_arb_matrix(inside, 30), a)
+        _, nonzero, decades = balls.excitation_check(_arb_matrix(inside, 30), a)
         assert nonzero == 0 and decades > 10
-        _, nonzero, decades = certify.excitation_check(_arb_matrix(whole, 30), a)
+        _, nonzero, decades = balls.excitation_check(_arb_matrix(whole, 30), a)
         assert nonzero > 0 and decades < 3
 
 
-def test_exact_and_dp_warn_about_digits():
+def test_exact_and_dp_declare_no_digits_and_the_front_door_says_it_ignores_it():
+    """Solvers declare only the options they use: dp and exact work in double precision
+    and in rationals, so they declare no ``digits``; offered as a common option,
+    run_solver drops it and says so; given as their own option, it is refused."""
     for name in ("dp", "exact"):
-        res = solver(name).solve(resolve("pendulum"), digits=40)
-        assert any("ignores --digits" in w for w in res.warnings), name
+        assert "digits" not in {o.name for o in solver(name).options}, name
+        res = run_solver(name, resolve("pendulum"), common={"digits": 40})
+        assert any(w.startswith(f"{name} ignores digits") for w in res.warnings), name
+        with pytest.raises(InputError, match="has no option 'digits'"):
+            run_solver(name, resolve("pendulum"), {"digits": 40})
 
 
 def test_vp_untrusted_coefficients_are_listed_not_printed():
@@ -212,7 +220,7 @@ def test_vp_untrusted_coefficients_are_listed_not_printed():
         beta = arb_mat(1, 3, [arb("1.25", "0.5"), arb(1) / 3, arb("0", "1e-40")])
         analysis = SimpleNamespace(beta=beta, kept=[0], eliminated=[1, 2, 3])
         final = SimpleNamespace(analysis=analysis, digits=30,
-                                digits_of=[[certify.radius_digits(beta[0, j]) for j in range(3)]])
+                                digits_of=[[balls.radius_digits(beta[0, j]) for j in range(3)]])
         rows, printed, untrusted = vp_solver._vp_coefficients(final, None, ["a", "b", "c", "d"])
     assert rows == [{"name": "phi_b01", "expression": {"a": "1", "c": "0." + "3" * 30}}]
     assert printed == [30]
@@ -420,11 +428,11 @@ def test_certify_hidden_singular_value_needs_more_digits():
 def test_rational_recovery():
     with Arb(40).activate():
         x = arb(625) / 251
-        assert certify.recover_rational(x, 35) == Fraction(625, 251)
+        assert balls.recover_rational(x, 35) == Fraction(625, 251)
         root = arb(2).sqrt()
-        guess = certify.recover_rational(root, 30)
+        guess = balls.recover_rational(root, 30)
     with Arb(80).activate():
-        assert guess is None or not certify.contains_rational(arb(2).sqrt(), guess)
+        assert guess is None or not balls.contains_rational(arb(2).sqrt(), guess)
 
 
 # ----- command line --------------------------------------------------------------------

@@ -2,13 +2,13 @@
 
 - Whole solver, on generated chains, trees, a spherical/irrational chain and a four-bar:
   every fast path on (rationals as fmpq, the float64-chosen rank proof with balls only at
-  its states, exact pivot ranks, the numeric prefilter of sampled transfers) gives the
+  its states, exact pivot counts in the one numerical rank, the numeric prefilter of sampled transfers) gives the
   same JSON result and the same derivation report, text for text, as every one off
   (sympy's field, balls at every state and the shared ball analysis, mpmath's SVD, every
   try built exactly), except where the certificate's balls were computed (states, rows)
   and the residual they give.
-- Pieces, each against an independent computation: pivot_rank against mpmath's SVD on
-  matrices of known rank; columns_independent against dependent columns (it must refuse)
+- Pieces, each against an independent computation (the rank's exact pivot count against
+  mpmath's SVD: tests/test_rank.py); columns_independent against dependent columns (it must refuse)
   and against the shared analysis; residual against mpmath's dot products; dedupe against
   the pairwise working-precision comparison it abbreviates; to_fmpq exactly.
 """
@@ -29,6 +29,7 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric import rank
 from baseparams.numeric.certify import analyse
 from baseparams.plugins.solvers.symbolic import body_conditions, elimination, sampled_transfers
 from baseparams.plugins.solvers.symbolic.rank_bound import columns_independent
@@ -81,7 +82,7 @@ def test_fast_paths_give_the_reference_result(monkeypatch, case):
     with monkeypatch.context() as m:
         m.setattr(elimination, "ExactField", _Reference)
         m.setattr(elimination, "columns_independent", lambda *args: False)
-        m.setattr(body_conditions, "pivot_rank", lambda *args, **kwargs: None)
+        m.setattr(rank, "_pivot_count", lambda *args, **kwargs: None)
         m.setattr(sampled_transfers, "PREFILTER", mpmath.inf)
         reference = _canonical(elimination.solve(mech))
     assert fast[0] == reference[0]
@@ -100,41 +101,6 @@ def test_the_reference_field_is_sympys_and_the_fast_one_rational():
 
 
 # ----- pieces ------------------------------------------------------------------------------
-def _low_rank(rows, cols, singular, seed):
-    """rows x cols with the given singular values (the rest exactly 0 before rounding)."""
-    rng = random.Random(seed)
-    with mpmath.workdps(60):
-        u, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(rows)] for _ in range(rows)]))
-        v, _ = mpmath.qr(mpmath.matrix([[rng.uniform(-1, 1) for _ in range(cols)] for _ in range(cols)]))
-        s = mpmath.zeros(rows, cols)
-        for k, x in enumerate(singular):
-            s[k, k] = x
-        a = u * s * v.T
-    return body_conditions.Rows([[+a[i, j] for j in range(cols)] for i in range(rows)])
-
-
-@pytest.mark.parametrize("singular,expected", [
-    ([1, 0.5, 0.1], 3),
-    ([1, 1e-3, 1e-8, 1e-12], 4),                       # 1e-12 > 1e-14: counted
-    ([1, 1e-2] + [mpmath.mpf(10) ** -24] * 3, 2),      # 1e-24: noise
-    ([1] * 10, 10),
-    ([], 0),
-])
-def test_pivot_rank_is_the_svd_count(singular, expected):
-    with mpmath.workdps(28):
-        rows = _low_rank(23, 10, singular, seed=len(singular))
-        assert body_conditions.svd_rank(rows) == expected
-        assert body_conditions.pivot_rank(rows) == expected
-        assert body_conditions.numeric_rank(rows) == expected
-
-
-def test_pivot_rank_declines_near_the_threshold():
-    with mpmath.workdps(28):
-        rows = _low_rank(23, 10, [1, 0.3, mpmath.mpf(10) ** -14], seed=5)     # at the tolerance
-        assert body_conditions.pivot_rank(rows) is None
-        assert body_conditions.numeric_rank(rows) == body_conditions.svd_rank(rows)
-
-
 def test_residual_is_the_dot_products_rounded_once():
     rng = random.Random(3)
     with mpmath.workdps(28):
@@ -151,7 +117,7 @@ def test_residual_is_the_dot_products_rounded_once():
 def test_to_fmpq_is_exact():
     with mpmath.workdps(40):
         for x in [mpmath.mpf(1) / 3, -mpmath.mpf(2) ** -200 * 7, mpmath.mpf(10) ** 30, mpmath.mpf(0)]:
-            q = body_conditions.to_fmpq(x)
+            q = rank.to_fmpq(x)
             with mpmath.workdps(400):
                 assert mpmath.mpf(int(q.p)) / int(q.q) == x
 
@@ -160,7 +126,7 @@ def _dedupe_reference(items, subs, directions):
     """The pairwise comparison at working precision, without the float64 shortcut."""
     out, seen = [], []
     for name, vec in items:
-        num = [body_conditions.to_number(c, subs) for c in vec]
+        num = [body_conditions.to_number(c, subs, 28) for c in vec]
         key = num
         if directions:
             norm = mpmath.sqrt(sum(x * x for x in num))
@@ -188,7 +154,7 @@ def test_dedupe_keeps_what_the_pairwise_comparison_keeps(directions):
     items.append(("zero", [sympy.Integer(0)] * 3))
     rng.shuffle(items)
     with mpmath.workdps(28):
-        got = [name for name, _, _ in body_conditions.dedupe(items, {}, directions=directions)]
+        got = [name for name, _, _ in body_conditions.dedupe(items, {}, 28, directions=directions)]
         assert got == _dedupe_reference(items, {}, directions)
     assert any("nudged" in n for n in got) and not all("again" in n for n in got)
 

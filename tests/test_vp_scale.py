@@ -19,16 +19,17 @@ from fractions import Fraction
 
 import mpmath
 import pytest
-from flint import arb, arb_mat, fmpq, fmpq_mat, fmpz_mat
+from flint import arb, arb_mat, ctx, fmpq, fmpq_mat, fmpz_mat
 
 from baseparams import registry
-from baseparams.dynamics.exact_states import rref_pivots
+from baseparams.plugins.solvers.exact.states import rref_pivots
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.numeric import certify
-from baseparams.numeric.backends import Arb, precision
+from baseparams.plugins.solvers.vp import balls
+from baseparams.numeric.backends import Arb
 from baseparams.plugins.solvers.vp import solver as vp_solver
 
 DIGITS = 30
@@ -85,7 +86,7 @@ def test_eliminations_give_the_exact_rank_and_leftmost_basis(seed, m, n, k):
     rank = exact.rank()
     R, r2 = fmpq_mat(A).rref()
     leftmost = rref_pivots(R, r2)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         W = arb_mat(A)
         G = W.transpose() * W
         gmax = max(float(G[i, i].mid()) for i in range(n))
@@ -108,7 +109,7 @@ def test_eliminations_give_the_exact_rank_and_leftmost_basis(seed, m, n, k):
 
 def test_cholesky_of_a_dependent_set_is_refused():
     A = _low_rank_integer_matrix(4, 80, 70, 30)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         W = arb_mat(A)
         G = W.transpose() * W
         assert certify._cholesky_mid(G, list(range(40))) is None       # 40 columns of rank 30
@@ -116,7 +117,7 @@ def test_cholesky_of_a_dependent_set_is_refused():
 
 # ----- column exponents against mpmath -----------------------------------------------------
 def test_column_exponents_fast_rule_equals_the_entrywise_rule():
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         half = arb(2) ** arb(fmpq(10 ** 9 + 2, 2 * 10 ** 9))    # 2^(1/2 + 1e-9): log2 just above k + 1/2
         columns = [
             [arb(3), arb(-4), arb(0)],                                  # norm 5
@@ -130,28 +131,28 @@ def test_column_exponents_fast_rule_equals_the_entrywise_rule():
         W = arb_mat([[col[i] for col in columns] for i in range(3)])
         exponents, zero = certify._column_exponents(W)
     assert zero == [1, 6]
-    mpmath.mp.dps = 50
-    for j, col in enumerate(columns):
-        if j in zero:
-            assert exponents[j] == 0
-            continue
-        norm = mpmath.sqrt(sum(mpmath.mpf(x.mid().str(60, radius=False)) ** 2 for x in col))
-        assert exponents[j] == int(mpmath.nint(mpmath.log(norm, 2))), j
+    with mpmath.workdps(50):           # local: the global precision is neither read nor left changed
+        for j, col in enumerate(columns):
+            if j in zero:
+                assert exponents[j] == 0
+                continue
+            norm = mpmath.sqrt(sum(mpmath.mpf(x.mid().str(60, radius=False)) ** 2 for x in col))
+            assert exponents[j] == int(mpmath.nint(mpmath.log(norm, 2))), j
 
 
 # ----- the Frobenius bound against exact arithmetic ------------------------------------------
 def test_frobenius_bound_contains_and_hugs_the_exact_norm():
     rng = random.Random(5)
-    with precision(DIGITS):
+    with ctx.workdps(DIGITS):
         values = []
         for _ in range(60 * 40):
             mid = arb(rng.uniform(-1, 1)) * arb(10) ** rng.randint(-30, 0)
             values.append(arb(mid, arb(10) ** -32 * rng.random()))
         M = arb_mat(60, 40, values)
-        bound = certify._frobenius_upper(M)
+        bound = certify.frobenius_upper(M)
     # the largest sum of squares over the balls: (|mid| + rad)^2 per entry, exactly
-    exact = sum((abs(certify._dyadic(x.mid())) + certify._dyadic(arb(x.rad()))) ** 2 for x in values)
-    b = certify._dyadic(bound)
+    exact = sum((abs(balls._dyadic(x.mid())) + balls._dyadic(arb(x.rad()))) ** 2 for x in values)
+    b = balls._dyadic(bound)
     assert b * b >= exact
     assert b * b <= exact * Fraction(1001, 1000)
 
@@ -171,7 +172,7 @@ def test_fast_decisions_agree_with_working_precision_ones_and_the_exact_solver(c
         for j in range(fast.beta.ncols()):
             x = fast.beta[i, j]
             assert x.overlaps(slow.beta[i, j])
-            assert certify.contains_rational(x, exact_fraction(R[i, fast.eliminated[j]])), (i, j)
+            assert balls.contains_rational(x, exact_fraction(R[i, fast.eliminated[j]])), (i, j)
 
 
 def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W, exact_result, monkeypatch):
@@ -190,7 +191,7 @@ def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W
     assert hinted.rows == first.rows and hinted.kept == first.kept
     for i in range(hinted.beta.nrows()):
         for j in range(hinted.beta.ncols()):
-            assert certify.contains_rational(hinted.beta[i, j], exact_fraction(R[i, hinted.eliminated[j]]))
+            assert balls.contains_rational(hinted.beta[i, j], exact_fraction(R[i, hinted.eliminated[j]]))
     # a useless hint (a block of one repeated row) falls back to a proper choice
     useless = copy.copy(first)
     useless.rows = [0] * len(first.rows)
@@ -200,9 +201,9 @@ def test_rows_of_an_earlier_analysis_are_used_and_keep_the_claims(chain, chain_W
 
 def test_tail_values_are_the_residual_of_the_analysed_W(chain, chain_W):
     a = certify.analyse(chain_W, DIGITS)
-    cached = certify.tail_singular_values(chain_W, a)
+    cached = balls.tail_singular_values(chain_W, a)
     copy = arb_mat(chain_W.nrows(), chain_W.ncols(), chain_W.entries())     # another object: recomputed
-    recomputed = certify.tail_singular_values(copy, a)
+    recomputed = balls.tail_singular_values(copy, a)
     assert cached == recomputed
     assert len(cached) == len(a.eliminated)
     assert all(float(v) <= 10 * float(a.tail_bound.mid()) for v in cached)     # Weyl: below the tail bound
@@ -236,16 +237,16 @@ def test_beta_from_rows_encloses_the_exact_beta_at_higher_precision(chain, exact
     for i in range(beta.nrows()):
         for j in range(beta.ncols()):
             x = beta[i, j]
-            assert certify.contains_rational(x, exact_fraction(R[i, a.eliminated[j]]))
+            assert balls.contains_rational(x, exact_fraction(R[i, a.eliminated[j]]))
             assert x.rad() < a.beta[i, j].rad() or a.beta[i, j].rad() == 0
 
 
 def test_log10_matches_mpmath_far_outside_float_range():
-    mpmath.mp.dps = 40
     rng = random.Random(9)
     for _ in range(200):
         e = rng.randint(-100000, 100000)
         x = arb(rng.uniform(1, 10)) * arb(10) ** e
-        expected = float(mpmath.log10(mpmath.mpf(x.mid().str(40, radius=False))))
+        with mpmath.workdps(40):
+            expected = float(mpmath.log10(mpmath.mpf(x.mid().str(40, radius=False))))
         assert certify.log10(x) == pytest.approx(expected, rel=1e-13, abs=1e-9)
     assert certify.log10(arb(0)) == -math.inf

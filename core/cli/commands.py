@@ -27,6 +27,7 @@ from baseparams import registry
 from baseparams.errors import BaseparamsError
 from baseparams.solvers.protocol import (Capabilities, Solver, check_options, describe_solver,
                                          options_from_text, require_applicable)
+from baseparams.solvers.run import find_solver, run_solver, solver_options
 
 
 class UserError(click.ClickException):
@@ -315,19 +316,10 @@ def plugins(fmt):
 
 # ----- solve --------------------------------------------------------------------
 def get_solver(name):
-    """A registered solver by name; a UserError listing the registered ones otherwise, or
-    naming the distribution whose solver does not implement the Solver protocol."""
-    solvers = registry.solvers()
-    if name not in solvers:
-        raise UserError(f"unknown solver {name!r}; registered solvers: {', '.join(solvers) or '(none)'} "
-                        f"(see `baseparams plugins`)")
-    reg = solvers[name]
-    if not isinstance(reg.item, Solver):
-        missing = [m for m in ("name", "description", "capabilities", "options", "applicable", "solve")
-                   if not hasattr(reg.item, m)]
-        raise UserError(f"solver {name!r} (distribution {reg.distribution}) does not implement the "
-                        f"solver protocol (baseparams.solvers.protocol.Solver): missing {', '.join(missing)}")
-    return reg.item
+    """A registered solver by name (:func:`baseparams.solvers.run.find_solver`): an error
+    listing the registered ones otherwise, or naming the distribution whose solver does not
+    implement the Solver protocol (exit code 2)."""
+    return find_solver(name)
 
 
 def _progress(message):
@@ -377,7 +369,7 @@ class SolverListCommand(click.Command):
               help="A registered solver (all are listed below).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=None,
               help="Fix the working precision of a variable-precision solver [default: automatic]; "
-                   "dp and exact ignore it with a warning.")
+                   "a solver without a digits option (dp, exact) ignores it with a warning.")
 @click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
               help="Samples of the exciting trajectory (or random states, for exact) "
                    "[default: the mechanism file's].")
@@ -397,16 +389,9 @@ def solve(mech, solver_name, digits, samples, extra, fmt):
     """
     solver = get_solver(solver_name)
     given = options_from_text(solver, extra)
-    for name, value in (("digits", digits), ("samples", samples)):
-        if value is not None:
-            if name in given:
-                raise UserError(f"--{name} and -O {name}=... both given; give one")
-            given[name] = value
-    check_options(solver, given)                 # the option's own range, before reading the file
-    mechanism = load(mech)
-    options = check_options(solver, given, mechanism)       # bounds that depend on the mechanism
-    require_applicable(solver, mechanism)
-    result = solver.solve(mechanism, progress=_progress, **options)
+    common = {"digits": digits, "samples": samples}      # passed to a solver that declares them
+    solver_options(solver, given, common=common)         # the options' own ranges, before reading the file
+    result = run_solver(solver, load(mech), given, common=common, progress=_progress)
     for warning in result.warnings:
         click.echo(f"warning: {warning}", err=True)
 

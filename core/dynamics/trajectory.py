@@ -39,7 +39,7 @@ import sympy
 
 from baseparams.dynamics import observation
 from baseparams.dynamics.evaluator import Evaluator, Sample
-from baseparams.numeric.backends import Backend, Float64
+from baseparams.numeric.backends import Backend, Float64, evaluate
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.mechanism import MAX_SAMPLES, Mechanism
 
@@ -181,7 +181,7 @@ def values_at(expression: sympy.Expr, backend: Backend, t: Any) -> tuple[Any, An
     """(q, qd, qdd) of an expression of t at ``t`` (a backend number; float64: an array of
     times), in ``backend``'s arithmetic, by forward-mode differentiation: exact in
     rationals and sympy, enclosing in arb, as evaluating the symbolic derivatives would be."""
-    jet = _JetBackend(backend).evaluate(expression, {"t": Jet(t, backend.rational(Fraction(1)))})
+    jet = evaluate(_JetBackend(backend), expression, {"t": Jet(t, backend.rational(Fraction(1)))})
     zero = backend.rational(Fraction(0))
     return jet.v, zero if jet.d1 is None else jet.d1, zero if jet.d2 is None else jet.d2
 
@@ -226,9 +226,9 @@ class Jet:
         return Jet(w, d1, None if d2 is None else d2 / other.v)
 
 
-class _JetBackend(Backend):
+class _JetBackend:
     """The functions of an expression (sin, cos, exp, sqrt) on jets, computed by ``base``:
-    :meth:`Backend.evaluate` then differentiates while it evaluates."""
+    :func:`baseparams.numeric.backends.evaluate` then differentiates while it evaluates."""
 
     def __init__(self, base: Backend) -> None:
         self.base = base

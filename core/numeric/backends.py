@@ -10,16 +10,25 @@ give the backend's matrix type (numpy array, ``arb_mat``, ``fmpq_mat``, sympy Ma
 - :class:`Arb`: python-flint ``arb`` balls at a chosen number of decimal digits; every
   result carries a rigorous error bound. flint's precision is a process-wide setting, so
   every public function that computes in arb enters its own with ``backend.activate()``
-  (that is, :func:`precision`), which restores the caller's on exit.
+  (python-flint's own ``ctx.workprec``), which restores the caller's on exit.
 - :class:`Exact`: python-flint ``fmpq`` rationals. Angles are given as
   :class:`TanHalf` (the rational point of the unit circle ``t = tan(theta/2)``).
 - :class:`Symbolic`: sympy expressions, for small mechanisms and for geometry symbols.
+
+:class:`Backend` is the interface, a ``typing.Protocol`` generic in the number type N
+(``Backend[arb]``); the four backends satisfy it (they share a few implementations through
+:class:`Defaults`, which is not the interface). :func:`evaluate` needs only the scalar
+functions (:class:`Functions`), so an arithmetic on other numbers (the trajectory's jets)
+evaluates expressions with it too.
 """
 
 import contextlib
 import functools
 import math
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import AbstractContextManager
 from fractions import Fraction
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar, Union
 
 import numpy as np
 import sympy
@@ -27,36 +36,27 @@ from flint import arb, arb_mat, ctx, fmpq, fmpq_mat
 
 from baseparams.errors import KinematicsError
 
-
-@contextlib.contextmanager
-def precision(digits: int | None = None, *, bits: int | None = None):
-    """flint's working precision for the block (decimal ``digits`` or binary ``bits``),
-    restored exactly on exit: the one place a precision is entered, so no function
-    depends on a precision some caller happened to leave set."""
-    saved = ctx.prec
-    if bits is not None:
-        ctx.prec = int(bits)
-    else:
-        ctx.dps = int(digits)
-    try:
-        yield
-    finally:
-        ctx.prec = saved
+N = TypeVar("N")
+T = TypeVar("T")
+# numbers given exactly, which every backend can make its own (Backend.number)
+ExactValue = Union[int, Fraction, fmpq, "TanHalf"]
+# a float64 "number": one float, or an array of one value per sample (vectorised)
+Samples = Union[float, np.ndarray]
 
 
-def in_backend_precision(method):
+def in_backend_precision(method: Callable[..., T]) -> Callable[..., T]:
     """Decorator for a method of an object that carries its backend (``self.backend``, or
     ``self.kin.backend`` for an evaluated sample): the method computes in the backend's
     precision, and the caller's is restored, so it never depends on a leftover setting."""
     @functools.wraps(method)
-    def run(self, *args, **kwargs):
+    def run(self: Any, *args: Any, **kwargs: Any) -> T:
         backend = self.backend if hasattr(self, "backend") else self.kin.backend
         with backend.activate():
             return method(self, *args, **kwargs)
     return run
 
 
-def stack_flint(mats):
+def stack_flint(mats: Sequence[Any]) -> Any:
     """python-flint matrices of one type (arb_mat, fmpq_mat) stacked vertically: python-flint
     0.9 has no concatenation. Entries are copied, never rounded."""
     cols = mats[0].ncols()
@@ -71,90 +71,119 @@ class TanHalf:
 
     __slots__ = ("t",)
 
-    def __init__(self, t):
+    def __init__(self, t: int | Fraction | fmpq):
         self.t = fmpq(t.numerator, t.denominator) if isinstance(t, Fraction) else fmpq(t)
 
-    def cos_sin(self):
+    def cos_sin(self) -> tuple[fmpq, fmpq]:
         t2 = self.t * self.t
         return (1 - t2) / (1 + t2), 2 * self.t / (1 + t2)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"TanHalf({self.t})"
 
 
-class Backend:
-    """The interface. Subclasses override the number-making and the functions."""
+class Functions(Protocol[N]):
+    """The scalar functions :func:`evaluate` needs: what makes an arithmetic of numbers N."""
 
-    name = "abstract"
-    exact = False
+    def rational(self, value: Fraction) -> N: ...
 
-    def activate(self):
+    def pi(self) -> N: ...
+
+    def cos_sin(self, x: N) -> tuple[N, N]: ...
+
+    def sqrt(self, x: N) -> N: ...
+
+    def exp(self, x: N) -> N: ...
+
+
+class Backend(Functions[N], Protocol[N]):
+    """The interface every arithmetic satisfies, generic in its number type N."""
+
+    name: str
+    exact: bool
+
+    def activate(self) -> AbstractContextManager[None]:
         """Context in which this backend's numbers are computed (precision settings)."""
-        return contextlib.nullcontext()
+        ...
 
-    def number(self, value):
+    def number(self, value: ExactValue) -> N:
         """An exactly given number (int, Fraction, fmpq, or an angle as :class:`TanHalf`)
         in this backend: how every source of states hands its values to any arithmetic."""
+        ...
+
+    def angle(self, value: "TanHalf") -> N:
+        """The angle ``2 atan(t)`` (its cos and sin are the exact rationals of ``value``)."""
+        ...
+
+    def matrix(self, rows: Sequence[Sequence[N]], columns: int | None = None) -> Any:
+        """The backend's matrix of ``rows`` (lists of its numbers); ``columns`` when there
+        are no rows."""
+        ...
+
+    def stack(self, *mats: Any) -> Any:
+        """Matrices of this backend stacked vertically (rows of the first, then the next ...)."""
+        ...
+
+    def solve(self, a: Sequence[Sequence[N]], b: Sequence[Sequence[N]]) -> list[list[N]]:
+        """Solve ``a x = b`` for x; ``a`` is a list of n rows, ``b`` a list of n rows."""
+        ...
+
+    def to_float(self, x: N) -> Any:
+        """x as a float (or a float array, for samples)."""
+        ...
+
+    def point(self, x: N) -> N:
+        """``x`` without its error bound (ball midpoint); iterates of Newton's method use it."""
+        ...
+
+    def magnitude(self, x: N) -> float:
+        """An upper bound (float) of |x|, for messages (may underflow to 0 at high precision)."""
+        ...
+
+    def small(self, x: N, exponent: float) -> bool:
+        """Is |x| <= 10**exponent (for every sample)? ``exponent`` may be far below float range."""
+        ...
+
+    def evaluate(self, expr: Any, env: Mapping[str, N] | None = None) -> N:
+        """A sympy expression (rationals, ``env`` symbols, + * ** and sin cos exp sqrt pi)."""
+        ...
+
+
+class Defaults(Generic[N]):
+    """Implementations the backends share (not the interface: :class:`Backend` is)."""
+
+    exact = False
+
+    def activate(self) -> AbstractContextManager[None]:
+        return contextlib.nullcontext()
+
+    def number(self: Backend[N], value: ExactValue) -> N:
         if isinstance(value, TanHalf):
             return self.angle(value)
         if isinstance(value, fmpq):
             value = Fraction(int(value.p), int(value.q))
         return self.rational(Fraction(value))
 
-    def angle(self, value: "TanHalf"):
-        """The angle ``2 atan(t)`` (its cos and sin are the exact rationals of ``value``)."""
-        raise NotImplementedError
-
-    def matrix(self, rows, columns=None):
-        """The backend's matrix of ``rows`` (lists of its numbers); ``columns`` when there
-        are no rows."""
-        raise NotImplementedError
-
-    def stack(self, *mats):
-        """Matrices of this backend stacked vertically (rows of the first, then the next ...)."""
-        raise NotImplementedError
-
-    def rational(self, value: Fraction):
-        raise NotImplementedError
-
-    def cos_sin(self, x):
-        raise NotImplementedError
-
-    def sqrt(self, x):
-        raise NotImplementedError
-
-    def exp(self, x):
-        raise NotImplementedError
-
-    def pi(self):
-        raise NotImplementedError
-
-    def solve(self, a, b):
-        """Solve ``a x = b`` for x; ``a`` is a list of n rows, ``b`` a list of n rows."""
-        raise NotImplementedError
-
-    def to_float(self, x):
-        raise NotImplementedError
-
-    def point(self, x):
-        """``x`` without its error bound (ball midpoint); iterates of Newton's method use it."""
+    def point(self, x: N) -> N:
         return x
 
-    def magnitude(self, x):
-        """An upper bound (float) of |x|, for messages (may underflow to 0 at high precision)."""
+    def magnitude(self: Backend[N], x: N) -> float:
         return float(np.max(np.abs(self.to_float(x))))
 
-    def small(self, x, exponent):
-        """Is |x| <= 10**exponent (for every sample)? ``exponent`` may be far below float range."""
+    def small(self: Backend[N], x: N, exponent: float) -> bool:
         return bool(np.all(np.abs(self.to_float(x)) <= 10.0 ** exponent))
 
-    def evaluate(self, expr, env=None):
-        """Evaluate a sympy expression: rationals, ``env`` symbols, + * ** and sin cos exp sqrt pi."""
-        env = env or {}
-        return _evaluate(self, sympy.sympify(expr), env)
+    def evaluate(self: Backend[N], expr: Any, env: Mapping[str, N] | None = None) -> N:
+        return evaluate(self, expr, env)
 
 
-def _evaluate(backend, expr, env):
+def evaluate(functions: Functions[N], expr: Any, env: Mapping[str, N] | None = None) -> N:
+    """Evaluate a sympy expression with ``functions``: rationals, ``env`` symbols (values
+    by name), + * ** (integer and half-integer powers) and sin cos exp sqrt pi."""
+    return _evaluate(functions, sympy.sympify(expr), env or {})
+
+
+def _evaluate(backend: Functions[Any], expr: Any, env: Mapping[str, Any]) -> Any:
     if expr.is_Rational:
         return backend.rational(Fraction(int(expr.p), int(expr.q)))
     if expr.is_Symbol:
@@ -164,7 +193,7 @@ def _evaluate(backend, expr, env):
             raise KeyError(f"no value for symbol {expr.name}") from None
     if expr is sympy.pi:
         return backend.pi()
-    args = [_evaluate(backend, a, env) for a in expr.args] if not expr.is_Pow else None
+    args: list[Any] = [] if expr.is_Pow else [_evaluate(backend, a, env) for a in expr.args]
     if expr.is_Add:
         total = args[0]
         for a in args[1:]:
@@ -195,39 +224,39 @@ def _evaluate(backend, expr, env):
         return backend.cos_sin(args[0])[0]
     if isinstance(expr, sympy.exp):
         return backend.exp(args[0])
-    raise ValueError(f"cannot evaluate {expr} in backend {backend.name}")
+    raise ValueError(f"cannot evaluate {expr} in backend {getattr(backend, 'name', type(backend).__name__)}")
 
 
-class Float64(Backend):
+class Float64(Defaults[Samples]):
     """numpy float64; scalars may be arrays over samples (vectorised evaluation)."""
 
     name = "float64"
 
-    def rational(self, value):
+    def rational(self, value: Fraction) -> Samples:
         return float(value)
 
-    def cos_sin(self, x):
+    def cos_sin(self, x: Samples) -> tuple[Samples, Samples]:
         return np.cos(x), np.sin(x)
 
-    def sqrt(self, x):
+    def sqrt(self, x: Samples) -> Samples:
         return np.sqrt(x)
 
-    def exp(self, x):
+    def exp(self, x: Samples) -> Samples:
         return np.exp(x)
 
-    def pi(self):
+    def pi(self) -> Samples:
         return math.pi
 
-    def angle(self, value):
+    def angle(self, value: TanHalf) -> Samples:
         return 2.0 * math.atan(float(Fraction(int(value.t.p), int(value.t.q))))
 
-    def matrix(self, rows, columns=None):
+    def matrix(self, rows: Sequence[Sequence[Samples]], columns: int | None = None) -> np.ndarray:
         return np.array(rows, dtype=float) if rows else np.zeros((0, columns or 0))
 
-    def stack(self, *mats):
+    def stack(self, *mats: np.ndarray) -> np.ndarray:
         return np.vstack(mats)
 
-    def solve(self, a, b):
+    def solve(self, a: Sequence[Sequence[Samples]], b: Sequence[Sequence[Samples]]) -> list[list[Samples]]:
         n = len(a)
         k = len(b[0])
         if all(isinstance(v, float) for row in a for v in row) and all(isinstance(v, float) for row in b for v in row):
@@ -249,17 +278,17 @@ class Float64(Backend):
             raise KinematicsError(f"singular linear system (condition number {np.max(cond):.3g})")
         return np.linalg.solve(A, B)
 
-    def to_float(self, x):
+    def to_float(self, x: Samples) -> np.ndarray:
         return np.asarray(x, dtype=float)
 
-    def magnitude(self, x):
-        return abs(x) if isinstance(x, float) else super().magnitude(x)
+    def magnitude(self, x: Samples) -> float:
+        return abs(x) if isinstance(x, float) else float(np.max(np.abs(x)))
 
-    def small(self, x, exponent):
-        return abs(x) <= 10.0 ** exponent if isinstance(x, float) else super().small(x, exponent)
+    def small(self, x: Samples, exponent: float) -> bool:
+        return abs(x) <= 10.0 ** exponent if isinstance(x, float) else bool(np.all(np.abs(x) <= 10.0 ** exponent))
 
 
-class Arb(Backend):
+class Arb(Defaults[arb]):
     """python-flint ball arithmetic at ``digits`` decimal digits.
 
     Numbers made here (``rational``, ``pi``, ``number``) are born at these digits whatever
@@ -269,88 +298,83 @@ class Arb(Backend):
 
     name = "arb"
 
-    def __init__(self, digits=50):
+    def __init__(self, digits: int = 50):
         self.digits = int(digits)
-        with precision(self.digits):
-            self.bits = ctx.prec
+        with ctx.workdps(self.digits):
+            self.bits = int(ctx.prec)
 
-    def activate(self):
-        return precision(self.digits)
+    def activate(self) -> AbstractContextManager[None]:
+        return ctx.workprec(self.bits)
 
-    def _made(self, make):
+    def _made(self, make: Callable[[], arb]) -> arb:
         """``make()`` at this backend's precision (cheap when it is already current)."""
         if ctx.prec == self.bits:
             return make()
-        with precision(bits=self.bits):
+        with ctx.workprec(self.bits):
             return make()
 
-    def rational(self, value):
+    def rational(self, value: Fraction) -> arb:
         return self._made(lambda: arb(fmpq(value.numerator, value.denominator)))
 
-    def cos_sin(self, x):
+    def cos_sin(self, x: arb) -> tuple[arb, arb]:
         return x.cos(), x.sin()
 
-    def sqrt(self, x):
+    def sqrt(self, x: arb) -> arb:
         return x.sqrt()
 
-    def exp(self, x):
+    def exp(self, x: arb) -> arb:
         return x.exp()
 
-    def pi(self):
+    def pi(self) -> arb:
         return self._made(arb.pi)
 
-    def angle(self, value):
+    def angle(self, value: TanHalf) -> arb:
         return self._made(lambda: 2 * arb(value.t).atan())
 
-    def matrix(self, rows, columns=None):
+    def matrix(self, rows: Sequence[Sequence[arb]], columns: int | None = None) -> arb_mat:
         if not rows:
             return arb_mat(0, columns or 0)
         # arb entries are copied as they are (no conversion call per entry: W has 10^6)
         return arb_mat(len(rows), len(rows[0]), [v if type(v) is arb else arb(v) for row in rows for v in row])
 
-    def stack(self, *mats):
+    def stack(self, *mats: arb_mat) -> arb_mat:
         return stack_flint(mats)
 
-    def solve(self, a, b):
-        A = arb_mat(len(a), len(a[0]), [arb(v) for row in a for v in row])
-        B = arb_mat(len(b), len(b[0]), [arb(v) for row in b for v in row])
-        try:
-            X = A.solve(B)
-        except ZeroDivisionError:
-            raise KinematicsError("singular linear system (no pivot excludes zero)") from None
-        return [[X[i, j] for j in range(X.ncols())] for i in range(X.nrows())]
+    def solve(self, a: Sequence[Sequence[arb]], b: Sequence[Sequence[arb]]) -> list[list[arb]]:
+        return _solve_flint(arb_mat, arb, a, b, "singular linear system (no pivot excludes zero)")
 
-    def to_float(self, x):
+    def to_float(self, x: arb) -> float:
         return float(arb(x).mid())
 
-    def point(self, x):
+    def point(self, x: arb) -> arb:
         return arb(x).mid()
 
-    def magnitude(self, x):
-        x = arb(x)
-        return float(abs(x).upper())
+    def magnitude(self, x: arb) -> float:
+        return float(abs(arb(x)).upper())
 
-    def small(self, x, exponent):
+    def small(self, x: arb, exponent: float) -> bool:
         return bool(abs(arb(x)).upper() <= arb(10) ** exponent)
 
 
-class Exact(Backend):
+class Exact(Defaults[Union[fmpq, TanHalf]]):
     """Exact rationals (python-flint ``fmpq``); angles as :class:`TanHalf`."""
 
     name = "exact"
     exact = True
 
-    def rational(self, value):
+    def rational(self, value: Fraction) -> fmpq:
         return fmpq(value.numerator, value.denominator)
 
-    def cos_sin(self, x):
+    def cos_sin(self, x: fmpq | TanHalf) -> tuple[fmpq, fmpq]:
         if isinstance(x, TanHalf):
             return x.cos_sin()
         if x == 0:
             return fmpq(1), fmpq(0)
         raise KinematicsError("exact arithmetic needs angles as TanHalf (rational cos and sin)")
 
-    def sqrt(self, x):
+    def sqrt(self, x: fmpq | TanHalf) -> fmpq:
+        if isinstance(x, TanHalf):
+            raise KinematicsError("sqrt of an angle")
         x = fmpq(x)
         p, q = int(x.p), int(x.q)
         rp, rq = math.isqrt(p) if p >= 0 else -1, math.isqrt(q)
@@ -358,82 +382,90 @@ class Exact(Backend):
             raise KinematicsError(f"sqrt({x}) is not rational: exact arithmetic is not available here")
         return fmpq(rp, rq)
 
-    def exp(self, x):
+    def exp(self, x: fmpq | TanHalf) -> fmpq:
         if x == 0:
             return fmpq(1)
         raise KinematicsError("exp of a nonzero rational is not rational")
 
-    def pi(self):
+    def pi(self) -> fmpq:
         raise KinematicsError("pi is not rational")
 
-    def angle(self, value):
+    def angle(self, value: TanHalf) -> TanHalf:
         return value
 
-    def matrix(self, rows, columns=None):
+    def matrix(self, rows: Sequence[Sequence[Any]], columns: int | None = None) -> fmpq_mat:
         if not rows:
             return fmpq_mat(0, columns or 0)
         return fmpq_mat(len(rows), len(rows[0]), [_as_fmpq(v) for row in rows for v in row])
 
-    def stack(self, *mats):
+    def stack(self, *mats: fmpq_mat) -> fmpq_mat:
         return stack_flint(mats)
 
-    def solve(self, a, b):
-        A = fmpq_mat(len(a), len(a[0]), [fmpq(v) for row in a for v in row])
-        B = fmpq_mat(len(b), len(b[0]), [fmpq(v) for row in b for v in row])
-        try:
-            X = A.solve(B)
-        except ZeroDivisionError:
-            raise KinematicsError("singular linear system") from None
-        return [[X[i, j] for j in range(X.ncols())] for i in range(X.nrows())]
+    def solve(self, a: Sequence[Sequence[Any]], b: Sequence[Sequence[Any]]) -> list[list[Any]]:
+        return _solve_flint(fmpq_mat, fmpq, a, b, "singular linear system")
 
-    def to_float(self, x):
+    def to_float(self, x: Any) -> float:
         return float(int(x.p)) / float(int(x.q)) if isinstance(x, fmpq) else float(x)
 
 
-class Symbolic(Backend):
+class Symbolic(Defaults[Union[sympy.Expr, TanHalf]]):
     """sympy expressions; angles are sympy expressions (symbols or numbers)."""
 
     name = "symbolic"
     exact = True
 
-    def rational(self, value):
+    def rational(self, value: Fraction) -> sympy.Expr:
         return sympy.Rational(value.numerator, value.denominator)
 
-    def cos_sin(self, x):
+    def cos_sin(self, x: Any) -> tuple[Any, Any]:
         if isinstance(x, TanHalf):
             c, s = x.cos_sin()
             return sympy.Rational(int(c.p), int(c.q)), sympy.Rational(int(s.p), int(s.q))
         return sympy.cos(x), sympy.sin(x)
 
-    def sqrt(self, x):
+    def sqrt(self, x: Any) -> Any:
         return sympy.sqrt(x)
 
-    def exp(self, x):
+    def exp(self, x: Any) -> Any:
         return sympy.exp(x)
 
-    def pi(self):
+    def pi(self) -> Any:
         return sympy.pi
 
-    def angle(self, value):
+    def angle(self, value: TanHalf) -> TanHalf:
         return value
 
-    def matrix(self, rows, columns=None):
+    def matrix(self, rows: Sequence[Sequence[Any]], columns: int | None = None) -> sympy.Matrix:
         return sympy.Matrix(rows) if rows else sympy.zeros(0, columns or 0)
 
-    def stack(self, *mats):
+    def stack(self, *mats: sympy.Matrix) -> sympy.Matrix:
         return sympy.Matrix.vstack(*mats)
 
-    def solve(self, a, b):
+    def solve(self, a: Sequence[Sequence[Any]], b: Sequence[Sequence[Any]]) -> list[list[Any]]:
         A = sympy.Matrix(a)
         B = sympy.Matrix(b)
         X = A.LUsolve(B)
         return [[sympy.simplify(X[i, j]) for j in range(X.cols)] for i in range(X.rows)]
 
-    def to_float(self, x):
+    def to_float(self, x: Any) -> float:
         return float(sympy.N(x))
 
 
-def _condition_numbers(A):
+def _solve_flint(kind: Any, convert: Callable[[Any], Any], a: Sequence[Sequence[Any]],
+                 b: Sequence[Sequence[Any]], singular: str) -> list[list[Any]]:
+    """``a x = b`` in python-flint matrices of ``kind`` (arb_mat: a verified solve;
+    fmpq_mat: exact), entries made by ``convert``; KinematicsError(``singular``) when no
+    solution is proven."""
+    A = kind(len(a), len(a[0]), [convert(v) for row in a for v in row])
+    B = kind(len(b), len(b[0]), [convert(v) for row in b for v in row])
+    try:
+        X = A.solve(B)
+    except ZeroDivisionError:
+        raise KinematicsError(singular) from None
+    return [[X[i, j] for j in range(X.ncols())] for i in range(X.nrows())]
+
+
+def _condition_numbers(A: np.ndarray) -> np.ndarray:
     """2-norm condition numbers of a batch of square matrices, or upper bounds of them that
     are all <= 1e13: cond_2 <= n cond_1, and cond_1 needs only an inverse (LU), several
     times cheaper than the SVD of np.linalg.cond, which is kept for the doubtful ones."""
@@ -450,9 +482,16 @@ def _condition_numbers(A):
     return bound
 
 
-def _as_fmpq(v):
+def _as_fmpq(v: Any) -> fmpq:
     if isinstance(v, fmpq):
         return v
     if isinstance(v, Fraction):
         return fmpq(v.numerator, v.denominator)
     return fmpq(v)
+
+
+if TYPE_CHECKING:       # mypy checks here that each backend satisfies the interface
+    _float64: Backend[Samples] = Float64()
+    _arb: Backend[arb] = Arb()
+    _exact: Backend[Union[fmpq, TanHalf]] = Exact()
+    _symbolic: Backend[Union[sympy.Expr, TanHalf]] = Symbolic()

@@ -51,13 +51,13 @@ claim changes: each is still verified in ball arithmetic as in 2.
 """
 
 import math
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from fractions import Fraction
+from typing import Any
 
 import numpy as np
-from flint import acb_mat, arb, arb_mat, ctx
+from flint import acb_mat, arb, arb_mat, arf, ctx
 
-from baseparams.numeric.backends import precision
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
@@ -72,25 +72,25 @@ LOG10_2 = math.log10(2)
 class BallAnalysis:
     digits: int
     rank: int
-    kept: list
-    eliminated: list
+    kept: list[int]
+    eliminated: list[int]
     pivoting: str                 # "natural", "complete" or "imposed"
-    pivots: list                  # complete-pivoting pivots of the scaled G (midpoints), in order
-    pivot_order: list             # their columns
-    beta_s: object                # arb_mat r x (n - r), scaled
-    beta: object                  # arb_mat r x (n - r), unscaled: phi_b = phi_1 + beta phi_2
-    exponents: list               # column j scaled by 2^-exponents[j]
-    zero_columns: list            # columns no entry of which is proven nonzero
-    tail_bound: object            # arb: rigorous upper bound of s_{r+1}(Ws) (0 if r = n)
-    sigma_r_lower: object         # arb: rigorous lower bound of s_r(Ws)
-    singular_values: list         # approximate singular values of Ws (strings), largest first
-    refined: object = None        # exact (midpoint) B used for tail_bound
-    notes: list = field(default_factory=list)
-    rows: list = field(default_factory=list)  # the rows R of the square block Ws_RK
-    _residual: object = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
+    pivots: list[arb]             # complete-pivoting pivots of the scaled G (midpoints), in order
+    pivot_order: list[int]        # their columns
+    beta_s: arb_mat               # r x (n - r), scaled
+    beta: arb_mat                 # r x (n - r), unscaled: phi_b = phi_1 + beta phi_2
+    exponents: list[int]          # column j scaled by 2^-exponents[j]
+    zero_columns: list[int]       # columns no entry of which is proven nonzero
+    tail_bound: arb               # rigorous upper bound of s_{r+1}(Ws) (0 if r = n)
+    sigma_r_lower: arb            # rigorous lower bound of s_r(Ws)
+    singular_values: list[str]    # approximate singular values of Ws, largest first
+    refined: arb_mat | None = None  # exact (midpoint) B used for tail_bound
+    notes: list[str] = field(default_factory=list)
+    rows: list[int] = field(default_factory=list)  # the rows R of the square block Ws_RK
+    _residual: tuple[arb_mat, arb_mat] | None = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
 
     @property
-    def ridge_log10(self):
+    def ridge_log10(self) -> float:
         """log10(sigma_r_lower / tail_bound): the proven height of the ridge, in decades."""
         if self.rank == 0 or not self.sigma_r_lower > 0:
             return -math.inf
@@ -99,16 +99,16 @@ class BallAnalysis:
         return log10(self.sigma_r_lower) - log10(self.tail_bound)
 
 
-def log10(x):
+def log10(x: arb | arf) -> float:
     """log10 |midpoint| as a float (-inf for zero); fine for 10^-100000. From the
     midpoint's exact mantissa and binary exponent (no precision involved: called tens of
     thousands of times per analysis); a non-finite midpoint at FLOAT_BITS."""
     m = arb(x).mid()
     if m.is_finite():
         man, exp = m.man_exp()
-        man = int(man)
-        return math.log10(abs(man)) + int(exp) * LOG10_2 if man else -math.inf
-    with precision(bits=FLOAT_BITS):
+        mantissa = int(man)
+        return math.log10(abs(mantissa)) + int(exp) * LOG10_2 if mantissa else -math.inf
+    with ctx.workprec(FLOAT_BITS):
         x = abs(arb(x).mid())
         if x == 0:
             return -math.inf
@@ -120,12 +120,13 @@ def log10(x):
 # matrices in C: W's entries are read once (``entries()``), every submatrix is built from
 # that list, and every loop over entries that can be a matrix product is one.
 
-def _float_mids(entries, rows, cols):
+def _float_mids(entries: Sequence[arb], rows: int, cols: int) -> np.ndarray:
     """The midpoints as a float64 array (rows x cols): 0 or inf where out of float range."""
     return np.array([float(x) for x in entries]).reshape(rows, cols)
 
 
-def _column_exponents(W, entries=None, mids=None):
+def _column_exponents(W: arb_mat, entries: list[arb] | None = None,
+                      mids: np.ndarray | None = None) -> tuple[list[int], list[int]]:
     """Per column: round(log2(norm)) from the midpoints, and the zero columns.
 
     A column is zero when every entry's ball contains 0: nothing proves it nonzero, and
@@ -153,19 +154,20 @@ def _column_exponents(W, entries=None, mids=None):
         safe = np.isfinite(largest) & (largest > 1e-290) & (largest < 1e290)
         norms = largest * np.sqrt(np.sum((mids / np.where(safe, largest, 1.0)) ** 2, axis=0))
         logs = np.log2(np.where(safe, norms, 1.0))
-    log2_norms, zero = [], []
+    log2_norms: list[float | None] = []
+    zero: list[int] = []
     for j in range(cols):
         if safe[j] and not entries[int(where[j]) * cols + j].contains(0):
-            x = float(logs[j])
-            if abs(x - math.floor(x) - 0.5) > 1e-6:
-                log2_norms.append(x)
+            log2 = float(logs[j])
+            if abs(log2 - math.floor(log2) - 0.5) > 1e-6:
+                log2_norms.append(log2)
                 continue
         column = entries[j::cols]
         if all(x.contains(0) for x in column):
             zero.append(j)
             log2_norms.append(None)
             continue
-        total = arb(0)
+        total: Any = arb(0)
         for x in column:
             m = x.mid()
             total += m * m
@@ -173,7 +175,7 @@ def _column_exponents(W, entries=None, mids=None):
     return power_of_two_exponents(log2_norms), zero
 
 
-def _scaled_entries(entries, cols, exponents):
+def scaled_entries(entries: Sequence[arb], cols: int, exponents: Sequence[int]) -> list[arb]:
     """W's entries (row-major) with column j divided by 2^exponents[j]: exact."""
     two = arb(2)
     powers = [two ** (-e) for e in exponents]
@@ -183,7 +185,7 @@ def _scaled_entries(entries, cols, exponents):
     return [x * p for x, p in zip(entries, repeated)]
 
 
-def _block(entries, cols, rows, picked):
+def block(entries: Sequence[arb], cols: int, rows: Sequence[int], picked: Sequence[int]) -> arb_mat:
     """The submatrix (``rows`` x ``picked`` columns) of the row-major ``entries`` of a
     matrix with ``cols`` columns, as an arb_mat (copied, not rounded)."""
     if not rows or not picked:
@@ -191,7 +193,7 @@ def _block(entries, cols, rows, picked):
     return arb_mat(len(rows), len(picked), [entries[i * cols + j] for i in rows for j in picked])
 
 
-def _on_grid(M, extra_bits=GRID_EXTRA_BITS, four=None):
+def _on_grid(M: arb_mat, extra_bits: int = GRID_EXTRA_BITS, four: arb_mat | None = None) -> arb_mat:
     """A ball matrix containing M whose midpoints are multiples of one power of two:
     ``(M + 4) - 4`` at the working precision plus ``extra_bits`` (each addition's
     rounding error joins the radius, so every exact matrix inside M is inside the result).
@@ -200,13 +202,13 @@ def _on_grid(M, extra_bits=GRID_EXTRA_BITS, four=None):
     integer matrix instead of many (W's midpoints reach 1e-96 where an entry is noise)."""
     if not M.nrows() or not M.ncols():
         return M
-    with precision(bits=ctx.prec + extra_bits):
+    with ctx.extraprec(extra_bits):
         if four is None:            # the matrix of 4s of M's shape (callers may pass it)
             four = arb_mat(M.nrows(), 1, [1] * M.nrows()) * arb_mat(1, M.ncols(), [4] * M.ncols())
         return (M + four) - four
 
 
-def _gram(Ws):
+def _gram(Ws: arb_mat) -> arb_mat:
     """Midpoints of ``Ws^T Ws`` (decisions only): one product, in C. Beyond
     FAST_DECISIONS_ABOVE columns from Ws on a grid (:func:`_on_grid`: 1.5-2x faster);
     up to there (every built-in mechanism) from Ws itself, so that the approximate
@@ -215,7 +217,7 @@ def _gram(Ws):
     return (Y.transpose() * Y).mid()
 
 
-def _frobenius_upper(M):
+def frobenius_upper(M: arb_mat) -> arb:
     """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits):
     the entries as one row vector v, ``v v^T`` in ball arithmetic (one dot product, in C)
     encloses the sum of squares of every matrix inside M."""
@@ -226,7 +228,7 @@ def _frobenius_upper(M):
     return arb(total.sqrt().upper())
 
 
-def _mid(M):
+def _mid(M: arb_mat) -> arb_mat:
     return M.mid()
 
 
@@ -234,7 +236,8 @@ def _mid(M):
 PANEL = 64                 # pivots per block update of the Schur complement
 
 
-def _eliminations(G, threshold, complete=True, skip=(), target=None):
+def _eliminations(G: arb_mat, threshold: arb, complete: bool = True, skip: Iterable[int] = (),
+                  target: int | None = None) -> Iterator[tuple[int, Any, list[Any]]]:
     """Symmetric Gaussian elimination (Cholesky, ``G = L^T L``) on the midpoints of G, one
     pivot at a time: yields (column, pivot, row of L) for each pivot above ``threshold``;
     the row of L is the pivot's Schur column divided by the square root of the pivot.
@@ -256,10 +259,10 @@ def _eliminations(G, threshold, complete=True, skip=(), target=None):
     A = _submatrix(G.mid(), open_) if skipped else G.mid()
     cols = list(open_)              # the columns A holds (the open ones at the panel's start)
     place = {j: i for i, j in enumerate(cols)}
-    diag = [A[i, i] for i in range(len(cols))] if complete else None
+    diag: list[Any] = [A[i, i] for i in range(len(cols))] if complete else []
     cap = len(open_) if target is None else min(len(open_), target)
     L = arb_mat(PANEL, len(cols))   # the panel's rows of L, over ``cols``
-    rows = []                       # the same, as lists
+    rows: list[list[Any]] = []      # the same, as lists
     zeros = [0] * PANEL
     four = arb_mat(1, len(cols), [4] * len(cols)) if cols else None
     count = 0
@@ -270,7 +273,7 @@ def _eliminations(G, threshold, complete=True, skip=(), target=None):
             j = open_[0]
         open_.remove(j)
         a = place[j]
-        p = diag[a] if complete else None
+        p: Any = diag[a] if complete else None
         if complete and not p > threshold:
             return
         width = len(cols)
@@ -292,7 +295,7 @@ def _eliminations(G, threshold, complete=True, skip=(), target=None):
             L[c, k] = ell[k]
         rows.append(ell)
         count += 1
-        full = [0] * n
+        full: list[Any] = [0] * n
         for k, x in zip(cols, ell):
             full[k] = x
         yield j, p, full
@@ -310,14 +313,14 @@ def _eliminations(G, threshold, complete=True, skip=(), target=None):
             rows = []
 
 
-def _submatrix(A, index):
+def _submatrix(A: arb_mat, index: Sequence[int]) -> arb_mat:
     """The symmetric submatrix A[index, index] (copied, not rounded)."""
     n = A.ncols()
     e = A.entries()
     return arb_mat(len(index), len(index), [e[i * n + j] for i in index for j in index])
 
 
-def _approximate_pivots(G, threshold, skip=()):
+def _approximate_pivots(G: arb_mat, threshold: arb, skip: Iterable[int] = ()) -> tuple[list[int], list[arb]]:
     """Cholesky (LDL^T) with diagonal pivoting on midpoints while the pivot exceeds ``threshold``.
 
     Returns (order, pivots): the columns in pivot order and their pivots (midpoints).
@@ -329,7 +332,8 @@ def _approximate_pivots(G, threshold, skip=()):
     return order, pivots
 
 
-def _natural_basis(G, threshold, target, skip=()):
+def _natural_basis(G: arb_mat, threshold: arb, target: int,
+                   skip: Iterable[int] = ()) -> tuple[list[int], arb_mat]:
     """Leftmost columns (parameter order) whose midpoint Schur pivot exceeds ``threshold``,
     and the Cholesky factor of G restricted to them, from the same elimination (the
     columns passed over take no part in it): (columns, R)."""
@@ -337,7 +341,7 @@ def _natural_basis(G, threshold, target, skip=()):
     return [j for j, _, _ in found], _factor(found)
 
 
-def _cholesky_mid(G, kept):
+def _cholesky_mid(G: arb_mat, kept: Sequence[int]) -> arb_mat | None:
     """Upper-triangular R with R^T R = G_KK (midpoints), or None if a pivot is not positive."""
     others = set(range(G.nrows())) - set(kept)
     found = list(_eliminations(G, arb(0), complete=False, skip=others))
@@ -346,7 +350,7 @@ def _cholesky_mid(G, kept):
     return _factor(found)
 
 
-def _factor(found):
+def _factor(found: Sequence[tuple[int, Any, list[Any]]]) -> arb_mat:
     """R (upper triangular, R^T R = G_KK) from the elimination's (column, pivot, row of L)
     of the kept columns K, in order."""
     kept = [j for j, _, _ in found]
@@ -357,7 +361,7 @@ def _factor(found):
     return arb_mat(r, r, values) if r else arb_mat(0, 0)
 
 
-def _select_rows_float64(Wk, R, W64=None):
+def _select_rows_float64(Wk: arb_mat, R: arb_mat | None, W64: np.ndarray | None = None) -> list[int] | None:
     """The rows of :func:`_select_rows` chosen in float64 when R is well conditioned
     (cond(R) <= 1e8, so ``Q = W_K R^-1`` has float accuracy to 1e-8), by LAPACK's QR with
     column pivoting; None when it is not. A choice only, as the other's."""
@@ -375,7 +379,7 @@ def _select_rows_float64(Wk, R, W64=None):
     return sorted(int(i) for i in perm[:r])
 
 
-def _select_rows(Wk, R):
+def _select_rows(Wk: arb_mat, R: arb_mat | None) -> list[int]:
     """r rows of W_K making a well-conditioned square block (a choice only: what is claimed
     is verified in arb).
 
@@ -396,7 +400,9 @@ def _select_rows(Wk, R):
     return sorted(pivoted_qr_columns(a, r))
 
 
-def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
+def _verify(scaled: Sequence[arb], shape: tuple[int, int], G: arb_mat, kept: Sequence[int],
+            R: arb_mat | None = None, hint: tuple[list[int], list[int]] | None = None,
+            scaled64: np.ndarray | None = None) -> tuple[list[int], arb_mat, arb_mat, arb_mat] | None:
     """(rows, beta_s, Ws_K, Ws_RK^-1) with Ws_RK beta_s = Ws_RE and the inverse solved in
     ball arithmetic (one solve, right-hand side [Ws_RE, I]), or None when Ws_RK is not
     proven nonsingular. ``scaled``: the row-major entries of the column-scaled W of
@@ -410,12 +416,12 @@ def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
     eliminated = [j for j in range(n) if j not in set(kept)]
     if not kept:
         return [], arb_mat(0, len(eliminated)), arb_mat(m, 0), arb_mat(0, 0)
-    Wk = _block(scaled, n, range(m), kept)
+    Wk = block(scaled, n, range(m), kept)
     fast = n > FAST_DECISIONS_ABOVE
     tried = []
     if fast and hint is not None and hint[0] == list(kept) and all(0 <= i < m for i in hint[1]):
         tried.append(list(hint[1]))
-        found = _solve_block(scaled, n, tried[-1], kept, eliminated)
+        found = solve_block(scaled, n, tried[-1], kept, eliminated)
         if found is not None:
             return (tried[-1], found[0], Wk, found[1])
     if R is None:
@@ -424,22 +430,23 @@ def _verify(scaled, shape, G, kept, R=None, hint=None, scaled64=None):
         rows = _select_rows_float64(Wk, R, None if scaled64 is None else scaled64[:, kept])
         if rows is not None and rows not in tried:
             tried.append(rows)
-            found = _solve_block(scaled, n, rows, kept, eliminated)
+            found = solve_block(scaled, n, rows, kept, eliminated)
             if found is not None:
                 return (rows, found[0], Wk, found[1])
     rows = _select_rows(Wk, R)
     if len(rows) < len(kept) or rows in tried:
         return None
-    found = _solve_block(scaled, n, rows, kept, eliminated)
+    found = solve_block(scaled, n, rows, kept, eliminated)
     return None if found is None else (rows, found[0], Wk, found[1])
 
 
-def _solve_block(scaled, n, rows, kept, eliminated):
+def solve_block(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Sequence[int],
+                eliminated: Sequence[int]) -> tuple[arb_mat, arb_mat] | None:
     """(beta_s, Ws_RK^-1) by one verified solve, or None when Ws_RK is not proven nonsingular."""
     r, e = len(kept), len(eliminated)
-    Wrk = _block(scaled, n, rows, kept)
+    Wrk = block(scaled, n, rows, kept)
     identity = [0] * r
-    right = []
+    right: list[Any] = []
     for a, i in enumerate(rows):
         right += [scaled[i * n + j] for j in eliminated]
         identity[a] = 1
@@ -456,7 +463,8 @@ def _solve_block(scaled, n, rows, kept, eliminated):
 
 
 # ----- the analysis --------------------------------------------------------------
-def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True, earlier=None):
+def analyse(W: arb_mat, digits: int, kept: Sequence[int] | None = None, pivoting: str = "natural",
+            approximate_spectrum: bool = True, earlier: BallAnalysis | None = None) -> BallAnalysis:
     """Rank, permutation and beta of an ``arb_mat`` W, computed at ``digits`` (whatever
     precision the caller has set; it is restored on return).
 
@@ -467,18 +475,19 @@ def analyse(W, digits, kept=None, pivoting="natural", approximate_spectrum=True,
     FAST_DECISIONS_ABOVE columns).
     """
     hint = None if earlier is None else (list(earlier.kept), list(earlier.rows))
-    with precision(digits):
+    with ctx.workdps(digits):
         return _analyse(W, digits, kept, pivoting, approximate_spectrum, hint)
 
 
-def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
+def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str, approximate_spectrum: bool,
+             hint: tuple[list[int], list[int]] | None = None) -> BallAnalysis:
     m, n = W.nrows(), W.ncols()
     entries = W.entries()
     mids = _float_mids(entries, m, n) if m else None
     exponents, zero = _column_exponents(W, entries, mids)
-    scaled = _scaled_entries(entries, n, exponents)
+    scaled = scaled_entries(entries, n, exponents)
     # the scaled midpoints in float64 (for choices and the approximate spectrum only)
-    scaled64 = np.ldexp(mids, -np.array(exponents, dtype=int)) if m else np.zeros((0, n))
+    scaled64 = np.ldexp(mids, -np.array(exponents, dtype=int)) if mids is not None else np.zeros((0, n))
     del entries, mids
     everything = arb_mat(m, n, scaled) if m and n else arb_mat(m, n)
     G = _gram(everything)
@@ -487,8 +496,8 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     gmax = max((float(abs(gm[i * n + i])) for i in range(n)), default=0.0)
     threshold = arb(NOISE_FACTOR * n * max(gmax, 1e-300)) * arb(10) ** (-digits)
     order, pivots = _approximate_pivots(G, threshold, skip=zero)
-    notes = []
-    candidates = []
+    notes: list[str] = []
+    candidates: list[tuple[list[int], str, arb_mat | None]] = []
     if kept is not None:
         candidates.append((sorted(kept), "imposed", None))
     else:
@@ -505,8 +514,8 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
         candidates.append((sorted(order), "complete", None))
     verified = None
     while verified is None:
-        for cand, how, R in candidates:
-            verified = _verify(scaled, (m, n), G, cand, R, hint, scaled64)
+        for cand, how, factor in candidates:
+            verified = _verify(scaled, (m, n), G, cand, factor, hint, scaled64)
             if verified is not None:
                 kept, used = cand, how
                 break
@@ -519,6 +528,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
             candidates = [(sorted(order), "complete", None)]
             notes.append(f"rank lowered to {len(order)}: the last pivot is not provable at {digits} digits")
     rows, beta_s, Wk, inverse = verified
+    assert kept is not None             # the verified candidate's columns
     eliminated = [j for j in range(n) if j not in set(kept)]
 
     # s_{r+1} <= ||Ws_E - Ws_K B||_F for any exact B (Weyl: [Ws_K, Ws_K B] has rank r)
@@ -526,7 +536,7 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     if eliminated and kept and n > FAST_DECISIONS_ABOVE:
         B, residual, tail = _refined_fast(scaled, (m, n), gm, kept, eliminated, Wk, beta_s)
     elif eliminated and kept:
-        We = _block(scaled, n, range(m), eliminated)
+        We = block(scaled, n, range(m), eliminated)
         B = _mid(beta_s)
         try:                            # one least-squares refinement of B on all rows
             E = _mid(We - Wk * B)
@@ -535,11 +545,11 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
         except ZeroDivisionError:
             pass
         residual = We - Wk * B
-        tail = _frobenius_upper(residual)
+        tail = frobenius_upper(residual)
     elif eliminated:
         B = arb_mat(0, len(eliminated))
-        residual = _block(scaled, n, range(m), eliminated)
-        tail = _frobenius_upper(residual)
+        residual = block(scaled, n, range(m), eliminated)
+        tail = frobenius_upper(residual)
     else:
         B = arb_mat(len(kept), 0)
         tail = arb(0)
@@ -547,13 +557,13 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     # s_r >= s_min(Ws_K) >= s_min(Ws_RK) >= 1 / ||Ws_RK^-1||_F
     sigma_lower = arb(0)
     if kept:
-        f = _frobenius_upper(inverse)
+        f = frobenius_upper(inverse)
         sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
 
-    beta = _unscaled(beta_s, kept, eliminated, exponents)
+    beta = unscaled(beta_s, kept, eliminated, exponents)
 
     svals = _approximate_singular_values(G, scaled64) if approximate_spectrum else []
-    analysis = BallAnalysis(digits, len(kept), kept, eliminated, used, pivots, order, beta_s, beta,
+    analysis = BallAnalysis(digits, len(kept), list(kept), eliminated, used, pivots, order, beta_s, beta,
                             exponents, zero, tail, sigma_lower, svals, B, notes)
     analysis.rows = list(rows)
     if residual is not None:
@@ -561,7 +571,8 @@ def _analyse(W, digits, kept, pivoting, approximate_spectrum, hint=None):
     return analysis
 
 
-def _refined_fast(scaled, shape, gm, kept, eliminated, Wk, beta_s):
+def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], gm: Sequence[arb], kept: Sequence[int],
+                  eliminated: Sequence[int], Wk: arb_mat, beta_s: arb_mat) -> tuple[arb_mat, arb_mat, arb]:
     """(B, Ws_E - Ws_K B, its Frobenius bound) beyond FAST_DECISIONS_ABOVE columns.
 
     B starts as the midpoint of beta_s. The least-squares refinement (as for small W,
@@ -570,42 +581,26 @@ def _refined_fast(scaled, shape, gm, kept, eliminated, Wk, beta_s):
     balls' radii dominate, no B does better), and kept only if its bound is smaller. Both
     bounds are rigorous for their own exact B, so the smaller one is a valid claim."""
     m, n = shape
-    We = _block(scaled, n, range(m), eliminated)
+    We = block(scaled, n, range(m), eliminated)
     B = _mid(beta_s)
     residual = We - Wk * B
-    tail = _frobenius_upper(residual)
+    tail = frobenius_upper(residual)
     E = _mid(residual)
-    if 4 * _frobenius_upper(E) > tail:
+    if 4 * frobenius_upper(E) > tail:
         Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
         try:
             B1 = _mid(B + Gkk.solve(_mid(Wk.transpose() * E), algorithm="approx"))
         except ZeroDivisionError:
             return B, residual, tail
         other = We - Wk * B1
-        bound = _frobenius_upper(other)
+        bound = frobenius_upper(other)
         if bound < tail:
             return B1, other, bound
     return B, residual, tail
 
 
-def block_beta(Wr, digits, kept, rows, exponents):
-    """beta (unscaled, ``arb_mat``) from the square block of the rows ``rows`` of ``Wr``:
-    ``Ws_RK beta_s = Ws_RE`` solved in ball arithmetic at ``digits``, columns scaled by
-    ``2^exponents`` as in the analysis that chose K and R. For W of rank r = |K| this
-    encloses W's beta (every nonsingular r x r block of W_K gives the same one); the rank
-    is the analysis' claim. ValueError if the block is not proven nonsingular."""
-    with precision(digits):
-        n = Wr.ncols()
-        eliminated = [j for j in range(n) if j not in set(kept)]
-        scaled = _scaled_entries(Wr.entries(), n, exponents)
-        found = _solve_block(scaled, n, list(rows), list(kept), eliminated) if kept else None
-        if kept and found is None:
-            raise ValueError(f"the square block of W is not proven nonsingular at {digits} digits")
-        beta_s = found[0] if kept else arb_mat(0, len(eliminated))
-        return _unscaled(beta_s, kept, eliminated, exponents)
 
-
-def _unscaled(beta_s, kept, eliminated, exponents):
+def unscaled(beta_s: arb_mat, kept: Sequence[int], eliminated: Sequence[int], exponents: Sequence[int]) -> arb_mat:
     """beta = D_K^-1 beta_s D_E entry by entry (powers of two: exact)."""
     two = arb(2)
     values = beta_s.entries()
@@ -616,93 +611,7 @@ def _unscaled(beta_s, kept, eliminated, exponents):
                                    for a, i in enumerate(kept) for b, j in enumerate(eliminated)])
 
 
-def excitation_check(Wc, a):
-    """An independent batch of rows ``Wc`` (W at other states) against the analysis ``a``
-    of W: ``(bound, proven_nonzero, ridge_decades)``.
-
-    - ``bound``: a rigorous upper bound of ``||Wcs_E - Wcs_K B||_F`` (B = ``a.refined``,
-      exact; Wcs scaled with W's exponents). As for the tail bound, Weyl gives
-      ``s_(r+1)([Ws; Wcs]) <= sqrt(tail_bound^2 + bound^2)``, and adding rows never lowers
-      ``s_r``: ``ridge_decades`` is the ridge proven on W and the batch together.
-    - ``proven_nonzero``: entries of ``Wcs_E - Wcs_K beta_s`` whose ball excludes 0. Each
-      proves ``rank([W; Wc]) > r``: if rank W = r, beta_s encloses W's exact null space and
-      the batch leaves it; if rank W > r, r was already only a lower bound.
-
-    A trajectory that does not excite the mechanism gives W a clean ridge at too low a
-    rank (all the missing directions are exact zeros of W); only other states show it.
-    Computed at the analysis' digits.
-    """
-    with precision(a.digits):
-        return _excitation_check(Wc, a)
-
-
-def _excitation_check(Wc, a):
-    if not a.eliminated:
-        return arb(0), 0, math.inf
-    m, n = Wc.nrows(), Wc.ncols()
-    scaled = _scaled_entries(Wc.entries(), n, a.exponents)
-    We = _block(scaled, n, range(m), a.eliminated)
-    if a.kept:
-        Wk = _block(scaled, n, range(m), a.kept)
-        bound = _frobenius_upper(We - Wk * a.refined)
-        E = We - Wk * a.beta_s
-    else:
-        bound, E = _frobenius_upper(We), We
-    nonzero = sum(1 for x in E.entries() if not x.contains(0))
-    combined = arb((a.tail_bound ** 2 + bound ** 2).sqrt().upper())
-    if a.rank == 0 or not a.sigma_r_lower > 0:
-        decades = math.inf if combined == 0 else -math.inf
-    elif combined == 0:
-        decades = math.inf
-    else:
-        decades = log10(a.sigma_r_lower) - log10(combined)
-    return bound, nonzero, decades
-
-
-def tail_singular_values(W, a):
-    """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
-    largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
-    singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
-    Computed at the analysis' digits (E is the analysis' own when W is the matrix analysed)."""
-    with precision(a.digits):
-        return _tail_singular_values(W, a)
-
-
-def _tail_singular_values(W, a):
-    if not a.eliminated:
-        return []
-    source, E = a._residual if a._residual is not None else (None, None)
-    if source is not W:
-        m, n = W.nrows(), W.ncols()
-        scaled = _scaled_entries(W.entries(), n, a.exponents)
-        We = _block(scaled, n, range(m), a.eliminated)
-        E = _mid(We - _block(scaled, n, range(m), a.kept) * a.refined) if a.kept else _mid(We)
-    rows, cols = E.nrows(), E.ncols()
-    values = E.entries()
-    live = [j for j in range(cols) if any(values[i * cols + j] != 0 for i in range(rows))]
-    out = []
-    if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
-        picked = [values[i * cols + j] for i in range(rows) for j in live]
-        a64 = np.array([float(x) for x in picked]).reshape(rows, len(live))
-        exponent = 0
-        biggest64 = float(np.max(np.abs(a64)))
-        if not 1e-280 < biggest64 < 1e280:      # out of float range: scaled by 2^-exponent first
-            biggest = max(abs(x) for x in picked)
-            exponent = int(math.floor(log10(biggest) / math.log10(2)))
-            scale = arb(2) ** (-exponent)
-            a64 = np.array([float(x * scale) for x in picked]).reshape(rows, len(live))
-        out = np.linalg.svd(a64, compute_uv=False)
-        two = arb(2) ** exponent
-        out = [arb(float(v)) * two for v in out] + [arb(0)] * (len(live) - len(out))
-    elif live:
-        Ml = _block(values, cols, range(rows), live)
-        M = Ml.transpose() * Ml
-        out = [abs(e.real.mid()).sqrt() for e in acb_mat(M).eig(algorithm="approx")]
-        out.sort(key=lambda v: -log10(v))
-    return [v.str(6, radius=False) for v in out] + ["0"] * (cols - len(live))
-
-
-def _approximate_singular_values(G, scaled64):
+def _approximate_singular_values(G: arb_mat, scaled64: np.ndarray) -> list[str]:
     """sqrt(|eigenvalues|) of the scaled Gram matrix, largest first, as decimal strings.
 
     ``acb_mat.eig(algorithm="approx")``: no error bounds (the cluster of zero eigenvalues
@@ -719,70 +628,12 @@ def _approximate_singular_values(G, scaled64):
         values = np.linalg.svd(scaled64, compute_uv=False) if m else np.zeros(0)
         return [arb(float(v)).str(12, radius=False) for v in values] + ["0"] * (n - len(values))
     M = acb_mat(G)
-    values = [abs(e.real.mid()).sqrt() for e in M.eig(algorithm="approx")]
-    values.sort(key=lambda v: -log10(v))
-    return [v.str(12, radius=False) for v in values]
+    spectrum = [abs(e.real.mid()).sqrt() for e in M.eig(algorithm="approx")]
+    spectrum.sort(key=lambda v: -log10(v))
+    return [v.str(12, radius=False) for v in spectrum]
 
 
-# ----- digits, agreement, rationals ------------------------------------------------
-def radius_digits(x):
-    """Significant decimal digits a ball proves about its midpoint (inf when exact, 0 when
-    it contains zero)."""
-    if x.rad() == 0:
-        return math.inf
-    if x.contains(0):
-        return 0
-    return max(0, math.floor(log10(x.mid()) - log10(arb(x.rad()))))
-
-
-def agreement_digits(a, b):
-    """Leading decimal digits on which two balls' midpoints agree (relative to ``b``). The
-    difference of the exact midpoints is rounded once, at FLOAT_BITS: enough for an integer."""
-    da, db = a.mid(), b.mid()
-    if da == db:
-        return math.inf
-    if db == 0:
-        return 0
-    with precision(bits=FLOAT_BITS):
-        difference = da - db
-    return max(0, math.floor(log10(db) - log10(difference)))
-
-
-def decimal_string(x, digits):
+def decimal_string(x: arb, digits: int) -> str:
     """The midpoint with ``digits`` significant digits, without the radius."""
     digits = max(1, min(int(digits), 100_000))
     return x.mid().str(digits, radius=False).replace("e+", "e")
-
-
-def recover_rational(x, digits):
-    """The simplest rational agreeing with ``digits`` significant digits of a ball's
-    midpoint (continued fractions, ``Fraction.limit_denominator``), or None.
-
-    Denominators up to about 10^(digits/2) are searched: below that bound a rational is
-    determined uniquely by ``digits`` correct digits.
-    """
-    digits = int(digits)
-    mid = Fraction(x.mid().str(digits + 10, radius=False))
-    if mid == 0:
-        return Fraction(0)
-    bound = 10 ** max(1, (digits - 2) // 2)
-    candidate = mid.limit_denominator(bound)
-    if abs(candidate - mid) <= abs(mid) * Fraction(10) ** (1 - digits):
-        return candidate
-    return None
-
-
-def contains_rational(x, q):
-    """Does the ball ``x`` contain the rational ``q``? Decided exactly, from the ball's
-    exact (binary) midpoint and radius: no precision, no rounding of ``q``."""
-    if not x.is_finite():
-        return not x.mid().is_nan()          # an infinite radius contains every real
-    q = Fraction(q)
-    return abs(q - _dyadic(x.mid())) <= _dyadic(x.rad())
-
-
-def _dyadic(x):
-    """An exact arb (a binary floating-point number) as a Fraction."""
-    man, exp = x.man_exp()
-    man, exp = int(man), int(exp)
-    return Fraction(man * 2 ** exp) if exp >= 0 else Fraction(man, 2 ** -exp)

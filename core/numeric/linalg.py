@@ -2,11 +2,12 @@
 the exact power-of-two column scaling rule and a greedy column choice."""
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 
-def power_of_two_exponents(log2_norms):
+def power_of_two_exponents(log2_norms: Sequence[float | None] | np.ndarray) -> list[int]:
     """The column scaling rule of both dp and vp: column j is divided by 2^e_j with
     ``e_j = round(log2 ||W_j||)`` (0 for a zero column, given as -inf or None). Dividing
     by a power of two is exact in binary, so the scaling itself adds no rounding."""
@@ -19,7 +20,7 @@ def power_of_two_exponents(log2_norms):
 LAPACK_ENTRIES = 200_000
 
 
-def pivoted_qr_columns(a, count):
+def pivoted_qr_columns(a: np.ndarray, count: int) -> list[int]:
     """Indices of ``count`` columns of ``a`` chosen by Householder QR with column pivoting
     (the same greedy choice either way: numpy's loop below, or LAPACK's for large ``a``)."""
     a = np.array(a, dtype=float, copy=True)

@@ -17,6 +17,7 @@ from baseparams import registry
 from baseparams.errors import BaseparamsError, InputError
 from baseparams.io.loader import load_mechanism
 from baseparams.orchestrate.model_checks import model_checks
+from baseparams.solvers.run import run_solver
 
 MODEL = "model"     # the pseudo-solver name of a mechanism's model checks
 
@@ -109,7 +110,7 @@ def run_job(job: Job) -> Outcome:
         reason = solver.applicable(mechanism) if hasattr(solver, "applicable") else None
         if reason is not None:
             return outcome(NOT_APPLICABLE, message=reason)
-        result = solver.solve(mechanism, **dict(job.options))
+        result = run_solver(solver, mechanism, dict(job.options))
         return outcome(OK, result=result.to_json())
     except BaseparamsError as exc:
         return outcome(ERROR, message=str(getattr(exc, "message", exc)))

@@ -12,19 +12,27 @@ A solver is any object registered through the ``baseparams_solvers`` hook that s
   reason it cannot (a sentence for the user), found without solving;
 - ``solve(mechanism, *, progress=None, **options)``: a
   :class:`~baseparams.solvers.result.BaseParameterResult`. ``options`` are keywords named
-  in ``options``; ``progress``, when given, receives one-line messages. A solver raises
-  :class:`NotApplicable` (:func:`require_applicable`) when asked to solve a mechanism it
-  does not take, and :class:`~baseparams.errors.InputError` for bad options.
+  in ``options`` (a solver spells them as typed keyword parameters with the declared
+  defaults); ``progress``, when given, receives one-line messages.
 
-Keyword options (not one dict) keep the library call short:
-``solver.solve(mech, digits=30, recover=False)``.
+The generic checks are not the solver's: :func:`baseparams.solvers.run.run_solver` (the one
+sequence every caller uses) checks the options against the declarations
+(:func:`check_options`: unknown names, types, ranges, the mechanism's bounds), refuses a
+mechanism the solver does not take (:func:`require_applicable`: :class:`NotApplicable`)
+and only then calls ``solve`` with every declared option. ``solve`` itself checks only
+what depends on its own work (dp: a rank above W's row count, known once W is built) and
+raises :class:`~baseparams.errors.InputError` for it.
+
+The library call is ``run_solver("vp", mech, {"digits": 30, "recover": False})``;
+``solver.solve(mech, digits=30, recover=False)`` skips the checks (values known valid).
 """
 
+import builtins
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, NoReturn, Protocol, runtime_checkable
 
 from baseparams.errors import InputError
 from baseparams.model.mechanism import MAX_SAMPLES, Mechanism
@@ -88,8 +96,8 @@ class SolverOption:
     type: type
     default: Any = None
     help: str = ""
-    item: type | None = None
-    choices: tuple = ()
+    item: builtins.type | None = None
+    choices: tuple[str, ...] = ()
     minimum: int | float | None = None
     maximum: int | float | Callable[[Mechanism], int | float] | None = None
     maximum_text: str = ""
@@ -131,9 +139,11 @@ class Solver(Protocol):
     def applicable(self, mechanism: Mechanism) -> str | None:
         """None if this solver takes ``mechanism``, else the reason it does not."""
 
-    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None,
-              **options: Any) -> BaseParameterResult:
-        """The base parameters of ``mechanism``; ``options`` as declared in ``options``."""
+    def solve(self, mechanism: Mechanism, *args: Any, **options: Any) -> BaseParameterResult:
+        """The base parameters of ``mechanism``: called as ``solve(mechanism,
+        progress=..., **options)`` with every option declared in ``options``, checked
+        (``*args: Any, **options: Any`` lets each solver spell its options as typed
+        keyword parameters)."""
 
 
 class NotApplicable(InputError):
@@ -212,11 +222,11 @@ def describe_solver(solver: Solver) -> dict[str, Any]:
 
 
 # ----- values -----------------------------------------------------------------------
-def _fail(solver, option, value, want):
+def _fail(solver: str, option: SolverOption, value: object, want: str) -> NoReturn:
     raise InputError(f"solver {solver!r}: option {option.name!r} must be {want}, got {value!r}")
 
 
-def _checked(solver, option, value, mechanism=None):
+def _checked(solver: str, option: SolverOption, value: Any, mechanism: Mechanism | None = None) -> Any:
     if value is None:
         if option.default is None:
             return None
@@ -255,7 +265,8 @@ def _checked(solver, option, value, mechanism=None):
     return float(value) if kind is float else value
 
 
-def _in_range(solver, option, v, mechanism, shown, each=""):
+def _in_range(solver: str, option: SolverOption, v: int | float, mechanism: Mechanism | None, shown: object,
+              each: str = "") -> None:
     """Refuse a number outside the option's declared range (and any non-finite float)."""
     if isinstance(v, float) and not math.isfinite(v):
         _fail(solver, option, _show(shown), f"a finite number{each}")
@@ -273,7 +284,7 @@ def _in_range(solver, option, v, mechanism, shown, each=""):
         _fail(solver, option, _show(shown), f"at most {high}{each}")
 
 
-def _is_a(value, kind):
+def _is_a(value: object, kind: type) -> bool:
     if kind is int:             # bool is an int subclass, but True is no sample count
         return isinstance(value, int) and not isinstance(value, bool)
     if kind is float:
@@ -281,7 +292,7 @@ def _is_a(value, kind):
     return isinstance(value, kind)
 
 
-def _parse(solver, option, text):
+def _parse(solver: str, option: SolverOption, text: str) -> Any:
     kind = option.type
     if text.lower() in ("none", "auto", "automatic") and option.default is None:
         return None
@@ -297,7 +308,7 @@ def _parse(solver, option, text):
     return _parse_scalar(solver, option, kind, text)
 
 
-def _parse_scalar(solver, option, kind, text):
+def _parse_scalar(solver: str, option: SolverOption, kind: type, text: str) -> Any:
     if kind in (int, float):
         pattern = _INT_TEXT if kind is int else _FLOAT_TEXT
         if not pattern.fullmatch(text) or len(text) > 400:
@@ -310,7 +321,7 @@ def _parse_scalar(solver, option, kind, text):
     return text
 
 
-def _show(value):
+def _show(value: object) -> str:
     if isinstance(value, bool):
         return str(value).lower()
     if isinstance(value, tuple):
@@ -318,9 +329,9 @@ def _show(value):
     return str(value)
 
 
-def _json_range(option):
+def _json_range(option: SolverOption) -> dict[str, Any]:
     """minimum/maximum (a number, or the text of a mechanism-dependent bound) and length."""
-    out = {}
+    out: dict[str, Any] = {}
     if option.minimum is not None:
         out["minimum"] = option.minimum
     if option.maximum is not None:
@@ -330,5 +341,5 @@ def _json_range(option):
     return out
 
 
-def _json_default(value):
+def _json_default(value: object) -> object:
     return list(value) if isinstance(value, tuple) else value

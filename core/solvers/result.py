@@ -18,7 +18,7 @@ Comparing two results (same base parameters?) is :mod:`baseparams.solvers.compar
 """
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
@@ -133,7 +133,7 @@ class Diagnostics(Mapping):
         return len(self.to_json())
 
 
-def _json_decades(x):
+def _json_decades(x: float) -> float | str:
     x = float(x)
     if math.isinf(x):
         return "inf" if x > 0 else "-inf"
@@ -144,39 +144,39 @@ def _json_decades(x):
 class BaseParameterResult:
     mechanism: str
     solver: str
-    parameters: list
+    parameters: list[str]
     rank: int
-    base: list                          # [{"name": "phi_b01", "expression": {param: str}}]
-    eliminated: list
+    base: list[dict[str, Any]]          # [{"name": "phi_b01", "expression": {param: str}}]
+    eliminated: list[str]
     certified: bool = False
     digits: int | None = None
-    singular_values: list | None = None  # decimal strings, largest first
-    geometry: dict = field(default_factory=dict)
-    warnings: list = field(default_factory=list)
+    singular_values: list[str] | None = None  # decimal strings, largest first
+    geometry: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
-    expression_values: list | None = None  # symbolic: [{param: "625/251"}], same layout as base
+    expression_values: list[dict[str, str]] | None = None  # symbolic: [{param: "625/251"}], same layout as base
     rank_is_upper_bound: bool = False
     diagnostics: Diagnostics = field(default_factory=Diagnostics)
-    coefficients: list | None = None    # [{param: Coefficient}], same layout as base
+    coefficients: list[dict[str, Coefficient]] | None = None    # [{param: Coefficient}], same layout as base
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not isinstance(self.diagnostics, Diagnostics):
             self.diagnostics = Diagnostics.from_dict(self.diagnostics or {})
         if self.coefficients is None:
             self.coefficients = coefficient_rows(self.base, lambda p, t: Coefficient.of_text(t, self.geometry))
 
     @property
-    def derivation(self):
+    def derivation(self) -> Any:
         """The symbolic derivation (``diagnostics.derivation``), or None."""
         return self.diagnostics.derivation
 
     @property
-    def kept(self):
+    def kept(self) -> list[str]:
         return [p for p in self.parameters if p not in self.eliminated
                 and any(p in b["expression"] and _is_one(b["expression"][p]) for b in self.base)]
 
-    def to_json(self):
-        out = {
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
             "mechanism": self.mechanism, "solver": self.solver,
             "parameters": list(self.parameters), "rank": self.rank,
             "base": [{"name": b["name"], "expression": dict(b["expression"])} for b in self.base],
@@ -194,7 +194,7 @@ class BaseParameterResult:
         out["elapsed_s"] = round(self.elapsed_s, 3)
         return out
 
-    def to_text(self, max_digits=8):
+    def to_text(self, max_digits: int = 8) -> str:
         lines = [f"{self.mechanism}: {self.solver} solver, {len(self.parameters)} parameters, "
                  f"rank {self.rank}" + (" (certified)" if self.certified else "")
                  + (" (upper bound)" if self.rank_is_upper_bound else "")
@@ -208,7 +208,7 @@ class BaseParameterResult:
         lines.append(f"  elapsed: {self.elapsed_s:.2f} s")
         return "\n".join(lines)
 
-    def coefficient_matrix(self, values=False):
+    def coefficient_matrix(self, values: bool = False) -> list[list[Fraction | mpmath.mpf]]:
         """Rows of coefficients over ``parameters``, parsed from the text: Fractions when exact
         (or exact decimals), else mpmath numbers. ``values``: the symbolic solver's exact
         values instead of its expressions."""
@@ -216,12 +216,13 @@ class BaseParameterResult:
         return [[parse_coefficient(row.get(p, "0"), self.geometry) for p in self.parameters] for row in rows]
 
 
-def coefficient_rows(base: list, entry) -> list[dict[str, Coefficient]]:
+def coefficient_rows(base: list[dict[str, Any]],
+                     entry: Callable[[str, str], Coefficient]) -> list[dict[str, Coefficient]]:
     """``[{parameter: Coefficient}]`` in the layout of ``base``: a row's first entry (the
     parameter it keeps, "1") is exactly 1, every other is ``entry(parameter, text)``."""
     rows = []
     for b in base:
-        row = {}
+        row: dict[str, Coefficient] = {}
         for k, (param, text) in enumerate(b["expression"].items()):
             row[param] = (Coefficient.of_exact(Fraction(1), text) if k == 0 and _is_one(text)
                           else entry(param, text))
@@ -235,11 +236,11 @@ def significant_digits(text: str) -> int:
     return max(1, len(mantissa))
 
 
-def _is_one(text):
+def _is_one(text: object) -> bool:
     return str(text).strip() == "1"
 
 
-def parse_coefficient(text, geometry=None):
+def parse_coefficient(text: object, geometry: Mapping[str, str] | None = None) -> Fraction | mpmath.mpf:
     """A coefficient string -> Fraction (exact rational or exact decimal) or sympy-evaluated Fraction."""
     text = str(text).strip()
     try:
@@ -256,23 +257,23 @@ def parse_coefficient(text, geometry=None):
         return mpmath.mpf(str(sympy.N(expr, 50)))
 
 
-def format_number(value, max_digits=8):
-    """Short decimal for text tables."""
-    if isinstance(value, Fraction):
-        if value.denominator == 1:
-            return str(value.numerator)
-        value = mpmath.mpf(value.numerator) / value.denominator
-    return mpmath.nstr(mpmath.mpf(value), max_digits)
+def format_number(value: Fraction | mpmath.mpf | float, max_digits: int = 8) -> str:
+    """Short decimal for text tables (at its own precision: mpmath's global one is not read)."""
+    if isinstance(value, Fraction) and value.denominator == 1:
+        return str(value.numerator)
+    with mpmath.workdps(max(15, max_digits + 5)):
+        if isinstance(value, Fraction):
+            value = mpmath.mpf(value.numerator) / value.denominator
+        return mpmath.nstr(mpmath.mpf(value), max_digits)
 
 
-def format_expression(expression, max_digits=8):
+def format_expression(expression: Mapping[str, object], max_digits: int = 8) -> str:
     parts = []
     for param, coeff in expression.items():
         # symbolic coefficients (geometry symbols) are printed as they are, never evaluated
         symbolic = isinstance(coeff, str) and not _is_plain_number(coeff)
-        value = None if symbolic else parse_coefficient(coeff)
         if not symbolic:
-            num = value
+            num = parse_coefficient(coeff)
             sign = "-" if num < 0 else "+"
             mag = abs(num)
             text = param if mag == 1 else f"{format_number(mag, max_digits)}*{param}"
@@ -288,7 +289,7 @@ def format_expression(expression, max_digits=8):
     return out
 
 
-def _is_plain_number(text):
+def _is_plain_number(text: object) -> bool:
     try:
         Fraction(str(text))
         return True

@@ -4,13 +4,14 @@ every Gautier-type solver words the same way."""
 
 from collections.abc import Callable, Sequence
 from fractions import Fraction
+from typing import Any
 
 from baseparams.model.mechanism import Mechanism
 from baseparams.solvers.result import Coefficient, coefficient_rows
 
 
 def base_rows(parameters: Sequence[str], kept: Sequence[int], eliminated: Sequence[int],
-              coefficient: Callable[[int, int], str | None]) -> list[dict]:
+              coefficient: Callable[[int, int], str | None]) -> list[dict[str, Any]]:
     """[{"name": "phi_b01", "expression": {kept: "1", eliminated: coeff, ...}}] in kept order.
 
     ``coefficient(a, b)``: the string for row a (kept[a]) and column b (eliminated[b]), or
@@ -28,17 +29,18 @@ def base_rows(parameters: Sequence[str], kept: Sequence[int], eliminated: Sequen
     return rows
 
 
-def decimal_coefficients(base: list, rationals: list | None = None) -> list[dict[str, Coefficient]]:
+def decimal_coefficients(base: list[dict[str, Any]],
+                         rationals: list[dict[str, Fraction]] | None = None) -> list[dict[str, Coefficient]]:
     """Coefficient data of rows printed as decimals with exactly their trusted digits (dp,
     vp). ``rationals``: ``[{parameter: Fraction}]`` in the same layout, exact values
     recovered for the printed decimals (vp's rational recovery)."""
-    def entry(a):
+    def entry(a: int) -> Callable[[str, str], Coefficient]:
         return lambda param, text: Coefficient.of_decimal(
             text, None if rationals is None else rationals[a].get(param))
     return [coefficient_rows([b], entry(a))[0] for a, b in enumerate(base)]
 
 
-def exact_coefficients(base: list) -> list[dict[str, Coefficient]]:
+def exact_coefficients(base: list[dict[str, Any]]) -> list[dict[str, Coefficient]]:
     """Coefficient data of rows printed as exact rationals (``exact_text``: "0.6", "625/251")."""
     return coefficient_rows(base, lambda param, text: Coefficient.of_exact(Fraction(text), text))
 
@@ -48,7 +50,7 @@ def say(progress: Callable[[str], None] | None, message: str) -> None:
         progress(message)
 
 
-def untrusted_warning(items: Sequence) -> str:
+def untrusted_warning(items: Sequence[object]) -> str:
     return (f"{len(items)} nonzero coefficients have no trusted digit: omitted from the base "
             f"parameter expressions and listed in diagnostics.untrusted")
 

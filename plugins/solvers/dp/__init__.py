@@ -4,10 +4,11 @@ Registered through the ``baseparams_solvers`` hook by the entry point ``builtin_
 """
 
 from baseparams.hookspecs import hookimpl
+from baseparams.solvers.protocol import Solver
 
 from .solver import DoublePrecisionSolver
 
 
 @hookimpl
-def baseparams_solvers():
+def baseparams_solvers() -> list[Solver]:
     return [DoublePrecisionSolver()]

@@ -44,12 +44,14 @@ Choices made here, all reported in the result's diagnostics:
   :class:`baseparams.errors.KinematicsError` saying where, never numpy's LinAlgError.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from baseparams.errors import KinematicsError
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
+from baseparams.numeric.rank import numerical_rank
 
 RIDGE_RATIO = 1e3
 EPS = np.finfo(float).eps
@@ -76,7 +78,8 @@ class DPResult:
     lifted_columns: list = field(default_factory=list)   # the columns that carry them most
 
 
-def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> DPResult:
+def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
+               columns: Sequence[str] | None = None) -> DPResult:
     """Gautier's method on a float64 observation matrix ``W`` (rows x parameters).
 
     ``rank``: force the rank (to study what DP gives at a rank known from elsewhere);
@@ -101,7 +104,7 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
     s_full[:len(s)] = s
     s_max = s_full[0] if n else 0.0
     tol = max(rows, n) * EPS * s_max
-    r_tol = int(np.sum(s_full > tol))
+    r_tol = numerical_rank(singular_values=s_full, tol=max(rows, n) * EPS)     # s_i > tol
     lifted = _lifted_by_scaling(W, s_full, vt, s_col, r_tol) if scale and rank is None else 0
     warnings = []
     lifted_columns = []
@@ -165,7 +168,7 @@ def dp_gautier(W, scale: bool = True, rank: int | None = None, columns=None) -> 
                     clear, err, cond22, warnings, lifted, lifted_columns)
 
 
-def _lifted_by_scaling(W, s, vt, s_col, r_tol) -> int:
+def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.ndarray, r_tol: int) -> int:
     """How many of the trailing singular directions counted in the scaled W are below the
     unscaled tolerance in the parameters' own units (see the module doc)."""
     rows, n = W.shape
@@ -188,7 +191,7 @@ def _lifted_by_scaling(W, s, vt, s_col, r_tol) -> int:
     return lifted
 
 
-def _check_finite(W: np.ndarray, columns) -> None:
+def _check_finite(W: np.ndarray, columns: Sequence[str] | None) -> None:
     """Refuse a W with NaN or infinite entries, naming the columns (parameters) and rows hit."""
     finite = np.isfinite(W)
     if finite.all():
@@ -211,7 +214,7 @@ def _column_norms(W: np.ndarray) -> np.ndarray:
         return largest * np.linalg.norm(W / safe, axis=0)
 
 
-def _singular_values_and_vt(Ws: np.ndarray):
+def _singular_values_and_vt(Ws: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Singular values and the full n x n V^T; economy SVD when W is tall (see the module doc)."""
     rows, n = Ws.shape
     try:

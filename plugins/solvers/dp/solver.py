@@ -4,6 +4,7 @@ first-order error estimate trusts."""
 
 import math
 import time
+from typing import Any, cast
 
 import numpy as np
 from flint import arb
@@ -14,17 +15,18 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
 from baseparams.numeric.backends import Float64
 from baseparams.numeric.certify import decimal_string
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, parameter_count, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import (MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
+                                         parameter_count)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
-from .gautier import EPS, dp_gautier
+from .gautier import EPS, DPResult, dp_gautier
 
 CHECK_SEED = 7919          # seed of the independent excitation batch
 
 
-def _g(x, digits=3):
+def _g(x: float, digits: int = 3) -> str:
     return f"{x:.{digits}g}"
 
 
@@ -35,7 +37,7 @@ class DoublePrecisionSolver:
     description = ("Gautier's SVD method in double precision (numpy): rank by tolerance, "
                    "with ridge diagnostics and warnings")
     capabilities = Capabilities(closed_loops=True)
-    options = (
+    options: tuple[SolverOption, ...] = (
         SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
                      "mechanism file's)", minimum=2, maximum=MAX_SAMPLES),
         SolverOption("scale", bool, True, "scale W's columns by powers of two near their norms"),
@@ -43,25 +45,20 @@ class DoublePrecisionSolver:
                      "the excitation check is skipped)", minimum=1, maximum=parameter_count,
                      maximum_text="the number of parameters"),
         SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch", minimum=0, maximum=MAX_SEED),
-        SolverOption("digits", int, None, "ignored (dp always works in double precision); "
-                     "a warning says so", minimum=10, maximum=MAX_DIGITS),
     )
 
-    def applicable(self, mechanism):
+    def applicable(self, mechanism: Mechanism) -> str | None:
         """Any mechanism: the SVD needs nothing of the geometry."""
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """The base parameters in float64; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        samples, scale, rank, seed = (chosen[k] for k in ("samples", "scale", "rank", "seed"))
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, samples: int | None = None,
+              scale: bool = True, rank: int | None = None, seed: int = CHECK_SEED) -> BaseParameterResult:
+        """The base parameters in float64; the options as declared in ``options`` (checked
+        by :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
-        warnings = []
-        if chosen["digits"]:
-            warnings.append("dp ignores --digits: it always works in double precision")
+        warnings: list[str] = []
         trajectory = Trajectory.default(mechanism, samples=samples)
-        W, info = observation_matrix(mechanism, Float64(), trajectory)
+        W, info = cast(tuple[np.ndarray, dict[str, Any]], observation_matrix(mechanism, Float64(), trajectory))
         say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
         if rank is not None and rank > min(W.shape):
             # W's row count depends on the samples: known only now (the option's declared
@@ -70,7 +67,7 @@ class DoublePrecisionSolver:
                              f"{W.shape[0]} x {W.shape[1]}: its rank cannot be higher), got {rank}")
         res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters)
         check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
-        if check.get("raised"):
+        if check.get("raised") and stacked is not None and both is not None:
             warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
             W, res = stacked, both
         elif check.get("error"):
@@ -87,7 +84,7 @@ class DoublePrecisionSolver:
         most = int(min(16, math.floor(-math.log10(noise))))
         dropped, largest_dropped, untrusted = 0, 0.0, []
 
-        def coefficient(a, b):
+        def coefficient(a: int, b: int) -> str | None:
             nonlocal dropped, largest_dropped
             value, scaled = float(res.beta[a, b]), abs(float(res.beta_s[a, b]))
             if value == 0.0:
@@ -156,13 +153,14 @@ class DoublePrecisionSolver:
             coefficients=decimal_coefficients(base))
 
     @staticmethod
-    def _excitation_check(mechanism, trajectory, W, res, scale, rank, seed):
+    def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, res: DPResult, scale: bool,
+                          rank: int | None, seed: int) -> tuple[dict[str, Any], np.ndarray | None, DPResult | None]:
         """dp on W stacked with an independent random batch: (diagnostics, stacked W, its DPResult)."""
         if rank is not None:
             return {"skipped": "rank forced"}, None, None
         batch = random_batch(mechanism, trajectory, seed)
         try:
-            rows, _ = observation_matrix(mechanism, Float64(), batch)
+            rows = cast(np.ndarray, observation_matrix(mechanism, Float64(), cast(Any, batch))[0])
         except KinematicsError as exc:
             return {"seed": seed, "states": batch.states, "error": str(exc)}, None, None
         stacked = np.vstack([W, rows])
@@ -171,7 +169,7 @@ class DoublePrecisionSolver:
                  "rank_with_batch": both.rank, "raised": both.rank > res.rank}, stacked, both)
 
 
-def _dp_check_line(check):
+def _dp_check_line(check: dict[str, Any]) -> str:
     if check.get("skipped") or check.get("error"):
         return f"excitation check: not done ({check.get('skipped') or check.get('error')})"
     if check["raised"]:

@@ -1,19 +1,20 @@
 """The ``exact`` solver: W over the rationals at random rational states of an open chain,
-its exact rank and rref (:mod:`baseparams.dynamics.exact_states`)."""
+its exact rank and rref (:mod:`baseparams.plugins.solvers.exact.states`)."""
 
 import math
 import time
 
-from baseparams.dynamics.exact_states import exact_observation_matrix, rref_base
+from .states import exact_observation_matrix, rref_base
 from baseparams.numeric.backends import Exact
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import (base_rows, check_memory, exact_coefficients, say, seconds_text,
                                         size_text)
 
+SEED = 2024               # seed of the random rational states
 EXACT_ROUNDS = 6           # independent batches before the rank is declared unsettled
 
 
@@ -22,7 +23,7 @@ PER_BODY_BYTES = 32         # (measured: pendulum ~100 B, 6-body chain ~250 B an
 SECONDS_PER_STATE = 7e-5    # x bodies^2 (measured: pendulum 0.07 ms, 6-body chain 2.8 ms a state)
 
 
-def exact_cost(mechanism, states: int) -> tuple[float, float]:
+def exact_cost(mechanism: Mechanism, states: int) -> tuple[float, float]:
     """(bytes, seconds) that W over the rationals at ``states`` states should take: printed
     up front, and the bytes checked against BASEPARAMS_MAX_MEMORY before any is spent."""
     f = max(1, len(mechanism.independent or mechanism.coordinates))
@@ -38,15 +39,13 @@ class ExactSolver:
     description = ("exact rational arithmetic (fmpq) at random rational states: exact rank and "
                    "beta by rref; open chains with rational geometry only")
     capabilities = Capabilities(needs_rational_geometry=True, certifies=True, exact_coefficients=True)
-    options = (
+    options: tuple[SolverOption, ...] = (
         SolverOption("samples", int, None, "random rational states of the first batch (default: "
                      "enough for 1.5 rows per parameter)", minimum=1, maximum=MAX_SAMPLES),
-        SolverOption("seed", int, 2024, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
-        SolverOption("digits", int, None, "ignored (the arithmetic is exact); a warning says so",
-                     minimum=10, maximum=MAX_DIGITS),
+        SolverOption("seed", int, SEED, "seed of the random rational states", minimum=0, maximum=MAX_SEED),
     )
 
-    def applicable(self, mechanism):
+    def applicable(self, mechanism: Mechanism) -> str | None:
         """An open chain whose kinematics stays rational at rational states: refused for a
         closed loop (algebraic dependent coordinates) or irrational geometry, found by
         evaluating one random state."""
@@ -56,15 +55,12 @@ class ExactSolver:
             return exc.reason
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """Exact rank and beta; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        samples, seed = chosen["samples"], chosen["seed"]
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, samples: int | None = None,
+              seed: int = SEED) -> BaseParameterResult:
+        """Exact rank and beta; the options as declared in ``options`` (checked by
+        :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
-        warnings = []
-        if chosen["digits"]:
-            warnings.append("exact ignores --digits: its arithmetic is exact (rationals)")
+        warnings: list[str] = []
         params = mechanism.parameters
         f = max(1, len(mechanism.independent or mechanism.coordinates))
         n = len(params)

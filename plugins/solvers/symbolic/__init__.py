@@ -9,10 +9,11 @@ derivation that :func:`baseparams.cli.report.render` prints (text, Markdown, LaT
 """
 
 from baseparams.hookspecs import hookimpl
+from baseparams.solvers.protocol import Solver
 
 from .solver import SymbolicSolver
 
 
 @hookimpl
-def baseparams_solvers():
+def baseparams_solvers() -> list[Solver]:
     return [SymbolicSolver()]

@@ -29,14 +29,18 @@ across joints use the same states: :mod:`baseparams.plugins.solvers.symbolic.sam
 import random
 import weakref
 from dataclasses import dataclass, field
+from collections.abc import Sequence
+from typing import Any
 from fractions import Fraction
 
 import mpmath
 import numpy as np
 import sympy
-from flint import fmpq, fmpq_mat
+from flint import arb, fmpq_mat
 
+from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric.rank import numerical_rank, to_fmpq
 from baseparams.dynamics.evaluator import Evaluator, independent_rows
 from baseparams.dynamics.observation import RationalStates, evaluate_states
 from baseparams.errors import InputError
@@ -45,7 +49,8 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import (INERTIA_KINDS, TENSOR_INDEX, Generator, as_vector, dipole_params,
                         monopole_params, quadrupole_params, symbolic_frame)
 
-NULL_TOL = mpmath.mpf(10) ** -14      # relative size of a null singular value / residual
+with mpmath.workprec(53):              # a fixed constant, whatever precision is current at import
+    NULL_TOL = mpmath.mpf(10) ** -14  # relative size of a null singular value / residual
 INDEPENDENCE_TOL = 1e-10              # relative norm left after projecting out a basis
 
 
@@ -60,7 +65,7 @@ class BodyMotion:
     generators: list = field(default_factory=list)
 
     @property
-    def motion(self):
+    def motion(self) -> str:
         if self.omega_rank == 0:
             return "translation" if not self.rest_points else "at rest"
         if self.omega_rank == 1:
@@ -70,12 +75,12 @@ class BodyMotion:
         return "general"
 
     @property
-    def missing(self):
+    def missing(self) -> int:
         return self.null_dimension - len(self.generators)
 
 
 # ----- random states ---------------------------------------------------------------------
-def random_states(mechanism, count=12, digits=30, seed=1):
+def random_states(mechanism: Mechanism, count: int = 12, digits: int = 30, seed: int = 1) -> tuple[list, Arb]:
     """``count`` random states (Arb samples) on the constraint manifold.
 
     Positions: the default trajectory's positions at random times (so closed loops close
@@ -101,22 +106,23 @@ def random_states(mechanism, count=12, digits=30, seed=1):
         zs = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
     zds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
     zdds = [[Fraction(rng.randint(-1000, 1000), 1000) for _ in range(f)] for _ in range(count)]
-    guesses = [None] * count
+    guesses: list[Any] = [None] * count
     if mechanism.loops:
         fl = Evaluator(mechanism, Float64())
         zarr = [np.array([float(zs[k][j]) for k in range(count)]) for j in range(f)]
         q = fl.assemble(zarr, where="random states: ")
         guesses = [[Fraction(float(np.atleast_1d(v)[k])) for v in q] for k in range(count)]
     backend = Arb(digits)
-    states = RationalStates(*(tuple(map(tuple, v)) for v in (zs, zds, zdds)),
-                            start=tuple(guesses) if mechanism.loops else None, name="random state")
+    z, zd, zdd = (tuple(map(tuple, v)) for v in (zs, zds, zdds))
+    states: Any = RationalStates(z, zd, zdd, start=tuple(guesses) if mechanism.loops else None, name="random state")
     return evaluate_states(mechanism, backend, states, certify=False), backend
 
 
-def to_mpf(x):
-    """An arb ball's midpoint (or any real number) as an mpmath number."""
-    if hasattr(x, "mid"):
-        return mpmath.mpf(x.mid().str(mpmath.mp.dps + 5, radius=False))
+def to_mpf(x: arb | float | int | Fraction, dps: int) -> mpmath.mpf:
+    """An arb ball's midpoint (or any real number) as an mpmath number, read to ``dps``
+    digits and 5 more (call inside ``mpmath.workdps(dps)``)."""
+    if isinstance(x, arb):
+        return mpmath.mpf(x.mid().str(dps + 5, radius=False))
     return mpmath.mpf(x)
 
 
@@ -128,130 +134,46 @@ class Rows(list):
 
     _exact = None
 
-    def exact(self):
+    def exact(self) -> fmpq_mat:
         if self._exact is None:
             self._exact = exact_matrix(self)
         return self._exact
 
 
-def to_fmpq(x) -> fmpq:
-    """An mpmath number, int or Fraction as the exact rational it is (an mpf is m 2^e)."""
-    if isinstance(x, int):
-        return fmpq(x)
-    if isinstance(x, Fraction):
-        return fmpq(x.numerator, x.denominator)
-    sign, man, exp, _ = mpmath.mpf(x)._mpf_
-    if not man:
-        if exp:
-            raise ValueError(f"{x} is not a finite number")
-        return fmpq(0)
-    man = -man if sign else man
-    return fmpq(man << exp) if exp >= 0 else fmpq(man, 1 << -exp)
-
-
-def exact_matrix(rows) -> fmpq_mat:
+def exact_matrix(rows: Sequence[Sequence[mpmath.mpf]]) -> fmpq_mat:
     if not rows:
         return fmpq_mat(0, 0)
     return fmpq_mat(len(rows), len(rows[0]), [to_fmpq(v) for row in rows for v in row])
 
 
-def _normalized_rows(rows):
-    """Rows scaled to unit max-norm; rows that are zero to working precision are dropped."""
+def _normalized_rows(rows: Sequence[Sequence[mpmath.mpf]], dps: int) -> Rows:
+    """Rows scaled to unit max-norm; rows that are zero at ``dps`` digits are dropped."""
     peaks = [max(abs(v) for v in row) for row in rows]
     scale = max(peaks, default=mpmath.mpf(0))
     if scale == 0:
         return Rows()
     out = Rows()
-    floor = scale * mpmath.mpf(10) ** (-(mpmath.mp.dps - 8))
+    floor = scale * mpmath.mpf(10) ** (-(dps - 8))
     for row, m in zip(rows, peaks):
         if m > floor:
             out.append([v / m for v in row])
     return out
 
 
-def numeric_rank(rows, tol=NULL_TOL):
-    """The number of singular values of ``rows`` above ``tol`` times the largest.
-
-    Decided in exact arithmetic on the Gram matrix when the margin is clear
-    (:func:`pivot_rank`, the usual case: a few ms), else by mpmath's SVD (0.1-0.2 s)."""
-    if not rows:
-        return 0
-    count = pivot_rank(rows, tol)
-    return svd_rank(rows, tol) if count is None else count
-
-
-def svd_rank(rows, tol=NULL_TOL):
-    s = mpmath.svd_r(mpmath.matrix(rows), compute_uv=False)
-    s = [abs(x) for x in s]
-    top = max(s)
-    return sum(1 for x in s if x > tol * top) if top > 0 else 0
-
-
-def pivot_rank(rows, tol=NULL_TOL):
-    """The SVD's count of singular values above ``tol`` s_max, decided in exact rational
-    arithmetic (``rows`` taken as the exact rationals they are), or None when the margin
-    is too thin to be sure of agreeing with the SVD.
-
-    G = A^T A, LDL^T with complete pivoting (largest remaining diagonal first) until a
-    pivot d < tol^2 d_max / (100 n), d_max the largest diagonal entry (d_max <= s_max^2):
-
-    - every singular value from there on is below tol s_max / 10 (the remaining Schur
-      complement S has s^2 <= trace S <= n d);
-    - for the r pivots kept, the principal block G_KK bounds s_r^2 >= lambda_min(G_KK)
-      (interlacing) >= 1 / ||G_KK^-1||_F (exact inverse): the count is returned only if
-      that is >= 100 tol^2 trace G >= 100 tol^2 s_max^2, i.e. s_r >= 10 tol s_max.
-
-    Either way the count is the SVD's, with a margin of 10 in s."""
-    a = rows.exact() if isinstance(rows, Rows) else exact_matrix(rows)
-    n = a.ncols()
-    g = a.transpose() * a
-    G = [[g[i, j] for j in range(n)] for i in range(n)]
-    trace = sum((G[i][i] for i in range(n)), fmpq(0))
-    dmax = max((G[i][i] for i in range(n)), default=fmpq(0))
-    if dmax == 0:
-        return 0
-    tol2 = to_fmpq(tol) ** 2
-    low = tol2 * dmax / (100 * n)
-    open_, kept = list(range(n)), []
-    while open_:
-        j = max(open_, key=lambda k: G[k][k])
-        d = G[j][j]
-        if d < low:
-            break
-        open_.remove(j)
-        kept.append(j)
-        for i in open_:
-            f = G[i][j] / d
-            if f:
-                row_i, row_j = G[i], G[j]
-                for k in open_:
-                    row_i[k] -= f * row_j[k]
-    if not kept:
-        return 0
-    try:
-        inverse = fmpq_mat(len(kept), len(kept), [g[i, j] for i in kept for j in kept]).inv()
-    except ZeroDivisionError:
-        return None
-    flat = fmpq_mat(1, len(kept) ** 2, inverse.entries())
-    frobenius2 = (flat * flat.transpose())[0, 0]
-    bound = 100 * tol2 * trace
-    return len(kept) if bound * bound * frobenius2 <= 1 else None
-
-
-def null_basis(rows, ncols, tol=NULL_TOL):
+def null_basis(rows: Sequence[Sequence[mpmath.mpf]], ncols: int, tol: mpmath.mpf = NULL_TOL) -> list[list[mpmath.mpf]]:
     """Orthonormal basis (list of vectors) of the numeric null space of ``rows``."""
     if not rows:
         return [[mpmath.mpf(int(i == j)) for i in range(ncols)] for j in range(ncols)]
     a = mpmath.matrix(rows)
     if a.rows < ncols:
-        a = mpmath.matrix(rows + [[0] * ncols] * (ncols - a.rows))
+        a = mpmath.matrix(list(rows) + [[0] * ncols] * (ncols - a.rows))
     _, s, v = mpmath.svd_r(a)
     top = max(abs(x) for x in s) or 1
     return [[v[k, i] for i in range(ncols)] for k in range(ncols)
             if k >= len(s) or abs(s[k]) <= tol * top]
 
 
-def residual(rows, n):
+def residual(rows: Sequence[Sequence[mpmath.mpf]], n: Sequence[mpmath.mpf]) -> mpmath.mpf:
     """max |row . n| / |n| over ``rows`` (each scaled to unit max-norm): how far n is from null.
     The dot products are exact (rationals, in C), then rounded once to working precision."""
     norm = mpmath.sqrt(sum(x * x for x in n))
@@ -263,7 +185,7 @@ def residual(rows, n):
     return mpmath.mpf(int(top.p)) / int(top.q) / norm
 
 
-def independent(vectors):
+def independent(vectors: Sequence[Sequence[Any]]) -> list[int]:
     """Indices of the vectors independent of the earlier ones, in order (greedy
     Gram-Schmidt on unit vectors, so the tolerance is relative: a candidate is dependent
     when less than ``INDEPENDENCE_TOL`` of it is left). Float64 is enough: the vectors
@@ -277,8 +199,9 @@ def independent(vectors):
 
 
 # ----- exact candidates ------------------------------------------------------------------
-def to_number(expr, subs):
-    """An exact expression at the geometry ``subs``, as an mpmath number (working precision).
+def to_number(expr: object, subs: dict, dps: int) -> mpmath.mpf:
+    """An exact expression at the geometry ``subs``, as an mpmath number to ``dps`` digits
+    (call inside ``mpmath.workdps(dps)``).
     A rational (int, Fraction, sympy Rational: most entries) is divided out directly,
     without sympy's substitution and evaluation."""
     if isinstance(expr, int):
@@ -287,13 +210,13 @@ def to_number(expr, subs):
         return mpmath.mpf(expr.numerator) / expr.denominator
     if isinstance(expr, sympy.Rational):
         return mpmath.mpf(int(expr.p)) / int(expr.q)
-    return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), mpmath.mp.dps + 5))
+    return mpmath.mpf(sympy.N(sympy.sympify(expr).subs(subs), dps + 5))
 
 
-_CANDIDATES = weakref.WeakKeyDictionary()      # mechanism -> {label: (points, dirs)}
+_CANDIDATES: weakref.WeakKeyDictionary[Mechanism, dict[int, tuple[tuple, tuple]]] = weakref.WeakKeyDictionary()
 
 
-def body_candidates(mechanism, label):
+def body_candidates(mechanism: Mechanism, label: int) -> tuple[tuple, tuple]:
     """Exact candidate points and unit directions of a body (body axes), as tuples: computed
     once per mechanism and body (the body conditions and every sampled transfer across the
     body's joints ask for them; a Mechanism is immutable)."""
@@ -304,7 +227,7 @@ def body_candidates(mechanism, label):
     return known[label]
 
 
-def _body_candidates(mechanism, label):
+def _body_candidates(mechanism: Mechanism, label: int) -> tuple[list, list]:
     """Exact candidate points and unit directions of a body (body axes).
 
     Points: the origin and the body's joint points. Directions: the body axes, its joint
@@ -331,7 +254,7 @@ def _body_candidates(mechanism, label):
     return points, dirs
 
 
-def same_rotation(mechanism, label: int) -> list:
+def same_rotation(mechanism: Mechanism, label: int) -> list:
     """[(body, M)]: the bodies that always turn with ``label`` (through joints whose motions
     are all translations), with M the exact rotation from that body's axes to ``label``'s
     (``label`` itself first, M = 1). Ground is left out: its directions are not the body's."""
@@ -360,17 +283,20 @@ def same_rotation(mechanism, label: int) -> list:
     return list(found.items())
 
 
-def dedupe(items, subs, directions: bool = False) -> list:
+def dedupe(items: list, subs: dict, dps: int, directions: bool = False) -> list:
     """(name, exact vector, numeric vector) for the items whose vector (or, for
     ``directions``, its line) at the geometry ``subs`` differs from every earlier one.
 
-    Duplicates are decided at working precision (1e-20); a float64 copy of the keys only
+    Numbers at ``dps`` digits (call inside ``mpmath.workdps(dps)``). Duplicates are
+    decided at that precision (1e-20); a float64 copy of the keys only
     spares that comparison for the pairs it shows far apart (by more than 1e-8, a thousand
     million times float64's error), so the decisions are the working-precision ones."""
-    out, seen, seen_float = [], [], []
+    out: list[tuple[str, Any, list[mpmath.mpf]]] = []
+    seen: list[list[mpmath.mpf]] = []
+    seen_float: list[np.ndarray] = []
     tiny = mpmath.mpf(10) ** -20
     for name, vec in items:
-        num = [to_number(c, subs) for c in vec]
+        num = [to_number(c, subs, dps) for c in vec]
         key = num
         if directions:
             norm = mpmath.sqrt(sum(x * x for x in num))
@@ -403,10 +329,10 @@ def dedupe(items, subs, directions: bool = False) -> list:
     return out
 
 
-def _quadrupole_family(span, span_num):
+def _quadrupole_family(span: Sequence[Sequence[Any]], span_num: Sequence[Sequence[mpmath.mpf]]) -> list[tuple[list, int]]:
     """Exact symmetric tensors Q (six entries) with s_a^T Q s_b = 0 for a basis s of the span,
     and for each the entry it is designated to eliminate (a free variable)."""
-    def coeffs(a, b):
+    def coeffs(a: Sequence[Any], b: Sequence[Any]) -> list[Any]:
         row = []
         for i, j in TENSOR_INDEX:
             row.append(a[i] * b[i] if i == j else a[i] * b[j] + a[j] * b[i])
@@ -433,49 +359,52 @@ def _quadrupole_family(span, span_num):
     return out
 
 
-def lagrangian_forms(states):
-    """Per state: (T form, V form, {body: rotation rows}, {body: omega}) as mpmath numbers."""
+def lagrangian_forms(states: list, dps: int) -> list:
+    """Per state: (T form, V form, {body: rotation rows}, {body: omega}) as mpmath numbers
+    to ``dps`` digits (call inside ``mpmath.workdps(dps)``)."""
     out = []
     for sample in states:
         t_form, v_form = sample.energies()
-        rots = {b: [[to_mpf(x) for x in row] for row in st.rot] for b, st in sample.states.items() if b}
-        omegas = {b: [to_mpf(x) for x in st.w] for b, st in sample.states.items() if b}
-        out.append(([to_mpf(x) for x in t_form], [to_mpf(x) for x in v_form], rots, omegas))
+        rots = {b: [[to_mpf(x, dps) for x in row] for row in st.rot] for b, st in sample.states.items() if b}
+        omegas = {b: [to_mpf(x, dps) for x in st.w] for b, st in sample.states.items() if b}
+        out.append(([to_mpf(x, dps) for x in t_form], [to_mpf(x, dps) for x in v_form], rots, omegas))
     return out
 
 
-def lagrangian_rows(mechanism, labels, forms):
+def lagrangian_rows(mechanism: Mechanism, labels: list[int], forms: list, dps: int) -> Rows:
     """Rows whose common null space holds the parameter directions of ``labels`` without
-    effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized."""
-    cols = []
+    effect: ``T(s)`` and ``V(s) - V(s_0)`` restricted to those bodies, normalized (the
+    forms' ``dps`` digits)."""
+    cols: list[int] = []
     for label in labels:
         i = mechanism.body_labels.index(label)
         cols.extend(range(10 * i, 10 * i + 10))
     t_rows = [[t[c] for c in cols] for t, _, _, _ in forms]
     v_rows = [[v[c] for c in cols] for _, v, _, _ in forms]
     rows = t_rows + [[a - b for a, b in zip(r, v_rows[0])] for r in v_rows[1:]]
-    return _normalized_rows(rows)
+    return _normalized_rows(rows, dps)
 
 
-def analyse_body(mechanism, label, forms):
-    """Classify one body's motion from sampled states and build its exact generators."""
-    rows = lagrangian_rows(mechanism, [label], forms)
+def analyse_body(mechanism: Mechanism, label: int, forms: list, dps: int) -> BodyMotion:
+    """Classify one body's motion from sampled states (``forms`` at ``dps`` digits; call
+    inside ``mpmath.workdps(dps)``) and build its exact generators."""
+    rows = lagrangian_rows(mechanism, [label], forms, dps)
     omegas = []
     for _, _, rots, ws in forms:
         rot, w = rots[label], ws[label]
         omegas.append([mpmath.fsum(rot[k][i] * w[k] for k in range(3)) for i in range(3)])
-    null_dim = 10 - numeric_rank(rows)
-    omega_rows = _normalized_rows(omegas)
-    omega_rank = numeric_rank(omega_rows) if omega_rows else 0
+    null_dim = 10 - numerical_rank(rows.exact(), NULL_TOL) if rows else 10
+    omega_rows = _normalized_rows(omegas, dps)
+    omega_rank = numerical_rank(omega_rows.exact(), NULL_TOL) if omega_rows else 0
 
     subs = mechanism.geometry_subs
-    points, dirs = body_candidates(mechanism, label)
-    points = dedupe(points, subs)
-    dirs = dedupe(dirs, subs, directions=True)
+    point_candidates, direction_candidates = body_candidates(mechanism, label)
+    points = dedupe(list(point_candidates), subs, dps)
+    dirs = dedupe(list(direction_candidates), subs, dps, directions=True)
     motion = BodyMotion(label, omega_rank, null_dim)
     names = body_parameter_names(label)
 
-    def norm(v):
+    def norm(v: Sequence[mpmath.mpf]) -> list[mpmath.mpf]:
         n = mpmath.sqrt(sum(x * x for x in v))
         return [x / n for x in v]
 
@@ -528,7 +457,7 @@ def analyse_body(mechanism, label, forms):
     valid = []
     for multipole, cond, values, pref, side, text in candidates:
         vector = as_vector(label, values)
-        num = [to_number(vector.get(n, 0), subs) for n in names]
+        num = [to_number(vector.get(n, 0), subs, dps) for n in names]
         if residual(rows, num) >= NULL_TOL * 100:
             continue           # a quadrupole of a wrongly identified span: never trust it
         valid.append((num, vector, multipole, cond, pref, side, text))
@@ -540,10 +469,14 @@ def analyse_body(mechanism, label, forms):
     return motion
 
 
-def analyse_bodies(mechanism, states=None, count=12, digits=30, seed=1):
-    """(BodyMotion for every moving body, the sampled Lagrangian forms for reuse)."""
+def analyse_bodies(mechanism: Mechanism, states: list | None = None, count: int = 12, digits: int = 30,
+                   seed: int = 1) -> tuple[list[BodyMotion], list]:
+    """(BodyMotion for every moving body, the sampled Lagrangian forms for reuse), in
+    mpmath numbers at ``digits - 2`` digits (a local ``mpmath.workdps``: the caller's
+    precision is neither read nor changed)."""
     if states is None:
         states, _ = random_states(mechanism, count=count, digits=digits, seed=seed)
-    with mpmath.workdps(digits - 2):
-        forms = lagrangian_forms(states)
-        return [analyse_body(mechanism, label, forms) for label in mechanism.body_labels], forms
+    dps = digits - 2
+    with mpmath.workdps(dps):
+        forms = lagrangian_forms(states, dps)
+        return [analyse_body(mechanism, label, forms, dps) for label in mechanism.body_labels], forms

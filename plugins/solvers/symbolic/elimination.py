@@ -48,8 +48,10 @@ Default order of generators and pivots (reproduces the paper's choice on the SLA
 
 import functools
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import Any, cast
 
 import numpy as np
 import sympy
@@ -60,14 +62,15 @@ from baseparams import registry
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
-from baseparams.dynamics.transfers import transfer_generators
+from baseparams.dynamics.transfers import Generator, transfer_generators
 from baseparams.errors import InputError, KinematicsError
+from baseparams.model.mechanism import Joint, Mechanism
 from baseparams.model.params import PARAMETER_KINDS, split_name
 from baseparams.numeric.backends import Arb, Float64
 from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
 
-from .body_conditions import analyse_bodies
+from .body_conditions import BodyMotion, analyse_bodies
 from .loop_transfers import CONDITION as LOOP_CONDITION, planar_loop_generators
 from .rank_bound import choose_rows, columns_independent
 from .sampled_transfers import sampled_joint_transfers
@@ -93,18 +96,21 @@ class ExactField:
     values with the same printed forms, and arithmetic in C instead of a polynomial gcd per
     operation (most of the elimination's time on a 48-body chain went to sympy's ``cancel``)."""
 
-    def __init__(self, mechanism, expressions, rationals: bool = True):
+    def __init__(self, mechanism: Mechanism, expressions: Iterable[Any], rationals: bool = True):
         """``rationals=False`` keeps sympy's field even when it could be constant (the
         reference the constant path is tested against)."""
         self.mechanism = mechanism
-        self.radicals = {}          # sympy Pow (b**(1/q)) -> Dummy
-        atoms = set()
+        self.radicals: dict[Any, sympy.Dummy] = {}          # sympy Pow (b**(1/q)) -> Dummy
+        atoms: set[Any] = set()
         converted = [self._replace(sympy.sympify(e)) for e in expressions]
         self.constant = rationals and all(e.is_Rational for e in converted)
         self.values = mechanism.geometry_subs
         self.exact = True
         if self.constant:
-            self.symbols, self.K, self.pairs, self.one = [], None, [], fmpq(1)
+            self.symbols: list[Any] = []
+            self.K: Any = None
+            self.pairs: list[Any] = []
+            self.one: Any = fmpq(1)
             return
         for e in converted:
             atoms |= e.free_symbols
@@ -134,8 +140,8 @@ class ExactField:
         self.pairs = pairs
         self.points = [Fraction(int(v.numerator), int(v.denominator)) for _, v in pairs]
 
-    def _replace(self, e):
-        def repl(p):
+    def _replace(self, e: Any) -> Any:
+        def repl(p: Any) -> Any:
             b, x = p.as_base_exp()
             if x.is_Rational and not x.is_Integer:
                 root = b ** sympy.Rational(1, x.q)
@@ -145,7 +151,7 @@ class ExactField:
             return p
         return e.replace(lambda p: p.is_Pow, repl) if e.has(sympy.Pow) else e
 
-    def convert(self, expr):
+    def convert(self, expr: Any) -> Any:
         expr = sympy.sympify(expr)
         if self.constant:
             if not expr.is_Rational:
@@ -153,7 +159,7 @@ class ExactField:
             return fmpq(int(expr.p), int(expr.q))
         return self.K.from_sympy(self._replace(expr))
 
-    def to_sympy(self, elem):
+    def to_sympy(self, elem: Any) -> Any:
         if self.constant:
             return sympy.Rational(int(elem.p), int(elem.q))
         expr = self.K.to_sympy(elem)
@@ -161,7 +167,7 @@ class ExactField:
             expr = expr.subs({v: k for k, v in self.radicals.items()})
         return expr
 
-    def value(self, elem):
+    def value(self, elem: Any) -> Fraction | Any:
         """Exact value at the mechanism's geometry: Fraction (or sympy number with radicals)."""
         if self.constant:
             return Fraction(int(elem.p), int(elem.q))
@@ -169,7 +175,7 @@ class ExactField:
             return self._at_geometry(elem.numer) / self._at_geometry(elem.denom)
         return sympy.simplify(self.to_sympy(elem).subs(self.values))
 
-    def _at_geometry(self, poly):
+    def _at_geometry(self, poly: Any) -> Fraction:
         """A polynomial of the field's ring at the geometry, exactly (a Fraction): term by term
         over its monomials (sympy's ``evaluate`` builds a ring per variable: 40 times slower)."""
         total = Fraction(0)
@@ -181,15 +187,15 @@ class ExactField:
             total += term
         return total
 
-    def nonzero_at_geometry(self, elem):
+    def nonzero_at_geometry(self, elem: Any) -> bool:
         return bool(elem) and self.value(elem) != 0
 
 
 # ----- the mechanism's graph: root, distances, donors -------------------------------------
-def body_distances(mechanism):
+def body_distances(mechanism: Mechanism) -> tuple[int | None, dict[int, int]]:
     """(root, {body: distance}) with distances counted in joints from ground or the root."""
     degree = {b: 0 for b in mechanism.body_labels}
-    neighbours = {0: set(), **{b: set() for b in mechanism.body_labels}}
+    neighbours: dict[int, set[int]] = {0: set(), **{b: set() for b in mechanism.body_labels}}
     for j in mechanism.joints:
         for b in (j.parent, j.child):
             if b != 0:
@@ -214,7 +220,7 @@ def body_distances(mechanism):
     return root, dist
 
 
-def donor_acceptor(joint, dist):
+def donor_acceptor(joint: Joint, dist: dict[int, int]) -> tuple[int, int]:
     a, b = joint.parent, joint.child
     if a == 0 or b == 0:
         return 0, (b if a == 0 else a)            # ground gives: the body is the acceptor
@@ -224,12 +230,12 @@ def donor_acceptor(joint, dist):
 
 
 # ----- pivot preferences ------------------------------------------------------------------
-def _largest_component(direction, field):
+def _largest_component(direction: Sequence[Any], field: ExactField) -> int:
     values = [abs(float(sympy.N(sympy.sympify(c).subs(field.values)))) for c in direction]
     return max(range(3), key=lambda k: (round(values[k], 12), -k))
 
 
-def transfer_preference(gen, mechanism, field):
+def transfer_preference(gen: Generator, mechanism: Mechanism, field: ExactField) -> list[str]:
     """Parameters a transfer generator should eliminate, most wanted first (see module doc)."""
     body = gen.acceptor if gen.donor == 0 else gen.donor
     side = gen.sides.get(body, {})
@@ -254,35 +260,37 @@ def transfer_preference(gen, mechanism, field):
 class Step:
     """An accepted generator: its reduced vector, the parameter it eliminates, and (after
     :func:`apply_steps`) the multipole amount and the parameters it changed."""
-    generator: object
-    vector: dict                   # parameter -> field element (reduced)
+    generator: Generator
+    vector: dict[str, Any]         # parameter -> field element (reduced)
     pivot: str
-    amount: dict = field(default_factory=dict)       # linear form: parameter -> field element
-    changes: dict = field(default_factory=dict)      # parameter -> new linear form
+    amount: dict[str, Any] = field(default_factory=dict)       # linear form: parameter -> field element
+    changes: dict[str, Any] = field(default_factory=dict)      # parameter -> new linear form
 
 
 @dataclass
 class Derivation:
-    mechanism: object
-    field: object
-    bodies: list                   # BodyMotion per body
-    steps: list                    # Step, in order
-    redundant: list                # (Generator, reason)
-    missing_rules: list            # joints whose type has no rules
-    base: dict                     # kept parameter -> linear form (parameter -> field element)
-    eliminated: list
-    warnings: list
+    mechanism: Mechanism
+    field: ExactField
+    bodies: list[BodyMotion]       # BodyMotion per body
+    steps: list[Step]              # Step, in order
+    redundant: list[tuple[Generator, str]]  # (Generator, reason)
+    missing_rules: list[Joint]     # joints whose type has no rules
+    base: dict[str, dict[str, Any]]  # kept parameter -> linear form (parameter -> field element)
+    eliminated: list[str]
+    warnings: list[str]
+    root: int | None = None        # the body the elimination grows from (body_distances)
+    distances: dict[int, int] | None = None  # joints from ground or the root, per body
 
     @property
-    def conditions(self):
+    def conditions(self) -> list[Step]:
         return [s for s in self.steps if s.generator.kind == "condition"]
 
     @property
-    def transfers(self):
+    def transfers(self) -> list[Step]:
         return [s for s in self.steps if s.generator.kind == "transfer"]
 
 
-def _reduce(vector, steps):
+def _reduce(vector: dict[str, Any], steps: Sequence[Step]) -> dict[str, Any]:
     g = dict(vector)
     for step in steps:
         c = g.get(step.pivot)
@@ -298,25 +306,30 @@ def _reduce(vector, steps):
     return g
 
 
-def _order_generators(mechanism, bodies, transfers, loops=()):
+def _order_generators(mechanism: Mechanism, bodies: Sequence[BodyMotion], transfers: list[Generator],
+                      loops: Sequence[Generator] = ()) -> tuple[list[Generator], int | None, dict[int, int]]:
     root, dist = body_distances(mechanism)
-    phase_a, phase_c = [], []
+    phase_a: list[Generator] = []
+    phase_c: list[Generator] = []
     for motion in bodies:
         for g in motion.generators:
             late = g.multipole == "monopole" and g.sides[g.bodies[0]].get("where") != "origin"
             (phase_c if late else phase_a).append(g)
     joint_index = {j.name: i for i, j in enumerate(mechanism.joints)}
     for g in transfers:
-        g.donor, g.acceptor = donor_acceptor(g.joint, dist)
-    transfers = sorted(transfers, key=lambda g: (g.condition == 0,
-                                                 -(dist[g.donor] if g.donor else dist[g.acceptor]),
-                                                 joint_index[g.joint.name]))
+        g.donor, g.acceptor = donor_acceptor(cast(Joint, g.joint), dist)
+
+    def place(g: Any) -> tuple[bool, int, int]:
+        return g.condition == 0, -(dist[g.donor] if g.donor else dist[g.acceptor]), joint_index[g.joint.name]
+
+    transfers = sorted(transfers, key=place)
     for g in loops:                      # donor: the closing joint's (the report's grouping)
-        g.donor, g.acceptor = donor_acceptor(g.joint, dist)
+        g.donor, g.acceptor = donor_acceptor(cast(Joint, g.joint), dist)
     return phase_a + transfers + list(loops) + phase_c, root, dist
 
 
-def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
+def eliminate(mechanism: Mechanism, keep: Sequence[str] = (), eliminate_first: Sequence[str] = (),
+              states: list | None = None, seed: int = 1) -> Derivation:
     """Run the whole derivation (generators, elimination, base expressions)."""
     params = list(mechanism.parameters)
     for name, opt in [(n, "keep") for n in keep] + [(n, "eliminate_first") for n in eliminate_first]:
@@ -345,12 +358,13 @@ def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
     keep_set = set(keep)
     first = list(eliminate_first)
     order = {p: i for i, p in enumerate(params)}
-    steps, redundant = [], []
+    steps: list[Step] = []
+    redundant: list[tuple[Generator, str]] = []
     for gen in ordered:
         vector = {p: field_.convert(v) for p, v in gen.vector.items()}
         vector = {p: v for p, v in vector.items() if v}
         g = _reduce(vector, steps)
-        live = [p for p in sorted(g, key=order.get) if field_.nonzero_at_geometry(g[p])]
+        live = [p for p in sorted(g, key=lambda p: order[p]) if field_.nonzero_at_geometry(g[p])]
         if not live:
             reason = "implied by the generators before it" if not g else \
                 "vanishes at this geometry (special values of the geometry symbols)"
@@ -375,12 +389,12 @@ def eliminate(mechanism, keep=(), eliminate_first=(), states=None, seed=1):
     return derivation
 
 
-def apply_steps(steps, params, one=1):
+def apply_steps(steps: Sequence[Step], params: Sequence[str], one: Any = 1) -> dict[str, dict[str, Any]]:
     """Apply the transfers in order; returns every parameter's final value as a linear form
     in the original parameters (eliminated ones end at zero). Fills ``amount``/``changes``."""
-    current = {}
+    current: dict[str, dict[str, Any]] = {}
 
-    def value(p):
+    def value(p: str) -> dict[str, Any]:
         return current.get(p, {p: one})
 
     for step in steps:
@@ -401,7 +415,7 @@ def apply_steps(steps, params, one=1):
     return {p: value(p) for p in params}
 
 
-def describe(gen):
+def describe(gen: Generator) -> str:
     if gen.kind == "condition":
         return f"body {gen.bodies[0]} condition {gen.condition} ({gen.label})"
     return f"joint {gen.joint_name} ({gen.joint_type}) {gen.label}"
@@ -429,14 +443,14 @@ class Certificate:
     random_states: int = 0          # of ``samples``: drawn independently of the trajectory
     tested: int = 0
     residual: float | None = None
-    failed: list = field(default_factory=list)      # (description, relative residual)
-    untested: list = field(default_factory=list)    # (description, reason)
+    failed: list[tuple[str, Any]] = field(default_factory=list)      # (description, relative residual)
+    untested: list[tuple[str, str]] = field(default_factory=list)    # (description, reason)
 
     @property
-    def passed(self):
+    def passed(self) -> int:
         return self.tested - len(self.failed)
 
-    def info(self):
+    def info(self) -> dict[str, Any]:
         """The ``diagnostics.certificate`` entry of the result (JSON-ready)."""
         return {"digits": self.digits, "samples": self.samples, "random_states": self.random_states,
                 "rows": self.rows,
@@ -448,7 +462,8 @@ class Certificate:
                 "generators_untested": [{"source": s, "reason": r} for s, r in self.untested]}
 
 
-def certify(mechanism, derivation, digits=40, trajectory=None):
+def certify(mechanism: Mechanism, derivation: Derivation, digits: int = 40,
+            trajectory: Trajectory | None = None) -> Certificate:
     """Check the symbolic count on W computed in ball arithmetic at ``digits`` (a
     :class:`Certificate`).
 
@@ -481,7 +496,8 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     trajectory = trajectory or Trajectory.default(mechanism)
     # W in float64 at every state: choices (rows, preconditioner) and max|W|, never claims;
     # without it (float64 refused, e.g. over the memory limit) the shared analysis decides
-    wf_trajectory = wf_random = None
+    wf_trajectory: Any = None
+    wf_random: Any = None
     try:
         wf_trajectory = observation_matrix(mechanism, Float64(), trajectory)[0]
     except (InputError, KinematicsError, MemoryError):
@@ -489,13 +505,13 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
     # rows at random states independent of the trajectory, so that a trajectory which does
     # not excite the mechanism cannot lower the proven rank (core/excitation.py)
     batch = random_batch(mechanism, trajectory, seed=7919)
-    random_block = observation_matrix(mechanism, backend, batch)[0]
+    random_block: Any = observation_matrix(mechanism, backend, cast(Any, batch))[0]
     params = list(mechanism.parameters)
     kept = [params.index(p) for p in derivation.base]
     index = {p: i for i, p in enumerate(params)}
     try:
         if wf_trajectory is not None:
-            wf_random = observation_matrix(mechanism, Float64(), batch)[0]
+            wf_random = cast(np.ndarray, observation_matrix(mechanism, Float64(), cast(Any, batch))[0])
     except (InputError, KinematicsError, MemoryError):
         pass
     usable = wf_random is not None and wf_trajectory.shape[1] == wf_random.shape[1] == len(params)
@@ -510,13 +526,14 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
         if chosen is not None:
             # rows chosen among all: balls at the trajectory states that hold some of them
             states = tuple(sorted({i // width for i in chosen if i < wf_trajectory.shape[0]}))
-            blocks = [observation_matrix(mechanism, backend, Subset(trajectory, states))[0]] if states else []
+            subset: Any = Subset(trajectory, states)
+            blocks = [observation_matrix(mechanism, backend, subset)[0]] if states else []
             blocks.append(random_block)
             rows_used = [s * width + k for s in states for k in range(width)]
             if columns_independent(blocks, np.vstack([wf_trajectory[rows_used], wf_random]), kept):
                 lower, kept_proven, samples = len(kept), True, len(states) + batch.count
         if lower is None:           # every state in balls, and the shared analysis
-            W, info = observation_matrix(mechanism, backend, trajectory)
+            W, info = cast(tuple[Any, dict[str, Any]], observation_matrix(mechanism, backend, trajectory))
             blocks = [W, random_block]
             samples = info.get("samples") + batch.count
             stacked = backend.stack(*blocks)
@@ -553,7 +570,7 @@ def certify(mechanism, derivation, digits=40, trajectory=None):
 
 
 # ----- result -------------------------------------------------------------------------------
-def coefficient_text(field_, elem):
+def coefficient_text(field_: ExactField, elem: Any) -> str:
     """The coefficient as text: sympy's factored form (a rational number prints as itself,
     which python-flint's ``str`` of an fmpq gives without sympy)."""
     if field_.constant:
@@ -568,13 +585,14 @@ def _factored(expression: sympy.Expr) -> str:
     return str(expression) if expression.is_Number else str(sympy.factor(expression))
 
 
-def value_text(field_, elem):
+def value_text(field_: ExactField, elem: Any) -> str:
     v = field_.value(elem)
     return str(v)
 
 
-def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, seed=1,
-          trajectory=None):
+def solve(mechanism: Mechanism, keep: Sequence[str] = (), eliminate_first: Sequence[str] = (),
+          certify_rank: bool = True, digits: int = 40, seed: int = 1,
+          trajectory: Trajectory | None = None) -> BaseParameterResult:
     """The symbolic solver: a :class:`BaseParameterResult` with the derivation in
     ``diagnostics.derivation``."""
     start = time.perf_counter()
@@ -597,7 +615,7 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
         coefficients.append(coefficient_row)
     rank = len(der.base)
     warnings = list(der.warnings)
-    diagnostics = {"conditions": [_step_json(s, f) for s in der.conditions],
+    diagnostics: dict[str, Any] = {"conditions": [_step_json(s, f) for s in der.conditions],
                    "transfers": [_step_json(s, f) for s in der.transfers],
                    "redundant": [{"source": describe(g), "reason": r} for g, r in der.redundant],
                    "root": der.root}
@@ -630,14 +648,14 @@ def solve(mechanism, keep=(), eliminate_first=(), certify_rank=True, digits=40, 
         diagnostics=Diagnostics(summary=summary, derivation=der, details=diagnostics))
 
 
-def _coefficient(text, value_text_):
+def _coefficient(text: str, value_text_: str) -> Coefficient:
     """An expression's data: its exact rational value, or an algebraic value to 50 digits."""
     if _is_fraction_text(value_text_):
         return Coefficient.of_exact(Fraction(value_text_), text)
     return Coefficient(text=text, value=parse_coefficient(value_text_), exact=False, digits=50)
 
 
-def _certificate_warnings(cert, rank):
+def _certificate_warnings(cert: Certificate, rank: int) -> list[str]:
     """Why a checked result is not certified (nothing when it is)."""
     out = []
     if cert.failed:
@@ -661,7 +679,7 @@ def _certificate_warnings(cert, rank):
     return out
 
 
-def _is_fraction_text(text):
+def _is_fraction_text(text: str) -> bool:
     try:
         Fraction(text)
         return True
@@ -669,7 +687,7 @@ def _is_fraction_text(text):
         return False
 
 
-def _step_json(step, f):
+def _step_json(step: Step, f: ExactField) -> dict[str, Any]:
     g = step.generator
     out = {"kind": g.kind, "condition": g.condition, "multipole": g.multipole, "label": g.label,
            "bodies": list(g.bodies), "eliminated": step.pivot}

@@ -38,8 +38,12 @@ each group of R joints with parallel axes (a cycle basis: the generator is linea
 cycle, so every planar cycle's generator is a combination of the basis's).
 """
 
+from collections.abc import Sequence
+from typing import Any
+
 import sympy
 
+from baseparams.model.mechanism import Joint, Mechanism
 from baseparams.dynamics.transfers import Generator, add_vectors, as_vector, joint_frames, map_direction, \
     map_point, quadrupole_params
 
@@ -48,32 +52,32 @@ ORIGIN = (0, 0, 0)
 Z = (0, 0, 1)
 
 
-def is_revolute(joint) -> bool:
+def is_revolute(joint: Joint) -> bool:
     """One rotation about the joint frames' common z axis (the kinematics of R)."""
     return tuple(joint.type.motions) == (("R", "z"),)
 
 
-def _cross(a, b):
+def _cross(a: Sequence[Any], b: Sequence[Any]) -> list[Any]:
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
-def _parallel(a, b) -> bool:
+def _parallel(a: Sequence[Any], b: Sequence[Any]) -> bool:
     return all(sympy.simplify(c) == 0 for c in _cross(a, b))
 
 
-def _groups(mechanism, joints, axes):
+def _groups(mechanism: Mechanism, joints: Sequence[Joint], axes: dict[str, Any]) -> list[list[Joint]]:
     """Joints grouped by parallel axes: two R joints on one body whose axes are parallel
     there are in one group (relative rotations about b keep b, so this is transitive
     along the group)."""
     parent = {j.name: j.name for j in joints}
 
-    def find(x):
+    def find(x: str) -> str:
         while parent[x] != x:
             parent[x] = parent[parent[x]]
             x = parent[x]
         return x
 
-    by_body = {}
+    by_body: dict[int, list[Joint]] = {}
     for j in joints:
         for b in (j.parent, j.child):
             by_body.setdefault(b, []).append(j)
@@ -84,20 +88,20 @@ def _groups(mechanism, joints, axes):
             for f in incident[i + 1:]:
                 if find(e.name) != find(f.name) and _parallel(axes[e.name][body], axes[f.name][body]):
                     parent[find(e.name)] = find(f.name)
-    groups = {}
+    groups: dict[str, list[Joint]] = {}
     for j in joints:
         groups.setdefault(find(j.name), []).append(j)
     return list(groups.values())
 
 
-def _cycles(group):
+def _cycles(group: Sequence[Joint]) -> list[tuple[Joint, list[tuple[Any, ...]]]]:
     """A cycle basis of the group's joints: per joint outside a spanning forest (in the
     mechanism's joint order), the cycle it closes as [(body, joint in, joint out), ...]."""
-    neighbours = {}
+    neighbours: dict[int, list[tuple[int, Joint]]] = {}
     for j in group:
         neighbours.setdefault(j.parent, []).append((j.child, j))
         neighbours.setdefault(j.child, []).append((j.parent, j))
-    up = {}                                    # body -> (parent body, joint) in the forest
+    up: dict[int, Any] = {}                    # body -> (parent body, joint) in the forest
     depth = {}
     tree = set()
     for start in sorted(neighbours):
@@ -137,7 +141,7 @@ def _cycles(group):
     return out
 
 
-def planar_loop_generators(mechanism) -> list:
+def planar_loop_generators(mechanism: Mechanism) -> list[Generator]:
     """One generator (condition 7) per independent planar loop without ground (module doc)."""
     joints = [j for j in mechanism.joints if is_revolute(j)]
     if len(joints) < 3:
@@ -152,7 +156,7 @@ def planar_loop_generators(mechanism) -> list:
             bodies = [body for body, _, _ in cycle]
             if 0 in bodies:
                 continue
-            vector = {}
+            vector: dict[str, Any] = {}
             for body, j_in, j_out in cycle:
                 p_in = map_point(frames[j_in.name][body], ORIGIN)
                 p_out = map_point(frames[j_out.name][body], ORIGIN)

@@ -22,12 +22,14 @@ Nothing here is assumed from float64: a bad choice of rows or a poor X only make
 fail (``False``), and the solver then falls back to the shared analysis.
 """
 
+from collections.abc import Sequence
+
 import numpy as np
 from flint import arb_mat
 
 from baseparams.numeric.linalg import pivoted_qr_columns
 
-def _powers_of_two(norms):
+def _powers_of_two(norms: np.ndarray) -> np.ndarray:
     """2^-round(log2 x) per entry (1 where x is 0): exact scalings toward unit norm."""
     out = np.ones_like(norms)
     nz = norms > 0
@@ -65,7 +67,7 @@ def approximate_inverse(block: np.ndarray) -> np.ndarray | None:
     return x if np.all(np.isfinite(x)) else None
 
 
-def columns_independent(blocks, wf: np.ndarray, kept: list[int]) -> bool:
+def columns_independent(blocks: Sequence[arb_mat], wf: np.ndarray, kept: list[int]) -> bool:
     """True when the columns ``kept`` of W are proven independent (for every matrix in its
     balls). W is given as ``blocks``, arb_mats with the same columns whose rows, stacked,
     are W's (no copy of W is made); ``wf`` is W's float64 counterpart (same rows and

@@ -9,26 +9,33 @@ import functools
 import math
 import sys
 import time
+from collections.abc import Sequence
 from fractions import Fraction
+from typing import Any, cast
+
+from flint import arb_mat
 
 try:
     import resource
 except ImportError:        # not on Windows: peak memory is then not reported
-    resource = None
+    resource = None  # type: ignore[assignment]
 
-from baseparams.dynamics.excitation import random_batch
+from baseparams.dynamics.excitation import RandomBatch, random_batch
 from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.expressions import exact_text
 from baseparams.numeric import certify
 from baseparams.numeric.backends import Arb
-from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, SolverOption,
-                                         check_options, last_parameter_index, require_applicable)
+from baseparams.model.mechanism import Mechanism
+from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
+                                         last_parameter_index)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.dynamics.trajectory import memory_limit
 from baseparams.solvers.support import (base_rows, check_memory, decimal_coefficients, raised_warning, say,
                                         size_text, untrusted_warning)
+
+from . import balls
 
 RIDGE_DECADES = 3          # a proven ridge of at least 3 decades (s_{r+1} <= 1e-3 s_r)
 MIN_DIGITS = 10            # coefficients must agree to 10 digits between two precisions
@@ -47,13 +54,13 @@ BALL_ENTRY_BYTES = 400      # + the digits: one entry of W in balls, with the an
                            # (measured: chains of 20 and 40 bodies at 30 and 60 digits, 5-15 % above)
 
 
-def ball_bytes(rows: int, cols: int, steps) -> float:
+def ball_bytes(rows: int, cols: int, steps: Sequence[int]) -> float:
     """Memory of W in balls at each precision of ``steps`` (every run's W is kept until the
     result: the last two are compared): checked against BASEPARAMS_MAX_MEMORY up front."""
     return rows * cols * sum(BALL_ENTRY_BYTES + d for d in steps)
 
 
-def default_samples(mechanism):
+def default_samples(mechanism: Mechanism) -> int | None:
     """Samples of the file's trajectory for W: the file's, unless they give more than 6 rows
     per parameter; then 4 rows per parameter, 3 beyond certify.FAST_DECISIONS_ABOVE
     parameters (the rank is at most the number of parameters: either leaves a wide
@@ -71,14 +78,14 @@ def default_samples(mechanism):
     return max(MIN_SAMPLES, math.ceil(per * params / f))
 
 
-def _digits_of(beta):
+def _digits_of(beta: arb_mat) -> list[list[float]]:
     """Per entry of beta (rows of lists): the digits its ball proves (radius_digits)."""
     cols = beta.ncols()
     values = beta.entries()
-    return [[certify.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
+    return [[balls.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
 
 
-def peak_memory_mb():
+def peak_memory_mb() -> float | None:
     """The process's peak resident memory so far (MB), or None where unknown."""
     if resource is None:
         return None
@@ -89,8 +96,9 @@ def peak_memory_mb():
 class BallRun:
     """One precision: W at D digits and its certified analysis."""
 
-    def __init__(self, mechanism, digits, trajectory, kept=None, pivoting="natural", progress=None,
-                 batches=(), earlier=None):
+    def __init__(self, mechanism: Mechanism, digits: int, trajectory: Trajectory,
+                 kept: Sequence[int] | None = None, pivoting: str = "natural", progress: Progress | None = None,
+                 batches: Sequence[RandomBatch] = (), earlier: certify.BallAnalysis | None = None):
 
         self.digits = digits
         start = time.perf_counter()
@@ -98,19 +106,22 @@ class BallRun:
         total = len(trajectory.times)
         marks = {max(1, round(total * k / 4)) for k in (1, 2, 3)}
 
-        def tick(done, count):
+        def tick(done: int, count: int) -> None:
             if done in marks:
                 say(progress, f"vp: {digits} digits: sample {done}/{count}")
 
-        self.W, self.info = observation_matrix(mechanism, backend, trajectory, progress=tick)
+        W, info = cast(tuple[Any, dict[str, Any]], observation_matrix(mechanism, backend, trajectory, progress=tick))
+        self.W: Any = W
+        self.info: dict[str, Any] = info
         if batches:             # independent random states added after a failed excitation check
-            self.W = backend.stack(self.W, *(observation_matrix(mechanism, backend, b)[0] for b in batches))
+            extra: list[Any] = [observation_matrix(mechanism, backend, cast(Any, b))[0] for b in batches]
+            self.W = backend.stack(self.W, *extra)
         self.info["random_states"] = sum(b.states for b in batches)
         self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier)
         self.seconds = time.perf_counter() - start
         self.digits_of = _digits_of(self.analysis.beta)
 
-    def reanalyse(self, kept, earlier=None):
+    def reanalyse(self, kept: Sequence[int], earlier: certify.BallAnalysis | None = None) -> "BallRun | None":
         """This run's W analysed with imposed kept columns (a copy), or None if they are not
         proven independent at this precision. ``earlier``: an analysis that kept them (its
         rows are tried first)."""
@@ -124,21 +135,21 @@ class BallRun:
         return other
 
     @functools.cached_property
-    def tail_values(self):
+    def tail_values(self) -> list[str]:
         """Approximate singular values after the ridge (only the final run's are reported)."""
-        return certify.tail_singular_values(self.W, self.analysis)
+        return balls.tail_singular_values(self.W, self.analysis)
 
     @property
-    def rank(self):
+    def rank(self) -> int:
         return self.analysis.rank
 
-    def min_digits(self):
+    def min_digits(self) -> float:
         a = self.analysis
         values = [d for i, row in enumerate(self.digits_of) for j, d in enumerate(row)
                   if not a.beta[i, j].contains(0)]
         return min(values, default=math.inf)
 
-    def summary(self):
+    def summary(self) -> dict[str, Any]:
         a = self.analysis
         return {"digits": self.digits, "rank": a.rank, "pivoting": a.pivoting,
                 "ridge_decades": _finite(a.ridge_log10), "sigma_r_lower": a.sigma_r_lower.str(4, radius=False),
@@ -146,18 +157,19 @@ class BallRun:
                 "closure_residual": self.info.get("closure_residual"), "seconds": round(self.seconds, 3)}
 
 
-def _beta_from_rows(mechanism, digits, trajectory, batches, a):
+def _beta_from_rows(mechanism: Mechanism, digits: int, trajectory: Trajectory, batches: Sequence[RandomBatch],
+                    a: certify.BallAnalysis) -> arb_mat:
     """beta at ``digits`` from the square block of the analysis ``a``: W evaluated only at
     the states its rows R come from, then ``W_RK beta = W_RE`` solved in ball arithmetic
-    (:func:`baseparams.numeric.certify.block_beta`). For W of rank r every nonsingular
+    (:func:`baseparams.plugins.solvers.vp.balls.block_beta`). For W of rank r every nonsingular
     r x r block gives the same beta, so these balls enclose the beta that the whole W at
     ``digits`` would give; the rank itself was proven at the final precision."""
     f = max(1, len(mechanism.independent) or len(mechanism.coordinates))
-    sources = [trajectory, *batches]
+    sources: list[Any] = [trajectory, *batches]
     starts = [0]
     for source in sources:
         starts.append(starts[-1] + source.count * f)
-    wanted = [set() for _ in sources]
+    wanted: list[set[int]] = [set() for _ in sources]
     located = []
     for row in a.rows:
         k = next(k for k in range(len(sources)) if row < starts[k + 1])
@@ -165,20 +177,22 @@ def _beta_from_rows(mechanism, digits, trajectory, batches, a):
         wanted[k].add(state)
         located.append((k, state, within))
     backend = Arb(digits)
-    blocks, position = [], {}
+    blocks: list[Any] = []
+    position: dict[tuple[int, int], int] = {}
     for k, source in enumerate(sources):
         picked = sorted(wanted[k])
         if not picked:
             continue
         for i, state in enumerate(picked):
             position[k, state] = sum(b.nrows() for b in blocks) // f + i
-        blocks.append(observation_matrix(mechanism, backend, Subset(source, tuple(picked)))[0])
+        subset: Any = Subset(source, tuple(picked))
+        blocks.append(observation_matrix(mechanism, backend, subset)[0])
     W = backend.stack(*blocks) if blocks else backend.matrix([], len(mechanism.parameters))
     rows = [position[k, state] * f + within for k, state, within in located]
-    return certify.block_beta(W, digits, a.kept, rows, a.exponents)
+    return balls.block_beta(W, digits, a.kept, rows, a.exponents)
 
 
-def _finite(x):
+def _finite(x: Any) -> Any:
     if x == math.inf:
         return "inf"
     if x == -math.inf:
@@ -186,7 +200,7 @@ def _finite(x):
     return round(x, 2) if isinstance(x, float) else x
 
 
-def _vp_check_line(check):
+def _vp_check_line(check: dict[str, Any]) -> str:
     if "error" in check:
         return f"the random states could not be evaluated ({check['error']})"
     verdict = ("obey the base parameters" if check["passed"] else
@@ -196,7 +210,7 @@ def _vp_check_line(check):
             f"{verdict}: a ridge of {check['ridge_decades_with_batch']} decades on W and the batch together")
 
 
-def compare_runs(prev, cur):
+def compare_runs(prev: BallRun, cur: BallRun) -> tuple[bool, float, list[str]]:
     """Agreement between two precisions: (ok, minimum agreement digits, reasons)."""
     reasons = []
     a, b = prev.analysis, cur.analysis
@@ -218,7 +232,7 @@ def compare_runs(prev, cur):
             if x.contains(0) != y.contains(0):
                 worst = 0
                 continue
-            worst = min(worst, certify.agreement_digits(x, y))
+            worst = min(worst, balls.agreement_digits(x, y))
     if worst < MIN_DIGITS:
         reasons.append(f"coefficients agree to only {worst} digits between {prev.digits} and "
                        f"{cur.digits} digits (need {MIN_DIGITS})")
@@ -230,24 +244,26 @@ def compare_runs(prev, cur):
     return not reasons, worst, reasons
 
 
-def _vp_coefficients(final, prev, params):
+def _vp_coefficients(final: BallRun, prev: BallRun | None,
+                     params: Sequence[str]) -> tuple[list[dict[str, Any]], list[int], list[dict[str, Any]]]:
     """Base rows with each coefficient printed to the digits trusted: its ball's own, capped
     by the agreement with the previous precision. Returns (rows, trusted digits of the
     printed ones, untrusted): a nonzero coefficient with no trusted digit is left out of
     its expression and listed in ``untrusted`` with its ball."""
     a = final.analysis
     same = prev is not None and prev.analysis.kept == a.kept and prev.rank == a.rank
-    trusted, untrusted = {}, []
+    trusted: dict[tuple[int, int], int] = {}
+    untrusted: list[dict[str, Any]] = []
     cols = a.beta.ncols()
-    mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same else None
+    mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same and prev is not None else None
     for i in range(a.beta.nrows()):
         for j in range(cols):
             d = final.digits_of[i][j]
-            if same and d > 0:          # (a ball containing 0 has no digit to cap)
-                d = min(d, certify.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
-            trusted[i, j] = max(0, min(d, final.digits))
+            if theirs is not None and d > 0:          # (a ball containing 0 has no digit to cap)
+                d = min(d, balls.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
+            trusted[i, j] = int(max(0, min(d, final.digits)))
 
-    def coefficient(i, j):
+    def coefficient(i: int, j: int) -> str | None:
         x = a.beta[i, j]
         if x.contains(0):
             return None
@@ -271,7 +287,7 @@ class VariablePrecisionSolver:
     description = ("Gautier's method in ball arithmetic (python-flint): proven rank, precision "
                    "raised until the ridge is evident and beta agrees at two precisions")
     capabilities = Capabilities(closed_loops=True, certifies=True)
-    options = (
+    options: tuple[SolverOption, ...] = (
         SolverOption("digits", int, None, "fix the working precision (default: raised along the "
                      "ladder until two precisions agree)", minimum=MIN_WORKING_DIGITS, maximum=MAX_DIGITS),
         SolverOption("samples", int, None, "samples of the exciting trajectory (default: the "
@@ -289,16 +305,16 @@ class VariablePrecisionSolver:
                      maximum=MAX_SEED),
     )
 
-    def applicable(self, mechanism):
+    def applicable(self, mechanism: Mechanism) -> str | None:
         """Any mechanism: ball arithmetic evaluates square roots and closed loops alike."""
         return None
 
-    def solve(self, mechanism, progress=None, **options):
-        """Certified base parameters; ``options`` as declared in ``options``."""
-        chosen = check_options(self, options, mechanism)
-        digits, samples, ladder, pivoting, recover, kept, seed = (
-            chosen[k] for k in ("digits", "samples", "ladder", "pivoting", "recover", "kept", "seed"))
-        require_applicable(self, mechanism)
+    def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, digits: int | None = None,
+              samples: int | None = None, ladder: tuple[int, ...] = LADDER, pivoting: str = "natural",
+              recover: bool = True, kept: tuple[int, ...] | None = None,
+              seed: int = CHECK_SEED) -> BaseParameterResult:
+        """Certified base parameters; the options as declared in ``options`` (checked by
+        :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
         trajectory = Trajectory.default(mechanism, samples=samples or default_samples(mechanism))
         params = mechanism.parameters
@@ -313,7 +329,8 @@ class VariablePrecisionSolver:
                       f"at {', '.join(map(str, first))} digits"
                       + (f", up to {size_text(ball_bytes(rows, cols, steps))} if the ladder climbs to "
                          f"{steps[-1]}" if len(steps) > 2 else ""))
-        batches, checks = [], []
+        batches: list[RandomBatch] = []
+        checks: list[dict[str, Any]] = []
         for round_ in range(CHECK_ROUNDS + 1):
             try:
                 runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
@@ -369,7 +386,7 @@ class VariablePrecisionSolver:
             warnings.append(untrusted_warning(untrusted))
         warnings += [n for n in a.notes if "lowered" in n]
 
-        recovery = {"attempted": False}
+        recovery: dict[str, Any] = {"attempted": False}
         if recover:
             recovery = self._recover(mechanism, final, trajectory, batches, params, progress)
 
@@ -431,10 +448,14 @@ class VariablePrecisionSolver:
             coefficients=decimal_coefficients(base, rationals))
 
     @staticmethod
-    def _escalate(mechanism, trajectory, batches, steps, kept, pivoting, progress):
+    def _escalate(mechanism: Mechanism, trajectory: Trajectory, batches: Sequence[RandomBatch], steps: Sequence[int],
+                  kept: Sequence[int] | None, pivoting: str,
+                  progress: Progress | None) -> tuple[list[BallRun], bool, float | None, list[str]]:
         """W at each precision of ``steps`` until two consecutive ones agree:
         (runs, accepted, agreement digits, reasons)."""
-        runs, accepted, agreement, reasons = [], False, None, []
+        runs: list[BallRun] = []
+        accepted, agreement = False, None
+        reasons: list[str] = []
         rows = len(trajectory.times) * max(1, len(mechanism.independent) or len(mechanism.coordinates))
         rows += sum(b.states for b in batches) * max(1, len(mechanism.independent) or len(mechanism.coordinates))
         for k, D in enumerate(steps):
@@ -467,25 +488,27 @@ class VariablePrecisionSolver:
         return runs, accepted, agreement, reasons
 
     @staticmethod
-    def _excitation_check(mechanism, trajectory, final, seed, progress):
+    def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, final: BallRun, seed: int,
+                          progress: Progress | None) -> tuple[dict[str, Any], RandomBatch]:
         """An independent random batch at the final precision against the null space of the
-        final analysis (:func:`baseparams.numeric.certify.excitation_check`): (diagnostics, batch)."""
+        final analysis (:func:`baseparams.plugins.solvers.vp.balls.excitation_check`): (diagnostics, batch)."""
         a = final.analysis
         batch = random_batch(mechanism, trajectory, seed)
         say(progress, f"vp: excitation check: {batch.states} random states at {final.digits} digits")
         out = {"seed": seed, "states": batch.states, "digits": final.digits, "rank": a.rank}
         backend = Arb(final.digits)
         try:
-            Wc, _ = observation_matrix(mechanism, backend, batch)
+            Wc: Any = observation_matrix(mechanism, backend, cast(Any, batch))[0]
         except KinematicsError as exc:
             return {**out, "passed": False, "error": str(exc)}, batch
-        bound, nonzero, decades = certify.excitation_check(Wc, a)
-        bound = bound.str(3, radius=False)
+        bound, nonzero, decades = balls.excitation_check(Wc, a)
+        bound_text = bound.str(3, radius=False)
         passed = nonzero == 0 and decades >= RIDGE_DECADES
-        return {**out, "rows": Wc.nrows(), "residual_bound": bound, "proven_nonzero": nonzero,
+        return {**out, "rows": Wc.nrows(), "residual_bound": bound_text, "proven_nonzero": nonzero,
                 "ridge_decades_with_batch": _finite(decades), "passed": passed}, batch
 
-    def _recover(self, mechanism, final, trajectory, batches, params, progress):
+    def _recover(self, mechanism: Mechanism, final: BallRun, trajectory: Trajectory, batches: Sequence[RandomBatch],
+                 params: Sequence[str], progress: Progress | None) -> dict[str, Any]:
         """Exact rationals for beta from the digits its balls prove, then confirmed: each
         must lie inside its ball at twice the digits (:func:`_beta_from_rows`)."""
         a = final.analysis
@@ -499,7 +522,7 @@ class VariablePrecisionSolver:
                 if digits < 8:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"a coefficient has only {digits} proven digits"}
-                q = certify.recover_rational(x, digits)
+                q = balls.recover_rational(x, int(digits))
                 if q is None:
                     return {"attempted": True, "succeeded": False,
                             "reason": f"no rational with a denominator below 10^{max(1, (digits - 2) // 2)} "
@@ -514,14 +537,15 @@ class VariablePrecisionSolver:
         return self._confirm(values, b, final, D2, a, params)      # exact containment: no precision
 
     @staticmethod
-    def _confirm(values, b, final, D2, a, params):
+    def _confirm(values: dict[tuple[int, int], Fraction], b: arb_mat, final: BallRun, D2: int,
+                 a: certify.BallAnalysis, params: Sequence[str]) -> dict[str, Any]:
         for i in range(b.nrows()):
             for j in range(b.ncols()):
                 q = values.get((i, j))
                 if q is None and not b[i, j].contains(0):
                     return {"attempted": True, "succeeded": False,
                             "reason": f"a coefficient zero at {final.digits} digits is not zero at {D2}"}
-                if q is not None and not certify.contains_rational(b[i, j], q):
+                if q is not None and not balls.contains_rational(b[i, j], q):
                     return {"attempted": True, "succeeded": False,
                             "reason": f"{q} is outside the ball at {D2} digits"}
         rows = base_rows(params, a.kept, a.eliminated,

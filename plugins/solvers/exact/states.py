@@ -17,16 +17,19 @@ rational, functions of the independent ones.
 """
 
 import random
+from collections.abc import Sequence
 from fractions import Fraction
+from typing import Any, cast
 
-from flint import fmpq
+from flint import fmpq, fmpq_mat
 
 from baseparams.dynamics.observation import RationalStates, observation_matrix
 from baseparams.errors import InputError, KinematicsError
+from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Exact, TanHalf
 
 
-def coordinate_kinds(mechanism):
+def coordinate_kinds(mechanism: Mechanism) -> tuple[list[str], list[str]]:
     """'angle' or 'length' for each independent coordinate."""
     names = mechanism.independent or mechanism.coordinates
     kinds = []
@@ -36,7 +39,7 @@ def coordinate_kinds(mechanism):
     return list(names), kinds
 
 
-def check_exact_possible(mechanism):
+def check_exact_possible(mechanism: Mechanism) -> None:
     """InputError unless the mechanism is an open chain (exact kinematics exists)."""
     if mechanism.loops:
         raise InputError(
@@ -54,8 +57,11 @@ def check_exact_possible(mechanism):
                 file=mechanism.path)
 
 
-def _random_state(rng, mechanism, names, kinds):
-    z, zd, zdd = [], [], []
+def _random_state(rng: random.Random, mechanism: Mechanism, names: Sequence[str],
+                  kinds: Sequence[str]) -> tuple[list[Any], list[fmpq], list[fmpq]]:
+    z: list[Any] = []
+    zd: list[fmpq] = []
+    zdd: list[fmpq] = []
     for name, kind in zip(names, kinds):
         if kind == "angle":
             z.append(TanHalf(Fraction(rng.randint(-97, 97), rng.randint(37, 101))))
@@ -67,12 +73,12 @@ def _random_state(rng, mechanism, names, kinds):
     return z, zd, zdd
 
 
-def _fmpq(value):
+def _fmpq(value: Fraction | int) -> fmpq:
     value = Fraction(value)
     return fmpq(value.numerator, value.denominator)
 
 
-def random_rational_states(mechanism, count, seed=0):
+def random_rational_states(mechanism: Mechanism, count: int, seed: int = 0) -> RationalStates:
     """``count`` random states with every value rational: angles as rational points of the
     unit circle (:class:`TanHalf`), lengths inside their limits, rational velocities and
     accelerations. They can be evaluated in any backend."""
@@ -83,7 +89,7 @@ def random_rational_states(mechanism, count, seed=0):
     return RationalStates(z, zd, zdd, name="random rational state")
 
 
-def exact_observation_matrix(mechanism, samples, seed=0):
+def exact_observation_matrix(mechanism: Mechanism, samples: int, seed: int = 0) -> fmpq_mat:
     """W over the rationals at ``samples`` random states: an ``fmpq_mat``.
 
     Raises InputError for closed loops or geometry that is not rational here (an axis of
@@ -91,14 +97,15 @@ def exact_observation_matrix(mechanism, samples, seed=0):
     """
     check_exact_possible(mechanism)
     try:
-        W, _ = observation_matrix(mechanism, Exact(), random_rational_states(mechanism, samples, seed))
+        states: Any = random_rational_states(mechanism, samples, seed)
+        W = cast(fmpq_mat, observation_matrix(mechanism, Exact(), states)[0])
     except KinematicsError as exc:
         raise InputError(f"the exact solver cannot evaluate {mechanism.name} in rational arithmetic "
                          f"({exc}); use --solver vp", file=mechanism.path) from None
     return W
 
 
-def rref_base(W):
+def rref_base(W: fmpq_mat) -> tuple[int, list[int], list[int], list[list[Fraction]]]:
     """(rank, kept columns, eliminated columns, beta as Fractions) from the exact rref of W.
 
     The pivot columns of the rref are kept (the leftmost basis); a non-pivot column j is
@@ -113,7 +120,7 @@ def rref_base(W):
     return rank, kept, eliminated, beta
 
 
-def rref_pivots(R, rank):
+def rref_pivots(R: fmpq_mat, rank: int) -> list[int]:
     """Pivot columns of a reduced row echelon form ``R`` of rank ``rank``: the leading
     nonzero of each of its first ``rank`` rows."""
     pivots, row = [], 0
