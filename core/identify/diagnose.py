@@ -38,7 +38,8 @@ from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, impla
 from baseparams.identify.data import MeasuredData
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
-from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel, numerical_rank
+from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
+from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.selection import Candidate, Rival, Selection, Step, project_out, holm, select_whitened
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
@@ -333,7 +334,7 @@ def reduced_model(columns: np.ndarray, train: int) -> np.ndarray:
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     _, sv, vt = np.linalg.svd(A / scale, full_matrices=False)
-    rank = numerical_rank(sv, RANK_TOL)
+    rank = numerical_rank(tol=RANK_TOL, singular_values=sv)
     return np.ascontiguousarray(columns @ (vt[:rank].T / scale[:, None]))
 
 

@@ -35,6 +35,7 @@ from typing import Literal
 import numpy as np
 
 from baseparams.identify.longrun import hac_lags, long_run
+from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
@@ -42,12 +43,6 @@ from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statisti
 RANK_TOL = 1e-6
 
 CovType = Literal["nonrobust", "hac", "hac_prewhitened"]
-
-
-def numerical_rank(singular_values: np.ndarray, tol: float) -> int:  # TODO: numeric's one rank (issue 23b)
-    """How many singular values (largest first) exceed ``tol`` times the largest."""
-    s = singular_values
-    return int(np.sum(s > tol * s[0])) if s.size else 0
 
 
 @dataclass(frozen=True)
@@ -203,7 +198,7 @@ class WeightedLinearModel:
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
         u, s, vt = np.linalg.svd(A / scale, full_matrices=False)
-        rank = numerical_rank(s, rank_tol)
+        rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
         residual = b - u[:, :rank] @ proj
@@ -249,7 +244,7 @@ class _GramStatistics:
         scale[scale == 0] = 1.0
         values, vectors = np.linalg.eigh(normal / np.outer(scale, scale))
         values, vectors = values[::-1], vectors[:, ::-1]
-        rank = numerical_rank(np.sqrt(np.clip(values, 0.0, None)), self.rank_tol)
+        rank = numerical_rank(tol=self.rank_tol, singular_values=np.sqrt(np.clip(values, 0.0, None)))
         inverse = (vectors[:, :rank] / values[:rank]) @ vectors[:, :rank].T / np.outer(scale, scale)
         coefficients = inverse @ np.tensordot(w2, self.moment, axes=1)
         residual = self.y - self.model @ coefficients

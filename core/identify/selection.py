@@ -44,6 +44,7 @@ from scipy.optimize import minimize_scalar
 from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
+from baseparams.numeric.rank import numerical_rank
 
 # A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
 # current model is projected out is absorbed by the model.
@@ -188,7 +189,7 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
         scale = np.linalg.norm(matrix, axis=0)
         scale[scale == 0] = 1.0
         u, s, _ = np.linalg.svd(matrix / scale, full_matrices=False)
-        keep = s > tol * (s[0] if s.size else 0.0)
+        keep = np.arange(s.size) < numerical_rank(tol=tol, singular_values=s)
     return u[:, keep]
 
 
