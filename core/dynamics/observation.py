@@ -20,6 +20,7 @@ Rows are sample-major: the ``f`` rows of the first state, then of the second ...
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Any, Protocol
 
 import numpy as np
@@ -191,7 +192,8 @@ def _each_sample(ev: Evaluator, states: States) -> Iterator[Sample]:
     mechanism, backend = ev.mechanism, ev.backend
     starts = states.starts(mechanism)
     for index in range(states.count):
-        guess = [backend.number(v) for v in starts[index]] if starts is not None and mechanism.loops else None
+        guess = ([backend.number(Fraction(v)) for v in starts[index]] if starts is not None and mechanism.loops
+                 else None)     # a float start is the rational it stands for
         z, zd, zdd = states.values(mechanism, backend, index)
         yield ev.sample(z, zd, zdd, guess, where=states.where(index))
 

@@ -75,7 +75,8 @@ def _body_terms(kin: TreeKinematics, s: BodyState, qdd: Sequence[Any]) -> tuple[
     """Body-axes Jacobian columns and the ten wrench columns of one body."""
     dw, acc = kin.accelerations(s, qdd)
     acc = vec.sub(acc, kin.gravity)
-    wb, dwb, ab = vec.tmatvec(s.rot, s.w), vec.tmatvec(s.rot, dw), vec.tmatvec(s.rot, acc)
+    w, _, _, _ = s.moving()
+    wb, dwb, ab = vec.tmatvec(s.rot, w), vec.tmatvec(s.rot, dw), vec.tmatvec(s.rot, acc)
     cols = body_wrench_columns(wb, dwb, ab, kin.zero)
     jw = {c: vec.tmatvec(s.rot, col) for c, col in s.jw.items()}
     jv = {c: vec.tmatvec(s.rot, col) for c, col in s.jv.items()}
@@ -116,7 +117,8 @@ def energy_forms(kin: TreeKinematics, states: Mapping[int, BodyState]) -> tuple[
     v_form: list[Any] = []
     for body in kin.mechanism.body_labels:
         s = states[body]
-        wb, vb = vec.tmatvec(s.rot, s.w), vec.tmatvec(s.rot, s.v)
+        w, v, _, _ = s.moving()
+        wb, vb = vec.tmatvec(s.rot, w), vec.tmatvec(s.rot, v)
         gb = vec.tmatvec(s.rot, kin.gravity)
         vxw = vec.cross(vb, wb)
         t_form.extend([half * vec.dot(vb, vb), vxw[0], vxw[1], vxw[2],

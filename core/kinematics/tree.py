@@ -39,6 +39,13 @@ class BodyState:
     bw: Vector | None = None   # bias angular acceleration (qdd = 0)
     ba: Vector | None = None   # bias origin acceleration (qdd = 0)
 
+    def moving(self) -> tuple[Vector, Vector, Vector, Vector]:
+        """(w, v, bw, ba) of a state of ``forward(q, qd)`` (velocities given)."""
+        w, v, bw, ba = self.w, self.v, self.bw, self.ba
+        if w is None or v is None or bw is None or ba is None:
+            raise ValueError("body velocities are needed: call forward(q, qd) with qd")
+        return w, v, bw, ba
+
 
 # mechanism -> {(backend type, digits, symbolic geometry): (edges, loops, gravity, zero, one)}
 _PREPARED: weakref.WeakKeyDictionary[Mechanism, dict[tuple[Any, ...], tuple[Any, ...]]] = (
@@ -115,8 +122,9 @@ class TreeKinematics:
                     st.jv.setdefault(c, [z, z, z])
                     if qd is not None:
                         rate = qd[c] if sign > 0 else -qd[c]
-                        st.bw = vec.add(st.bw, vec.scale(vec.cross(st.w, u), rate))
-                        st.w = vec.add(st.w, vec.scale(u, rate))
+                        w, _, bw, _ = st.moving()
+                        st.bw = vec.add(bw, vec.scale(vec.cross(w, u), rate))
+                        st.w = vec.add(w, vec.scale(u, rate))
                 else:
                     d = q[c] if sign > 0 else -q[c]
                     r = vec.scale(u, d)
@@ -126,8 +134,9 @@ class TreeKinematics:
                     st.jw.setdefault(c, [z, z, z])
                     if qd is not None:
                         rate = qd[c] if sign > 0 else -qd[c]
-                        st.ba = vec.add(st.ba, vec.scale(vec.cross(st.w, u), 2 * rate))
-                        st.v = vec.add(st.v, vec.scale(u, rate))
+                        w, v, _, ba = st.moving()
+                        st.ba = vec.add(ba, vec.scale(vec.cross(w, u), 2 * rate))
+                        st.v = vec.add(v, vec.scale(u, rate))
             st.rot = vec.matmul_t(st.rot, nr)
             _offset(st, vec.scale(vec.matvec(st.rot, np_), -1))
             states[new] = st
@@ -170,21 +179,24 @@ class TreeKinematics:
                     row[c] = row[c] + vec.dot(u, col)
                 rows.append(row)
                 if want_bias:
-                    u_dot = vec.cross(sa.w, u)
-                    u_dd = vec.add(vec.cross(sa.bw, u), vec.cross(sa.w, u_dot))
+                    wa, _, bwa, _ = sa.moving()
+                    u_dot = vec.cross(wa, u)
+                    u_dd = vec.add(vec.cross(bwa, u), vec.cross(wa, u_dot))
                     if eq[0] == "gap":
                         o_dot = vec.sub(_point_velocity(sb, arm_b), _point_velocity(sa, arm_a))
                         o_dd = vec.sub(_point_bias(sb, arm_b), _point_bias(sa, arm_a))
                     else:
-                        o_dot = vec.cross(sb.w, other)
-                        o_dd = vec.add(vec.cross(sb.bw, other), vec.cross(sb.w, o_dot))
+                        wb, _, bwb, _ = sb.moving()
+                        o_dot = vec.cross(wb, other)
+                        o_dd = vec.add(vec.cross(bwb, other), vec.cross(wb, o_dot))
                     biases.append(vec.dot(u_dd, other) + 2 * vec.dot(u_dot, o_dot) + vec.dot(u, o_dd))
         return values, rows, biases
 
     def accelerations(self, state: BodyState, qdd: Sequence[Any]) -> tuple[Vector, Vector]:
         """(omega_dot, a) of a body (world) from its Jacobians, bias terms and ``qdd``."""
-        return (vec.add(state.bw, _combine(state.jw, qdd, self.zero)),
-                vec.add(state.ba, _combine(state.jv, qdd, self.zero)))
+        _, _, bw, ba = state.moving()
+        return (vec.add(bw, _combine(state.jw, qdd, self.zero)),
+                vec.add(ba, _combine(state.jv, qdd, self.zero)))
 
 
 def _offset(st: BodyState, r: Vector) -> None:
@@ -193,9 +205,11 @@ def _offset(st: BodyState, r: Vector) -> None:
     for c, w in st.jw.items():
         st.jv[c] = vec.add(st.jv[c], vec.cross(w, r))
     if st.w is not None:
-        wr = vec.cross(st.w, r)
-        st.ba = vec.add(st.ba, vec.add(vec.cross(st.bw, r), vec.cross(st.w, wr)))
-        st.v = vec.add(st.v, wr)
+        w, v, bw, ba = st.moving()
+        wr = vec.cross(w, r)
+        st.ba = vec.add(ba, vec.add(vec.cross(bw, r), vec.cross(w, wr)))
+        st.v = vec.add(v, wr)
+
 
 
 def _point_columns(state: BodyState, arm: Vector) -> Columns:
@@ -203,12 +217,13 @@ def _point_columns(state: BodyState, arm: Vector) -> Columns:
 
 
 def _point_velocity(state: BodyState, arm: Vector) -> Vector:
-    return vec.add(state.v, vec.cross(state.w, arm))
+    w, v, _, _ = state.moving()
+    return vec.add(v, vec.cross(w, arm))
 
 
 def _point_bias(state: BodyState, arm: Vector) -> Vector:
-    return vec.add(state.ba, vec.add(vec.cross(state.bw, arm),
-                                     vec.cross(state.w, vec.cross(state.w, arm))))
+    w, _, bw, ba = state.moving()
+    return vec.add(ba, vec.add(vec.cross(bw, arm), vec.cross(w, vec.cross(w, arm))))
 
 
 def _combine(columns: Columns, rates: Sequence[Any], zero: Any) -> Vector:
