@@ -20,7 +20,8 @@ MINIMUM = 0.90
 # every folder is in this list.
 ASSERTED = [
     "core/model", "core/dynamics", "core/kinematics", "core/io", "core/excite",
-    "core/registry.py", "core/hookspecs.py", "core/errors.py", "core/identify",
+    "core/registry.py", "core/hookspecs.py", "core/errors.py", "core/identify", "core/numeric", "core/solvers",
+    "plugins/solvers",
     "plugins/__init__.py", "plugins/joints.py", "plugins/effects.py", "plugins/readers.py",
     "plugins/urdf", "mechanisms",
 ]

@@ -73,7 +73,7 @@ def _random_state(rng: random.Random, mechanism: Mechanism, names: Sequence[str]
     return z, zd, zdd
 
 
-def _fmpq(value: Fraction | int) -> fmpq:
+def _fmpq(value: Fraction | int | float) -> fmpq:
     value = Fraction(value)
     return fmpq(value.numerator, value.denominator)
 

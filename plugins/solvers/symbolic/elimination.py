@@ -238,6 +238,7 @@ def _largest_component(direction: Sequence[Any], field: ExactField) -> int:
 def transfer_preference(gen: Generator, mechanism: Mechanism, field: ExactField) -> list[str]:
     """Parameters a transfer generator should eliminate, most wanted first (see module doc)."""
     body = gen.acceptor if gen.donor == 0 else gen.donor
+    assert body is not None
     side = gen.sides.get(body, {})
     names = lambda kinds: [f"{k}{body}" for k in kinds]  # noqa: E731
     if gen.multipole == "monopole":
@@ -533,9 +534,9 @@ def certify(mechanism: Mechanism, derivation: Derivation, digits: int = 40,
             if columns_independent(blocks, np.vstack([wf_trajectory[rows_used], wf_random]), kept):
                 lower, kept_proven, samples = len(kept), True, len(states) + batch.count
         if lower is None:           # every state in balls, and the shared analysis
-            W, info = cast(tuple[Any, dict[str, Any]], observation_matrix(mechanism, backend, trajectory))
+            W, info = observation_matrix(mechanism, backend, trajectory)
             blocks = [W, random_block]
-            samples = info.get("samples") + batch.count
+            samples = int(info["samples"]) + batch.count
             stacked = backend.stack(*blocks)
             try:
                 lower, kept_proven = analyse(stacked, digits, kept=kept, approximate_spectrum=False).rank, True

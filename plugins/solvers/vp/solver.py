@@ -110,7 +110,7 @@ class BallRun:
             if done in marks:
                 say(progress, f"vp: {digits} digits: sample {done}/{count}")
 
-        W, info = cast(tuple[Any, dict[str, Any]], observation_matrix(mechanism, backend, trajectory, progress=tick))
+        W, info = observation_matrix(mechanism, backend, trajectory, progress=tick)
         self.W: Any = W
         self.info: dict[str, Any] = info
         if batches:             # independent random states added after a failed excitation check
