@@ -173,7 +173,7 @@ def numeric_rank(rows, tol=NULL_TOL):
     """The number of singular values of ``rows`` above ``tol`` times the largest.
 
     Decided in exact arithmetic on the Gram matrix when the margin is clear
-    (:func:`pivot_rank`, the usual case: a few ms), else by mpmath's SVD (0.1-0.2 s)."""
+    (:func:`pivot_rank`, the usual case, cheap), else by mpmath's SVD (far slower)."""
     if not rows:
         return 0
     count = pivot_rank(rows, tol)
