@@ -15,18 +15,16 @@ import gc
 import statistics
 import subprocess
 import sys
-import time
 from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_regressor import best_of  # noqa: E402
 
 
 def best(fn: Callable[[], object], repeat: int) -> float:
     """The smallest of ``repeat`` wall times of ``fn()`` (seconds)."""
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+    return best_of(repeat, fn)[0]
 
 
 def import_seconds(modules: str, before: str = "numpy", repeat: int = 3) -> float:
