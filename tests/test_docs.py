@@ -46,7 +46,6 @@ OPTION_RE = re.compile(r"^--[a-z][\w-]*$")
 TIMING_RE = re.compile(r"\b\d+(\.\d+)?\s?(s|ms)\b")
 EXIT_RE = re.compile(r"#.*\bexit (\d)\b")
 COMMAND_LANGUAGES = ("console", "bash", "sh", "shell", "")
-EXCLUDED_FILES = ()          # every markdown file of README.md and docs/ is checked
 
 
 # ----- the checker: pure functions of markdown text ------------------------------------------
