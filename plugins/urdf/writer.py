@@ -26,7 +26,7 @@ import sympy
 
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.model.mechanism import Mechanism
+from baseparams.model.mechanism import Joint, Mechanism
 from baseparams.numeric.backends import Symbolic
 
 from .parse import transform_parameters
@@ -231,7 +231,7 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n", notes
 
 
-def _limit(joint, kind: str) -> dict[str, str] | None:
+def _limit(joint: Joint, kind: str) -> dict[str, str] | None:
     """The ``<limit>`` attributes the mechanism knows for a one-coordinate joint (None: none).
 
     Only what was read or declared is written: never a zero effort or velocity, which
