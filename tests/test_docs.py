@@ -3,7 +3,8 @@
 What is checked, for every markdown file:
 
 - every repository path it cites (``core/...``, ``plugins/...``, ``tests/...``,
-  ``benchmarks/...``, ``docs/...``, ``examples/...``, ``mechanisms/...``; globs allowed) exists;
+  ``benchmarks/...``, ``docs/...``, ``examples/...``, ``mechanisms/...``; globs allowed) exists,
+  and every markdown link to a local file;
 - every dotted name ``baseparams.x.y`` imports (the longest importable module, then attributes);
 - every command line ``baseparams VERB ...`` (console, bash and plain code blocks, inline code)
   names a verb of the click group (a subcommand for ``plot``) and only options that verb has;
@@ -62,6 +63,16 @@ def missing_paths(text: str, root: Path = ROOT) -> list[str]:
         if not found:
             out.append(path)
     return out
+
+
+LINK_RE = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+
+
+def missing_links(text: str, folder: Path) -> list[str]:
+    """Markdown links ``[text](target)`` to local files that do not exist (relative to the
+    document's folder, as a reader's browser resolves them); URLs are not fetched."""
+    return [m.group(1) for m in LINK_RE.finditer(text)
+            if not re.match(r"[a-z]+:", m.group(1)) and not (folder / m.group(1)).exists()]
 
 
 def resolves(name: str) -> bool:
@@ -296,6 +307,7 @@ def test_checker_fails_when_a_cited_path_is_renamed(tmp_path):
     assert missing_paths(text, tmp_path) == []
     (tmp_path / "core" / "backends.py").rename(tmp_path / "core" / "arithmetic.py")
     assert missing_paths(text, tmp_path) == ["core/backends.py"]
+    assert missing_links("[x](urdf.md#top) [y](https://a.b/c.md)", tmp_path) == ["urdf.md"]
 
 
 def test_checker_fails_on_stale_names_verbs_options_and_output():
@@ -316,6 +328,7 @@ def test_checker_fails_on_stale_names_verbs_options_and_output():
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
 def test_cited_paths_exist(doc):
     assert missing_paths(doc.read_text(encoding="utf-8")) == []
+    assert missing_links(doc.read_text(encoding="utf-8"), doc.parent) == []
 
 
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
