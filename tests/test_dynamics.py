@@ -1,6 +1,7 @@
 """The regressor against closed forms, energy balance, loop closure and trajectory errors."""
 
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -185,6 +186,18 @@ def test_exact_rational_state_gives_exact_regressor():
     g = Fraction(981, 100)
     expected = [0, -g * Fraction(3, 5), 0, -g * Fraction(4, 5), 0, 0, 0, Fraction(5, 3), 0, 0]
     assert [Fraction(int(v.p), int(v.q)) for v in k] == expected
+
+
+BUILTIN = {"pendulum", "planar_2r", "puma560", "scara", "four_bar", "slider_crank", "stewart_platform",
+           "sla_suspension"}
+
+
+def test_the_parametrized_tests_see_every_builtin_mechanism():
+    """The tests above loop over the registry: an empty or partial one (a broken entry point)
+    must fail here rather than leave them with nothing to check."""
+    files = {path.stem for path in (Path(__file__).parent.parent / "mechanisms").glob("*.toml")}
+    assert files == BUILTIN
+    assert BUILTIN <= set(registry.mechanisms())
 
 
 def test_every_builtin_file_is_registered_under_its_own_name():

@@ -18,7 +18,7 @@ from baseparams.dynamics.trajectory import T, values_at
 from baseparams.excite import design
 from baseparams.excite.criterion import Model, criterion
 from baseparams.excite.fourier import FourierForm
-from baseparams.excite.limits import limits_of, urdf_limits
+from baseparams.excite.limits import drive_limits, limits_of
 from baseparams.excite.plan import Settings, plan, problem_of
 from baseparams.excite.tangent import tree_regressor_with_tangents
 from baseparams.identify.base import BaseModel
@@ -205,7 +205,7 @@ def test_written_motion_is_at_rest_exactly_and_equals_the_optimisers():
 
 def test_urdf_velocity_and_effort_limits_are_read():
     mechanism = load_mechanism(TX40)
-    found = urdf_limits(mechanism)
+    found = drive_limits(mechanism)
     assert found["joint_1"] == {"velocity": 5.009, "effort": 131.84}
     limits = limits_of(mechanism, acceleration="joint_2=3", velocity="1.5")
     assert limits.upper[4] == pytest.approx(2.33) and limits.lower[4] == pytest.approx(-2.09)

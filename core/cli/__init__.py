@@ -4,8 +4,8 @@ the symbolic derivation report (:mod:`.report`)."""
 import os
 
 # The command line's matrices are small (thousands of rows, tens of columns): BLAS threads only
-# contend for the cores. With OpenBLAS's default threads diagnose on the TX40 spent 50 CPU s
-# for 30 s of wall time, dp 10-40 times its single-thread CPU time (docs/urdf.md). Set before
+# contend for the cores. With OpenBLAS's default threads diagnose on the TX40 spent more CPU
+# than wall time, dp many times its single-thread CPU time (docs/urdf.md). Set before
 # numpy is first imported; a user's own setting wins.
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")

@@ -10,7 +10,7 @@ import click
 from baseparams.cli.commands import emit, format_option, load, main
 from baseparams.cli.plots import _figure, _save
 
-# The statistics (scipy.signal, scipy.stats, statsmodels: 2 s of imports) are imported by
+# The statistics (scipy.signal, scipy.stats, statsmodels: slow imports) are imported by
 # the verb when it runs, as in identify.py: every other command starts without them.
 if TYPE_CHECKING:
     from baseparams.identify.diagnose import Diagnosis

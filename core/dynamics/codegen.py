@@ -362,8 +362,8 @@ def _liveness(graph: Graph, kernel: Kernel) -> tuple[dict[int, list[tuple[str, i
 def _numpy_kernel(graph: Graph, kernel: Kernel, constants: Constants) -> tuple[str, int]:
     """The numpy flavour's source and its number of work rows.
 
-    Why this form: at a thousand samples a numpy operation costs about 1 us of dispatch
-    for 0.5 us of arithmetic, so the call itself matters. Every operation writes into a
+    Why this form: at a thousand samples a numpy operation's dispatch costs about as much
+    as its arithmetic (docs/performance.md), so the call itself matters. Every operation writes into a
     preallocated row (``_multiply(a, b, w3)``: a ufunc with a positional ``out``) instead of
     allocating its result; every value an output needs is computed straight into its row
     of the output buffer; constants are 0-d arrays (numpy's slower path for a Python
@@ -582,7 +582,7 @@ def _structure(mechanism: Mechanism) -> ClosureStructure:
 
 # ----- in this process ------------------------------------------------------------------------
 # Generating and compiling costs about as much as evaluating the generic numpy code on a few
-# thousand samples (0.1 s for a 6R arm, 6 s for a 48-body chain), so the float64 paths use
+# thousand samples (docs/generated_numpy.md), so the float64 paths use
 # the generated code once it is compiled or when the batch is large enough to pay for it.
 GENERATE_AT = {"regressor": 2000, "closure": 50}   # samples
 _CACHE: dict[tuple[Mechanism, str], dict[str, Any]] = {}
@@ -592,7 +592,7 @@ _CACHE_SIZE = 32
 @functools.lru_cache(maxsize=_CACHE_SIZE)
 def _traced(mechanism: Mechanism, parts: tuple[str, ...]) -> tuple[Graph, list[Kernel]]:
     """:func:`trace`, once per mechanism and parts: the numpy and the scalar (arb, one
-    float64 state) code of a closed loop are written from the same graph (0.2 s on the SLA)."""
+    float64 state) code of a closed loop are written from the same graph, traced once."""
     return trace(mechanism, parts)
 
 

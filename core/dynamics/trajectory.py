@@ -4,8 +4,8 @@ A trajectory gives each independent coordinate as an expression of time (a finit
 Fourier series by default); velocities and accelerations are its exact derivatives,
 evaluated by forward-mode differentiation (:class:`Jet`: value, first and second
 derivative carried through each operation of the expression, in the backend's own
-arithmetic): no symbolic derivative is built, which cost sympy about 0.1 s per expression
-(most of dp's time on a generated chain), and every operation is still the backend's, so
+arithmetic): no symbolic derivative is built, which cost sympy most of dp's time on a
+generated chain (docs/performance.md), and every operation is still the backend's, so
 arb balls contain the exact derivatives and rationals are exact.
 Sample times are exact rationals, so at D digits every sample is computed at D digits
 from the start. Positions on the constraint manifold: in float64 all samples at once, by
@@ -267,7 +267,8 @@ class _JetBackend:
 @functools.lru_cache(maxsize=1024)
 def _derivatives(expression: sympy.Expr) -> tuple[Any, Any, Any]:
     """(q, qd, qdd) of one expression of t, differentiated once per process: the per-state
-    arithmetics ask for them at every sample (sympy took 3.5 s of a 12-body chain's dp run)."""
+    arithmetics ask for them at every sample (sympy's derivatives dominated a 12-body chain's
+    dp run before this cache: docs/performance.md)."""
     d1 = sympy.diff(expression, T)
     return expression, d1, sympy.diff(d1, T)
 

@@ -146,7 +146,7 @@ def symbolic_frame(mechanism: Mechanism, frame: Frame) -> Placement:
     """Exact (R, p) of one of ``mechanism``'s frames in its body's axes (geometry symbols):
     ``mechanism.numeric_frame(frame, Symbolic(), symbolic=True)``, computed once per frame
     (each joint's rules, the sampled transfers and every body's candidate directions ask
-    for the same frames; the sympy substitutions cost about 10 ms each). A Mechanism and
+    for the same frames, and each costs sympy substitutions). A Mechanism and
     its frames are immutable and live together, so the frame's id is a key. Callers must
     not change the lists returned."""
     known = _FRAMES.setdefault(mechanism, {})

@@ -1,9 +1,8 @@
 """The limits a planned motion must respect, per independent coordinate.
 
 Positions from the mechanism (a URDF's ``<limit lower upper>``, a mechanism file's
-``limits``), velocities and torques from a URDF's ``<limit velocity effort>`` (the URDF
-reader keeps only positions, so they are read here from the file itself), each overridable
-on the command line; accelerations have no URDF form and come from the command line or
+``limits``), velocities and torques from it too (a URDF's ``<limit velocity effort>``, a
+mechanism file's ``drive_limits``), each overridable on the command line; accelerations have no URDF form and come from the command line or
 the default below. A coordinate without a position range keeps the range the user gives,
 or +-pi (angles) / +-0.5 m (lengths).
 """
@@ -11,7 +10,6 @@ or +-pi (angles) / +-0.5 m (lengths).
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,31 +48,10 @@ def _kind(mechanism: Mechanism, name: str) -> str:
     return joint.type.coordinate_kinds[joint.coordinates.index(name)]
 
 
-def urdf_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
-    """{coordinate: {"velocity": v, "effort": e}} from the URDF the mechanism was read from."""
-    path = mechanism.path
-    if not path or not str(path).lower().endswith(".urdf"):
-        return {}
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError):
-        return {}
-    out = {}
-    for joint in root.iter("joint"):
-        limit = joint.find("limit")
-        name = joint.get("name")
-        if limit is None or name not in mechanism.coordinates:
-            continue
-        values = {}
-        for key in ("velocity", "effort"):
-            try:
-                value = float(limit.get(key, "nan"))
-            except ValueError:
-                continue
-            if math.isfinite(value) and value > 0:
-                values[key] = value
-        out[name] = values
-    return out
+def drive_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
+    """{coordinate: {"velocity": v, "effort": e}} as the mechanism carries them (a URDF's
+    ``<limit velocity effort>``, a mechanism file's ``drive_limits``)."""
+    return {name: dict(values) for joint in mechanism.joints for name, values in joint.drive_limits.items()}
 
 
 def parse_values(text: str | None, names: tuple, option: str, pair: bool = False) -> dict:
@@ -118,7 +95,7 @@ def limits_of(mechanism: Mechanism, *, positions: str | None = None, velocity: s
     """The limits of ``mechanism``'s independent coordinates, the options' overrides applied
     (positions: intersected with the file's range)."""
     names = independent_names(mechanism)
-    urdf = urdf_limits(mechanism)
+    drives = drive_limits(mechanism)
     ranges = parse_values(positions, names, "--position-range", pair=True)
     vel = parse_values(velocity, names, "--max-velocity")
     acc = parse_values(acceleration, names, "--max-acceleration")
@@ -140,13 +117,13 @@ def limits_of(mechanism: Mechanism, *, positions: str | None = None, velocity: s
                              f"(the file's limits {joint.limits.get(name)} and --position-range "
                              f"{ranges.get(name)} do not overlap)", file=mechanism.path, key="--position-range")
         lower[k], upper[k] = lo, hi
-        v_max[k] = vel.get(name, urdf.get(name, {}).get("velocity", DEFAULT_VELOCITY[kind]))
+        v_max[k] = vel.get(name, drives.get(name, {}).get("velocity", DEFAULT_VELOCITY[kind]))
         a_max[k] = acc.get(name, ACCELERATION_PER_VELOCITY * v_max[k])
-        if name in tau or "effort" in urdf.get(name, {}):
-            t_max[k] = tau.get(name, urdf.get(name, {}).get("effort"))
+        if name in tau or "effort" in drives.get(name, {}):
+            t_max[k] = tau.get(name, drives.get(name, {}).get("effort"))
         sources[name] = {"position": source,
-                         "velocity": "option" if name in vel else "urdf" if "velocity" in urdf.get(name, {})
+                         "velocity": "option" if name in vel else "file" if "velocity" in drives.get(name, {})
                          else "default",
                          "acceleration": "option" if name in acc else "default",
-                         "torque": "option" if name in tau else "urdf" if math.isfinite(t_max[k]) else "none"}
+                         "torque": "option" if name in tau else "file" if math.isfinite(t_max[k]) else "none"}
     return Limits(names, lower, upper, v_max, a_max, t_max, sources)

@@ -292,8 +292,8 @@ def correlation(residual: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 def holm(pvalues: Sequence[float]) -> np.ndarray:
     """Holm's step-down adjusted p values (statsmodels' ``multipletests(method="holm")`` gives
-    the same, tests/test_diagnose.py checks it, but it runs ``gc.collect()`` on every call:
-    85 ms in a process holding sympy, more than all of a step's tests)."""
+    the same, tests/test_diagnose.py checks it, but it runs ``gc.collect()`` on every call,
+    which in a process holding sympy costs more than all of a step's tests)."""
     p = np.asarray(pvalues, dtype=float)
     order = np.argsort(p)
     m = len(p)

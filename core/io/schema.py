@@ -93,6 +93,7 @@ SCHEMA = Table({
         "name": (STRING, False), "type": (STRING, True), "parent": (INTEGER, True),
         "child": (INTEGER, True), "coordinates": (NAMES, False), "loop": (BOOLEAN, False),
         "limits": (Map(Array(VALUE, 2, what="[low, high]")), False),
+        "drive_limits": (Map(Table({"velocity": (VALUE, False), "effort": (VALUE, False)})), False),
         "parent_frame": (FRAME, True), "child_frame": (FRAME, True),
     }), min_length=1), True),
     "coordinates": (Table({"independent": (NAMES, False)}), False),

@@ -111,7 +111,7 @@ class _Walker:
             b.joint(joint["type"], joint["parent"], joint["child"], name=joint.get("name"),
                     parent_frame=joint["parent_frame"], child_frame=joint["child_frame"],
                     coordinates=joint.get("coordinates"), limits=joint.get("limits"),
-                    loop=joint.get("loop", False), key=f"joints[{i}]")
+                    loop=joint.get("loop", False), drive_limits=joint.get("drive_limits"), key=f"joints[{i}]")
         coordinates = data.get("coordinates", {})
         if "independent" in coordinates:
             b.independent(coordinates["independent"], key="coordinates.independent")

@@ -79,6 +79,10 @@ def mechanism_toml(mech: Mechanism) -> str:
         if joint.limits:
             limits = ", ".join(f"{c} = [{_string(repr(lo))}, {_string(repr(hi))}]" for c, (lo, hi) in joint.limits.items())
             out.append(f"limits = {{ {limits} }}")
+        if joint.drive_limits:
+            drives = ", ".join(f"{c} = {{ " + ", ".join(f"{k} = {_string(repr(v))}" for k, v in d.items()) + " }"
+                               for c, d in joint.drive_limits.items())
+            out.append(f"drive_limits = {{ {drives} }}")
         out.append(f"parent_frame = {_frame(joint.parent_frame)}")
         out.append(f"child_frame = {_frame(joint.child_frame)}")
     if mech.loops and mech.independent:

@@ -56,8 +56,8 @@ class TreeKinematics:
     """Precomputed numeric frames of a mechanism in one backend; evaluates states.
 
     The frames are computed once per mechanism, backend kind and precision and then shared
-    (read only): evaluating them goes through sympy (about 0.2 s for the SLA, which was most
-    of its warm float64 W). A backend's numbers depend on nothing but its kind and digits."""
+    (read only): evaluating them goes through sympy (most of the SLA's warm float64 W
+    before this cache: docs/performance.md). A backend's numbers depend on nothing but its kind and digits."""
 
     edges: list[tuple[int, int, Frame, list[tuple[str, int, int, int]], Frame]]
     loops: list[tuple[Joint, Frame, Frame]]

@@ -26,6 +26,7 @@ through :func:`baseparams.io.loader.load_mechanism` gets it.
 """
 
 import keyword
+import math
 import re
 from collections.abc import Mapping, Sequence
 from decimal import Decimal
@@ -273,12 +274,15 @@ class MechanismBuilder:
               child_frame: Frame | Mapping[str, object] | None = None,
               coordinates: Sequence[str] | None = None,
               limits: Mapping[str, Sequence[Value]] | None = None, loop: bool = False,
+              drive_limits: Mapping[str, Mapping[str, Value]] | None = None,
               key: str | None = None) -> Joint:
         """A joint of a registered type (or a :class:`JointType`) from ``parent`` to ``child``.
 
         ``name``: default ``J{parent}_{child}``. ``coordinates``: one name per motion;
         default the joint name (one coordinate) or ``{name}_{suffix}``. ``limits``:
-        coordinate -> (low, high). ``loop=True`` makes it a loop-closing joint."""
+        coordinate -> (low, high). ``loop=True`` makes it a loop-closing joint.
+        ``drive_limits``: coordinate -> {"velocity": v, "effort": e} (either or both; positive
+        numbers: a URDF's ``<limit velocity effort>``, kept so that writing it back loses nothing)."""
         key = key or f"joints[{len(self._joints)}]"
         jtype = self._joint_type(type, f"{key}.type")
         ends = []
@@ -301,7 +305,8 @@ class MechanismBuilder:
         bounds = self._limits({} if limits is None else limits, f"{key}.limits", cnames)
         if not isinstance(loop, bool):
             raise self.error(f"{key}.loop", "must be true or false")
-        joint = Joint(name, jtype, ends[0], ends[1], frames[0], frames[1], cnames, bounds, loop)
+        drives = self._drive_limits({} if drive_limits is None else drive_limits, f"{key}.drive_limits", cnames)
+        joint = Joint(name, jtype, ends[0], ends[1], frames[0], frames[1], cnames, bounds, loop, drives)
         self._joints.append(joint)
         self._coordinates.update(cnames)
         return joint
@@ -345,10 +350,30 @@ class MechanismBuilder:
             values = [self.expression(v, f"{key}.{c}", time=True).xreplace(self.geometry_subs) for v in pair]
             if any(v.free_symbols for v in values):
                 raise self.error(f"{key}.{c}", "must be numbers (t is not allowed here)")
-            lo, hi = (float(sympy.N(v)) for v in values)
+            lo, hi = (_nearest_float(v) for v in values)
             if not lo < hi:
                 raise self.error(f"{key}.{c}", "low must be below high")
             out[c] = (lo, hi)
+        return out
+
+    def _drive_limits(self, raw: object, key: str, cnames: tuple[str, ...]) -> dict[str, dict[str, float]]:
+        """coordinate -> {"velocity": v, "effort": e}: positive finite numbers, either or both."""
+        if not isinstance(raw, Mapping):
+            raise self.error(key, "must be a table: coordinate = { velocity = v, effort = e }")
+        out: dict[str, dict[str, float]] = {}
+        for c, table in raw.items():
+            if c not in cnames:
+                raise self.error(f"{key}.{c}", f"not a coordinate of this joint ({', '.join(cnames)})")
+            if not isinstance(table, Mapping) or not table or set(table) - {"velocity", "effort"}:
+                raise self.error(f"{key}.{c}", "must be a table with velocity and/or effort")
+            out[c] = {}
+            for kind, value in table.items():
+                number = self.expression(value, f"{key}.{c}.{kind}").xreplace(self.geometry_subs)
+                if number.free_symbols:
+                    raise self.error(f"{key}.{c}.{kind}", "must be a number")
+                out[c][kind] = _nearest_float(number)
+                if not (math.isfinite(out[c][kind]) and out[c][kind] > 0):
+                    raise self.error(f"{key}.{c}.{kind}", "must be a positive number")
         return out
 
     def independent(self, names: Sequence[str], *, key: str = "coordinates.independent") -> None:
@@ -577,3 +602,9 @@ def _type_word(value: object) -> str:
     return {str: "a string", int: "an integer", list: "a list", tuple: "a list", dict: "a table",
             type(None): "a missing value", Decimal: "a number", float: "a float"}.get(
         type(value), "a table" if isinstance(value, Mapping) else f"a {type(value).__name__}")
+
+
+def _nearest_float(value: sympy.Expr) -> float:
+    """The float nearest an exact number (``float(sympy.N(v))`` rounds twice: a file's
+    "-2.96705972839" came back as -2.9670597283899998 and was written so)."""
+    return float(value) if value.is_Rational else float(sympy.N(value, 30))

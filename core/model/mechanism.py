@@ -52,6 +52,8 @@ class Joint:
     coordinates: tuple[str, ...]      # coordinate names, one per motion
     limits: Mapping[str, Limits] = field(default_factory=dict, compare=False)  # name -> (lo, hi) floats
     loop: bool = False                # requested as loop-closing
+    # name -> {"velocity": max |qd|, "effort": max |tau|} floats (a URDF's <limit velocity effort>)
+    drive_limits: dict = field(default_factory=dict, compare=False)
 
 
 @dataclass(frozen=True)

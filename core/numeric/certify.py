@@ -373,7 +373,7 @@ def _select_rows_float64(Wk: arb_mat, R: arb_mat | None, W64: np.ndarray | None 
         return None
     if W64 is None:
         W64 = _float_mids(Wk.entries(), Wk.nrows(), r)
-    import scipy.linalg      # here, not at the top: 0.4-0.6 s of every command's start, for one call
+    import scipy.linalg      # here, not at the top: a large part of every command's start, for one call
     Qt = scipy.linalg.solve_triangular(R64, W64.T, trans="T")
     _, perm = scipy.linalg.qr(Qt, mode="r", pivoting=True)
     return sorted(int(i) for i in perm[:r])

@@ -15,7 +15,7 @@ def power_of_two_exponents(log2_norms: Sequence[float | None] | np.ndarray) -> l
 
 
 # above this many entries LAPACK's blocked QR (scipy) is used: there its 10x speed repays
-# importing scipy.linalg (0.25-0.6 s, paid by the whole process once); below, this loop
+# importing scipy.linalg (paid by the whole process once: docs/performance.md); below, this loop
 # takes milliseconds and a command that needs no other scipy never imports it
 LAPACK_ENTRIES = 200_000
 

@@ -44,6 +44,7 @@ class UrdfJoint:
     origin: tuple[Fraction, ...] = ZERO3
     axis: tuple[Fraction, ...] = (Fraction(0), Fraction(0), Fraction(1))
     limits: tuple[Decimal, Decimal] | None = None       # (lower, upper)
+    drive: dict[str, Decimal] | None = None   # {"velocity": v, "effort": e} positive Decimals of <limit>
     damping: Decimal | None = None
     friction: Decimal | None = None
     mimic: tuple[str, Decimal, Decimal] | None = None   # (leader joint name, multiplier, offset)
@@ -237,6 +238,10 @@ class _Parser:
                 joint.limits = (lo, hi)
             else:
                 self.notes.append(f"{key}.limit: lower {lo} is not below upper {hi}: no limits taken")
+        if jtype in ("revolute", "continuous", "prismatic") and limit is not None:
+            drive = {attr: self.number(limit, attr, f"{key}.limit") for attr in ("velocity", "effort")
+                     if limit.get(attr) is not None}
+            joint.drive = {attr: value for attr, value in drive.items() if value > 0} or None
         dynamics = elem.find("dynamics")
         if dynamics is not None and jtype in ("revolute", "continuous", "prismatic"):
             for attr in ("damping", "friction"):

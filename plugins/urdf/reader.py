@@ -131,8 +131,9 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
             notes.append(f"{j.key}: coordinate named {cname!r} (joint names must be identifiers here)")
         parent_frame, child_frame = _frames(j, jtype)
         limits = {cname: list(j.limits)} if j.limits is not None and jtype in ("R", "P") else None
+        drives = {cname: j.drive} if j.drive and jtype in ("R", "P") else None
         joint = b.joint(jtype, label[j.parent], label[j.child], name=cname, parent_frame=parent_frame,
-                        child_frame=child_frame, limits=limits, key=j.key)
+                        child_frame=child_frame, limits=limits, drive_limits=drives, key=j.key)
         for name, value in (("viscous_friction", j.damping), ("coulomb_friction", j.friction)):
             if value:
                 coefficient = "fv" if name == "viscous_friction" else "fc"

@@ -28,7 +28,7 @@ import sympy
 
 from baseparams.errors import InputError
 from baseparams.model.expressions import exact_text
-from baseparams.model.mechanism import Frame, Mechanism
+from baseparams.model.mechanism import Frame, Joint, Mechanism
 from baseparams.numeric.backends import Symbolic
 
 from .parse import transform_parameters
@@ -189,6 +189,7 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
         else:
             notes.append(f"body {body.label} has no inertia: link {names[body.label]} has no <inertial>")
     effects = {(e.kind, e.coordinate): e for e in getattr(mech, "effects", ())}
+    unknown: list[str] = []
     for joint, new, known, rot, pos, axis in joints:
         jname = joint.coordinates[0] if len(joint.coordinates) == 1 else joint.name
         kind = URDF_TYPE[joint.type.name]
@@ -200,12 +201,16 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
         ET.SubElement(elem, "origin", xyz=_triple(pos), rpy=_rpy(rot))
         if kind in ("revolute", "continuous", "prismatic"):
             ET.SubElement(elem, "axis", xyz=_triple(axis))
-            limit = {"effort": "0", "velocity": "0"}
-            if joint.limits:
-                lo, hi = joint.limits[joint.coordinates[0]]
-                limit.update(lower=repr(lo), upper=repr(hi))
-            if kind != "continuous":
+            limit = _limit(joint, kind)
+            if kind == "continuous" and limit is not None and set(limit) != {"effort", "velocity"}:
+                notes.append(f"joint {jname}: only {', '.join(limit)} known; URDF's <limit> needs effort and "
+                             "velocity together: not written")
+                limit = None
+            if limit is not None:
                 ET.SubElement(elem, "limit", limit)
+            missing = {"lower", "upper", "effort", "velocity"} - set(limit or ()) if kind != "continuous" else set()
+            if missing:
+                unknown.append(f"{jname} ({', '.join(sorted(missing))})")
             dynamics: dict[str, str] = {}
             for effect_kind, attr, coefficient in (("viscous_friction", "damping", "fv"),
                                                    ("coulomb_friction", "friction", "fc")):
@@ -218,12 +223,32 @@ def mechanism_urdf(mech: Mechanism) -> tuple[str, list[str]]:
                 ET.SubElement(elem, "dynamics", dynamics)
     for (kind, coordinate) in effects:
         notes.append(f"{kind} on {coordinate}: URDF has no such element, not written")
+    if unknown:
+        notes.append(f"<limit> attributes URDF requires but the mechanism does not know, not written (none is "
+                     f"invented): {'; '.join(unknown)}. urdfdom, hence ROS and Pinocchio, refuse such a file until "
+                     "they are added (in the mechanism file: `limits` and `drive_limits`, docs/mechanism-format.md)")
     if mech.geometry:
         notes.append(f"geometry names ({', '.join(mech.geometry)}) written as their values")
     if mech.trajectory is not None:
         notes.append("the trajectory is not part of URDF; the URDF reader makes a default one")
     ET.indent(robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n", notes
+
+
+def _limit(joint: Joint, kind: str) -> dict[str, str] | None:
+    """The ``<limit>`` attributes the mechanism knows for a one-coordinate joint (None: none).
+
+    Only what was read or declared is written: never a zero effort or velocity, which
+    ROS, Gazebo and MoveIt take as "cannot move". A revolute joint without a position range
+    is written ``continuous`` by the caller (URDF's unlimited hinge), whose ``<limit>`` is
+    optional and carries only effort and velocity."""
+    name = joint.coordinates[0]
+    limit: dict[str, str] = {}
+    if kind != "continuous" and name in joint.limits:
+        lo, hi = joint.limits[name]
+        limit.update(lower=repr(lo), upper=repr(hi))
+    limit.update({k: repr(v) for k, v in sorted(joint.drive_limits.get(name, {}).items())})
+    return limit or None
 
 
 def _frame(mech: Mechanism, frame: Frame, backend: Symbolic, subs: Mapping[Any, Any]) -> tuple[Any, Any]:

@@ -3,12 +3,12 @@
 The symbolic solver needs one fact about W: its kept columns K are independent. The
 shared analysis (:func:`baseparams.numeric.certify.analyse`) proves that and much more (the
 Gram matrix, pivots, beta, a tail bound), which costs O(rows n^2) Python-level ball
-operations: 160 of 320 s on a 48-body chain. Here the *choices* are made in float64 on a
+operations: half of a 48-body chain's symbolic run (docs/performance.md). Here the *choices* are made in float64 on a
 copy of W (the same states in the Float64 backend) and only the *claim* is made in balls:
 
 1. r = |K| rows R of W_K, by QR with column pivoting on the column-scaled W_K^T (the
    shared :func:`baseparams.numeric.linalg.pivoted_qr_columns`, numpy only: importing
-   scipy.linalg would cost this one call 0.25-0.6 s of a command's whole process);
+   scipy.linalg would cost this one call more than its work, in the command's whole process);
 2. an approximate inverse X of the r x r block M = W_RK, computed in float64 with rows and
    columns scaled by powers of two (exact), so X's entries are exact binary numbers;
 3. in ball arithmetic at the caller's precision: E = I - M X, and the upper bound of
