@@ -13,43 +13,6 @@ from baseparams.errors import InputError
 from baseparams.solvers.protocol import check_options, require_applicable
 
 
-def parse_separate(text: str, mechanism) -> tuple:
-    """``KIND:COORD,KIND:COORD`` or a ``diagnose --format json`` file (its "ambiguous" groups)."""
-    from baseparams.identify.model import checked_effect
-    pairs = []
-    path = Path(text)
-    if text.endswith(".json") or path.is_file():
-        try:
-            report = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"cannot read a diagnose JSON report: {exc}", file=text, key="--separate") from None
-        groups = report.get("ambiguous") if isinstance(report, dict) else None
-        if not isinstance(groups, list):
-            raise InputError("no \"ambiguous\" list (expected `baseparams diagnose --format json` output)",
-                             file=text, key="ambiguous")
-        for k, group in enumerate(groups):
-            try:
-                pairs += [(c["kind"], c["coordinate"]) for c in group["candidates"]]
-            except (KeyError, TypeError):
-                raise InputError("expected {\"candidates\": [{\"kind\", \"coordinate\"}, ...]}", file=text,
-                                 key=f"ambiguous[{k}]") from None
-        if not pairs:
-            raise InputError("the diagnosis reports no ambiguous effects: nothing to separate", file=text,
-                             key="ambiguous")
-    else:
-        for item in (s.strip() for s in text.split(",") if s.strip()):
-            kind, sep, coordinate = item.partition(":")
-            if not sep or not kind.strip() or not coordinate.strip():
-                raise InputError(f"{item!r}: expected KIND:COORD", key="--separate")
-            pairs.append((kind.strip(), coordinate.strip()))
-    for kind, coordinate in pairs:
-        checked_effect(mechanism, kind, coordinate, key=f"--separate {kind}:{coordinate}")
-    unique = tuple(dict.fromkeys(pairs))
-    if len(unique) < 1:
-        raise InputError("name at least one effect to separate", key="--separate")
-    return unique
-
-
 @main.command()
 @click.argument("mech")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
