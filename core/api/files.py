@@ -12,14 +12,9 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Union
 
-import numpy as np
-
 from baseparams import registry
 from baseparams.errors import InputError
-from baseparams.io.loader import check_mobility, reader_for, resolve
-from baseparams.model.expressions import ExpressionError, parse_decimal
 from baseparams.model.mechanism import Mechanism
-from baseparams.model.params import PARAMETER_KINDS, body_parameter_names, split_name
 
 from .solving import DEFAULT_SOLVER, MechanismLike, Progress, check_solver_options, get_solver, load, run_solver
 
@@ -34,6 +29,7 @@ CONSISTENCY_TOLERANCE = 1e-9        # relative to the trace: eigenvalues of the 
 
 def read(mech: PathText, options: Mapping[str, bool]) -> tuple[Mechanism, list[str]]:
     """The mechanism (mobility checked) and its reader's notes, with reader options."""
+    from baseparams.io.loader import check_mobility, reader_for, resolve
     if not options and not Path(mech).suffix:
         return resolve(mech), []
     mech = str(mech)
@@ -81,6 +77,8 @@ def with_inertia(mech: Mechanism, physical: Mapping[str, str], path: PathText) -
     """``mech`` with every body's ten parameters taken from ``physical`` (exact decimals),
     each set checked: mass >= 0 and the inertia at the centre of mass positive semidefinite
     (to 1e-9 of its trace)."""
+    from baseparams.model.expressions import ExpressionError, parse_decimal
+    from baseparams.model.params import body_parameter_names, split_name
     labels = set(mech.body_labels)
     for name in physical:
         try:
@@ -110,6 +108,9 @@ def with_inertia(mech: Mechanism, physical: Mapping[str, str], path: PathText) -
 
 def consistency_problem(phi: Sequence[Any]) -> str | None:
     """Why ten parameters (about the body origin) are not a physical body, or None."""
+    import numpy as np
+
+    from baseparams.model.params import PARAMETER_KINDS
     m, h = phi[0], phi[1:4]
     if m < 0:
         return f"negative mass {float(m):g}"
@@ -293,6 +294,8 @@ def _is_number(text: str) -> bool:
 def _trajectory_limits(mechanism: Mechanism, names: Sequence[str]) -> tuple[str | None, str | None, str | None]:
     """Closed loops: the position range, peak velocity and peak acceleration of the file's
     trajectory (its positions are known to close), as option texts."""
+    import numpy as np
+
     from baseparams.identify.simulate import trajectory_motion
     motion = trajectory_motion(mechanism)
     lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)

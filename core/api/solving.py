@@ -37,8 +37,9 @@ def load(mech: MechanismLike, *, warn: Warn | None = None) -> "Mechanism":
         return mech
     from baseparams.io.loader import resolve      # sympy and flint load here, not on import
     mechanism = resolve(mech)
-    for warning in mechanism.warnings if warn else ():
-        warn(warning)
+    if warn is not None:
+        for warning in mechanism.warnings:
+            warn(warning)
     return mechanism
 
 

@@ -7,7 +7,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from baseparams.api.render import diagnosis_text as render_text
 from baseparams.cli.commands import emit, format_option, load, main
+from baseparams.cli.options import Progress, output_option, quiet_option
 from baseparams.cli.plots import _figure, _save
 
 # The statistics (scipy.signal, scipy.stats, statsmodels: 2 s of imports) are imported by
@@ -40,9 +42,12 @@ if TYPE_CHECKING:
               help="Residuals before/after per coordinate and the candidates' statistics (png, pdf, svg).")
 @click.option("--write", "write_path", type=click.Path(dir_okay=False), default=None, metavar="FILE.toml",
               help="Save the mechanism (a TOML file) with the named effects added as [[effects]] tables.")
+@output_option(help="Write the report (text, or JSON with --format json) to FILE instead of standard output.")
 @format_option
-def diagnose(mech, data_paths, params_source, selection, alpha, folds, holdout, max_steps, plot_path,
-             write_path, fmt):
+@quiet_option()
+def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, selection: tuple[str, ...],
+             alpha: float, folds: int, holdout: float, max_steps: int | None, plot_path: str | None,
+             write_path: str | None, output: str | None, fmt: str, quiet: bool) -> None:
     """Find where MECH's model and measured DATA disagree and name the missing effect.
 
     DATA: CSV files or recording descriptions (.toml), as for identify.
@@ -59,43 +64,22 @@ def diagnose(mech, data_paths, params_source, selection, alpha, folds, holdout, 
     unsupported), 1 when structure remains, 2 for bad input. JSON: {"verdict", "effects":
     [{"kind", "coordinate", "value", "std", "shape", "checks"}], "ambiguous", "unsupported",
     "gap": {"before", "after", "cv_before", "cv_after", "cv_blocks", ...}, "where",
-    "unexplained"} (docs/diagnosis.md).
+    "unexplained"} (`python -m pydoc baseparams.identify.diagnose`).
     """
-    from dataclasses import replace
-
-    from baseparams.identify.diagnose import check_writable, diagnose_data, write_fixed
-    from baseparams.identify.given import given_parameters
-    from baseparams.identify.recording import read_data
-
+    from baseparams.api import diagnose as run
     mechanism = load(mech)
-    if write_path:
-        check_writable(mechanism, write_path)          # before the run, not after it
-    given = None
-    if params_source:
-        given, known = given_parameters(mechanism, params_source)
-        if known:
-            mechanism = replace(mechanism, effects=tuple(mechanism.effects) + tuple(known))
-    measured, mechanism = read_data(list(data_paths), mechanism)
-    data = ", ".join(data_paths)
-    result = diagnose_data(mechanism, measured, selection=list(selection) or None, alpha=alpha, folds=folds,
-                           holdout=holdout, max_steps=max_steps, given=given)
-    written = None
-    if write_path:
-        named = result.named()
-        if named:
-            write_fixed(mechanism, named, write_path, origin=f"data {data}")
-            written = str(write_path)
-        else:
-            result.notes.append(f"--write: no mechanism effect named, {write_path} not written")
-    if plot_path:
-        plot_diagnosis(result, plot_path)
-    payload = result.to_json()
-    payload["written"] = written
-    emit(fmt, payload, lambda: render_text(result, written))
+    with Progress("diagnose", steps=2 + bool(plot_path), quiet=quiet) as progress:
+        result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
+                     alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
+                     progress=progress)
+        if plot_path:
+            progress("plotting")
+            plot_diagnosis(result.diagnosis, plot_path)
+    emit(fmt, result.to_json(), result.to_text, output)
     sys.exit(0 if result.closed else 1)
 
 
-def plot_diagnosis(result: "Diagnosis", path, fmt=None):
+def plot_diagnosis(result: "Diagnosis", path: str, fmt: str | None = None) -> str:
     """Residuals before and after per coordinate (the before trace drawn over the after one,
     dashed, so it shows where the two coincide; the held-out part shaded), and the first
     step's candidate statistics (normal-equivalent z) with the significant ones marked."""
