@@ -229,8 +229,9 @@ def test_simulate_then_identify_json(tmp_path):
     result = runner.invoke(main, ["identify", "planar_2r", str(data), "--effect", "viscous_friction:q2",
                                   "--solver", "dp", "--physical", "--format", "json", "-o", str(out)])
     assert result.exit_code == 0, result.output
-    report = json.loads(result.stdout)
-    assert json.loads(out.read_text()) == report
+    # -o FILE is where the output goes (docs/cli.md, "One grammar"): nothing on stdout
+    assert result.stdout == "" and f"wrote {out}" in result.stderr
+    report = json.loads(out.read_text())
     assert set(report) >= {"base", "effects", "condition_number", "nrms", "noise_sd", "physical", "physical_fit"}
     fv = report["effects"][0]["coefficients"][0]
     assert fv["name"] == "fv_q2" and abs(fv["value"] - 0.7) < 4 * fv["std"]
