@@ -11,6 +11,7 @@ import pytest
 import sympy
 from click.testing import CliRunner
 
+from baseparams.api import DEFAULT_SOLVER
 from baseparams import registry
 from baseparams.cli import main
 from baseparams.dynamics import codegen
@@ -39,7 +40,7 @@ def _run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
-def _base(mechanism, solver="dp"):
+def _base(mechanism, solver=DEFAULT_SOLVER):       # the solver excite uses unless told
     return BaseModel.from_result(registry.solvers()[solver].item.solve(mechanism), mechanism)
 
 
