@@ -13,6 +13,7 @@ The Python front door (docs/api.md)::
 stays fast; the command line is ``baseparams`` or ``python -m baseparams``.
 """
 
+import types
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -34,3 +35,24 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(list(globals()) + list(API))
+
+
+class _CallablePackage(types.ModuleType):
+    """``baseparams.identify`` and ``baseparams.excite`` are subpackages (their modules keep
+    their dotted names) and, called, the API functions of the same name: importing a
+    submodule binds the package to the attribute, so ``bp.identify(...)`` must work on it."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        from baseparams import api
+        return getattr(api, self.__name__.rpartition(".")[2])(*args, **kwargs)
+
+
+def _callable_packages() -> None:
+    # both packages' __init__ hold only a docstring: importing them here costs nothing
+    import importlib
+    for name in ("identify", "excite"):
+        importlib.import_module(f"{__name__}.{name}").__class__ = _CallablePackage
+
+
+if not TYPE_CHECKING:
+    _callable_packages()

@@ -11,7 +11,6 @@ import pytest
 import sympy
 from click.testing import CliRunner
 
-from baseparams.api import DEFAULT_SOLVER
 from baseparams import registry
 from baseparams.cli import main
 from baseparams.dynamics import codegen
@@ -40,7 +39,7 @@ def _run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
-def _base(mechanism, solver=DEFAULT_SOLVER):       # the solver excite uses unless told
+def _base(mechanism, solver="dp"):
     return BaseModel.from_result(registry.solvers()[solver].item.solve(mechanism), mechanism)
 
 
@@ -230,7 +229,7 @@ def _limits_hold(mechanism, path_limits, samples=2000):
 
 def test_excite_ur5_halves_the_condition_number_within_the_limits(tmp_path):
     out, report, table, figure = tmp_path / "ur5.toml", tmp_path / "r.json", tmp_path / "m.csv", tmp_path / "p.png"
-    result = _run("excite", UR5, "-o", out, "--harmonics", "3", "--samples", "40", "--iterations", "30",
+    result = _run("excite", UR5, "-o", out, "--solver", "dp", "--harmonics", "3", "--samples", "40", "--iterations", "30",
                   "--starts", "1", "--max-acceleration", "6", "--report", report, "--csv", table,
                   "--rate", "50", "--plot", figure, "--format", "json", "--quiet")
     assert result.exit_code == 0, result.output

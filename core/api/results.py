@@ -95,13 +95,35 @@ class Solution(Result):
         return "\n".join(lines)
 
     def rows(self) -> list[dict[str, Any]]:
-        """One row per base parameter: its name and its expression (as the CSV writes it)."""
-        from baseparams.solvers.result import format_expression
-        return [{"name": b["name"], "expression": format_expression(b["expression"], 17)} for b in self.result.base]
+        """One row per base parameter: its name and its expression (as ``solve --format csv``
+        writes it: every digit the solver wrote)."""
+        return [{"name": b["name"], "expression": expression_text(b["expression"])} for b in self.result.base]
 
     def legend(self) -> list[str]:
         """``phi_b01 = m1 + 0.5*mx2`` lines: what each base parameter stands for."""
         return legend_lines(self.result.base)
+
+
+def expression_text(expression: dict[str, str]) -> str:
+    """``m2 + 0.5*mx3 - (L**2)*Izz1``: a base parameter's expression with every digit the
+    solver wrote (symbolic coefficients in parentheses)."""
+    terms = []
+    for param, coeff in expression.items():
+        text = str(coeff).strip()
+        if _plain_number(text):
+            sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
+        else:                               # an expression keeps its own signs
+            sign, body = "+", f"({text})"
+        terms.append((sign, param if body == "1" else f"{body}*{param}"))
+    return " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ") or "0"
+
+
+def _plain_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
 
 
 def legend_lines(base: list[dict[str, Any]], max_digits: int = 6) -> list[str]:

@@ -413,29 +413,13 @@ def solve(mech: str, solver_name: str, digits: int | None, samples: int | None, 
 def base_csv(result: "BaseParameterResult") -> str:
     """``name,expression`` rows, one per base parameter; the expression keeps every digit
     the solver wrote (``m2 + 0.5*mx3 - (L**2)*Izz1``)."""
+    from baseparams.api.results import expression_text
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(["name", "expression"])
     for b in result.base:
-        terms = []
-        for param, coeff in b["expression"].items():
-            text = str(coeff).strip()
-            if _plain_number(text):
-                sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
-            else:                               # an expression keeps its own signs
-                sign, body = "+", f"({text})"
-            terms.append((sign, param if body == "1" else f"{body}*{param}"))
-        expression = " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ")
-        writer.writerow([b["name"], expression if expression else "0"])
+        writer.writerow([b["name"], expression_text(b["expression"])])
     return out.getvalue()
-
-
-def _plain_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 # ----- plot ---------------------------------------------------------------------

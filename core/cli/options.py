@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
@@ -106,26 +107,39 @@ def emit(fmt: str, data: Any, text: str | Callable[[], str], output: str | None 
 
 class Progress:
     """Progress on stderr for work that can take more than 2 s: a bar on a terminal
-    (redrawn on one line), one line per step otherwise (logs, pipes); nothing when quiet.
+    (redrawn on one line); elsewhere (logs, pipes) one line per step, starting only once
+    the work has run for ``AFTER`` seconds, so quick runs and input errors print nothing
+    but their result. ``quiet``: nothing at all.
 
     Call it with a message (a step of ``steps``) or use :meth:`counted` for ``(done,
     total, label)`` callbacks (jobs, starts). Use as a context manager: the bar's line is
-    ended when the work ends."""
+    ended, and the pending line dropped, when the work ends."""
 
     WIDTH = 24
+    AFTER = 2.0
 
     def __init__(self, verb: str, *, steps: int = 0, quiet: bool = False) -> None:
         self.verb, self.steps, self.quiet = verb, steps, quiet
         self.tty = sys.stderr.isatty()
         self.done, self.start, self.drawn = 0, time.monotonic(), False
+        self.latest: tuple[int, int, str] | None = None
+        self.lock = threading.Lock()
+        self.timer: threading.Timer | None = None
+        if not quiet and not self.tty:
+            self.timer = threading.Timer(self.AFTER, self._late)
+            self.timer.daemon = True
+            self.timer.start()
 
     def __enter__(self) -> "Progress":
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self.drawn:
-            click.echo("", err=True)
-            self.drawn = False
+        if self.timer is not None:
+            self.timer.cancel()
+        with self.lock:
+            if self.drawn:
+                click.echo("", err=True)
+                self.drawn = False
 
     def __call__(self, message: str) -> None:
         self.done += 1
@@ -134,18 +148,31 @@ class Progress:
     def counted(self, done: int, total: int, label: str) -> None:
         self.show(done, total, label)
 
+    def _late(self) -> None:
+        """The work has run for AFTER seconds: show the step it is at."""
+        with self.lock:
+            latest = self.latest
+        if latest is not None:
+            self._line(*latest)
+
+    def _line(self, done: int, total: int, label: str) -> None:
+        count = f" [{done}/{total}]" if total else ""
+        click.echo(f"{self.verb}{count}: {label} ({time.monotonic() - self.start:.0f} s)", err=True)
+
     def show(self, done: int, total: int, label: str) -> None:
         if self.quiet:
             return
-        elapsed = time.monotonic() - self.start
+        with self.lock:
+            self.latest = (done, total, label)
         if not self.tty:
-            count = f" [{done}/{total}]" if total else ""
-            click.echo(f"{self.verb}{count}: {label}", err=True)
+            if time.monotonic() - self.start >= self.AFTER:
+                self._line(done, total, label)
             return
         bar = ""
         if total:
             filled = int(self.WIDTH * min(done, total) / total)
             bar = f"[{'#' * filled}{'-' * (self.WIDTH - filled)}] {done}/{total} "
-        line = f"{self.verb} {bar}{label} ({elapsed:.0f} s)"
-        click.echo("\r\033[K" + line[:200], err=True, nl=False)
-        self.drawn = True
+        line = f"{self.verb} {bar}{label} ({time.monotonic() - self.start:.0f} s)"
+        with self.lock:
+            click.echo("\r\033[K" + line[:200], err=True, nl=False)
+            self.drawn = True
