@@ -30,7 +30,7 @@ def _save(fig, path, fmt):
     if fmt is None and suffix and suffix not in IMAGE_FORMATS:
         # writing PNG bytes under a .jpg name would mislead every program that opens it
         raise InputError(f"cannot write a {suffix!r} image (known formats: {', '.join(IMAGE_FORMATS)}); "
-                         f"name the file .png, .pdf or .svg, or give --format", file=path)
+                         f"name the file .png, .pdf or .svg, or give --image-format", file=path)
     fmt = fmt or (suffix if suffix in IMAGE_FORMATS else "png")
     if fmt not in IMAGE_FORMATS:
         raise InputError(f"unknown image format {fmt!r} (known: {', '.join(IMAGE_FORMATS)})", file=path)
