@@ -57,4 +57,4 @@ def test_third_party_joint_validates():
     result = run(ROOT / "examples" / "third_party_joint.py")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "all agree: 1 mechanism(s), 4 solver(s)" in result.stdout
-    assert "collar: exact solver, 20 parameters, rank 11 (certified)" in result.stdout
+    assert "puck: exact solver, 20 parameters, rank 11 (certified)" in result.stdout
