@@ -162,3 +162,29 @@ def test_one_default_solver():
     for command in ("solve", "identify", "export", "excite"):
         param = next(p for p in main.commands[command].params if p.name == "solver_name")
         assert param.default == DEFAULT_SOLVER, command
+
+
+def test_an_inaccurate_physical_fit_is_said_in_the_text_not_leaked(recording, monkeypatch):
+    """cvxpy warns through `warnings` ("Solution may be inaccurate") and reports
+    optimal_inaccurate: the text says both, stderr carries no raw warning."""
+    pytest.importorskip("cvxpy")
+    import dataclasses
+    import warnings
+
+    from baseparams.identify import physical
+
+    real = physical.physical_fit
+
+    def inaccurate(*args, **kwargs):
+        warnings.warn("Solution may be inaccurate. Try another solver, adjusting the solver settings, "
+                      "or solve with verbose=True for more information.", UserWarning)
+        return dataclasses.replace(real(*args, **kwargs), status="optimal_inaccurate")
+
+    monkeypatch.setattr(physical, "physical_fit", inaccurate)
+    result = CliRunner().invoke(main, ["identify", "planar_2r", str(recording), "--solver", "dp", "--physical"])
+    assert result.exit_code == 0, result.output
+    assert "status optimal_inaccurate" in result.stdout
+    assert "warning: Solution may be inaccurate." in result.stdout
+    assert "UserWarning" not in result.stderr and "may be inaccurate" not in result.stderr
+    fit = bp.identify("planar_2r", recording, solver="dp", physical=True).to_json()["physical_fit"]
+    assert fit["status"] == "optimal_inaccurate" and fit["warnings"][0].startswith("Solution may be inaccurate.")
