@@ -537,7 +537,7 @@ def report(mech: str, solver_name: str, fmt: str, keep: str, first: str, no_cert
     if output is not None:                  # -o "" is a bad file name, not standard output
         from baseparams.io.atomic import atomic_write
         atomic_write(output, text, what="the report")     # a full disk keeps the old file whole
-        click.echo(f"wrote {output}")
+        click.echo(f"wrote {output}", err=True)        # as every -o FILE: stdout stays empty
     else:
         click.echo(text, nl=False)
 
