@@ -234,3 +234,14 @@ def test_two_files_of_one_name_are_kept_apart(tmp_path):
             (registry.mechanisms()["pendulum"].item.path).read_text())
     texts = mechanism_texts([str(tmp_path / "a" / "robot.toml"), str(tmp_path / "b" / "robot.toml")])
     assert [t.name for t in texts] == ["robot", "robot#2"]
+
+
+def test_a_solvers_error_names_the_source_file_not_the_workers_copy(tmp_path):
+    text = open(registry.mechanisms()["pendulum"].item.path, encoding="utf-8").read()
+    path = tmp_path / "no_trajectory.toml"
+    path.write_text(text[:text.index("[trajectory]")])
+    report = validate(mechanism_texts([str(path)]), ["dp"])
+    outcome = report.mechanisms[0].solvers["dp"]
+    assert outcome["status"] == "error" and str(path) in outcome["verdict"]
+    details = [c.detail for c in report.mechanisms[0].checks]
+    assert all("baseparams-job-" not in d for d in details + [outcome["verdict"]])

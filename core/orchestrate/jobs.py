@@ -6,6 +6,7 @@ worker elsewhere). A worker that lacks a plugin the job needs reports that, as
 ``status = "missing_plugin"``.
 """
 
+import dataclasses
 import tempfile
 import time
 import traceback
@@ -14,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 from baseparams import registry
-from baseparams.api.solving import run_solver
 from baseparams.errors import BaseparamsError, InputError
 from baseparams.io.loader import load_mechanism
 from baseparams.model.mechanism import Mechanism
@@ -74,15 +74,19 @@ class Outcome:
 
 
 def load(mechanism: MechanismText) -> Mechanism:
-    """The Mechanism in ``mechanism.text``, read by the reader its file name's suffix picks."""
+    """The Mechanism in ``mechanism.text``, read by the reader its file name's suffix picks;
+    its path (which solvers' messages name) and warnings name the source, not the worker's
+    temporary copy, which is gone once it is read."""
     with tempfile.TemporaryDirectory(prefix="baseparams-job-") as folder:
         path = Path(folder) / mechanism.filename
         path.write_text(mechanism.text, encoding="utf-8")
         try:
-            return load_mechanism(path)
+            loaded = load_mechanism(path)
         except BaseparamsError as exc:
             message = str(getattr(exc, "message", exc)).replace(str(path), mechanism.source)
             raise type(exc)(message) from None
+    return dataclasses.replace(loaded, path=mechanism.source,
+                               warnings=tuple(w.replace(str(path), mechanism.source) for w in loaded.warnings))
 
 
 def run_job(job: Job) -> Outcome:
@@ -108,6 +112,7 @@ def run_job(job: Job) -> Outcome:
             return outcome(status, message=text)
         if job.solver == MODEL:
             return outcome(OK, result={"checks": [c.to_json() for c in model_checks(mechanism)]})
+        from baseparams.api.solving import run_solver        # the one solver sequence
         try:
             result = run_solver(solvers[job.solver].item, mechanism, dict(job.options))
         except NotApplicable as exc:
