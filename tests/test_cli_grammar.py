@@ -147,3 +147,14 @@ def test_progress_off_a_terminal_starts_after_its_delay(capsys, monkeypatch):
     with Progress("work", steps=1, quiet=True) as progress:
         progress("quiet")
     assert capsys.readouterr().err == ""
+
+
+def test_excite_without_dash_o_prints_the_mechanism_file(tmp_path):
+    result = invoke("excite", "pendulum", "--iterations", "2", "--starts", "1", "--solver", "dp", "--quiet")
+    assert result.exit_code == 0, result.output
+    path = tmp_path / "planned.toml"
+    path.write_text(result.stdout)
+    from baseparams.io.loader import load_mechanism
+    planned = load_mechanism(path)
+    assert planned.name == "pendulum" and planned.trajectory is not None
+    assert "starts: 1" in result.stderr
