@@ -66,7 +66,7 @@ def test_simulate_without_dash_o_writes_the_csv_to_stdout(tmp_path):
     assert rows[0].startswith("t,") and len(rows) == 21
     assert "20 samples" in result.stderr and "0 hidden effects" in result.stderr
     again = invoke("simulate", "pendulum", "--samples", "20", "--noise", "0.01", "-o", tmp_path / "d.csv")
-    assert (tmp_path / "d.csv").read_text() == result.stdout
+    assert again.exit_code == 0 and (tmp_path / "d.csv").read_text() == result.stdout
 
 
 def test_solvers_are_chosen_by_repeating_solver_and_the_old_spelling_still_works():

@@ -3,7 +3,7 @@ the command line's options and the Python functions accept alike."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 import json
 from fractions import Fraction
 from pathlib import Path

@@ -14,7 +14,6 @@ for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
 import contextlib
 import csv
 import io
-import json
 import signal
 import textwrap
 import threading
@@ -27,7 +26,7 @@ import click
 from baseparams import __version__
 from baseparams import registry
 from baseparams.api.solving import get_solver, load as api_load, run_solver
-from baseparams.cli.options import (Progress, emit, write_output, image_format_option, output_option, samples_option,
+from baseparams.cli.options import (emit, write_output, image_format_option, output_option, samples_option,
                                     seed_option, solver_option, solver_options_option, solvers_option,
                                     chosen_solvers)
 from baseparams.errors import BaseparamsError

@@ -11,8 +11,6 @@ from pathlib import Path
 
 import click
 
-from baseparams.api.files import (CONSISTENCY_TOLERANCE, READER_OPTIONS, consistency_problem, load_physical,  # noqa: F401
-                                  read, with_inertia, writer_for)
 from baseparams.cli.commands import main
 from baseparams.cli.options import output_option
 
