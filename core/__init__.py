@@ -13,8 +13,17 @@ The Python front door (docs/api.md)::
 stays fast; the command line is ``baseparams`` or ``python -m baseparams``.
 """
 
+import os
 import types
 from typing import TYPE_CHECKING, Any
+
+# Our matrices are small (thousands of rows, tens of columns): BLAS threads only contend for
+# the cores. With OpenBLAS's default threads diagnose on the TX40 spent 50 CPU s for 30 s of
+# wall time in the CLI, dp 10-40 times its single-thread CPU time (docs/urdf.md); through the
+# Python API on a loaded 2-core machine bp.diagnose took 438 s against 23 s (docs/api.md).
+# Effective only when numpy is not imported yet; a user's own setting wins.
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
 
 __version__ = "0.1.0"
 

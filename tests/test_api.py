@@ -3,6 +3,7 @@ returns the object the command line prints, its to_json() is the CLI's JSON, and
 `import baseparams` stays light."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -40,6 +41,16 @@ def test_import_is_light_and_lists_the_functions():
     assert out[1] == "True True True"
     assert set(bp.__all__) >= {"load", "solve", "validate", "simulate", "identify", "diagnose", "export",
                                "convert", "excite"}
+
+
+def test_import_sets_one_blas_thread_unless_the_user_chose():
+    code = "import os, baseparams; print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])"
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.split() == ["1", "1"]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**env, "OPENBLAS_NUM_THREADS": "4"})
+    assert out.stdout.split() == ["4", "1"]
 
 
 def test_identify_and_excite_stay_packages_too():
