@@ -229,7 +229,7 @@ def _limits_hold(mechanism, path_limits, samples=2000):
 
 def test_excite_ur5_halves_the_condition_number_within_the_limits(tmp_path):
     out, report, table, figure = tmp_path / "ur5.toml", tmp_path / "r.json", tmp_path / "m.csv", tmp_path / "p.png"
-    result = _run("excite", UR5, "-o", out, "--harmonics", "3", "--samples", "40", "--iterations", "30",
+    result = _run("excite", UR5, "-o", out, "--solver", "dp", "--harmonics", "3", "--samples", "40", "--iterations", "30",
                   "--starts", "1", "--max-acceleration", "6", "--report", report, "--csv", table,
                   "--rate", "50", "--plot", figure, "--format", "json", "--quiet")
     assert result.exit_code == 0, result.output

@@ -234,8 +234,9 @@ def test_simulate_then_identify_json(tmp_path):
                                   "--solver", "dp", "--format", "json", "-o", str(out)]
                            + ["--physical"] * with_physical)
     assert result.exit_code == 0, result.output
-    report = json.loads(result.stdout)
-    assert json.loads(out.read_text()) == report
+    # -o FILE is where the output goes (docs/cli.md, "One grammar"): nothing on stdout
+    assert result.stdout == "" and f"wrote {out}" in result.stderr
+    report = json.loads(out.read_text())
     assert set(report) >= {"base", "effects", "condition_number", "nrms", "noise_sd"}
     fv = report["effects"][0]["coefficients"][0]
     assert fv["name"] == "fv_q2" and abs(fv["value"] - 0.7) < 4 * fv["std"]

@@ -56,11 +56,11 @@ def test_built_ins_agree_and_exact_is_not_applicable_to_a_loop(fast_report):
 
 
 def test_the_cli_prints_the_table_and_exits_0(tmp_path):
-    result = CliRunner().invoke(main, ["validate", "pendulum", "--solvers", "dp,exact", "--quiet"])
+    result = CliRunner().invoke(main, ["validate", "pendulum", "--solver", "dp", "--solver", "exact", "--quiet"])
     assert result.exit_code == 0, result.output
     assert "all agree: 1 mechanism(s), 2 solver(s)" in result.output
-    result = CliRunner().invoke(main, ["validate", "pendulum", "--solvers", "dp", "--format", "markdown"])
-    assert result.exit_code == 0 and result.output.startswith("| mechanism | dp | checks |")
+    result = CliRunner().invoke(main, ["validate", "pendulum", "--solver", "dp", "--format", "markdown"])
+    assert result.exit_code == 0 and result.stdout.startswith("| mechanism | dp | checks |")
 
 
 def test_bad_input_exits_2(tmp_path):
@@ -219,8 +219,8 @@ def test_generated_mechanisms_validate(tmp_path):
 
 
 def test_json_report_keys():
-    result = CliRunner().invoke(main, ["validate", "pendulum", "--solvers", "exact", "--format", "json"])
-    data = json.loads(result.output)
+    result = CliRunner().invoke(main, ["validate", "pendulum", "--solver", "exact", "--format", "json"])
+    data = json.loads(result.stdout)
     assert set(data) >= {"ok", "mechanisms"}
     m = data["mechanisms"][0]
     assert set(m) >= {"name", "ok", "solvers", "checks"}
@@ -234,3 +234,14 @@ def test_two_files_of_one_name_are_kept_apart(tmp_path):
             (registry.mechanisms()["pendulum"].item.path).read_text())
     texts = mechanism_texts([str(tmp_path / "a" / "robot.toml"), str(tmp_path / "b" / "robot.toml")])
     assert [t.name for t in texts] == ["robot", "robot#2"]
+
+
+def test_a_solvers_error_names_the_source_file_not_the_workers_copy(tmp_path):
+    text = open(registry.mechanisms()["pendulum"].item.path, encoding="utf-8").read()
+    path = tmp_path / "no_trajectory.toml"
+    path.write_text(text[:text.index("[trajectory]")])
+    report = validate(mechanism_texts([str(path)]), ["dp"])
+    outcome = report.mechanisms[0].solvers["dp"]
+    assert outcome["status"] == "error" and str(path) in outcome["verdict"]
+    details = [c.detail for c in report.mechanisms[0].checks]
+    assert all("baseparams-job-" not in d for d in details + [outcome["verdict"]])

@@ -1,15 +1,8 @@
 """The ``baseparams`` command line: verbs (:mod:`.commands`; ``validate`` in :mod:`.validate`), figures (:mod:`.plots`) and
 the symbolic derivation report (:mod:`.report`)."""
 
-import os
-
-# The command line's matrices are small (thousands of rows, tens of columns): BLAS threads only
-# contend for the cores. With OpenBLAS's default threads diagnose on the TX40 spent more CPU
-# than wall time, dp many times its single-thread CPU time (docs/urdf.md). Set before
-# numpy is first imported; a user's own setting wins.
-for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_variable, "1")
-
+# BLAS threads: one per process unless the user says otherwise, set by `import baseparams`
+# (core/__init__.py) before numpy loads, for the command line and the Python API alike.
 from . import validate as _validate  # noqa: E402,F401  (registers the verb)
 from . import convert as _convert  # noqa: E402,F401  (registers the verb)
 from . import identify as _identify  # noqa: E402,F401  (registers simulate and identify)

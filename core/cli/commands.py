@@ -14,27 +14,39 @@ for a figure), load mechanisms with :func:`load`, and print with :func:`emit`.
 import contextlib
 import csv
 import io
-import json
 import signal
 import textwrap
 import threading
 from collections.abc import Iterator
 
+from typing import TYPE_CHECKING, Any, TypeVar
+
 import click
 
 from baseparams import __version__
 from baseparams import registry
+from baseparams.api.solving import get_solver, load as api_load, run_solver
+from baseparams.cli.options import (emit, write_output, image_format_option, output_option, samples_option,
+                                    seed_option, solver_option, solver_options_option, solvers_option,
+                                    chosen_solvers)
 from baseparams.errors import BaseparamsError
-from baseparams.solvers.protocol import (Capabilities, Solver, check_options, describe_solver,
-                                         options_from_text, require_applicable)
-from baseparams.solvers.run import find_solver, run_solver, solver_options
+from baseparams.solvers.protocol import Capabilities, Solver, check_options, describe_solver, options_from_text
+from baseparams.solvers.run import solver_options
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
+
+    from baseparams.model.mechanism import Mechanism
+    from baseparams.solvers.result import BaseParameterResult
+
+F = TypeVar("F", bound="Callable[..., Any]")
 
 
 class UserError(click.ClickException):
     """A message for the user, printed as ``error: ...`` on stderr; exit code 2."""
     exit_code = 2
 
-    def show(self, file=None):
+    def show(self, file: Any = None) -> None:
         click.echo(f"error: {self.format_message()}", err=True, file=file)
 
 
@@ -43,7 +55,7 @@ class Group(click.Group):
     anything else, a bug, as one line and exit code 3 (``--debug``: the traceback)."""
     group_class = type          # subgroups (``plot``) use this class too
 
-    def invoke(self, ctx):
+    def invoke(self, ctx: click.Context) -> Any:
         if ctx.parent is not None:          # a subgroup (plot): the root handles everything
             return self._invoke(ctx)
         with interrupt_signals():
@@ -56,7 +68,7 @@ class Group(click.Group):
                 click.echo("interrupted", err=True)
                 ctx.exit(128 + (_received[-1] if _received else signal.SIGINT))
 
-    def _invoke(self, ctx):
+    def _invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except BaseparamsError as exc:
@@ -86,7 +98,7 @@ def interrupt_signals() -> Iterator[None]:
         yield
         return
 
-    def interrupt(signum, frame):
+    def interrupt(signum: int, frame: Any) -> None:
         _received.append(signum)
         raise KeyboardInterrupt
 
@@ -109,36 +121,27 @@ def interrupt_signals() -> Iterator[None]:
             signal.signal(number, handler)
 
 
-def format_option(function):
+def format_option(function: F) -> F:
     """``--format text|json`` (default text)."""
     return click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text",
                         show_default=True, help="Output format: readable text or one JSON object.")(function)
 
 
-def emit(fmt, data, text):
-    """Print ``data`` as JSON or ``text`` (a string or a callable returning one)."""
-    if fmt == "json":
-        click.echo(json.dumps(data, indent=2))
-    else:
-        click.echo(text() if callable(text) else text)
-
-
-def load(mech, warn=True):
+def load(mech: str, warn: bool = True) -> "Mechanism":
     """A registered mechanism name or a path to a mechanism file -> Mechanism; its
     warnings (``Mechanism.warnings``) go to stderr unless ``warn`` is false."""
-    # imported on use, as below: `baseparams --help` and `list` need no sympy or flint
-    from baseparams.io.loader import resolve
-    mechanism = resolve(mech)
-    for warning in mechanism.warnings if warn else ():
-        click.echo(f"warning: {warning}", err=True)
-    return mechanism
+    return api_load(mech, warn=_warn if warn else None)
 
 
-def _wrap(words, indent="  "):
+def _warn(message: str) -> None:
+    click.echo(f"warning: {message}", err=True)
+
+
+def _wrap(words: "Iterable[str]", indent: str = "  ") -> str:
     return textwrap.fill(" ".join(words), width=88, initial_indent=indent, subsequent_indent=indent)
 
 
-def _version():
+def _version() -> str:
     installed = registry.installed_version()
     return __version__ if installed == "not installed" else installed
 
@@ -146,11 +149,12 @@ def _version():
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(version=_version(), prog_name="baseparams")
 @click.option("--debug", is_flag=True, help="Show the traceback of an internal error (exit code 3).")
-def main(debug):
+def main(debug: bool) -> None:
     """Base inertial parameters of mechanisms.
 
     MECH is a registered mechanism name (see `baseparams list`) or a path to a
-    mechanism file (TOML, see docs/mechanism-format.md). Exit codes: 0 success,
+    mechanism file (TOML, its format: `python -m pydoc baseparams.io.toml_reader`;
+    URDF). Exit codes: 0 success,
     1 a check failed, 2 bad input or usage (the message names the file, the key
     and the reason), 3 an internal error (a bug: rerun with --debug for the traceback).
     """
@@ -159,7 +163,8 @@ def main(debug):
 # ----- list ---------------------------------------------------------------------
 @main.command("list")
 @format_option
-def list_mechanisms(fmt):
+@output_option()
+def list_mechanisms(fmt: str, output: str | None) -> None:
     """List the registered mechanisms.
 
     One line per mechanism: its name (usable as MECH), the distribution that provides
@@ -175,7 +180,7 @@ def list_mechanisms(fmt):
             row["error"] = getattr(exc, "message", str(exc))
         rows.append(row)
 
-    def text():
+    def text() -> str:
         if not rows:
             return "no mechanisms registered"
         width = max(len(r["name"]) for r in rows)
@@ -183,11 +188,11 @@ def list_mechanisms(fmt):
         return "\n".join(f"{r['name']:<{width}}  {r['source']:<{dist}}  "
                          + (f"error: {r['error']}" if "error" in r else r["title"]) for r in rows)
 
-    emit(fmt, {"mechanisms": rows}, text)
+    emit(fmt, {"mechanisms": rows}, text, output)
 
 
 # ----- show ---------------------------------------------------------------------
-def describe(mech):
+def describe(mech: "Mechanism") -> dict[str, Any]:
     """The structure of a mechanism as the ``show`` JSON object."""
     from baseparams.dynamics.evaluator import closure_structure
     structure = closure_structure(mech)
@@ -217,7 +222,7 @@ def describe(mech):
     }
 
 
-def describe_text(info):
+def describe_text(info: dict[str, Any]) -> str:
     lines = [f"{info['name']}: {info['title']}" if info["title"] else info["name"]]
     if info["path"]:
         lines.append(f"  file: {info['path']}")
@@ -249,7 +254,8 @@ def describe_text(info):
 @main.command()
 @click.argument("mech", metavar="MECH")
 @format_option
-def show(mech, fmt):
+@output_option()
+def show(mech: str, fmt: str, output: str | None) -> None:
     """Show a mechanism's bodies, joints, coordinates and parameters.
 
     Joints are marked as spanning-tree joints (with their coordinates) or loop-closing
@@ -262,21 +268,22 @@ def show(mech, fmt):
     mechanism = load(mech)
     info = describe(mechanism)
     check_trajectory(mechanism)          # what solve checks before solving (issue 13)
-    emit(fmt, info, lambda: describe_text(info))
+    emit(fmt, info, lambda: describe_text(info), output)
 
 
 # ----- plugins ------------------------------------------------------------------
 @main.command()
 @format_option
-def plugins(fmt):
+@output_option()
+def plugins(fmt: str, output: str | None) -> None:
     """List the installed plugins and the distributions providing them.
 
     Joint types, solvers, mechanisms, model effects, mechanism-file readers and writers. Built-ins come from the
     `baseparams` distribution; a third party registers its own through the `baseparams`
-    entry-point group (see README.md, "Plugins"). A joint type marked [no transfer rules]
+    entry-point group (`python -m pydoc baseparams.hookspecs`). A joint type marked [no transfer rules]
     makes the symbolic solver's rank an upper bound.
     """
-    def entry(name, reg, **extra):
+    def entry(name: str, reg: Any, **extra: Any) -> dict[str, Any]:
         out = {"name": name, "distribution": reg.distribution}
         if getattr(reg.item, "description", ""):
             out["description"] = reg.item.description
@@ -294,7 +301,7 @@ def plugins(fmt):
         "writers": [entry(n, r, suffixes=list(r.item.suffixes)) for n, r in registry.writers().items()],
     }
 
-    def text():
+    def text() -> str:
         lines = []
         for kind, items in data.items():
             lines.append(f"{kind} ({len(items)}):")
@@ -311,18 +318,12 @@ def plugins(fmt):
                 lines.append("  (none)")
         return "\n".join(lines)
 
-    emit(fmt, data, text)
+    emit(fmt, data, text, output)
 
 
 # ----- solve --------------------------------------------------------------------
-def get_solver(name):
-    """A registered solver by name (:func:`baseparams.solvers.run.find_solver`): an error
-    listing the registered ones otherwise, or naming the distribution whose solver does not
-    implement the Solver protocol (exit code 2)."""
-    return find_solver(name)
-
-
-def _progress(message):
+def _progress(message: str) -> None:
+    """A solver's own progress line, on stderr (``solve`` alone shows them)."""
     click.echo(message, err=True)
 
 
@@ -341,7 +342,7 @@ class SolverListCommand(click.Command):
     """A command whose help ends with every registered solver, its capabilities and options
     (read from the registry when the help is shown, so plugins' solvers are listed too)."""
 
-    def format_epilog(self, ctx, formatter):
+    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         try:
             solvers = registry.solvers()
         except BaseparamsError as exc:
@@ -363,23 +364,35 @@ class SolverListCommand(click.Command):
         super().format_epilog(ctx, formatter)
 
 
+def given_options(solver: Solver, extra: tuple[str, ...], **named: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(the solver options of ``-O NAME=VALUE``, the named front-door options ``--digits``,
+    ``--samples``, ``--seed`` given), checked against what the solver declares before any
+    file is read. A named option the solver does not declare is dropped with a warning (dp
+    has no digits); an undeclared ``-O`` option is an error."""
+    given = options_from_text(solver, extra)
+    common = {name: value for name, value in named.items() if value is not None}
+    for name in common:
+        if name in given:
+            raise UserError(f"--{name} and -O {name}=... both given; give one")
+    solver_options(solver, given, common=common)
+    return given, common
+
+
 @main.command(cls=SolverListCommand)
 @click.argument("mech", metavar="MECH")
-@click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
-              help="A registered solver (all are listed below).")
+@solver_option(help="A registered solver (all are listed below).")
 @click.option("--digits", type=click.IntRange(10, 20000), default=None,
               help="Fix the working precision of a variable-precision solver [default: automatic]; "
-                   "a solver without a digits option (dp, exact) ignores it with a warning.")
-@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
-              help="Samples of the exciting trajectory (or random states, for exact) "
-                   "[default: the mechanism file's].")
-@click.option("-O", "--option", "extra", multiple=True, metavar="NAME=VALUE",
-              help="Any option the solver declares (listed below), e.g. -O seed=3 -O recover=false; "
-                   "repeatable. An option it does not declare is an error (exit code 2).")
+                   "dp and exact ignore it with a warning.")
+@samples_option(help="Samples of the exciting trajectory (or random states, for exact) [default: the mechanism file's].")
+@seed_option(help="Seed of the solver's random states (solvers that declare a seed option).", default=None)
+@solver_options_option()
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True,
               help="Output format: readable text, one JSON object, or CSV (name,expression: one row per "
                    "base parameter, coefficients as the solver wrote them).")
-def solve(mech, solver_name, digits, samples, extra, fmt):
+@output_option()
+def solve(mech: str, solver_name: str, digits: int | None, samples: int | None, seed: int | None,
+          extra: tuple[str, ...], fmt: str, output: str | None) -> None:
     """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
     base parameter expressions phi_b = phi_1 + beta phi_2.
 
@@ -387,69 +400,57 @@ def solve(mech, solver_name, digits, samples, extra, fmt):
     Numeric coefficients carry only the digits the solver trusts. A solver that does not
     take MECH (exact on a closed loop) says why: `not applicable: <reason>`, exit code 2.
     """
-    solver = get_solver(solver_name)
-    given = options_from_text(solver, extra)
-    common = {"digits": digits, "samples": samples}      # passed to a solver that declares them
-    solver_options(solver, given, common=common)         # the options' own ranges, before reading the file
-    result = run_solver(solver, load(mech), given, common=common, progress=_progress)
-    for warning in result.warnings:
+    from baseparams.api import solve as api_solve
+    given, common = given_options(get_solver(solver_name), extra, digits=digits, samples=samples, seed=seed)
+    solution = api_solve(load(mech), solver_name, progress=_progress, common=common, **given)
+    for warning in solution.result.warnings:
         click.echo(f"warning: {warning}", err=True)
-
-    def text():
-        lines = [result.to_text()]
-        lines += [f"  {line}" for line in result.diagnostics.summary]
-        return "\n".join(lines)
-
     if fmt == "csv":
-        click.echo(base_csv(result), nl=False)
+        write_output(output, base_csv(solution.result).rstrip("\n"))
         return
-    emit(fmt, result.to_json(), text)
+    emit(fmt, solution.to_json(), solution.to_text, output)
 
 
-def base_csv(result) -> str:
+def base_csv(result: "BaseParameterResult") -> str:
     """``name,expression`` rows, one per base parameter; the expression keeps every digit
     the solver wrote (``m2 + 0.5*mx3 - (L**2)*Izz1``)."""
+    from baseparams.api.results import expression_text
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(["name", "expression"])
     for b in result.base:
-        terms = []
-        for param, coeff in b["expression"].items():
-            text = str(coeff).strip()
-            if _plain_number(text):
-                sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
-            else:                               # an expression keeps its own signs
-                sign, body = "+", f"({text})"
-            terms.append((sign, param if body == "1" else f"{body}*{param}"))
-        expression = " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ")
-        writer.writerow([b["name"], expression if expression else "0"])
+        writer.writerow([b["name"], expression_text(b["expression"])])
     return out.getvalue()
-
-
-def _plain_number(text):
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 # ----- plot ---------------------------------------------------------------------
 @main.group()
-def plot():
+def plot() -> None:
     """Write figures (PNG, PDF or SVG)."""
+
+
+def old_image_format() -> Any:
+    """The ``--format png|pdf|svg`` of earlier releases on plot verbs (hidden, deprecated)."""
+    return click.option("--format", "old_format", type=click.Choice(["png", "pdf", "svg"]), default=None, hidden=True,
+                        help="Deprecated: --image-format.")
+
+
+def chosen_image_format(new: str | None, old: str | None) -> str | None:
+    """``--image-format``, or the deprecated ``--format`` with a note on stderr."""
+    if old is not None:
+        click.echo("note: --format on plot verbs is deprecated; use --image-format (or the file's suffix)", err=True)
+    return new or old
 
 
 @plot.command("mechanism")
 @click.argument("mech", metavar="MECH")
-@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
-              help="Image file to write.")
+@output_option(help="Image file to write (its suffix chooses the format).", required=True)
 @click.option("--instants", type=click.IntRange(1, 12), default=4, show_default=True,
               help="Configurations of the default trajectory to draw (they span the range "
                    "of the first independent coordinate).")
-@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
-              help="Image format [default: from the file name, else png].")
-def plot_mechanism(mech, output, instants, fmt):
+@image_format_option()
+@old_image_format()
+def plot_mechanism(mech: str, output: str, instants: int, image_format: str | None, old_format: str | None) -> None:
     """Draw MECH in 3D at a few instants of its default trajectory.
 
     Bodies are segments between their joints (wheels are discs), ground joints black
@@ -458,36 +459,35 @@ def plot_mechanism(mech, output, instants, fmt):
     configuration is drawn.
     """
     from baseparams.cli.plots import plot_mechanism as draw
+    fmt = chosen_image_format(image_format, old_format)
     written = draw(load(mech), output, instants=instants, fmt=fmt)
     click.echo(f"wrote {written}")
 
 
 @plot.command("singular-values")
 @click.argument("mech", metavar="MECH")
-@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
-              help="Image file to write.")
-@click.option("--solver", "solvers", multiple=True, default=("dp", "vp"), show_default=True,
-              help="Solvers whose singular values to draw (repeat the option).")
+@output_option(help="Image file to write (its suffix chooses the format).", required=True)
+@solvers_option(help="A solver whose singular values to draw.", default=("dp", "vp"))
 @click.option("--digits", type=click.IntRange(10, 20000), default=30, show_default=True,
               help="Precision of variable-precision solvers (the seed paper's figure uses 30).")
-@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
-              help="Samples of the exciting trajectory [default: the mechanism file's].")
-@click.option("--format", "fmt", type=click.Choice(["png", "pdf", "svg"]), default=None,
-              help="Image format [default: from the file name, else png].")
-def plot_singular_values(mech, output, solvers, digits, samples, fmt):
+@samples_option()
+@image_format_option()
+@old_image_format()
+def plot_singular_values(mech: str, output: str, solver_names: tuple[str, ...], old_solvers: str | None,
+                         digits: int, samples: int | None, image_format: str | None, old_format: str | None) -> None:
     """Singular values of the (column-scaled) observation matrix of MECH, one series per
     solver on one log scale, with each solver's rank marked: the seed paper's figure of
     DP (*) against VP (+)."""
     from baseparams.cli.plots import plot_singular_values as draw
+    fmt = chosen_image_format(image_format, old_format)
     mechanism = load(mech)
     results = []
-    for name in solvers:
+    for name in chosen_solvers(solver_names, old_solvers):
         solver = get_solver(name)
         wanted = {"digits": digits, "recover": False, "samples": samples}
         declared = {o.name for o in solver.options}
         options = check_options(solver, {k: v for k, v in wanted.items() if k in declared and v is not None})
-        require_applicable(solver, mechanism)
-        result = solver.solve(mechanism, progress=_progress, **options)
+        result = run_solver(solver, mechanism, options, progress=_progress)
         if not result.singular_values:
             raise UserError(f"solver {name!r} gives no singular values to plot")
         results.append(result)
@@ -498,22 +498,21 @@ def plot_singular_values(mech, output, solvers, digits, samples, fmt):
 # ----- report (symbolic derivation) -------------------------------------------------
 @main.command()
 @click.argument("mech", metavar="MECH")
-@click.option("--solver", "solver_name", default="symbolic", show_default=True, metavar="NAME",
-              help="A registered solver that gives a derivation (its capabilities say so).")
+@solver_option(help="A registered solver that gives a derivation (its capabilities say so).", default="symbolic")
 @click.option("--format", "fmt", type=click.Choice(["text", "markdown", "latex"]), default="text",
               show_default=True, help="Rendering of the derivation.")
 @click.option("--keep", default="", help="Parameters never to eliminate (comma separated).")
 @click.option("--eliminate-first", "first", default="",
               help="Parameters to eliminate whenever a transfer allows it (comma separated).")
 @click.option("--no-certify", is_flag=True, help="Skip the ball-arithmetic rank check (faster).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
-              help="Write the report to this file instead of standard output.")
-def report(mech, solver_name, fmt, keep, first, no_certify, output):
+@output_option()
+def report(mech: str, solver_name: str, fmt: str, keep: str, first: str, no_certify: bool, output: str | None) -> None:
     """Derive MECH's base parameters by multipole transfers and print the derivation.
 
     Like the seed paper's Tabs. 4-5 and appendix: parameters without effect (per body and
     condition), the transfer at each joint and the parameter it eliminates, every step's
-    values, the base parameters and how the rank was checked (docs/symbolic.md). Any
+    values, the base parameters and how the rank was checked (`python -m pydoc
+    baseparams.plugins.solvers.symbolic`). Any
     solver whose capabilities include a derivation may be chosen (built in: symbolic);
     --keep, --eliminate-first and --no-certify are passed as its options of those names.
     """
@@ -524,28 +523,23 @@ def report(mech, solver_name, fmt, keep, first, no_certify, output):
                 if isinstance(r.item, Solver) and r.item.capabilities.derivation]
         raise UserError(f"solver {solver_name!r} gives no derivation; solvers that do: "
                         f"{', '.join(able) or '(none)'}")
-    given = {}
+    given: dict[str, Any] = {}
     if keep:
         given["keep"] = keep
     if first:
         given["eliminate_first"] = first
     if no_certify:
         given["certify"] = False
-    options = check_options(solver, given)
-    mechanism = load(mech)
-    require_applicable(solver, mechanism)
-    result = solver.solve(mechanism, **options)
+    check_options(solver, given)
+    result = run_solver(solver, load(mech), given)
     if result.diagnostics.derivation is None:
         raise UserError(f"solver {solver_name!r} declares a derivation but its result has none")
     text = render(result, fmt)
     if output is not None:                  # -o "" is a bad file name, not standard output
         from baseparams.io.atomic import atomic_write
         atomic_write(output, text, what="the report")     # a full disk keeps the old file whole
-        click.echo(f"wrote {output}")
+        click.echo(f"wrote {output}", err=True)        # as every -o FILE: stdout stays empty
     else:
         click.echo(text, nl=False)
 
 
-# Keep this last: `python -m baseparams.cli.commands` runs the command line.
-if __name__ == "__main__":
-    main()

@@ -1,70 +1,31 @@
 """``baseparams excite``: plan the exciting motion (registered on ``main``; docs/excite.md)."""
 
 import json
-import math
 import sys
-from pathlib import Path
 
 import click
-import numpy as np
 
-from baseparams.cli.commands import _progress, emit, format_option, get_solver, load, main
-from baseparams.errors import InputError
-from baseparams.solvers.protocol import check_options, require_applicable
-
-
-def parse_separate(text: str, mechanism) -> tuple:
-    """``KIND:COORD,KIND:COORD`` or a ``diagnose --format json`` file (its "ambiguous" groups)."""
-    from baseparams.identify.model import checked_effect
-    pairs = []
-    path = Path(text)
-    if text.endswith(".json") or path.is_file():
-        try:
-            report = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise InputError(f"cannot read a diagnose JSON report: {exc}", file=text, key="--separate") from None
-        groups = report.get("ambiguous") if isinstance(report, dict) else None
-        if not isinstance(groups, list):
-            raise InputError("no \"ambiguous\" list (expected `baseparams diagnose --format json` output)",
-                             file=text, key="ambiguous")
-        for k, group in enumerate(groups):
-            try:
-                pairs += [(c["kind"], c["coordinate"]) for c in group["candidates"]]
-            except (KeyError, TypeError):
-                raise InputError("expected {\"candidates\": [{\"kind\", \"coordinate\"}, ...]}", file=text,
-                                 key=f"ambiguous[{k}]") from None
-        if not pairs:
-            raise InputError("the diagnosis reports no ambiguous effects: nothing to separate", file=text,
-                             key="ambiguous")
-    else:
-        for item in (s.strip() for s in text.split(",") if s.strip()):
-            kind, sep, coordinate = item.partition(":")
-            if not sep or not kind.strip() or not coordinate.strip():
-                raise InputError(f"{item!r}: expected KIND:COORD", key="--separate")
-            pairs.append((kind.strip(), coordinate.strip()))
-    for kind, coordinate in pairs:
-        checked_effect(mechanism, kind, coordinate, key=f"--separate {kind}:{coordinate}")
-    unique = tuple(dict.fromkeys(pairs))
-    if len(unique) < 1:
-        raise InputError("name at least one effect to separate", key="--separate")
-    return unique
+from baseparams.api.effects import parse_separate  # noqa: F401  (its home moved; kept importable)
+from baseparams.cli.commands import emit, format_option, get_solver, load, main
+from baseparams.cli.options import (Progress, output_option, quiet_option, samples_option, seed_option,
+                                    solver_option, solver_options_option)
+from baseparams.solvers.protocol import options_from_text
 
 
 @main.command()
 @click.argument("mech")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Mechanism file (TOML) to write: MECH with the planned motion as its [trajectory].")
-@click.option("--solver", "solver_name", default="dp", show_default=True,
-              help="Solver whose base parameters define the base columns (any registered solver).")
+@output_option(help="Mechanism file (TOML) to write: MECH with the planned motion as its [trajectory] "
+                    "[default: standard output, the report then on stderr].")
+@solver_option(help="Solver whose base parameters define the base columns (any registered solver).")
+@solver_options_option()
 @click.option("--criterion", type=click.Choice(["condition", "d-optimal"]), default="condition",
               show_default=True, help="Minimise the condition number, or maximise log det (D-optimality).")
 @click.option("--harmonics", type=click.IntRange(2, 20), default=5, show_default=True,
               help="Harmonics of the Fourier series per coordinate.")
 @click.option("--period", type=click.FloatRange(0.1, 1e4), default=10.0, show_default=True,
               help="Period of the motion (s): its base frequency is 1/period.")
-@click.option("--samples", type=click.IntRange(10, 5000), default=100, show_default=True,
-              help="Samples of the period the criterion and the limits are evaluated on while "
-                   "optimising (the limits are then verified on ten times as many).")
+@samples_option(help="Samples of the period the criterion and the limits are evaluated on while optimising "
+                     "(the limits are then verified on ten times as many); at least 10.", default=100)
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
               help="An effect identified with the base parameters: its columns join the matrix; repeatable.")
 @click.option("--separate", default=None, metavar="KIND:COORD,... | DIAGNOSIS.json",
@@ -96,8 +57,7 @@ def parse_separate(text: str, mechanism) -> tuple:
               help="Run the starts on a Dask scheduler (tcp://host:8786, or 'local').")
 @click.option("--iterations", type=click.IntRange(1, 100000), default=200, show_default=True,
               help="Iterations of each local optimisation.")
-@click.option("--seed", type=click.IntRange(0, 2 ** 32 - 1), default=0, show_default=True,
-              help="Seed of the first start (start k uses seed + k).")
+@seed_option(help="Seed of the first start (start k uses seed + k).")
 @click.option("--csv", "csv_path", default=None, type=click.Path(dir_okay=False),
               help="Also write q, qd, qdd of every coordinate at --rate over one period.")
 @click.option("--rate", type=click.FloatRange(1, 1e5), default=1000.0, show_default=True,
@@ -106,11 +66,14 @@ def parse_separate(text: str, mechanism) -> tuple:
               help="Also write the report as JSON to this file.")
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="Plot of the motion and the singular values (png, pdf or svg).")
-@click.option("--quiet", is_flag=True, help="No progress messages.")
+@quiet_option()
 @format_option
-def excite(mech, output, solver_name, criterion, harmonics, period, samples, effects, separate,
-           position_range, max_velocity, max_acceleration, max_torque, singularity_margin, noise,
-           starts, workers, scheduler, iterations, seed, csv_path, rate, report_path, plot_path, quiet, fmt):
+def excite(mech: str, output: str | None, solver_name: str, extra: tuple[str, ...], criterion: str, harmonics: int,
+           period: float, samples: int, effects: tuple[str, ...], separate: str | None, position_range: str | None,
+           max_velocity: str | None, max_acceleration: str | None, max_torque: str | None,
+           singularity_margin: float, noise: str | None, starts: int, workers: int | None, scheduler: str | None,
+           iterations: int, seed: int, csv_path: str | None, rate: float, report_path: str | None,
+           plot_path: str | None, quiet: bool, fmt: str) -> None:
     """Plan a periodic motion of MECH that identifies its base parameters.
 
     A finite Fourier series per independent coordinate, at rest at both ends, that
@@ -124,114 +87,19 @@ def excite(mech, output, solver_name, criterion, harmonics, period, samples, eff
     the limits' margins on a sampling ten times finer. Exit 0, or 2 for bad input or
     limits no motion satisfies.
     """
-    from baseparams.excite import plan as planner
-    from baseparams.excite.limits import limits_of
-    from baseparams.identify.base import BaseModel
-    from baseparams.identify.model import independent_names
-    from baseparams.io.atomic import atomic_write
-    from baseparams.io.toml_writer import mechanism_toml
-    from baseparams.orchestrate.jobs import MechanismText
-    from baseparams.orchestrate.runners import make_runner
+    from baseparams.api import excite as run
+    options = options_from_text(get_solver(solver_name), extra)
     mechanism = load(mech)
-    if not mechanism.path:
-        raise InputError("the mechanism has no file to plan for", key="MECH")
-    names = independent_names(mechanism)
-    parsed_effects = []
-    for text in effects:
-        from baseparams.cli.identify import parse_effect
-        spec = parse_effect(text, mechanism, values=False)
-        parsed_effects.append((spec.kind, spec.coordinate))
-    pairs = parse_separate(separate, mechanism) if separate else ()
-    weights = None
-    if noise is not None:
-        sd = [float(v) for v in noise.split(",")] if all(_is_number(v) for v in noise.split(",")) else None
-        if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
-            raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
-        weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
-    if mechanism.loops and mechanism.trajectory is not None:
-        # closed loops: the file's trajectory is known to stay in the reachable range
-        ranges, velocities, accelerations = _trajectory_limits(mechanism, names)
-        position_range = position_range or ranges
-        max_velocity = max_velocity or velocities
-        max_acceleration = max_acceleration or accelerations
-    limits = limits_of(mechanism, positions=position_range, velocity=max_velocity,
-                       acceleration=max_acceleration, torque=max_torque)
-    solver = get_solver(solver_name)
-    require_applicable(solver, mechanism)
-    say = (lambda message: None) if quiet else _progress
-    result = solver.solve(mechanism, progress=say, **check_options(solver, {}))
-    base = BaseModel.from_result(result, mechanism)
-    settings = planner.Settings(harmonics=harmonics, period=period, samples=samples,
-                                criterion="separation" if pairs else criterion, effects=tuple(parsed_effects),
-                                separate=pairs, margin=singularity_margin if mechanism.loops else 0.0,
-                                maxiter=iterations, weights=weights)
-    text = MechanismText.read(mechanism.name, Path(mechanism.path))
-    runner = make_runner(workers, scheduler)
-
-    def rebase(planned):
-        return BaseModel.from_result(solver.solve(planned, **check_options(solver, {})), planned)
-
-    def run(progress):
-        return planner.plan(mechanism, text, base, limits, settings, starts=starts, runner=runner,
-                            progress=progress, seed=seed, rebase=rebase)
-
-    try:
-        if quiet:
-            found = run(None)
-        elif sys.stderr.isatty():
-            with click.progressbar(length=starts, label="excite", file=sys.stderr, show_eta=True, show_pos=True,
-                                   item_show_func=lambda label: label) as bar:
-                def progress(done, total, label):      # later rounds (one job each) only relabel
-                    bar.update(1 if bar.pos < bar.length else 0, label)
-                found = run(progress)
-        else:
-            found = run(lambda done, total, label: click.echo(f"excite: {done}/{total} starts done ({label})",
-                                                              err=True))
-    finally:
-        close = getattr(runner, "close", None)
-        if close:
-            close()
-    atomic_write(output, mechanism_toml(planner.with_trajectory(mechanism, found)), "the planned mechanism file")
-    out = found.to_json()
-    out["output"] = str(output)
-    if csv_path:
-        out["csv"] = {"path": str(csv_path), "rate": rate,
-                      "rows": planner.write_csv(csv_path, found.problem, found.x, rate)}
-    if report_path:
-        atomic_write(report_path, json.dumps(out, indent=2) + "\n", "the report")
-    if plot_path:
-        from baseparams.excite.plot import plot_plan
-        plot_plan(found, plot_path)
-
-    def text_report():
-        lines = [found.to_text(), f"wrote {output}"]
-        lines += [f"wrote {p}" for p in (csv_path, report_path, plot_path) if p]
-        return "\n".join(lines)
-
-    emit(fmt, out, text_report)
+    with Progress("excite", quiet=quiet) as progress:
+        result = run(mechanism, output=output, solver=solver_name, solver_options=options, criterion=criterion,
+                     harmonics=harmonics, period=period, samples=samples, effects=effects, separate=separate,
+                     position_range=position_range, max_velocity=max_velocity, max_acceleration=max_acceleration,
+                     max_torque=max_torque, singularity_margin=singularity_margin, noise=noise, starts=starts,
+                     workers=workers, scheduler=scheduler, iterations=iterations, seed=seed, csv=csv_path,
+                     rate=rate, report=report_path, plot=plot_path, progress=progress.counted, say=progress)
+    if output is None:              # the mechanism file is on stdout: the report goes beside it
+        click.echo(result.toml(), nl=False)
+        click.echo(result.to_text() if fmt == "text" else json.dumps(result.to_json(), indent=2), err=True)
+        sys.exit(0)
+    emit(fmt, result.to_json(), result.to_text)
     sys.exit(0)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        return float(text) == float(text)
-    except ValueError:
-        return False
-
-
-def _trajectory_limits(mechanism, names) -> tuple[str, str, str]:
-    """Closed loops: the position range, peak velocity and peak acceleration of the file's
-    trajectory (its positions are known to close), as option texts."""
-    from baseparams.identify.simulate import trajectory_motion
-    motion = trajectory_motion(mechanism)
-    lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)
-    ranges = ",".join(f"{n}={float(a)!r}:{float(b)!r}" for n, a, b in zip(names, lo, hi) if a < b) or None
-    peaks = [",".join(f"{n}={_up(v)!r}" for n, v in zip(names, np.max(np.abs(values), axis=0)) if v > 0)
-             or None for values in (motion.qd, motion.qdd)]
-    return ranges, peaks[0], peaks[1]
-
-
-def _up(value: float) -> float:
-    """``value`` rounded up to two significant digits."""
-    scale = 10.0 ** (math.floor(math.log10(value)) - 1)
-    return math.ceil(value / scale - 1e-9) * scale

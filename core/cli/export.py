@@ -2,22 +2,20 @@
 
 import click
 
-from baseparams.cli.commands import get_solver, load, main
-from baseparams.io.atomic import atomic_write
-from baseparams.solvers.protocol import check_options, require_applicable
+from baseparams.cli.commands import get_solver, given_options, load, main
+from baseparams.cli.options import output_option, samples_option, solver_option, solver_options_option
 
 
 @main.command()
 @click.argument("mech", metavar="MECH")
 @click.option("--to", "target", type=click.Choice(["python"]), required=True,
               help="What to write: a Python module (numpy only).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), default=None,
-              help="File to write [default: stdout].")
-@click.option("--solver", "solver_name", default="dp", show_default=True, metavar="NAME",
-              help="Solver whose base parameters give base_regressor's columns (dp, vp, exact, ...).")
-@click.option("--samples", type=click.IntRange(2, 1_000_000), default=None,
-              help="Samples of the exciting trajectory for the solver [default: the file's].")
-def export(mech, target, output, solver_name, samples):
+@output_option(help="File to write (atomically) [default: standard output].")
+@solver_option(help="Solver whose base parameters give base_regressor's columns (dp, vp, exact, ...).")
+@samples_option(help="Samples of the exciting trajectory for the solver [default: the file's].")
+@solver_options_option()
+def export(mech: str, target: str, output: str | None, solver_name: str, samples: int | None,
+           extra: tuple[str, ...]) -> None:
     """Write MECH's regressor as a standalone module (numpy only).
 
     The module has regressor(q, qd, qdd) -> K (tau = K phi, batches of states) and
@@ -26,16 +24,11 @@ def export(mech, target, output, solver_name, samples):
     functions take all tree coordinates on the constraint manifold (the module does not
     close the loops) and return K in the independent coordinates.
     """
-    from baseparams.dynamics.codegen import export_source       # numpy/sympy on use, as commands.load
-    solver = get_solver(solver_name)
-    options = check_options(solver, {"samples": samples} if samples is not None else {})
-    mechanism = load(mech)
-    require_applicable(solver, mechanism)
-    result = solver.solve(mechanism, **options)
-    source = export_source(mechanism, result)
+    from baseparams.api import export as run
+    options, common = given_options(get_solver(solver_name), extra, samples=samples)
+    result = run(load(mech), to=target, output=output, solver=solver_name, common=common, **options)
     if output is None:
-        click.echo(source, nl=False)
+        click.echo(result.source, nl=False)
         return
-    atomic_write(output, source)            # a full disk or a kill keeps the old module whole
-    click.echo(f"wrote {output}: regressor and base_regressor of {mechanism.name} "
-               f"({len(result.base)} base parameters, {result.solver})", err=True)
+    click.echo(f"wrote {output}: regressor and base_regressor of {result.solution.mechanism.name} "
+               f"({len(result.solution.result.base)} base parameters, {result.solution.result.solver})", err=True)

@@ -1,95 +1,38 @@
 """``baseparams simulate`` and ``baseparams identify`` (registered on ``main``; docs/identification.md)."""
 
 import json
-from fractions import Fraction
+import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from baseparams.cli.commands import _progress, emit, format_option, get_solver, load, main
+from baseparams.api.data import same_file
+from baseparams.api.effects import parse_effect, parse_effects  # noqa: F401  (their home moved; kept importable)
+from baseparams.cli.commands import emit, format_option, get_solver, load, main
+from baseparams.cli.options import (Progress, output_option, quiet_option, samples_option, seed_option,
+                                    solver_option, solver_options_option)
 from baseparams.errors import InputError
-from baseparams.model.mechanism import EffectSpec, Mechanism
-from baseparams.solvers.protocol import check_options, require_applicable
+from baseparams.solvers.protocol import options_from_text
+
+if TYPE_CHECKING:
+    from baseparams.identify.fit import Prediction
 
 # The identification modules (scipy.signal, scipy.linalg, cvxpy) are imported by the verbs
 # that use them, as in commands.py: `baseparams --help` and `list` stay fast.
 
 
-# ----- --effect ---------------------------------------------------------------------------
-def parse_effect(text: str, mechanism: Mechanism, *, values: bool) -> EffectSpec:
-    """``KIND:COORD`` (values=False), or with values (values=True) ``KIND:COORD=V[,V...]`` (the
-    coefficients in the effect's order) or ``KIND:COORD:NAME=V[,NAME=V...]``; values are
-    exact decimals or rationals."""
-    key = f"--effect {text}"
-    head, _, given = text.partition("=") if values else (text, "", "")
-    parts = head.split(":")
-    if len(parts) not in (2, 3) or not all(p.strip() for p in parts[:2]) or (len(parts) == 3 and not values):
-        form = "KIND:COORD=VALUE[,VALUE] or KIND:COORD:NAME=VALUE[,NAME=VALUE]" if values else "KIND:COORD"
-        raise InputError(f"expected {form}", key=key)
-    kind, coordinate = parts[0].strip(), parts[1].strip()
-    from baseparams.identify.model import checked_effect    # on use, like the verbs: fast --help
-    effect = checked_effect(mechanism, kind, coordinate, key)
-    if not values:
-        return EffectSpec(kind, coordinate)
-    coefficients = effect.coefficients
-    if len(parts) == 3:                          # KIND:COORD:NAME=V,NAME=V (head holds NAME)
-        pairs = (parts[2] + "=" + given).split(",")
-        out = {}
-        for pair in pairs:
-            name, sep, value = pair.partition("=")
-            name = name.strip()
-            if not sep or name not in coefficients:
-                raise InputError(f"{pair!r}: expected NAME=VALUE with NAME one of {', '.join(coefficients)}",
-                                 key=key)
-            out[name] = _number(value, key)
-    else:
-        numbers = [v for v in given.split(",")] if given else []
-        if len(numbers) != len(coefficients):
-            raise InputError(f"{kind} has {len(coefficients)} coefficients ({', '.join(coefficients)}): "
-                             f"give {len(coefficients)} values, not {len(numbers)}", key=key)
-        out = {name: _number(v, key) for name, v in zip(coefficients, numbers)}
-    missing = [c for c in coefficients if c not in out]
-    if missing:
-        raise InputError(f"no value for {', '.join(missing)}", key=key)
-    return EffectSpec(kind, coordinate, out)
-
-
-def _number(text: str, key: str) -> Fraction:
-    try:
-        return Fraction(text.strip())
-    except (ValueError, ZeroDivisionError):
-        raise InputError(f"{text.strip()!r} is not a number", key=key) from None
-
-
-def _noise(text: str) -> list[float] | float:
-    from baseparams.identify.data import MAX_MAGNITUDE, NUMBER
-    parts = [v.strip() for v in text.split(",")]
-    if not all(NUMBER.fullmatch(v) for v in parts):
-        raise InputError(f"{text!r}: expected SD or SD,SD,... (one per independent coordinate; ASCII "
-                         "digits)", key="--noise")
-    values = [float(v) for v in parts]
-    if not all(0 <= v <= MAX_MAGNITUDE for v in values):
-        raise InputError(f"{text!r}: a standard deviation is between 0 and {MAX_MAGNITUDE:g}", key="--noise")
-    return values[0] if len(values) == 1 else values
-
-
-def _same_file(a: str | None, b: str | None) -> bool:
-    return bool(a and b) and Path(a).resolve() == Path(b).resolve()
-
-
 # ----- simulate ---------------------------------------------------------------------------
 @main.command()
 @click.argument("mech", metavar="MECH")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="CSV file to write.")
+@output_option(help="CSV file to write (atomically) [default: standard output, the summary then on stderr].")
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD=VALUE[,VALUE]",
               help="A hidden effect on any joint coordinate (dependent ones too), its coefficients in "
                    "the effect's order, or KIND:COORD:NAME=VALUE[,NAME=VALUE]; repeatable.")
 @click.option("--noise", default="0", show_default=True, metavar="SD[,SD...]",
               help="Standard deviation of the Gaussian noise on tau, one for all coordinates or one each.")
-@click.option("--seed", type=click.IntRange(0, 2 ** 32 - 1), default=0, show_default=True,
-              help="Seed of the random numbers (0 to 2^32 - 1).")
-@click.option("--samples", type=click.IntRange(2, 10_000_000), default=None,
-              help="Samples of the exciting trajectory [default: the mechanism file's].")
+@seed_option()
+@samples_option()
 @click.option("--truth", type=click.Path(dir_okay=False), default=None,
               help="JSON file for the truth (parameters, effects, noise); never in the CSV.")
 @click.option("--random-inertia", is_flag=True,
@@ -97,160 +40,97 @@ def _same_file(a: str | None, b: str | None) -> bool:
 @click.option("--no-derivatives", is_flag=True,
               help="Write only t, q and tau (identify then estimates qd and qdd).")
 @format_option
-def simulate(mech, output, effects, noise, seed, samples, truth, random_inertia, no_derivatives, fmt):
+@quiet_option()
+def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str, seed: int, samples: int | None,
+             truth: str | None, random_inertia: bool, no_derivatives: bool, fmt: str, quiet: bool) -> None:
     """Synthetic measured data for MECH along its exciting trajectory.
 
     tau = K phi + the effects' forces + Gaussian noise, with phi the file's inertial
     parameters (or random physically consistent ones), velocities and accelerations the
     trajectory's exact derivatives. The mechanism's own [[effects]] with every value given
-    are simulated too. CSV layout: docs/design.md; files are written atomically.
+    are simulated too. CSV layout: `python -m pydoc baseparams.identify.data`; files are
+    written atomically.
     """
-    from baseparams.identify.data import MIN_SAMPLES, write_measured
-    from baseparams.io.atomic import atomic_write
-    from baseparams.identify.fit import split_effects
-    from baseparams.identify.simulate import simulate as run_simulation
-    if samples is not None and samples < MIN_SAMPLES:
-        raise InputError(f"{samples} samples: at least {MIN_SAMPLES} are needed", key="--samples")
+    from baseparams.api import simulate as run
     mechanism = load(mech)
-    named = [parse_effect(text, mechanism, values=True) for text in effects]
-    keys = {(s.kind, s.coordinate) for s in named}
-    if len(keys) < len(named):
-        raise InputError("an effect is named twice (same kind and coordinate)", key="--effect")
-    _, known = split_effects(mechanism, [])
-    hidden = [s for s in known if (s.kind, s.coordinate) not in keys] + named
-    for path in (output, truth):
-        if _same_file(path, mechanism.path):
-            raise InputError("would overwrite the mechanism file", file=path)
-    if truth and _same_file(truth, output):
-        raise InputError("the truth and the data would be the same file", file=truth)
-    data, truth_data = run_simulation(mechanism, samples=samples, noise_sd=_noise(noise), seed=seed,
-                                      effects=hidden, random_inertia=random_inertia)
-    write_measured(output, data, derivatives=not no_derivatives)
-    if truth:
-        atomic_write(truth, json.dumps(truth_data, indent=2) + "\n")
-    summary = {"output": str(output), "truth": truth, "samples": data.count,
-               "coordinates": list(data.coordinates), "effects": len(hidden)}
-    emit(fmt, summary, f"wrote {output} ({data.count} samples, coordinates {', '.join(data.coordinates)}, "
-                       f"{len(hidden)} hidden effects)" + (f"; truth in {truth}" if truth else ""))
+    with Progress("simulate", steps=2, quiet=quiet) as progress:
+        if output is not None:
+            result = run(mechanism, output=output, effects=effects, noise=noise, seed=seed, samples=samples,
+                         truth=truth, random_inertia=random_inertia, derivatives=not no_derivatives,
+                         progress=progress)
+        else:
+            with tempfile.TemporaryDirectory(prefix="baseparams-simulate-") as folder:
+                path = Path(folder) / "data.csv"
+                result = run(mechanism, output=path, effects=effects, noise=noise, seed=seed, samples=samples,
+                             truth=truth, random_inertia=random_inertia, derivatives=not no_derivatives,
+                             progress=progress)
+                result.output = None
+                click.echo(path.read_text(encoding="utf-8"), nl=False)
+    if output is None:                       # the CSV is on stdout: the summary goes beside it
+        text = result.to_text() if fmt == "text" else json.dumps(result.to_json(), indent=2)
+        click.echo(text, err=True)
+        return
+    emit(fmt, result.to_json(), result.to_text)
 
 
 # ----- identify ---------------------------------------------------------------------------
-def parse_effects(texts, mechanism: Mechanism) -> list[EffectSpec]:
-    """``--effect`` values; ``KIND:*`` is the effect on every independent coordinate."""
-    from baseparams.identify.model import independent_names
-    out = []
-    for text in texts:
-        kind, sep, coordinate = text.partition(":")
-        if sep and coordinate.strip() == "*":
-            out += [parse_effect(f"{kind}:{c}", mechanism, values=False) for c in independent_names(mechanism)]
-        else:
-            out.append(parse_effect(text, mechanism, values=False))
-    return out
-
-
 @main.command()
 @click.argument("mech", metavar="MECH")
 @click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
               help="An effect to identify with the inertial parameters, on a joint coordinate or a "
                    "motor; KIND:* on every independent coordinate; repeatable.")
-@click.option("--solver", "solver_name", default="vp", show_default=True, metavar="NAME",
-              help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
-                   "carry too few digits on badly conditioned mechanisms, which the result notes).")
+@solver_option(help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
+                    "carry too few digits on badly conditioned mechanisms, which the result notes).")
+@solver_options_option()
 @click.option("--validate", "validate_paths", multiple=True, metavar="OTHER",
               help="Predict this recording (CSV or description) with the identified model and print "
                    "the error per coordinate; repeatable.")
 @click.option("--physical", is_flag=True,
               help="Also physically consistent standard parameters reproducing the base estimates "
-                   "(needs cvxpy: pip install 'baseparams[physical]').")
+                   "(needs cvxpy: pip install 'baseparams[physical]'); the text gives the programme's status.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Measured and predicted forces per coordinate, fit and --validate data (png, pdf, svg).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
-              help="Also write the JSON result to this file (atomically).")
+@output_option(help="Write the result (text, or JSON with --format json) to FILE instead of standard output.")
 @format_option
-def identify(mech, data_paths, effects, solver_name, validate_paths, physical, plot_path, output, fmt):
+@quiet_option()
+def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], solver_name: str,
+             extra: tuple[str, ...], validate_paths: tuple[str, ...], physical: bool, plot_path: str | None,
+             output: str | None, fmt: str, quiet: bool) -> None:
     """Least squares on MECH's base parameters (and named effects) from measured DATA.
 
     DATA: CSV files in the project's layout or recording descriptions (.toml: raw logs
-    with motor-side channels, gains, time stamps, filtering; docs/identification.md), one
-    or several; several runs are fitted together, each filtered on its own. Weighted per
-    coordinate (Gautier: each coordinate's noise SD from an ordinary fit, then refitted
-    with weights 1/SD). Prints every estimate with its standard deviation and relative
-    std (%), the condition number and the NRMS residual per coordinate, and with
-    --validate the prediction error on recordings the fit did not see. Effects in the
-    mechanism's [[effects]] without values are identified too; those with every value
-    are subtracted as known.
+    with motor-side channels, gains, time stamps, filtering; `python -m pydoc
+    baseparams.identify.recording`), one or several; several runs are fitted together,
+    each filtered on its own. Weighted per coordinate (Gautier: each coordinate's noise SD
+    from an ordinary fit, then refitted with weights 1/SD). Prints every estimate with its
+    standard deviation and relative std (%), what each base parameter stands for, the
+    condition number and the NRMS residual per coordinate, and with --validate the
+    prediction error on recordings the fit did not see. Effects in the mechanism's
+    [[effects]] without values are identified too; those with every value are subtracted
+    as known.
     """
-    from baseparams.identify.base import BaseModel
-    from baseparams.io.atomic import atomic_write
-    from baseparams.identify.fit import identify as fit, predict, split_effects
-    from baseparams.identify.model import standard_parameters
-    from baseparams.identify.recording import read_data
-    if physical:
-        from baseparams.identify import physical as consistency     # cvxpy: an optional extra
-        consistency.require_cvxpy()
+    from baseparams.api import identify as run
     for path in (output, plot_path):
-        if path and any(_same_file(path, d) for d in data_paths + validate_paths):
+        if path and any(same_file(path, d) for d in data_paths + validate_paths):
             raise InputError("would overwrite a data file", file=path)
+    options = options_from_text(get_solver(solver_name), extra)
     mechanism = load(mech)
-    data, mechanism = read_data(list(data_paths), mechanism)
-    others = [read_data([path], mechanism)[0] for path in validate_paths]
-    named = parse_effects(effects, mechanism)
-    to_identify, known = split_effects(mechanism, named)
-    solver = get_solver(solver_name)
-    require_applicable(solver, mechanism)
-    result = solver.solve(mechanism, progress=_progress, **check_options(solver, {}))
+    with Progress("identify", steps=4 + physical, quiet=quiet) as progress:
+        result = run(mechanism, list(data_paths), effects=effects, solver=solver_name, solver_options=options,
+                     validate=validate_paths, physical=physical, progress=progress)
+        if plot_path:
+            progress("plotting")
+            plot_predictions([result.fitted] + result.predictions, plot_path,
+                             title=f"{mechanism.name}: identified model")
     for warning in result.warnings:
         click.echo(f"warning: {warning}", err=True)
-    base = BaseModel.from_result(result, mechanism)
-    identification = fit(mechanism, data, effects=to_identify, base=base, known=known)
-    if physical:
-        prior, source = None, "least-norm parameters B^+ phi_b"
-        if all(b.inertia is not None for b in mechanism.bodies):
-            from baseparams.model.consistency import require_physical
-            require_physical(mechanism, "identify --physical (the file's inertias are its prior)")
-            prior, source = standard_parameters(mechanism), "the mechanism file's inertias"
-        found = consistency.physical_fit(identification.base_estimates, base,
-                                         std=identification.std[:base.rank], prior=prior)
-        identification.physical = consistency.physical_json(found, tuple(mechanism.parameters))
-        identification.extras["physical_fit"] = {
-            "max_deviation_std": found.max_deviation, "prior": source, "solver": found.solver,
-            "status": found.status,
-            "min_pseudo_inertia_eigenvalue": dict(zip(map(str, mechanism.body_labels),
-                                                      map(float, found.min_eigenvalues)))}
-    fitted = predict(identification, mechanism, data)
-    predictions = [predict(identification, mechanism, other) for other in others]
-    identification.extras["rms"] = fitted.to_json()["rms"]
-    identification.extras["rms_overall"] = fitted.overall_rms
-    identification.extras["runs"] = list(data.runs)
-    if predictions:
-        identification.extras["validation"] = [p.to_json() for p in predictions]
-    out = identification.to_json()
-    if output:
-        atomic_write(output, json.dumps(out, indent=2) + "\n")
     if plot_path:
-        plot_predictions([fitted] + predictions, plot_path, title=f"{mechanism.name}: identified model")
-
-    def text():
-        lines = [identification.to_text()]
-        lines.append(f"  RMS residual overall {fitted.overall_rms:.4g}; per coordinate: "
-                     + ", ".join(f"{c} {r:.4g}" for c, r in zip(fitted.coordinates, fitted.rms)))
-        if identification.physical is not None:
-            info = identification.extras["physical_fit"]
-            lines.append(f"  physically consistent parameters (prior: {info['prior']}; the base "
-                         f"estimates reproduced within {info['max_deviation_std']:.3g} std):")
-            lines += [f"    {k} = {v}" for k, v in identification.physical.items()]
-        lines += [p.to_text() for p in predictions]
-        if output:
-            lines.append(f"wrote {output}")
-        if plot_path:
-            lines.append(f"wrote {plot_path}")
-        return "\n".join(lines)
-
-    emit(fmt, out, text)
+        result.written.append(plot_path)
+    emit(fmt, result.to_json(), result.to_text, output)
 
 
-def plot_predictions(predictions, path, title: str = "", fmt=None):
+def plot_predictions(predictions: "list[Prediction]", path: str, title: str = "", fmt: str | None = None) -> str:
     """Measured and predicted forces per coordinate: one column per recording (the fit's
     data first, then each --validate recording), the RMS error in each panel's title."""
     from baseparams.cli.plots import _figure, _save

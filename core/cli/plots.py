@@ -6,6 +6,7 @@ importing this module never changes matplotlib's global backend for a caller.
 
 import io
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -14,23 +15,29 @@ from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError
 from baseparams.io.atomic import atomic_write
+from baseparams.model.mechanism import Mechanism
+
+if TYPE_CHECKING:
+    from baseparams.solvers.result import BaseParameterResult
+
+Poses = dict[int, list[tuple[np.ndarray, np.ndarray]]]     # body label -> (R, p) per instant
 
 IMAGE_FORMATS = ("png", "pdf", "svg")
 PIVOT = 0.07        # half-length of a ground joint's axis stub, relative to the mechanism's size
 
 
-def _figure(**kwargs):
+def _figure(**kwargs: Any) -> Any:
     from matplotlib.figure import Figure
     return Figure(**kwargs)
 
 
-def _save(fig, path, fmt):
+def _save(fig: Any, path: str | Path, fmt: str | None) -> Path:
     path = Path(path)
     suffix = path.suffix[1:].lower()
     if fmt is None and suffix and suffix not in IMAGE_FORMATS:
         # writing PNG bytes under a .jpg name would mislead every program that opens it
         raise InputError(f"cannot write a {suffix!r} image (known formats: {', '.join(IMAGE_FORMATS)}); "
-                         f"name the file .png, .pdf or .svg, or give --format", file=path)
+                         f"name the file .png, .pdf or .svg, or give --image-format", file=path)
     fmt = fmt or (suffix if suffix in IMAGE_FORMATS else "png")
     if fmt not in IMAGE_FORMATS:
         raise InputError(f"unknown image format {fmt!r} (known: {', '.join(IMAGE_FORMATS)})", file=path)
@@ -41,7 +48,7 @@ def _save(fig, path, fmt):
 
 
 # ----- the mechanism in 3D -------------------------------------------------------
-def plot_mechanism(mech, path, instants=4, fmt=None):
+def plot_mechanism(mech: Mechanism, path: str | Path, instants: int = 4, fmt: str | None = None) -> Path:
     """Draw ``mech`` at a few instants of its default trajectory; return the path written.
 
     The instants are chosen to span the range of the first independent coordinate (so a
@@ -62,7 +69,8 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
     ax = fig.add_subplot(projection="3d")
     colours = _colours(len(mech.bodies))
     alphas = np.linspace(0.3, 1.0, len(labels)) if len(labels) > 1 else np.array([1.0])
-    drawn, linkage = [], []
+    drawn: list[Any] = []
+    linkage: list[Any] = []
 
     for k, alpha in enumerate(alphas):
         for body, colour in zip(mech.bodies, colours):
@@ -88,7 +96,7 @@ def plot_mechanism(mech, path, instants=4, fmt=None):
     return _save(fig, path, fmt)
 
 
-def _poses(mech, instants):
+def _poses(mech: Mechanism, instants: int) -> tuple[Poses, list[str]]:
     """{label: [(R, p) per instant]} and a legend label per instant."""
     if mech.trajectory is None:
         states = TreeKinematics(mech, Float64()).forward([0.0] * len(mech.coordinates))
@@ -113,7 +121,7 @@ def _poses(mech, instants):
     return poses, labels
 
 
-def _arr(values, k, n):
+def _arr(values: Any, k: int, n: int) -> np.ndarray:
     """Entry ``k`` of a (nested) list of float64 scalars or length-n arrays."""
     a = np.array([[np.broadcast_to(np.asarray(v, float), (n,))[k] for v in row]
                   if isinstance(row, list) else np.broadcast_to(np.asarray(row, float), (n,))[k]
@@ -121,10 +129,10 @@ def _arr(values, k, n):
     return a
 
 
-def _body_geometry(mech):
+def _body_geometry(mech: Mechanism) -> dict[int, dict[str, Any]]:
     """Per body: joint frames {joint name: (R, p)} in body coordinates and the points to draw."""
     backend = Float64()
-    out = {0: {"frames": {}}}
+    out: dict[int, dict[str, Any]] = {0: {"frames": {}}}
     out.update({b.label: {"frames": {}} for b in mech.bodies})
     for joint in mech.joints:
         for label, frame in ((joint.parent, joint.parent_frame), (joint.child, joint.child_frame)):
@@ -143,13 +151,13 @@ def _body_geometry(mech):
     return out
 
 
-def _centre_of_mass(body):
+def _centre_of_mass(body: Any) -> np.ndarray | None:
     if body.inertia is None or body.inertia[0] <= 0:
         return None
     return np.array([float(v) for v in body.inertia[1:4]]) / float(body.inertia[0])
 
 
-def _rotor_axis(mech, label, g):
+def _rotor_axis(mech: Mechanism, label: int, g: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
     """(centre, R of the joint frame) for a wheel: a body hanging on one R joint only, with
     its centre of mass on that joint's axis (off by less than 5 % of the disc radius)."""
     joints = [j for j in mech.joints if label in (j.parent, j.child)]
@@ -163,21 +171,20 @@ def _rotor_axis(mech, label, g):
     return centre, rot
 
 
-def _size(mech, poses, geometry):
+def _size(mech: Mechanism, poses: Poses, geometry: dict[int, dict[str, Any]]) -> float:
     pts = [_world(poses, b.label, 0, p) for b in mech.bodies for p in geometry[b.label]["points"]]
     pts += [p for p in geometry[0]["points"]]
-    pts = np.array(pts)
-    return max(float(np.ptp(pts, axis=0).max()), 1e-3)
+    return max(float(np.ptp(np.array(pts), axis=0).max()), 1e-3)
 
 
-def _world(poses, label, k, p):
+def _world(poses: Poses, label: int, k: int, p: Any) -> np.ndarray:
     if label == 0:
         return np.asarray(p, float)
     rot, pos = poses[label][k]
     return rot @ p + pos
 
 
-def _disc_radius(body, u, size):
+def _disc_radius(body: Any, u: np.ndarray, size: float) -> float:
     """Radius of a uniform disc with the body's inertia about the spin axis ``u``."""
     if body.inertia is None or body.inertia[0] <= 0:
         return 0.12 * size
@@ -187,14 +194,14 @@ def _disc_radius(body, u, size):
     return float(np.sqrt(2 * inertia / m)) if inertia > 0 else 0.12 * size
 
 
-def _draw_body(ax, body, g, rot, pos, colour, alpha, size):
+def _draw_body(ax: Any, body: Any, g: dict[str, Any], rot: np.ndarray, pos: np.ndarray, colour: Any, alpha: float,
+               size: float) -> list[Any]:
     world = [rot @ p + pos for p in g["points"]]
     if g["rotor"] is not None:
         centre, frame = g["rotor"]
         r = _disc_radius(body, frame[:, 2], size)
         a = np.linspace(0, 2 * np.pi, 73)
-        rim = [rot @ (centre + r * (np.cos(x) * frame[:, 0] + np.sin(x) * frame[:, 1])) + pos for x in a]
-        rim = np.array(rim)
+        rim = np.array([rot @ (centre + r * (np.cos(x) * frame[:, 0] + np.sin(x) * frame[:, 1])) + pos for x in a])
         ax.plot(*rim.T, color=colour, alpha=alpha, lw=0.6 + 1.4 * alpha)
         spoke = np.array([rot @ centre + pos, rim[0]])
         ax.plot(*spoke.T, color=colour, alpha=alpha, lw=0.6 + alpha)
@@ -214,7 +221,7 @@ def _draw_body(ax, body, g, rot, pos, colour, alpha, size):
     return world
 
 
-def _draw_ground(ax, mech, size):
+def _draw_ground(ax: Any, mech: Mechanism, size: float) -> list[Any]:
     """Ground joints: black triangles, with a stub along the joint axis (R, U, P)."""
     drawn = []
     for joint in mech.joints:
@@ -231,7 +238,7 @@ def _draw_ground(ax, mech, size):
     return drawn
 
 
-def _label_bodies(ax, mech, poses, geometry, k):
+def _label_bodies(ax: Any, mech: Mechanism, poses: Poses, geometry: dict[int, dict[str, Any]], k: int) -> None:
     for body in mech.bodies:
         g = geometry[body.label]
         rot, pos = poses[body.label][k]
@@ -243,7 +250,7 @@ def _label_bodies(ax, mech, poses, geometry, k):
         ax.text(*where, f" {body.label}", fontsize=11, fontweight="bold", zorder=10)
 
 
-def _frame_axes(ax, pts, view_pts):
+def _frame_axes(ax: Any, pts: np.ndarray, view_pts: np.ndarray) -> None:
     """Equal scale on the three axes, and a view across the plane of least extent."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     span = max(float((hi - lo).max()), 1e-3)
@@ -266,13 +273,13 @@ def _frame_axes(ax, pts, view_pts):
     ax.view_init(elev=min(elev + 12, 80), azim=azim + 15)
 
 
-def _colours(n):
+def _colours(n: int) -> list[Any]:
     from matplotlib import colormaps
     cmap = colormaps["tab10"]
     return [cmap(i % 10) for i in range(n)]
 
 
-def _legend(fig, mech, colours, alphas, labels):
+def _legend(fig: Any, mech: Mechanism, colours: list[Any], alphas: Any, labels: list[str]) -> None:
     from matplotlib.lines import Line2D
     handles = [Line2D([], [], color=c, lw=3, label=f"{b.label} {b.name}".rstrip())
                for b, c in zip(mech.bodies, colours)]
@@ -285,14 +292,14 @@ def _legend(fig, mech, colours, alphas, labels):
 _MARKERS = {"dp": "*", "vp": "+"}
 
 
-def _log10_text(text):
+def _log10_text(text: str) -> float | None:
     """log10 of a decimal string (any exponent: 1e-500 does not underflow), None for 0."""
     import mpmath
     value = abs(mpmath.mpf(str(text)))
     return None if value == 0 else float(mpmath.log10(value))
 
 
-def plot_singular_values(results, path, fmt=None):
+def plot_singular_values(results: "list[BaseParameterResult]", path: str | Path, fmt: str | None = None) -> Path:
     """One log-scale series of singular values per result (``BaseParameterResult`` with
     ``singular_values``), each solver's rank marked; return the path written.
 

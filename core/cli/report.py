@@ -17,15 +17,20 @@ Condition numbers are the paper's: section 3.2 (one body) and section 3.3 (a joi
 0 marks a transfer found by sampling the kinematics that no joint-type rule states.
 """
 
+from typing import TYPE_CHECKING, Any
+
 import sympy
 
 from baseparams.model.params import split_name
+
+if TYPE_CHECKING:
+    from baseparams.solvers.result import BaseParameterResult
 
 MULTIPOLE_SYMBOL = {"monopole": "m", "dipole": "d", "quadrupole": "q"}
 FORMATS = ("text", "markdown", "latex")
 
 
-def render(result, fmt="text"):
+def render(result: "BaseParameterResult", fmt: str = "text") -> str:
     """The derivation report of a result whose ``diagnostics.derivation`` is present."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown report format {fmt!r}; choose from {', '.join(FORMATS)}")
@@ -37,24 +42,24 @@ def render(result, fmt="text"):
 
 
 class _Writer:
-    def __init__(self, fmt, der, result):
+    def __init__(self, fmt: str, der: Any, result: "BaseParameterResult") -> None:
         self.fmt, self.der, self.result = fmt, der, result
         self.f = der.field
         self.order = {p: i for i, p in enumerate(der.mechanism.parameters)}
-        self.lines = []
+        self.lines: list[str] = []
 
     # ----- formatting primitives ---------------------------------------------------
-    def param(self, name):
+    def param(self, name: str) -> str:
         if self.fmt != "latex":
             return name
         kind, label = split_name(name)
         return f"\\mathit{{{kind}}}_{{{label}}}"
 
-    def expr(self, e):
+    def expr(self, e: Any) -> str:
         e = sympy.factor(e) if not e.is_Number else e
         return sympy.latex(e) if self.fmt == "latex" else str(e)
 
-    def form(self, form, first=None):
+    def form(self, form: Any, first: Any = None) -> str:
         """A linear form {parameter: field element} as text (``first`` printed first)."""
         terms = sorted(form.items(), key=lambda t: (t[0] != first, self.order[t[0]]))
         if not terms:
@@ -74,18 +79,18 @@ class _Writer:
             out += (" - " if neg else " + ") + text if out else ("-" if neg else "") + text
         return out
 
-    def vector(self, v):
+    def vector(self, v: Any) -> str:
         items = ", ".join(self.expr(sympy.sympify(c)) for c in v)
         return f"\\left({items}\\right)" if self.fmt == "latex" else f"({items})"
 
-    def math(self, s):
+    def math(self, s: str) -> str:
         if self.fmt == "latex":
             return f"${s}$"
         if self.fmt == "markdown":
             return f"`{s}`"
         return s
 
-    def heading(self, text, level=1):
+    def heading(self, text: str, level: int = 1) -> None:
         if self.fmt == "markdown":
             self.lines += [f"{'#' * (level + 1)} {text}", ""]
         elif self.fmt == "latex":
@@ -93,7 +98,7 @@ class _Writer:
         else:
             self.lines += [text, "-" * len(text)] if level == 1 else [text]
 
-    def table(self, header, rows):
+    def table(self, header: list[str], rows: list[list[str]]) -> None:
         if self.fmt == "markdown":
             self.lines.append("| " + " | ".join(header) + " |")
             self.lines.append("|" + "---|" * len(header))
@@ -114,29 +119,29 @@ class _Writer:
                 self.lines.append("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
         self.lines.append("")
 
-    def para(self, text):
+    def para(self, text: str) -> None:
         self.lines += [text, ""]
 
-    def item(self, text):
+    def item(self, text: str) -> None:
         if self.fmt == "latex":
             self.lines.append(f"  \\item {text}")
         else:
             self.lines.append(f"- {text}")
 
-    def begin_items(self):
+    def begin_items(self) -> None:
         if self.fmt == "latex":
             self.lines.append("\\begin{itemize}")
 
-    def end_items(self):
+    def end_items(self) -> None:
         if self.fmt == "latex":
             self.lines.append("\\end{itemize}")
         self.lines.append("")
 
-    def plist(self, names):
+    def plist(self, names: Any) -> str:
         return ", ".join(self.math(self.param(n)) for n in names) if self.fmt == "latex" else " ".join(names)
 
     # ----- sections ------------------------------------------------------------------
-    def write(self):
+    def write(self) -> str:
         der, res = self.der, self.result
         mech = der.mechanism
         title = f"Symbolic base parameters of {mech.name} (multipole transfers)"
@@ -159,11 +164,11 @@ class _Writer:
         self.check()
         return "\n".join(self.lines).rstrip() + "\n"
 
-    def no_effect(self):
+    def no_effect(self) -> None:
         self.heading("1. Parameters without effect on the dynamics (cf. the paper's Tab. 4)")
         rows = []
         motions = {m.label: m for m in self.der.bodies}
-        groups = {}
+        groups: dict[Any, Any] = {}
         for s in self.der.conditions:
             g = s.generator
             groups.setdefault((g.bodies[0], g.condition), []).append(s.pivot)
@@ -179,9 +184,9 @@ class _Writer:
         if quiet:
             self.para(f"Bodies {', '.join(quiet)}: no condition applies.")
 
-    def transfers(self):
+    def transfers(self) -> None:
         self.heading("2. Multipole transfers (cf. the paper's Tab. 5)")
-        groups = {}
+        groups: dict[Any, Any] = {}
         for s in self.der.transfers:
             g = s.generator
             key = (g.joint_name, g.donor, g.acceptor)
@@ -217,7 +222,7 @@ class _Writer:
             names = ", ".join(f"{j.name} ({j.type.name})" for j in self.der.missing_rules)
             self.para(f"Joints whose type has no transfer rules: {names}.")
 
-    def steps(self):
+    def steps(self) -> None:
         self.heading("3. Derivation")
         self.para("Each step moves one multipole; its amount is chosen so that the eliminated "
                   "parameter becomes zero. Values are given in the original parameters, "
@@ -253,7 +258,7 @@ class _Writer:
             amount = self.form(_acceptor_amount(s))
             sym = MULTIPOLE_SYMBOL[g.multipole]
             details = [f"{sym} = {amount}"]
-            for p in sorted(s.changes, key=self.order.get):
+            for p in sorted(s.changes, key=lambda name: self.order[name]):
                 details.append(f"{self.param(p)}' = {self.form(s.changes[p])}" if p != s.pivot
                                else f"{self.param(p)}' = 0")
             for d in details:
@@ -265,7 +270,7 @@ class _Writer:
                     self.lines.append(f"    {d}")
         self.end_items()
 
-    def base(self):
+    def base(self) -> None:
         self.heading("4. Base parameters")
         self.begin_items() if self.fmt == "latex" else None
         for k, (kept, form) in enumerate(self.der.base.items(), start=1):
@@ -278,7 +283,7 @@ class _Writer:
                 self.lines.append(f"  {text}")
         self.end_items() if self.fmt == "latex" else self.lines.append("")
 
-    def check(self):
+    def check(self) -> None:
         self.heading("5. Rank check")
         res = self.result
         self.para(_tex_escape(check_text(res)) if self.fmt == "latex" else check_text(res))
@@ -286,7 +291,7 @@ class _Writer:
             self.para(("Warning: " + _tex_escape(w)) if self.fmt == "latex" else f"Warning: {w}")
 
 
-def status(result):
+def status(result: "BaseParameterResult") -> str:
     """How the count stands, in a few words (the report's first paragraph)."""
     cert = result.diagnostics.details.get("certificate")
     if result.certified:
@@ -302,7 +307,7 @@ def status(result):
     return "not certified"
 
 
-def check_text(result):
+def check_text(result: "BaseParameterResult") -> str:
     """What the rank check proved, and what it only gives evidence for (section 5)."""
     cert = result.diagnostics.details.get("certificate")
     n = len(result.parameters)
@@ -342,7 +347,7 @@ def check_text(result):
     return text
 
 
-def _acceptor_amount(step):
+def _acceptor_amount(step: Any) -> Any:
     """The step's multipole amount as the acceptor gains it (a condition: as the body gains it).
 
     Transfer generators are (parent's change) - (child's change), so an acceptor that is the
@@ -353,12 +358,12 @@ def _acceptor_amount(step):
     return step.amount
 
 
-def _tex_escape(text):
+def _tex_escape(text: str) -> str:
     return (str(text).replace("\\", "\\textbackslash{}").replace("_", "\\_").replace("&", "\\&")
             .replace("%", "\\%").replace("#", "\\#"))
 
 
-def _tex_text(text):
+def _tex_text(text: str) -> str:
     """Escape text outside $...$ math spans."""
     parts = text.split("$")
     return "$".join(_tex_escape(p) if i % 2 == 0 else p for i, p in enumerate(parts))

@@ -6,11 +6,11 @@ import sys
 
 import click
 
-from baseparams.cli.commands import emit, main
-from baseparams.orchestrate.runners import make_runner
-from baseparams.orchestrate.validate import (mechanism_texts, render_markdown, render_text, select_solvers,
-                                             validate as run_validation)
+from typing import Any
+
 from baseparams import registry
+from baseparams.cli.commands import emit, main
+from baseparams.cli.options import Progress, chosen_solvers, output_option, quiet_option, solvers_option, write_output
 
 
 MAX_TIMEOUT_S = 1e7         # about 116 days: past SIGALRM's and the OS timers' range otherwise
@@ -23,7 +23,7 @@ class Seconds(click.ParamType):
     name = "seconds"
     _TEXT = re.compile(r"[+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
-    def convert(self, value, param, ctx):
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             seconds = float(value)
         elif isinstance(value, str) and self._TEXT.fullmatch(value.strip()):
@@ -38,10 +38,10 @@ class Seconds(click.ParamType):
 @main.command()
 @click.argument("mechs", nargs=-1, metavar="[MECH ...]")
 @click.option("--all", "everything", is_flag=True, help="Every registered mechanism.")
-@click.option("--solvers", default=None, metavar="A,B,...",
-              help="Solvers to run, comma separated [default: every registered solver].")
+@solvers_option(help="A solver to run [default: every registered solver].")
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "markdown"]), default="text",
               show_default=True, help="Report format.")
+@output_option(help="Write the report to FILE instead of standard output.")
 @click.option("--workers", type=click.IntRange(1, 256), default=None,
               help="Run jobs in this many local worker processes (with --scheduler local: Dask workers).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -49,8 +49,10 @@ class Seconds(click.ParamType):
                    "processes; needs pip install 'baseparams[distributed]'.")
 @click.option("--timeout", type=Seconds(), default=None, metavar="S", help="Seconds one job may take (0.1 to 10^7); a job past it is reported as "
                                       "timed out.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
-def validate(mechs, everything, solvers, fmt, workers, scheduler, timeout, quiet):
+@quiet_option()
+def validate(mechs: tuple[str, ...], everything: bool, solver_names: tuple[str, ...], old_solvers: str | None,
+             fmt: str, output: str | None, workers: int | None, scheduler: str | None, timeout: float | None,
+             quiet: bool) -> None:
     """Cross-validate every solver on MECH (or --all registered mechanisms).
 
     For each mechanism: every applicable solver runs (a solver that does not take the
@@ -62,26 +64,18 @@ def validate(mechs, everything, solvers, fmt, workers, scheduler, timeout, quiet
 
     Exit code 0 when everything agrees, 1 when a check fails, 2 for bad input.
     """
+    from baseparams.api import validate as run
     if everything and mechs:
         raise click.UsageError("give mechanisms or --all, not both")
     names = list(registry.mechanisms()) if everything else list(mechs)
     if not names:
         raise click.UsageError("name at least one mechanism, or --all")
-    chosen = select_solvers([s.strip() for s in solvers.split(",") if s.strip()] if solvers else None)
-    texts = mechanism_texts(names)
-    runner = make_runner(workers, scheduler)
-    total = len(texts) * (len(chosen) + 1)
-    show = not quiet and sys.stderr.isatty()
-    if show:
-        with click.progressbar(length=total, label="validate", file=sys.stderr, show_eta=True,
-                               show_pos=True, item_show_func=lambda label: label) as bar:
-            def progress(done, count, label):
-                bar.update(done - bar.pos, label)
-            report = run_validation(texts, chosen, runner=runner, timeout=timeout, progress=progress)
-    else:
-        report = run_validation(texts, chosen, runner=runner, timeout=timeout)
+    chosen = chosen_solvers(solver_names, old_solvers) or None
+    with Progress("validate", quiet=quiet) as progress:
+        result = run(names, solvers=chosen, workers=workers, scheduler=scheduler, timeout=timeout,
+                     progress=progress.counted)
     if fmt == "markdown":
-        click.echo(render_markdown(report))
+        write_output(output, result.to_markdown())
     else:
-        emit(fmt, report.to_json(), lambda: render_text(report))
-    sys.exit(0 if report.ok else 1)
+        emit(fmt, result.to_json(), result.to_text, output)
+    sys.exit(0 if result.ok else 1)

@@ -109,13 +109,13 @@ def cross_checks(results: Mapping[str, Mapping[str, Any]],
     return checks
 
 
-def _reference_rank(results):
+def _reference_rank(results: Mapping[str, Mapping[str, Any]]) -> tuple[int, str]:
     certified = [n for n, r in results.items() if r.get("certified")]
     name = certified[0] if certified else next(iter(results))
     return results[name]["rank"], name
 
 
-def _space_checks(results, rank, capabilities):
+def _space_checks(results: Mapping[str, Mapping[str, Any]], rank: int, capabilities: Mapping[str, Any]) -> list[Check]:
     exact = {}
     for name, r in results.items():
         if r["rank"] != rank:
@@ -126,7 +126,7 @@ def _space_checks(results, rank, capabilities):
     checks = []
     ref_name = _majority(exact)
     for other in exact:
-        if other == ref_name:
+        if ref_name is None or other == ref_name:
             continue
         same = same_row_space(exact[ref_name], exact[other])
         checks.append(Check(f"space {ref_name} = {other}", same,
@@ -156,7 +156,7 @@ def _space_checks(results, rank, capabilities):
     return checks
 
 
-def _majority(exact):
+def _majority(exact: Mapping[str, Any]) -> str | None:
     """The exact result that the most others agree with (the first such in solver order):
     with three exact results, one wrong one is then named, not the reference."""
     if not exact:
@@ -166,7 +166,7 @@ def _majority(exact):
     return max(names, key=lambda a: (agree[a], -names.index(a)))
 
 
-def _symbolic_values_check(result):
+def _symbolic_values_check(result: Mapping[str, Any]) -> Check:
     """The symbolic expressions at the file's geometry equal the exact values it lists."""
     name = "symbolic expressions = values"
     values = result.get("expression_values")
@@ -184,14 +184,14 @@ def _symbolic_values_check(result):
                  if not bad else f"{len(bad)} differ: " + "; ".join(bad[:3]))
 
 
-def _rows(layout, params, geometry=None):
+def _rows(layout: Sequence[Mapping[str, str]], params: Sequence[str], geometry: Mapping[str, Any] | None = None) -> list[list[Any]]:
     return [[parse_coefficient(row[p], geometry) if p in row else Fraction(0) for p in params] for row in layout]
 
 
-def _is_one(text):
+def _is_one(text: Any) -> bool:
     return str(text).strip() == "1"
 
 
-def _significant_digits(text):
+def _significant_digits(text: Any) -> int:
     digits = str(text).lower().split("e")[0].lstrip("+-").replace(".", "").lstrip("0")
     return max(1, len(digits))

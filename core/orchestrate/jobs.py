@@ -6,6 +6,7 @@ worker elsewhere). A worker that lacks a plugin the job needs reports that, as
 ``status = "missing_plugin"``.
 """
 
+import dataclasses
 import tempfile
 import time
 import traceback
@@ -16,8 +17,9 @@ from typing import Any
 from baseparams import registry
 from baseparams.errors import BaseparamsError, InputError
 from baseparams.io.loader import load_mechanism
+from baseparams.model.mechanism import Mechanism
 from baseparams.orchestrate.model_checks import model_checks
-from baseparams.solvers.run import run_solver
+from baseparams.solvers.protocol import NotApplicable
 
 MODEL = "model"     # the pseudo-solver name of a mechanism's model checks
 
@@ -46,7 +48,7 @@ class MechanismText:
 class Job:
     mechanism: MechanismText
     solver: str                      # a registered solver's name, or MODEL
-    options: tuple = ()              # (name, value) pairs for the solver
+    options: tuple[tuple[str, Any], ...] = ()      # (name, value) pairs for the solver
 
     @property
     def label(self) -> str:
@@ -60,9 +62,9 @@ class Outcome:
     solver: str
     status: str
     seconds: float = 0.0
-    result: dict | None = None      # the solver's result JSON, or the model checks
+    result: dict[str, Any] | None = None      # the solver's result JSON, or the model checks
     message: str = ""
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         out = {"status": self.status, "seconds": round(self.seconds, 3)}
@@ -71,26 +73,30 @@ class Outcome:
         return out
 
 
-def load(mechanism: MechanismText):
-    """The Mechanism in ``mechanism.text``, read by the reader its file name's suffix picks."""
+def load(mechanism: MechanismText) -> Mechanism:
+    """The Mechanism in ``mechanism.text``, read by the reader its file name's suffix picks;
+    its path (which solvers' messages name) and warnings name the source, not the worker's
+    temporary copy, which is gone once it is read."""
     with tempfile.TemporaryDirectory(prefix="baseparams-job-") as folder:
         path = Path(folder) / mechanism.filename
         path.write_text(mechanism.text, encoding="utf-8")
         try:
-            return load_mechanism(path)
+            loaded = load_mechanism(path)
         except BaseparamsError as exc:
             message = str(getattr(exc, "message", exc)).replace(str(path), mechanism.source)
             raise type(exc)(message) from None
+    return dataclasses.replace(loaded, path=mechanism.source,
+                               warnings=tuple(w.replace(str(path), mechanism.source) for w in loaded.warnings))
 
 
 def run_job(job: Job) -> Outcome:
     """Run one job here and now; never raises (every failure is an Outcome). A job of another
     kind (``baseparams excite``'s starts) runs itself through its ``execute()``."""
     if hasattr(job, "execute"):
-        return job.execute()
+        return job.execute()         # type: ignore[no-any-return]
     start = time.perf_counter()
 
-    def outcome(status, result=None, message=""):
+    def outcome(status: str, result: dict[str, Any] | None = None, message: str = "") -> Outcome:
         return Outcome(job.mechanism.name, job.solver, status, time.perf_counter() - start, result, message)
 
     try:
@@ -106,11 +112,11 @@ def run_job(job: Job) -> Outcome:
             return outcome(status, message=text)
         if job.solver == MODEL:
             return outcome(OK, result={"checks": [c.to_json() for c in model_checks(mechanism)]})
-        solver = solvers[job.solver].item
-        reason = solver.applicable(mechanism) if hasattr(solver, "applicable") else None
-        if reason is not None:
-            return outcome(NOT_APPLICABLE, message=reason)
-        result = run_solver(solver, mechanism, dict(job.options))
+        from baseparams.solvers.run import run_solver        # the one solver sequence
+        try:
+            result = run_solver(solvers[job.solver].item, mechanism, dict(job.options))
+        except NotApplicable as exc:
+            return outcome(NOT_APPLICABLE, message=exc.why)
         return outcome(OK, result=result.to_json())
     except BaseparamsError as exc:
         return outcome(ERROR, message=str(getattr(exc, "message", exc)))

@@ -87,7 +87,7 @@ def energy_balance(mechanism: Mechanism, points: int = 2, seed: int = 1) -> Chec
                            f"instants, random phi, {ENERGY_DIGITS} digits (tolerance {ENERGY_TOLERANCE:.0e})")
 
 
-def _energy_and_power(ev, backend, trajectory, mechanism, t, phi):
+def _energy_and_power(ev: Any, backend: Any, trajectory: Any, mechanism: Mechanism, t: Any, phi: Any) -> tuple[Any, Any]:
     z, zd, zdd = trajectory.independent_values(mechanism, backend, t)
     sample = ev.sample(z, zd, zdd)
     t_form, v_form = sample.energies()
@@ -139,7 +139,7 @@ def transfer_rule_checks(mechanism: Mechanism) -> list[Check]:
     return _dedupe(checks)
 
 
-def _dedupe(checks):
+def _dedupe(checks: list[Check]) -> list[Check]:
     seen, out = set(), []
     for c in checks:
         if c.name not in seen:
@@ -148,7 +148,7 @@ def _dedupe(checks):
     return out
 
 
-def _ball_observation_matrix(mechanism):
+def _ball_observation_matrix(mechanism: Mechanism) -> tuple[Any, int]:
     backend = Arb(RULE_DIGITS)
     trajectory = Trajectory.default(mechanism, samples=RULE_SAMPLES)
     W, _ = observation_matrix(mechanism, backend, trajectory)
@@ -157,7 +157,7 @@ def _ball_observation_matrix(mechanism):
     return W, W.nrows()
 
 
-def _null_residual(W, generator, mechanism):
+def _null_residual(W: Any, generator: Any, mechanism: Mechanism) -> tuple[float, bool]:
     """(max |W n| / (max|W| max|n|), every entry of W n contains 0)."""
     backend = Arb(RULE_DIGITS)
     values = numeric_vector(generator, mechanism)

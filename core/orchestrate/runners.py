@@ -54,7 +54,7 @@ class InProcess:
     """One job after the other, in this process."""
     workers = 1
 
-    def run(self, jobs, timeout=None, progress=None):
+    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         outcomes = []
         for k, job in enumerate(jobs):
             outcomes.append(_run_with_alarm(job, timeout))
@@ -65,10 +65,10 @@ class InProcess:
 
 def _run_with_alarm(job: Job, timeout: float | None) -> Outcome:
     usable = timeout and hasattr(signal, "SIGALRM") and threading.current_thread() is threading.main_thread()
-    if not usable:
+    if not usable or timeout is None:
         return run_job(job)
 
-    def expire(signum, frame):
+    def expire(signum: int, frame: Any) -> None:
         raise JobTimeout()
 
     previous = signal.signal(signal.SIGALRM, expire)
@@ -89,11 +89,11 @@ class _Window:
     counted from each job's start."""
 
     def __init__(self, size: int, start: Callable[[Job], Any], poll: Callable[[Any, Job], Outcome | None],
-                 stop: Callable[[Any], None], health: Callable[[], str | None] | None = None):
+                 stop: Callable[[Any], None], health: Callable[[], str | None] | None = None) -> None:
         self.size, self.start, self.poll, self.stop = max(1, size), start, poll, stop
         self.health = health        # None while jobs can run, else why every unfinished job is lost
 
-    def run(self, jobs, timeout=None, progress=None):
+    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         outcomes: list[Outcome | None] = [None] * len(jobs)
         waiting = list(range(len(jobs)))
         running: dict[int, tuple[Any, float]] = {}
@@ -169,7 +169,7 @@ def die_with_parent(parent: int) -> None:
     if os.getppid() != parent:          # the parent died before the request took effect
         os._exit(1)
 
-    def watch():
+    def watch() -> None:
         while True:
             time.sleep(WATCHDOG_S)
             if os.getppid() != parent:
@@ -178,7 +178,7 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="baseparams-watchdog", daemon=True).start()
 
 
-def _child(job: Job, connection, parent: int | None = None) -> None:
+def _child(job: Job, connection: Any, parent: int | None = None) -> None:
     die_with_parent(parent if parent is not None else os.getppid())
     connection.send(run_job(job))
     connection.close()
@@ -187,17 +187,17 @@ def _child(job: Job, connection, parent: int | None = None) -> None:
 class Processes:
     """Each job in its own process, ``workers`` at a time."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int) -> None:
         self.workers = workers
         methods = multiprocessing.get_all_start_methods()
         self.context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
 
-    def run(self, jobs, timeout=None, progress=None):
+    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         return _Window(self.workers, self._start, self._poll, self._stop).run(jobs, timeout, progress)
 
-    def _start(self, job):
+    def _start(self, job: Job) -> Any:
         receive, send = self.context.Pipe(duplex=False)
-        process = self.context.Process(target=_child, args=(job, send, os.getpid()), daemon=True)
+        process = self.context.Process(target=_child, args=(job, send, os.getpid()), daemon=True)  # type: ignore[attr-defined]
         process.start()
         if hasattr(os, "setpgid"):      # also here: no window where the terminal's Ctrl-C reaches it
             try:
@@ -208,7 +208,7 @@ class Processes:
         return process, receive, time.perf_counter()
 
     @staticmethod
-    def _poll(handle, job):
+    def _poll(handle: Any, job: Job) -> Outcome | None:
         process, receive, began = handle
         if receive.poll():
             try:
@@ -225,7 +225,7 @@ class Processes:
                        message=f"the worker process died (exit code {process.exitcode})")
 
     @staticmethod
-    def _stop(handle):
+    def _stop(handle: Any) -> None:
         process, receive, _ = handle
         if process.is_alive():
             process.kill()
@@ -266,7 +266,7 @@ def _bounded(call: Callable[[], Any], seconds: float) -> Any:
     daemon thread that is abandoned at the deadline (it cannot hold the process open)."""
     box: dict[str, Any] = {}
 
-    def run():
+    def run() -> None:
         try:
             box["value"] = call()
         except BaseException as exc:        # handed to the caller
@@ -293,12 +293,12 @@ class DaskCluster:
     """
 
     def __init__(self, address: str, workers: int | None = None, connect_s: float = CONNECT_S,
-                 lost_after_s: float = LOST_AFTER_S):
+                 lost_after_s: float = LOST_AFTER_S) -> None:
         self.cluster = None
         self.lost_after_s = lost_after_s
         if address != "local":
             scheme, host, port = check_scheduler_address(address)
-            if scheme == "tcp":
+            if scheme == "tcp" and port is not None:        # tcp always has one (checked above)
                 _probe(address, host, port, min(connect_s, 5.0))
         try:
             from dask.distributed import Client, LocalCluster     # optional extra: imported on use
@@ -320,21 +320,21 @@ class DaskCluster:
         self._checked = 0.0
         self._trouble_since: float | None = None
 
-    def run(self, jobs, timeout=None, progress=None):
+    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         try:
             return _Window(self.workers, self._start, self._poll, self._stop, self._health).run(
                 jobs, timeout, progress)
         finally:
             self.close()
 
-    def _start(self, job):
+    def _start(self, job: Job) -> Any:
         try:
             return self.client.submit(run_job, job, pure=False), time.perf_counter()
         except Exception as exc:             # a closed client: the scheduler is gone
             return _Failed(f"{type(exc).__name__}: {exc}"), time.perf_counter()
 
     @staticmethod
-    def _poll(handle, job):
+    def _poll(handle: Any, job: Job) -> Outcome | None:
         future, began = handle
         if isinstance(future, _Failed):
             return Outcome(job.mechanism.name, job.solver, LOST, time.perf_counter() - began,
@@ -350,7 +350,7 @@ class DaskCluster:
                            message=f"{name}: {exc}")
 
     @staticmethod
-    def _stop(handle):
+    def _stop(handle: Any) -> None:
         future = handle[0]
         if not isinstance(future, _Failed):
             try:
@@ -384,17 +384,18 @@ class DaskCluster:
             return f"{trouble} for {self.lost_after_s:g} s"
         return None
 
-    def close(self):
+    def close(self) -> None:
         try:
             _bounded(lambda: self.client.close(timeout=5), 10)
         except Exception:
             pass                              # a scheduler already gone: nothing to close
         self._close_cluster()
 
-    def _close_cluster(self):
-        if self.cluster is not None:
+    def _close_cluster(self) -> None:
+        cluster = self.cluster
+        if cluster is not None:
             try:
-                _bounded(lambda: self.cluster.close(timeout=10), 15)
+                _bounded(lambda: cluster.close(timeout=10), 15)
             except Exception:
                 pass
 
@@ -417,7 +418,7 @@ def _sigint_ignored() -> Iterator[None]:
 class _Failed:
     """A job that could not be submitted (its reason is reported as the job's outcome)."""
 
-    def __init__(self, reason: str):
+    def __init__(self, reason: str) -> None:
         self.reason = reason
 
 

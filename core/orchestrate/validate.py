@@ -53,7 +53,7 @@ def mechanism_texts(names_or_paths: Iterable[str]) -> list[MechanismText]:
     a bad one is an InputError (exit 2) naming file, key and reason, not a failed check; a
     worker that cannot read what this process can reports a missing plugin instead."""
     known = registry.mechanisms()
-    out = []
+    out: list[MechanismText] = []
     for item in names_or_paths:
         if item in known:
             path, name = Path(known[item].item.path), item

@@ -1,0 +1,216 @@
+"""Measured data: simulate it, identify a model from it, diagnose what the model misses.
+
+The statistics live in :mod:`baseparams.identify`; these functions read the inputs (names,
+files, effect texts), run the steps in order and return the results the command line
+prints. scipy, statsmodels and cvxpy are imported when a function runs.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Mapping, Sequence
+from fractions import Fraction
+from os import PathLike
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Union
+
+from baseparams.errors import InputError
+
+from .solving import DEFAULT_SOLVER, MechanismLike, Progress, get_solver, load, check_solver_options, run_solver
+
+if TYPE_CHECKING:
+    from baseparams.identify.data import MeasuredData
+    from baseparams.model.mechanism import EffectSpec, Mechanism
+
+    from .results import Diagnosed, Fit, Simulation
+
+PathText = Union[str, "PathLike[str]"]
+DataPaths = Union[PathText, Sequence[PathText]]
+EffectLike = Union[str, "EffectSpec"]
+
+
+def _paths(data: DataPaths) -> list[str]:
+    return [str(data)] if isinstance(data, (str, PathLike)) else [str(p) for p in data]
+
+
+def _say(progress: Progress | None, message: str) -> None:
+    if progress is not None:
+        progress(message)
+
+
+def same_file(a: PathText | None, b: PathText | None) -> bool:
+    """Whether two paths name the same file (both given)."""
+    return bool(a and b) and Path(a).resolve() == Path(b).resolve()      # type: ignore[arg-type]
+
+
+# ----- simulate --------------------------------------------------------------------------
+def simulate(mech: MechanismLike, *, output: PathText | None = None, effects: Sequence[EffectLike] = (),
+             noise: float | Sequence[float] | str = 0.0, seed: int = 0, samples: int | None = None,
+             truth: PathText | None = None, random_inertia: bool = False, derivatives: bool = True,
+             progress: Progress | None = None) -> "Simulation":
+    """Synthetic measured data along ``mech``'s exciting trajectory: tau = K phi + hidden
+    ``effects`` (``"viscous_friction:q1=0.5"`` or EffectSpec with values) + Gaussian ``noise``
+    (one SD or one per coordinate). Writes the CSV to ``output`` and the truth (JSON) to
+    ``truth`` when given; the result holds both (``.data``, ``.truth``, ``.to_frame()``)."""
+    from baseparams.identify.data import MIN_SAMPLES, write_measured
+    from baseparams.identify.fit import split_effects
+    from baseparams.identify.simulate import simulate as run_simulation
+    from baseparams.io.atomic import atomic_write
+
+    from .effects import parse_effect, parse_noise
+    from .results import Simulation
+    if samples is not None and samples < MIN_SAMPLES:
+        raise InputError(f"{samples} samples: at least {MIN_SAMPLES} are needed", key="--samples")
+    mechanism = load(mech)
+    named = [parse_effect(e, mechanism, values=True) if isinstance(e, str) else e for e in effects]
+    keys = {(s.kind, s.coordinate) for s in named}
+    if len(keys) < len(named):
+        raise InputError("an effect is named twice (same kind and coordinate)", key="--effect")
+    _, known = split_effects(mechanism, [])
+    hidden = [s for s in known if (s.kind, s.coordinate) not in keys] + named
+    for path in (output, truth):
+        if same_file(path, mechanism.path):
+            raise InputError("would overwrite the mechanism file", file=path)
+    if truth and same_file(truth, output):
+        raise InputError("the truth and the data would be the same file", file=truth)
+    sd = parse_noise(noise) if isinstance(noise, str) else noise
+    _say(progress, f"simulating {mechanism.name}")
+    data, truth_data = run_simulation(mechanism, samples=samples, noise_sd=sd, seed=seed, effects=hidden,
+                                      random_inertia=random_inertia)
+    if output is not None:
+        _say(progress, f"writing {output}")
+        write_measured(output, data, derivatives=derivatives)
+    if truth:
+        atomic_write(truth, json.dumps(truth_data, indent=2) + "\n")
+    return Simulation(data, truth_data, len(hidden), None if output is None else str(output),
+                      None if truth is None else str(truth))
+
+
+# ----- identify --------------------------------------------------------------------------
+def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLike] = (),
+             solver: str = DEFAULT_SOLVER, solver_options: Mapping[str, Any] | None = None,
+             validate: Sequence[PathText] = (), physical: bool = False,
+             progress: Progress | None = None) -> "Fit":
+    """Weighted least squares on ``mech``'s base parameters (those of ``solver``, with
+    ``solver_options``) and the coefficients of ``effects`` (``"viscous_friction:q1"``,
+    ``"coulomb_friction:*"``) from measured ``data`` (CSV files or recording descriptions,
+    several fitted together). ``validate``: recordings to predict with the identified
+    model. ``physical``: also physically consistent standard parameters (needs cvxpy)."""
+    from baseparams.identify.base import BaseModel
+    from baseparams.identify.fit import identify as fit, predict, split_effects
+    from baseparams.identify.recording import read_data
+
+    from .effects import parse_effects
+    from .results import Fit
+    if physical:
+        from baseparams.identify import physical as consistency     # cvxpy: an optional extra
+        consistency.require_cvxpy()
+    chosen = get_solver(solver)
+    check_solver_options(chosen, solver_options or {})
+    mechanism = load(mech)
+    _say(progress, "reading the data")
+    measured, mechanism = read_data(_paths(data), mechanism)
+    others = [read_data([str(path)], mechanism)[0] for path in validate]
+    texts = [e for e in effects if isinstance(e, str)]
+    named = parse_effects(texts, mechanism) + [e for e in effects if not isinstance(e, str)]
+    to_identify, known = split_effects(mechanism, named)
+    _say(progress, f"base parameters ({solver})")
+    result = run_solver(chosen, mechanism, solver_options)         # quiet: no inner progress lines
+    base = BaseModel.from_result(result, mechanism)
+    _say(progress, f"fitting {measured.count} samples")
+    identification = fit(mechanism, measured, effects=to_identify, base=base, known=known)
+    if physical:
+        _say(progress, "physically consistent parameters (cvxpy)")
+        _physical(identification, mechanism, base)
+    fitted = predict(identification, mechanism, measured)
+    predictions = [predict(identification, mechanism, other) for other in others]
+    identification.extras["rms"] = fitted.to_json()["rms"]
+    identification.extras["rms_overall"] = fitted.overall_rms
+    identification.extras["runs"] = list(measured.runs)
+    if predictions:
+        identification.extras["validation"] = [p.to_json() for p in predictions]
+    identification.extras["known_effects"] = [
+        {"kind": s.kind, "coordinate": s.coordinate, "values": {n: exact(v) for n, v in s.values.items()}}
+        for s in identification.known]
+    return Fit(identification, fitted, predictions, warnings=list(result.warnings))
+
+
+def exact(value: Any) -> str:
+    """An exact number as its decimal string where it has one (``0.3``), else ``p/q``."""
+    from baseparams.model.expressions import exact_text
+    try:
+        return exact_text(Fraction(value))
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def _physical(identification: Any, mechanism: "Mechanism", base: Any) -> None:
+    """Physically consistent standard parameters into ``identification`` (its ``physical``
+    and ``extras["physical_fit"]``); cvxpy's own warnings are kept as the fit's warnings."""
+    from baseparams.identify import physical as consistency
+    from baseparams.identify.model import standard_parameters
+    prior, source = None, "least-norm parameters B^+ phi_b"
+    if all(b.inertia is not None for b in mechanism.bodies):
+        from baseparams.model.consistency import require_physical
+        require_physical(mechanism, "identify --physical (the file's inertias are its prior)")
+        prior, source = standard_parameters(mechanism), "the mechanism file's inertias"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        found = consistency.physical_fit(identification.base_estimates, base,
+                                         std=identification.std[:base.rank], prior=prior)
+    said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught))
+    identification.physical = consistency.physical_json(found, tuple(mechanism.parameters))
+    identification.extras["physical_fit"] = {
+        "max_deviation_std": found.max_deviation, "prior": source, "solver": found.solver,
+        "status": found.status, "warnings": said,
+        "min_pseudo_inertia_eigenvalue": dict(zip(map(str, mechanism.body_labels),
+                                                  map(float, found.min_eigenvalues)))}
+
+
+# ----- diagnose --------------------------------------------------------------------------
+def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = None,
+             candidates: Sequence[str] | None = None, alpha: float = 0.05, folds: int = 5,
+             holdout: float = 0.0, max_steps: int | None = None, write: PathText | None = None,
+             progress: Progress | None = None) -> "Diagnosed":
+    """Name the effects ``mech``'s model misses on measured ``data``: the model is fitted
+    (or held as given: ``params``, a mechanism file with the robot's inertias or an
+    identify JSON), every candidate effect (``candidates``: ``KIND[:PLACE]``; default all)
+    is tested, the most significant added, until none is. ``write``: a TOML file of the
+    mechanism with the named effects. ``result.closed`` says whether the gap closed."""
+    from dataclasses import replace
+
+    from baseparams.identify.diagnose import check_writable, diagnose_data, write_fixed
+    from baseparams.identify.given import given_parameters
+    from baseparams.identify.recording import read_data
+
+    from .results import Diagnosed
+    paths = _paths(data)
+    mechanism = load(mech)
+    if write:
+        check_writable(mechanism, write)          # before the run, not after it
+    given = None
+    if params:
+        given, known = given_parameters(mechanism, str(params))
+        if known:
+            mechanism = replace(mechanism, effects=tuple(mechanism.effects) + tuple(known))
+    _say(progress, "reading the data")
+    measured, mechanism = read_data(paths, mechanism)
+    _say(progress, f"testing candidate effects on {measured.count} samples")
+    result = diagnose_data(mechanism, measured, selection=list(candidates) if candidates else None, alpha=alpha,
+                           folds=folds, holdout=holdout, max_steps=max_steps, given=given)
+    written = None
+    if write:
+        named = result.named()
+        if named:
+            write_fixed(mechanism, named, write, origin=f"data {', '.join(paths)}")
+            written = str(write)
+        else:
+            result.notes.append(f"--write: no mechanism effect named, {write} not written")
+    return Diagnosed(result, written)
+
+
+def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
+    """Measured data (CSV files or recording descriptions) as the fit reads it."""
+    from baseparams.identify.recording import read_data
+    return read_data(_paths(data), load(mech))[0]
