@@ -401,6 +401,5 @@ def test_help_text_checker():
     assert len(help_texts()) > 50
 
 
-@pytest.mark.xfail(strict=True, reason="session C rewrites help texts (core/cli/*): they cite docs/*.md")
 def test_help_texts_cite_only_urls_or_installed_files():
     assert uninstalled_citations(help_texts()) == []

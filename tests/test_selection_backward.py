@@ -9,6 +9,7 @@ import statsmodels.api as sm
 from scipy import stats
 
 from baseparams.identify import selection as S
+from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.diagnose import diagnose, prepare
 from baseparams.identify.model import evaluate
 from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
@@ -98,7 +99,7 @@ def test_rivals_that_add_over_each_other_must_clear_the_further_effect_bar(along
     Far beyond the bar both ways (p about 1e-6): two distinct effects, neither beaten."""
     n = 800
     A, B, residual = _rival_pair(n, 0.99, along, along)
-    fit = S.Fit(np.ones(1), np.zeros((n, 0)), residual, np.zeros(0), 0)
+    fit = WeightedLinearModel(np.zeros((n, 1, 0)), residual[:, None]).fit(np.ones(1))   # an empty model
     t_ab = S.wald(residual - B @ (B.T @ residual), S.conditional(A, B), (n, 1), 1, lags=0)
     # White's (HC0) statistic on unit white noise: about along^2, chi-square's tail
     assert t_ab.stat == pytest.approx(along ** 2, rel=0.5)

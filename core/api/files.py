@@ -227,8 +227,8 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
         raise InputError("the mechanism has no file to plan for", key="MECH")
     names = independent_names(mechanism)
     parsed_effects = []
-    for text in effects:
-        spec = parse_effect(text, mechanism, values=False)
+    for effect in effects:
+        spec = parse_effect(effect, mechanism, values=False)
         parsed_effects.append((spec.kind, spec.coordinate))
     pairs = parse_separate(separate, mechanism) if separate else ()
     weights = None
@@ -270,14 +270,14 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
         atomic_write(output, result.toml(), "the planned mechanism file")
     if csv:
         result.extra["csv"] = {"path": str(csv), "rate": rate,
-                               "rows": planner.write_csv(csv, found.problem, found.x, rate)}
+                               "rows": planner.write_csv(Path(csv), found.problem, found.x, rate)}
         result.written.append(str(csv))
     if report:
         atomic_write(report, json.dumps(result.to_json(), indent=2) + "\n", "the report")
         result.written.append(str(report))
     if plot:
         from baseparams.excite.plot import plot_plan
-        plot_plan(found, plot)
+        plot_plan(found, Path(plot))
         result.written.append(str(plot))
     return result
 

@@ -3,6 +3,7 @@ data, add it, and show the gap shrink (registered on ``main``; the statistics li
 :mod:`baseparams.identify.diagnose`)."""
 
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
@@ -79,7 +80,7 @@ def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, 
     sys.exit(0 if result.closed else 1)
 
 
-def plot_diagnosis(result: "Diagnosis", path: str, fmt: str | None = None) -> str:
+def plot_diagnosis(result: "Diagnosis", path: str, fmt: str | None = None) -> Path:
     """Residuals before and after per coordinate (the before trace drawn over the after one,
     dashed, so it shows where the two coincide; the held-out part shaded), and the first
     step's candidate statistics (normal-equivalent z) with the significant ones marked."""

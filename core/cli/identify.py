@@ -130,7 +130,7 @@ def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], s
     emit(fmt, result.to_json(), result.to_text, output)
 
 
-def plot_predictions(predictions: "list[Prediction]", path: str, title: str = "", fmt: str | None = None) -> str:
+def plot_predictions(predictions: "list[Prediction]", path: str, title: str = "", fmt: str | None = None) -> Path:
     """Measured and predicted forces per coordinate: one column per recording (the fit's
     data first, then each --validate recording), the RMS error in each panel's title."""
     from baseparams.cli.plots import _figure, _save

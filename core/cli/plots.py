@@ -223,13 +223,13 @@ def _draw_body(ax: Any, body: Any, g: dict[str, Any], rot: np.ndarray, pos: np.n
 
 def _draw_ground(ax: Any, mech: Mechanism, size: float) -> list[Any]:
     """Ground joints: black triangles, with a stub along the joint axis (R, U, P)."""
-    drawn = []
+    drawn: list[Any] = []
     for joint in mech.joints:
         if 0 not in (joint.parent, joint.child):
             continue
         frame = joint.parent_frame if joint.parent == 0 else joint.child_frame
-        rot, p = mech.numeric_frame(frame, Float64())
-        p = np.array(p, float)
+        rot, origin = mech.numeric_frame(frame, Float64())
+        p = np.array(origin, float)
         ax.scatter(*p, color="black", marker="^", s=60, depthshade=False, zorder=5)
         drawn.append(p)
         if joint.type.uses_axis and joint.type.dof:
@@ -292,7 +292,7 @@ def _legend(fig: Any, mech: Mechanism, colours: list[Any], alphas: Any, labels: 
 _MARKERS = {"dp": "*", "vp": "+"}
 
 
-def _log10_text(text: str) -> float | None:
+def _log10_text(text: str | float) -> float | None:
     """log10 of a decimal string (any exponent: 1e-500 does not underflow), None for 0."""
     import mpmath
     value = abs(mpmath.mpf(str(text)))
@@ -314,7 +314,7 @@ def plot_singular_values(results: "list[BaseParameterResult]", path: str | Path,
     colours = _colours(len(results))
     series = []
     for result in results:
-        logs = [_log10_text(v) for v in result.singular_values]
+        logs = [_log10_text(v) for v in result.singular_values or []]
         series.append(logs)
     finite = [v for logs in series for v in logs if v is not None]
     if not finite:

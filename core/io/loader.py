@@ -6,6 +6,7 @@ kinematics and so lives above the model. Every problem is an
 :class:`baseparams.errors.InputError` naming the file, the key path and the reason.
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from baseparams.io.toml_reader import parse_toml
 from baseparams.model.mechanism import Mechanism
 
 
-def resolve(mech: str | Path) -> Mechanism:
+def resolve(mech: str | os.PathLike[str]) -> Mechanism:
     """A registered mechanism name or a path to a mechanism file -> Mechanism."""
     known = registry.mechanisms()
     if str(mech) in known:

@@ -116,7 +116,7 @@ def _reference_rank(results: Mapping[str, Mapping[str, Any]]) -> tuple[int, str]
 
 
 def _space_checks(results: Mapping[str, Mapping[str, Any]], rank: int, capabilities: Mapping[str, Any]) -> list[Check]:
-    exact = {}
+    exact: dict[str, list[list[Any]]] = {}
     for name, r in results.items():
         if r["rank"] != rank:
             continue

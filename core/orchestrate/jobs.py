@@ -12,7 +12,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, Union
 
 from baseparams import registry
 from baseparams.errors import BaseparamsError, InputError
@@ -89,11 +89,29 @@ def load(mechanism: MechanismText) -> Mechanism:
                                warnings=tuple(w.replace(str(path), mechanism.source) for w in loaded.warnings))
 
 
-def run_job(job: Job) -> Outcome:
+class Executable(Protocol):
+    """A job of another kind (``baseparams excite``'s starts): it runs itself."""
+
+    @property
+    def mechanism(self) -> MechanismText: ...
+
+    @property
+    def solver(self) -> str: ...
+
+    @property
+    def label(self) -> str: ...
+
+    def execute(self) -> Outcome: ...
+
+
+AnyJob = Union[Job, Executable]
+
+
+def run_job(job: AnyJob) -> Outcome:
     """Run one job here and now; never raises (every failure is an Outcome). A job of another
     kind (``baseparams excite``'s starts) runs itself through its ``execute()``."""
-    if hasattr(job, "execute"):
-        return job.execute()         # type: ignore[no-any-return]
+    if not isinstance(job, Job):
+        return job.execute()
     start = time.perf_counter()
 
     def outcome(status: str, result: dict[str, Any] | None = None, message: str = "") -> Outcome:

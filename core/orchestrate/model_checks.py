@@ -65,6 +65,7 @@ def energy_balance(mechanism: Mechanism, points: int = 2, seed: int = 1) -> Chec
     backend = Arb(ENERGY_DIGITS)
     rng = random.Random(f"{mechanism.name}:{seed}")
     spec = mechanism.trajectory
+    assert spec is not None                  # Trajectory.default found one
     span = spec.t_end - spec.t_start
     worst = 0.0
     with backend.activate():

@@ -35,7 +35,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any, Protocol
 
 from baseparams.errors import InputError
-from baseparams.orchestrate.jobs import DIED, INTERNAL, LOST, TIMEOUT, Job, Outcome, run_job
+from baseparams.orchestrate.jobs import DIED, INTERNAL, LOST, TIMEOUT, AnyJob, Job, Outcome, run_job
 
 Progress = Callable[[int, int, str], None]      # (done, total, label of the job just done)
 POLL_S = 0.05
@@ -46,7 +46,7 @@ class JobTimeout(BaseException):
 
 
 class Runner(Protocol):
-    def run(self, jobs: Sequence[Job], timeout: float | None = None,
+    def run(self, jobs: Sequence[AnyJob], timeout: float | None = None,
             progress: Progress | None = None) -> list[Outcome]: ...
 
 
@@ -54,7 +54,7 @@ class InProcess:
     """One job after the other, in this process."""
     workers = 1
 
-    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
+    def run(self, jobs: Sequence[AnyJob], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         outcomes = []
         for k, job in enumerate(jobs):
             outcomes.append(_run_with_alarm(job, timeout))
@@ -63,7 +63,7 @@ class InProcess:
         return outcomes
 
 
-def _run_with_alarm(job: Job, timeout: float | None) -> Outcome:
+def _run_with_alarm(job: AnyJob, timeout: float | None) -> Outcome:
     usable = timeout and hasattr(signal, "SIGALRM") and threading.current_thread() is threading.main_thread()
     if not usable or timeout is None:
         return run_job(job)
@@ -88,12 +88,12 @@ class _Window:
     """Up to ``size`` jobs in flight through ``start``/``poll``/``stop`` callables; timeouts
     counted from each job's start."""
 
-    def __init__(self, size: int, start: Callable[[Job], Any], poll: Callable[[Any, Job], Outcome | None],
+    def __init__(self, size: int, start: Callable[[AnyJob], Any], poll: Callable[[Any, AnyJob], Outcome | None],
                  stop: Callable[[Any], None], health: Callable[[], str | None] | None = None) -> None:
         self.size, self.start, self.poll, self.stop = max(1, size), start, poll, stop
         self.health = health        # None while jobs can run, else why every unfinished job is lost
 
-    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
+    def run(self, jobs: Sequence[AnyJob], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         outcomes: list[Outcome | None] = [None] * len(jobs)
         waiting = list(range(len(jobs)))
         running: dict[int, tuple[Any, float]] = {}
@@ -135,7 +135,7 @@ class _Window:
         finally:
             for handle, _ in running.values():
                 self.stop(handle)
-        return outcomes
+        return [o for o in outcomes if o is not None]     # every job got one (lost: LOST)
 
 
 PR_SET_PDEATHSIG = 1        # linux/prctl.h
@@ -178,7 +178,7 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="baseparams-watchdog", daemon=True).start()
 
 
-def _child(job: Job, connection: Any, parent: int | None = None) -> None:
+def _child(job: AnyJob, connection: Any, parent: int | None = None) -> None:
     die_with_parent(parent if parent is not None else os.getppid())
     connection.send(run_job(job))
     connection.close()
@@ -192,10 +192,10 @@ class Processes:
         methods = multiprocessing.get_all_start_methods()
         self.context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
 
-    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
+    def run(self, jobs: Sequence[AnyJob], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         return _Window(self.workers, self._start, self._poll, self._stop).run(jobs, timeout, progress)
 
-    def _start(self, job: Job) -> Any:
+    def _start(self, job: AnyJob) -> Any:
         receive, send = self.context.Pipe(duplex=False)
         process = self.context.Process(target=_child, args=(job, send, os.getpid()), daemon=True)  # type: ignore[attr-defined]
         process.start()
@@ -208,7 +208,7 @@ class Processes:
         return process, receive, time.perf_counter()
 
     @staticmethod
-    def _poll(handle: Any, job: Job) -> Outcome | None:
+    def _poll(handle: Any, job: AnyJob) -> Outcome | None:
         process, receive, began = handle
         if receive.poll():
             try:
@@ -320,21 +320,21 @@ class DaskCluster:
         self._checked = 0.0
         self._trouble_since: float | None = None
 
-    def run(self, jobs: Sequence[Job], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
+    def run(self, jobs: Sequence[AnyJob], timeout: float | None = None, progress: Progress | None = None) -> list[Outcome]:
         try:
             return _Window(self.workers, self._start, self._poll, self._stop, self._health).run(
                 jobs, timeout, progress)
         finally:
             self.close()
 
-    def _start(self, job: Job) -> Any:
+    def _start(self, job: AnyJob) -> Any:
         try:
             return self.client.submit(run_job, job, pure=False), time.perf_counter()
         except Exception as exc:             # a closed client: the scheduler is gone
             return _Failed(f"{type(exc).__name__}: {exc}"), time.perf_counter()
 
     @staticmethod
-    def _poll(handle: Any, job: Job) -> Outcome | None:
+    def _poll(handle: Any, job: AnyJob) -> Outcome | None:
         future, began = handle
         if isinstance(future, _Failed):
             return Outcome(job.mechanism.name, job.solver, LOST, time.perf_counter() - began,

@@ -5,7 +5,7 @@ Per mechanism, one job per solver plus one for the model checks
 whichever runner ran it, timings apart.
 """
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -112,19 +112,20 @@ def expected_cost(job: Job) -> float:
     return size * SOLVER_WEIGHT.get(job.solver, 1.0)
 
 
-def _mechanism_report(m: MechanismText, outcomes: dict[str, Outcome], solvers, capabilities) -> MechanismReport:
+def _mechanism_report(m: MechanismText, outcomes: dict[str, Outcome], solvers: Sequence[str],
+                      capabilities: Mapping[str, Any]) -> MechanismReport:
     report = MechanismReport(m.name, m.source)
     model = outcomes.get(MODEL)
     if model is not None:
-        if model.status == OK:
+        if model.status == OK and model.result is not None:
             report.checks += [Check(c["name"], c["ok"], c["detail"]) for c in model.result["checks"]]
         else:
             report.checks.append(Check("model checks", False, f"{model.status}: {model.message}"))
-    results = {}
+    results: dict[str, dict[str, Any]] = {}
     for name in solvers:
         o = outcomes[name]
         row = {"status": o.status, "seconds": round(o.seconds, 3)}
-        if o.status == OK:
+        if o.status == OK and o.result is not None:
             row.update(rank=o.result["rank"], certified=bool(o.result.get("certified")),
                        warnings=len(o.result.get("warnings") or []))
             results[name] = o.result
