@@ -113,30 +113,27 @@ class TreeKinematics:
             _offset(st, vec.matvec(s.rot, fp))
             for kind, axis, c, sign in motions:
                 u = vec.column(st.rot, axis)
+                su = u if sign > 0 else vec.scale(u, -1)
+                value = q[c] if sign > 0 else -q[c]
+                rate = None if qd is None else (qd[c] if sign > 0 else -qd[c])
                 if kind == "R":
-                    angle = q[c] if sign > 0 else -q[c]
-                    cos, sin = self.backend.cos_sin(angle)
+                    cos, sin = self.backend.cos_sin(value)
                     st.rot = vec.matmul(st.rot, elementary_rotation(axis, cos, sin, one, z))
-                    su = u if sign > 0 else vec.scale(u, -1)
-                    st.jw[c] = vec.add(st.jw[c], su) if c in st.jw else su
-                    st.jv.setdefault(c, [z, z, z])
-                    if qd is not None:
-                        rate = qd[c] if sign > 0 else -qd[c]
-                        w, _, bw, _ = st.moving()
-                        st.bw = vec.add(bw, vec.scale(vec.cross(w, u), rate))
-                        st.w = vec.add(w, vec.scale(u, rate))
+                    moved, still = st.jw, st.jv
                 else:
-                    d = q[c] if sign > 0 else -q[c]
-                    r = vec.scale(u, d)
-                    _offset(st, r)
-                    su = u if sign > 0 else vec.scale(u, -1)
-                    st.jv[c] = vec.add(st.jv[c], su) if c in st.jv else su
-                    st.jw.setdefault(c, [z, z, z])
-                    if qd is not None:
-                        rate = qd[c] if sign > 0 else -qd[c]
-                        w, v, _, ba = st.moving()
-                        st.ba = vec.add(ba, vec.scale(vec.cross(w, u), 2 * rate))
-                        st.v = vec.add(v, vec.scale(u, rate))
+                    _offset(st, vec.scale(u, value))
+                    moved, still = st.jv, st.jw
+                moved[c] = vec.add(moved[c], su) if c in moved else su
+                still.setdefault(c, [z, z, z])
+                if rate is None:
+                    continue
+                w, v, bw, ba = st.moving()
+                if kind == "R":
+                    st.bw = vec.add(bw, vec.scale(vec.cross(w, u), rate))
+                    st.w = vec.add(w, vec.scale(u, rate))
+                else:
+                    st.ba = vec.add(ba, vec.scale(vec.cross(w, u), 2 * rate))
+                    st.v = vec.add(v, vec.scale(u, rate))
             st.rot = vec.matmul_t(st.rot, nr)
             _offset(st, vec.scale(vec.matvec(st.rot, np_), -1))
             states[new] = st
