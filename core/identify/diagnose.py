@@ -313,8 +313,9 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         notes.insert(0, "the cross-validated gap grew with the named effects: they do not predict "
                         "held-out blocks better than the model without them")
     if untestable:
-        notes.append(f"{len(untestable)} candidates not testable on this data: 'absorbed' (no direction "
-                     "beyond the inertial model: not identifiable) or 'support' (acting on too few samples)")
+        notes.append(f"{len(untestable)} candidate{'s' if len(untestable) != 1 else ''} not testable on this data: "
+                     "'absorbed' (no direction beyond the inertial model: not identifiable) or 'support' "
+                     "(acting on too few samples)")
     return Diagnosis(problem.mechanism.name, problem.coordinates, alpha, train, held, effects, ambiguous,
                      gap, unexplained, _steps_json(candidates, chosen), untestable, closed, notes,
                      problem.t, before.residual, after.residual, [full[i] for i in in_model],
