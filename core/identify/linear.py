@@ -20,23 +20,23 @@ Why these choices:
   autocorrelation), for filtered, decimated recordings whose rows are correlated;
   ``"hac_prewhitened"`` the same after Andrews and Monahan's VAR(1) prewhitening
   (:func:`.longrun.long_run`).
-- The SVD of the unit-norm columns decides the rank (:data:`RANK_TOL` of the largest singular
-  value by default): structural zeros of a regressor sit near 1e-15 in float64, and a
+- The SVD of the unit-norm columns decides the rank (:func:`baseparams.numeric.rank.numerical_rank`
+  at :data:`RANK_TOL` of the largest singular value by default): structural zeros of a regressor sit near 1e-15 in float64, and a
   direction kept at that level would put noise into the coefficients.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
 
 from baseparams.identify.longrun import hac_lags, long_run
-from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
+from baseparams.numeric.rank import numerical_rank
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
