@@ -20,15 +20,16 @@ import scipy.linalg
 
 from baseparams import registry
 from baseparams.errors import InputError
+from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
-from baseparams.dynamics.evaluator import Sample
-from baseparams.identify.model import Design, Motion, design, effect_values
 from baseparams.identify.linear import WeightedLinearModel
+from baseparams.identify.model import Design, Motion, design, effect_values
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
-# Unit-norm columns whose pivoted-QR diagonal falls below this fraction of the largest are
-# dependent to working precision: the data do not excite them (the SLA's weakest base
+# Unit-norm columns whose pivoted-QR diagonal (the base columns) or singular value (the whole
+# weighted fit) falls below this fraction of the largest are dependent to working precision:
+# the data do not excite them (the SLA's weakest base
 # parameter is legitimately near 1e-13, so only rounding-level dependence is refused).
 NOT_EXCITED = 1e-15
 # An effect column whose distance from the span of the columns before it is below this
