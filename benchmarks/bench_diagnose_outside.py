@@ -23,7 +23,10 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tx40"
 
 def rates(outcomes):
     n = len(outcomes)
-    return {k: f"{outcomes.count(k) / n:5.1%}" for k in ("right", "ambiguous", "none", "wrong")}, n
+    out = {k: f"{outcomes.count(k) / n:5.1%}" for k in ("right", "ambiguous", "unseeable", "none", "wrong")}
+    seeable = n - outcomes.count("unseeable")
+    out["right_of_seeable"] = f"{outcomes.count('right') / seeable:5.1%}" if seeable else "  -  "
+    return out, n
 
 
 def scenario_table(s, args, rng):
@@ -35,7 +38,8 @@ def scenario_table(s, args, rng):
             r, n = rates(outcomes)
             rows.append((label, rho, r, n))
             print(f"  {s.name:10s} {label:28s} AR {rho:3.1f}  n {n:3d}  right {r['right']}  ambiguous {r['ambiguous']}"
-                  f"  none {r['none']}  WRONG {r['wrong']}", flush=True)
+                  f"  unseeable {r['unseeable']}  none {r['none']}  WRONG {r['wrong']}  right of seeable "
+                  f"{r['right_of_seeable']}", flush=True)
     return rows
 
 

@@ -203,7 +203,9 @@ OUTSIDE = {"power_friction": power_friction, "compliance": compliance, "ripple":
 
 def score(d, data: Dataset) -> str:
     """'right' (the truth named, nothing wrong), 'ambiguous' (the truth in an ambiguous group,
-    nothing wrong), 'wrong' (a confident wrong name), 'none' (nothing wrong named, the truth
+    nothing wrong), 'wrong' (a confident wrong name), 'unseeable' (nothing wrong named and the
+    truth is a candidate the diagnosis reports it cannot see on this motion: absorbed by the
+    inertial model, or nearly collinear with it), 'none' (nothing wrong named, the truth
     missed or there was no truth)."""
     named = {(e["kind"], e["coordinate"]) for e in d.effects}
     wrong = named - data.acceptable - data.truth
@@ -214,6 +216,10 @@ def score(d, data: Dataset) -> str:
     groups = [{(c["kind"], c["coordinate"]) for c in a["candidates"]} for a in d.ambiguous]
     if data.truth and all(any(t in g for g in groups) or t in named for t in data.truth):
         return "ambiguous"
+    hidden = {label.split(" (")[0] for label in d.untestable if label.endswith("(absorbed)")}
+    hidden |= {w["candidate"] for w in d.unexplained.get("confusable_with_model", [])}
+    if data.truth and all(f"{kind}:{coordinate}" in hidden for kind, coordinate in data.truth):
+        return "unseeable"
     return "none"
 
 
