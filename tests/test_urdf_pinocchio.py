@@ -103,11 +103,7 @@ def free_maps(q, qd):
 
 def random_state(mech, rng):
     """Random (q, qd, qdd) of our coordinates, inside the limits (Cardan b within +-1)."""
-    q = []
-    for name in mech.coordinates:
-        joint = mech.joint_of_coordinate(name)
-        lo, hi = joint.limits.get(name, (-1.0, 1.0))
-        q.append(rng.uniform(max(lo, -3.0), min(hi, 3.0)))
+    q = within_limits(mech, mech.coordinates, rng, 3.0)
     n = len(q)
     return np.array(q), rng.normal(size=n), rng.normal(size=n)
 
@@ -234,7 +230,7 @@ def test_snapped_angles_change_nothing_above_1e9(tmp_path):
 # non-physical inertias (warnings) included. The reference rank is Pinocchio's regressor's;
 # ours is dp's base-parameter count; torques are K phi against rnea. Robots whose check takes
 # more than a few seconds are marked slow; benchmarks/bench_urdf_robots.py times them all.
-from urdf_reference import Reference, example_robot_data, robot_id, torque_check  # noqa: E402
+from urdf_reference import Reference, example_robot_data, robot_id, torque_check, within_limits  # noqa: E402
 
 ERD = example_robot_data()
 FAST = {"double_pendulum_description/double_pendulum", "double_pendulum_description/double_pendulum_continuous",

@@ -209,11 +209,7 @@ def torque_check(ref: Reference, mech, states: int = 3, seed: int = 1) -> tuple[
     worst, off_span = 0.0, 0.0
     g_pinv = np.linalg.pinv(ref.G) if ref.G.size else ref.G.T
     for _ in range(states):
-        z = []
-        for name in mech.independent:
-            joint = mech.joint_of_coordinate(name)
-            lo, hi = joint.limits.get(name, (-1.0, 1.0))
-            z.append(rng.uniform(max(lo, -1.0), min(hi, 1.0)))
+        z = within_limits(mech, mech.independent, rng, 1.0)
         n = len(z)
         zd, zdd = rng.normal(size=n), rng.normal(size=n)
         sample = evaluator.sample([np.array([x]) for x in z], [np.array([x]) for x in zd],
@@ -226,3 +222,12 @@ def torque_check(ref: Reference, mech, states: int = 3, seed: int = 1) -> tuple[
         if ref.G.size:
             off_span = max(off_span, float(np.max(np.abs(m - ref.G @ (g_pinv @ m)), initial=0.0)))
     return worst, off_span
+
+
+def within_limits(mech, names, rng, bound: float) -> list[float]:
+    """A uniform random value of each coordinate in ``names``, inside its limits and +-bound."""
+    out = []
+    for name in names:
+        lo, hi = mech.joint_of_coordinate(name).limits.get(name, (-1.0, 1.0))
+        out.append(rng.uniform(max(lo, -bound), min(hi, bound)))
+    return out
