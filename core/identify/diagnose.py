@@ -659,7 +659,7 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> lis
     for cand, test in zip(candidates, first.tests):
         if not test.tested:
             continue
-        Z = ((first.whiten or _identity)(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
+        Z = (first.whiten(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1.0
         kept = float(np.linalg.svd(project_out(Z / norms, fit.basis), compute_uv=False).min())
@@ -719,10 +719,6 @@ def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequen
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------
-def _identity(x: np.ndarray) -> np.ndarray:
-    return x
-
-
 def decimal_text(value: float | Fraction) -> str:
     """A float as a plain decimal string (exact in the mechanism format, no exponent)."""
     return format(Decimal(repr(float(value))), "f")

@@ -143,10 +143,10 @@ class Step:
     tests: list[Test]
     adjusted: np.ndarray
     fit: "Fit"                    # the weighted fit of the model this step tests against
+    whiten: Callable[[np.ndarray], np.ndarray]   # the filter its fit and tests saw (Whitening or identity)
     chosen: int | None = None
     confusable: list[Rival] = field(default_factory=list)
     beaten: list[Rival] = field(default_factory=list)
-    whiten: Callable | None = None  # the filter the step's fit and tests saw (Whitening or identity)
 
 
 @dataclass
@@ -427,7 +427,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         adjusted = np.ones(len(candidates))
         if tested:
             adjusted[tested] = holm([tests[i].pvalue for i in tested])
-        step = Step(tests, adjusted, fit, whiten=filtered)
+        step = Step(tests, adjusted, fit, filtered)
         steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
         if not significant:
