@@ -40,7 +40,7 @@ from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.rank import numerical_rank
-from baseparams.identify.selection import Candidate, Rival, Selection, Step, project_out, holm, select_whitened
+from baseparams.identify.selection import Candidate, Rival, Selection, Step, holm, select_whitened
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -662,7 +662,7 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> lis
         Z = (first.whiten(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1.0
-        kept = float(np.linalg.svd(project_out(Z / norms, fit.basis), compute_uv=False).min())
+        kept = float(np.linalg.svd(fit.orthogonal(Z / norms), compute_uv=False).min())
         if kept < WEAK:
             out.append({"candidate": cand.label, "kept": kept, "separate_by": MODEL_HINT})
     return out
