@@ -67,6 +67,16 @@ def test_load_takes_names_paths_and_mechanisms():
         bp.load("no_such")
 
 
+@pytest.mark.parametrize("family", ["serial_chain", "tree", "four_bar"])
+def test_generated_mechanisms_solve_from_their_toml_text(family):
+    """Generated mechanisms (TOML text, not a file) load and solve; dp and vp agree on the rank."""
+    from baseparams.model import generate
+    text = getattr(generate, family)(3)
+    mech = bp.load(text)
+    assert isinstance(mech, Mechanism)
+    assert bp.solve(text, "dp").rank == bp.solve(mech, "vp").rank > 0
+
+
 @pytest.mark.parametrize("name, solver", [("pendulum", "dp"), ("planar_2r", "exact"), ("four_bar", "vp")])
 def test_solve_json_is_the_cli_json(name, solver):
     api = bp.solve(name, solver).to_json()

@@ -28,15 +28,16 @@ Warn = Callable[[str], None]
 
 
 def load(mech: MechanismLike, *, warn: Warn | None = None) -> "Mechanism":
-    """A registered mechanism name (``"puma560"``) or a path to a mechanism file in any
-    registered format (TOML, URDF) -> :class:`~baseparams.model.mechanism.Mechanism`;
+    """A registered mechanism name (``"puma560"``), a path to a mechanism file in any
+    registered format (TOML, URDF), or the TOML text of one (a string over several lines, as
+    :mod:`baseparams.model.generate` writes) -> :class:`~baseparams.model.mechanism.Mechanism`;
     a Mechanism is returned as it is. ``warn`` receives each of the file's warnings
     (doubtful but accepted input); by default they are kept in ``mechanism.warnings`` only."""
     from baseparams.model.mechanism import Mechanism
     if isinstance(mech, Mechanism):
         return mech
-    from baseparams.io.loader import resolve      # sympy and flint load here, not on import
-    mechanism = resolve(mech)
+    from baseparams.io.loader import parse_mechanism, resolve      # sympy and flint load here
+    mechanism = parse_mechanism(mech) if isinstance(mech, str) and "\n" in mech else resolve(mech)
     if warn is not None:
         for warning in mechanism.warnings:
             warn(warning)
