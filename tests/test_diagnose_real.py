@@ -110,6 +110,62 @@ def test_delay_is_named_with_its_value(puma):
     assert abs(e["value"] - data.extra["d"]) < max(4 * e["std"], 0.1 * data.extra["d"])
 
 
+def test_delay_is_named_under_ar1_noise(puma):
+    """A delay of 0.5-3 samples at effect/noise 5 with AR(1) noise at 0.9 (the whitened tests
+    see its sharp signature; the campaign gives 100 % of 20)."""
+    rng = np.random.default_rng(15)
+    hits = sum(_named(diagnose(puma.problem, data.tau)) == data.truth
+               for data in (C.delay(puma, rng, rho=0.9) for _ in range(4)))
+    assert hits >= 3
+
+
+def _offset_cogging_spring(problem, place):
+    kinds = ("cogging", "offset", "spring")
+    cands = [next(c for c in problem.candidates if c.kind == k and c.coordinate == place) for k in kinds]
+    return cands
+
+
+def test_simpler_form_is_tried_in_place_of_a_held_back_general_one(puma):
+    """Cogging held back (as when it failed the out-of-sample checks): the offset it
+    generalises is proposed in its place when an offset is hidden, not the spring (the offset
+    is nested in it and its slope adds nothing), and nothing is proposed when nothing is
+    hidden (the bar is the one the cogging entered by)."""
+    P = puma.problem
+    place = puma.coordinates[3]            # q4: the spring's test is the stronger, the offset the truth
+    cands = _offset_cogging_spring(P, place)
+    rng = np.random.default_rng(16)
+    proposed, false = [], 0
+    for hidden in [True] * 4 + [False] * 10:
+        phi, clean, sd = C.base(puma, rng)
+        force = C.scaled(C.on(clean.shape[1], 3, np.ones(len(clean))), sd, 5.0) if hidden else 0.0
+        tau = clean + force + C.noise(rng, clean.shape, sd, 0.9)
+        chosen = S.select_whitened(P.inertial, tau, cands)
+        held = S.Selection(chosen.steps, [0], {}, candidates=list(chosen.candidates), bars={0: 0.05 / 3})
+        found = S.simpler_in_place(P.inertial, tau, held, 0, [], 0.05)
+        if hidden:
+            proposed.append(None if found is None else cands[found[0].chosen].kind)
+        else:
+            false += found is not None
+    assert proposed.count("offset") >= 3
+    assert false <= 1
+
+
+def test_diagnose_names_the_simpler_form_when_the_general_one_is_held_back():
+    """The campaign's offset datasets 8 and 15 (PUMA, AR(1) 0.9, seed 2024): cogging won the
+    selection and failed the stability check; the offset (the truth) is named in its place,
+    and the report says so. Before, nothing was named on these two."""
+    s = C.setting("puma560", 1200)
+    rng = np.random.default_rng(2024)
+    make = C.catalogue("offset")
+    datasets = [make(s, rng, rho=0.9, ratio=5.0) for _ in range(16)]
+    for k in (8, 15):
+        d = diagnose(s.problem, datasets[k].tau)
+        assert _named(d) == datasets[k].truth
+        (place,) = {c for _, c in datasets[k].truth}
+        assert any(n.startswith(f"cogging:{place} was held back") and f"offset:{place}" in n for n in d.notes)
+        assert not any(u["kind"] == "cogging" for u in d.unsupported)
+
+
 def test_gear_loss_is_named_as_load_friction(puma):
     rng = np.random.default_rng(6)
     hits = sum(_named(d) == data.truth for data, d in
@@ -260,8 +316,7 @@ def test_max_steps_when_hit_is_reported(puma):
 @pytest.mark.parametrize("text", ["chain4", "tree1"])
 def test_smooth_coulomb_and_delay_on_generated_mechanisms(text):
     """Not only the built-ins: a generated chain and tree, a smooth Coulomb law on the first
-    coordinate and a 1.5-sample delay, each named. (On a generated four-bar the delay was named
-    as viscous friction on a dependent joint: docs/diagnosis.md.)"""
+    coordinate and a 1.5-sample delay, each named (the four-bar: the next test)."""
     from baseparams.identify.simulate import random_physical_inertia
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
@@ -281,6 +336,65 @@ def test_smooth_coulomb_and_delay_on_generated_mechanisms(text):
     lagged = np.stack([np.interp(t - 1.5 * (t[1] - t[0]), t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
     d = diagnose(problem, lagged + rng.standard_normal(clean.shape) * sd)
     assert _named(d) == {("delay", "all")}
+
+
+def test_delay_on_a_generated_four_bar_is_not_taken_for_friction():
+    """A generated four-bar (one coordinate, 21 identifiable parameters), a 0.5-3 sample delay:
+    at effect/noise 3 named (30 of 30 measured), below it (the 2 % noise: effect/noise 0.2-1.5)
+    never a wrong name (ambiguous or none). Before the delay's column was fitted with the
+    model and low-passed, viscous friction on a dependent joint was named for it in half the
+    datasets at effect/noise 5 and in 8 of 30 below."""
+    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    m = parse_mechanism(generate.four_bar(2))
+    motion = trajectory_motion(m, 600)
+    problem = prepare(m, motion, evaluate(m, motion))
+    t = motion.t
+    rng = np.random.default_rng(21)
+    named, wrong = 0, 0
+    for ratio in [3.0] * 5 + [None] * 5:
+        clean = problem.inertial @ random_physical_inertia(m, rng)
+        sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
+        lag = rng.uniform(0.5, 3.0) * (t[1] - t[0])
+        lagged = np.stack([np.interp(t - lag, t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
+        if ratio is not None:
+            sd = sd * np.max(np.sqrt(np.mean((lagged - clean) ** 2, axis=0)) / sd) / ratio
+        found = _named(diagnose(problem, lagged + rng.standard_normal(clean.shape) * sd))
+        named += ratio is not None and found == {("delay", "all")}
+        wrong += bool(found - {("delay", "all")})
+    assert named >= 4 and wrong == 0
+
+
+def test_delay_column_is_the_true_torque_rate():
+    """The delay's column against -dtau/dt of the clean torque (a generated four-bar, a
+    2-sample delay, 2 % noise): within 10 % (3-8 % measured; 12-43 % without the low-pass),
+    where the model fitted alone and differentiated as it is gives 24-51 % (its fitted noise
+    in fast directions of the model's span)."""
+    from baseparams.identify import derived
+    from baseparams.identify.data import bandwidth
+    from baseparams.identify.diagnose import reduced_model
+    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    m = parse_mechanism(generate.four_bar(2))
+    motion = trajectory_motion(m, 600)
+    problem = prepare(m, motion, evaluate(m, motion))
+    t, rows = motion.t, slice(0, 600)
+    model = reduced_model(problem.inertial, 600)
+    rng = np.random.default_rng(22)
+    for _ in range(3):
+        clean = problem.inertial @ random_physical_inertia(m, rng)
+        sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
+        lagged = np.stack([np.interp(t - 2 * (t[1] - t[0]), t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
+        y = lagged + rng.standard_normal(clean.shape) * sd
+        fit = lambda X, target: WeightedLinearModel(X, target).fit().coefficients  # noqa: E731
+        alone = model @ fit(model, y)
+        cutoff = derived.DELAY_CUTOFF_PER_BANDWIDTH * bandwidth(problem.qd, t[1] - t[0])
+        column = derived.delay_column(model, y, rows, np.zeros_like(y), t, alone, fit, cutoff)[:, :, 0]
+        truth = -np.gradient(clean, t, axis=0)
+        assert np.linalg.norm(column - truth) < 0.1 * np.linalg.norm(truth)
+        assert np.linalg.norm(-np.gradient(alone, t, axis=0) - truth) > 0.2 * np.linalg.norm(truth)
 
 
 def test_params_from_a_wrong_source_is_refused(tmp_path):

@@ -35,12 +35,13 @@ from baseparams.identify import derived
 from baseparams.identify.candidates import library, parse_selection
 from baseparams.identify.derived import KINDS as DERIVED_KINDS
 from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, implausible, stability
-from baseparams.identify.data import MeasuredData
+from baseparams.identify.data import MeasuredData, bandwidth
 from baseparams.io.atomic import atomic_write
 from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.rank import numerical_rank
-from baseparams.identify.selection import Candidate, Rival, Selection, Step, holm, select_whitened
+from baseparams.identify.selection import (Candidate, Rival, Selection, Step, holm, select_whitened,
+                                          simpler_in_place)
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -250,6 +251,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     kept_named, unsupported = _gate(problem, model[rows], candidates, chosen.in_model, named, y[rows],
                                     weights, alpha, folds, checks)
     in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
+    replaced = _simpler_forms(problem, model[rows], y[rows], chosen, everything, full, unsupported, kept_named,
+                              in_model, weights, alpha / len(named) if named else alpha, folds, checks)
     before = _predict(model, [], y, chosen.steps[0].fit, train)
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
@@ -292,7 +295,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     named_any = bool(effects or ambiguous)
     verdict = ("explained" if closed else "partly explained") if named_any else \
         ("nothing missing" if closed else "unexplained")
-    notes = list(problem.notes)
+    notes = list(problem.notes) + replaced
     for u in unsupported:
         u.pop("index")
     for old, new in chosen.regrouped:
@@ -343,14 +346,21 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
     """The candidates built from the model's torque (:mod:`.derived`): the training fit of the
     model alone predicts it (with a given simulation: the given torque)."""
     torque = problem.known.copy()
+    wanted = problem.wanted
+    delay = None
     if model.shape[-1]:
         fit = WeightedLinearModel(model[rows], y[rows]).fit()
         torque = torque + model @ fit.coefficients
-    wanted = problem.wanted
+        if (wanted is None or ("delay", "all") in wanted) and len(problem.t) > 2:
+            band = bandwidth(problem.qd[rows], float(np.median(np.diff(problem.t)))) if problem.qd is not None else 0.0
+            delay = derived.delay_column(
+                model, y, rows, problem.known, problem.t, torque,
+                lambda X, target: WeightedLinearModel(X, target).fit(fit.weights).coefficients,
+                derived.DELAY_CUTOFF_PER_BANDWIDTH * band if band > 0 else None)
     if problem.qd is None:          # a Problem built without speeds: no load friction to build
         wanted = {("delay", "all")} if wanted is None else {w for w in wanted if w[0] != "load_friction"}
     qd = problem.qd if problem.qd is not None else np.zeros_like(torque)
-    out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, wanted)
+    out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, wanted, delay)
     if problem.bodies is not None:
         out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
                                         problem.wanted)
@@ -462,6 +472,48 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
             kept.append(i)
             checks[i] = detail
     return kept, out
+
+
+def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: Selection,
+                   everything: list[Candidate], full: list[Candidate], unsupported: list[dict],
+                   kept_named: list[int], in_model: list[int], weights: np.ndarray, alpha: float, folds: int,
+                   checks: dict) -> list[str]:
+    """Each held-back effect's simpler forms (:func:`.selection.simpler_in_place`) tried in its
+    place: one that clears the bar and passes the same checks (:func:`_gate`, at ``alpha``)
+    is named instead, entered in ``chosen`` as a step, and the held-back effect leaves
+    ``unsupported`` (it is superseded, not unexplained). Updates the lists given; returns
+    the notes saying what was replaced."""
+    notes = []
+    for u in list(unsupported):
+        found = simpler_in_place(model, y, chosen, u["index"], in_model, alpha)
+        if found is None:
+            continue
+        step, variant = found
+        j = step.chosen
+        assert j is not None
+        cand = chosen.candidates[j] if variant < 0 else chosen.candidates[j].at(variant)
+        trial = list(chosen.candidates)
+        trial[j] = cand
+        figures: dict = {}
+        kept, _ = _gate(problem, model, trial, in_model + [j], [j], y, weights, alpha, folds, figures)
+        if not kept:
+            continue
+        if variant >= 0:
+            chosen.shaped[j] = chosen.candidates[j]
+        chosen.candidates[j] = cand
+        full[j] = _fixed(everything[j], cand)
+        chosen.steps.insert(len(chosen.steps) - 1, step)
+        chosen.added.append(j)
+        chosen.bars[j] = chosen.bars.get(u["index"], alpha)
+        in_model.append(j)
+        kept_named.append(j)
+        checks[j] = figures[j]
+        unsupported.remove(u)
+        held = chosen.candidates[u["index"]].label
+        notes.append(f"{held} was held back ({u['reason']}); {cand.label}, a simpler form it generalises, "
+                     f"is named in its place (p = {step.tests[j].pvalue:.3g} against the other named effects, "
+                     "and it passes the same checks)")
+    return notes
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
