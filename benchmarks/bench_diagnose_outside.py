@@ -33,6 +33,7 @@ def scenario_table(s, args, rng):
     rows = []
     for rho in (0.0, 0.9):
         for label, make in [("nothing hidden", C.nothing)] + list(C.INSIDE.items()) + list(C.NEW.items()) \
+                + [(f"below 3: {k}", v) for k, v in C.BELOW.items()] \
                 + [(f"outside: {k}", v) for k, v in C.OUTSIDE.items()]:
             outcomes = [C.run(s, make, rng, rho=rho)[2] for _ in range(args.count)]
             r, n = rates(outcomes)

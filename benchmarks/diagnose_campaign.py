@@ -124,14 +124,26 @@ def smooth_coulomb(s, rng, rho=0.0, ratio=5.0):
     return Dataset(clean + force + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {"vs": vs})
 
 
-def delay(s, rng, rho=0.0, ratio=None):
-    """The torques lag the positions by 0.5 to 3 samples."""
+def delay(s, rng, rho=0.0, ratio=5.0):
+    """The torques lag the positions by 0.5 to 3 samples. The delay's force is fixed by the
+    delay, so the noise is scaled instead (all coordinates alike) to put the largest
+    effect-to-noise ratio at ``ratio``; ``ratio`` None keeps the 2 % noise (the delay's ratio
+    is then 0.7 to 3 on the PUMA: below the range the targets are set for)."""
     phi, clean, sd = base(s, rng)
     t = s.motion.t
     d = rng.uniform(0.5, 3.0) * (t[1] - t[0])
     lagged = np.stack([np.interp(t - d, t, clean[:, j]) for j in range(clean.shape[1])], axis=1)
+    effect = np.sqrt(np.mean((lagged - clean) ** 2, axis=0))
+    if ratio is not None:
+        sd = sd * np.max(effect / sd) / ratio
     truth = {("delay", "all")}
-    return Dataset(lagged + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi, {"d": d})
+    return Dataset(lagged + noise(rng, clean.shape, sd, rho), truth, truth, sd, phi,
+                   {"d": d, "ratio": float(np.max(effect / sd))})
+
+
+def small_delay(s, rng, rho=0.0, ratio=None):
+    """A delay of 0.5 to 3 samples at the 2 % noise, whatever its effect-to-noise ratio."""
+    return delay(s, rng, rho=rho, ratio=None)
 
 
 def gear_loss(s, rng, rho=0.0, ratio=5.0):
@@ -198,6 +210,7 @@ def joint_delay(s, rng, rho=0.0, ratio=None):
 INSIDE = {"viscous": catalogue("viscous_friction"), "coulomb": catalogue("coulomb_friction"),
           "offset": catalogue("offset"), "spring": catalogue("spring"), "rotor_inertia": catalogue("rotor_inertia")}
 NEW = {"smooth_coulomb": smooth_coulomb, "delay": delay, "gear_loss": gear_loss}
+BELOW = {"small_delay": small_delay}
 OUTSIDE = {"power_friction": power_friction, "compliance": compliance, "ripple": ripple, "joint_delay": joint_delay}
 
 
