@@ -46,6 +46,21 @@ def setting(name: str, samples: int = 1200) -> Setting:
     return Setting(name, mechanism, prepare(mechanism, motion, evaluate(mechanism, motion)), motion)
 
 
+GENERATED = ("chain4", "tree1", "four_bar2")
+
+
+def generated_setting(name: str, samples: int = 1200) -> Setting:
+    """A mechanism from ``baseparams.model.generate`` (not one of the built-ins the project was
+    tuned on): a 4-joint serial chain, a tree, a four-bar loop (one coordinate)."""
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    text = {"chain4": lambda: generate.serial_chain(4), "tree1": lambda: generate.tree(1),
+            "four_bar2": lambda: generate.four_bar(2)}[name]()
+    mechanism = parse_mechanism(text)
+    motion = trajectory_motion(mechanism, samples)
+    return Setting(name, mechanism, prepare(mechanism, motion, evaluate(mechanism, motion)), motion)
+
+
 def noise(rng, shape, sd, rho: float = 0.0) -> np.ndarray:
     white = rng.standard_normal(shape)
     if rho:

@@ -67,9 +67,31 @@ def test_without_equals_a_refit_without_the_columns(seed):
     assert np.allclose(reduced.orthogonal(Z), refit.orthogonal(Z), atol=1e-9 * np.linalg.norm(Z))
 
 
-def test_without_refuses_a_rank_deficient_fit():
+def test_without_refuses_columns_a_rank_deficiency_involves():
     rng = np.random.default_rng(6)
     model = rng.standard_normal((50, 2, 3))
     model[:, :, 2] = model[:, :, 0]
     fit = WeightedLinearModel(model, rng.standard_normal((50, 2))).fit(np.ones(2))
-    assert fit.rank == 2 and fit.without([2]) is None
+    assert fit.rank == 2 and fit.without([2]) is None and fit.without([0]) is None
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_without_on_a_rank_deficient_fit_equals_a_refit_when_the_deficiency_lies_elsewhere(seed):
+    """Two of the kept columns are collinear (the deficiency); leaving out others gives what a
+    fit without them gives: residual, rank, projections."""
+    rng = np.random.default_rng(10 + seed)
+    n, f, p = 120, 3, 8
+    model = rng.standard_normal((n, f, p)) * np.logspace(-1, 2, p)
+    model[:, :, 1] = 3.0 * model[:, :, 0]
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f))
+    weights = rng.uniform(0.5, 2.0, f)
+    complete = WeightedLinearModel(model, y).fit(weights)
+    assert complete.rank == p - 1
+    drop = sorted(rng.choice(np.arange(2, p), size=int(rng.integers(1, 3)), replace=False).tolist())
+    keep = [k for k in range(p) if k not in drop]
+    refit = WeightedLinearModel(model[:, :, keep], y).fit(weights)
+    reduced = complete.without(drop)
+    assert reduced is not None and reduced.rank == refit.rank == len(keep) - 1
+    assert np.allclose(reduced.residual, refit.residual, atol=1e-9 * np.linalg.norm(refit.residual))
+    Z = rng.standard_normal((n * f, 2))
+    assert np.allclose(reduced.orthogonal(Z), refit.orthogonal(Z), atol=1e-9 * np.linalg.norm(Z))

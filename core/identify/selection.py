@@ -572,20 +572,35 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
     those too (Coulomb friction took a smooth shape, then a Stribeck bump made up the
     difference). ``touched``: the places where the model changed since the last call (a shape
     is chosen again only where something changed beside it; None: everywhere)."""
+    complete: Fit | None = None
     for i in in_model:
         if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
                                and "all" not in touched):
             continue
-        others = [j for j in in_model if j != i]
-        fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others], axis=-1)),
-                                  whiten(y)).fit(weights)
+        # the model without i: at given weights from the model with everything (Frisch-Waugh-
+        # Lovell: one factorisation for all), else a refit
+        fit: Fit | Reduced | None = None
+        if weights is not None:
+            if complete is None:
+                complete = WeightedLinearModel(whiten(np.concatenate(
+                    [model] + [candidates[j].columns for j in in_model], axis=-1)), whiten(y)).fit(weights)
+            start = model.shape[-1] + sum(candidates[j].columns.shape[-1] for j in in_model[:in_model.index(i)])
+            fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
+        if fit is None:
+            others = [j for j in in_model if j != i]
+            fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others],
+                                                            axis=-1)), whiten(y)).fit(weights)
+
         def explained(columns: np.ndarray) -> float:
             basis = candidate_basis(whiten(columns), fit)
             return float(np.sum((basis.T @ fit.residual) ** 2))
 
         gains = [explained(columns) for columns in shaped[i].variants]
         best = int(np.argmax(gains))
+        before = candidates[i]
         candidates[i] = _between(shaped[i], best, explained) or shaped[i].at(best)
+        if candidates[i].columns is not before.columns:
+            complete = None                   # i's columns changed: the next one needs a new complete fit
 
 
 def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) -> Candidate | None:
