@@ -212,14 +212,17 @@ def ripple(s, rng, rho=0.0, ratio=5.0):
 
 
 def joint_delay(s, rng, rho=0.0, ratio=None):
-    """Only one joint's torque lags (3 to 6 samples): a delay is acceptable, nothing else."""
+    """Only one joint's torque lags (3 to 6 samples). Outside the default vocabulary (one
+    drive's own delay is a candidate only when named: ``--candidates delay:COORD``); that
+    joint's delay or the recording's is acceptable, nothing else."""
     phi, clean, sd = base(s, rng)
     j = driven(s, rng)
     t = s.motion.t
     d = rng.uniform(3, 6) * (t[1] - t[0])
     out = clean.copy()
     out[:, j] = np.interp(t - d, t, clean[:, j])
-    return Dataset(out + noise(rng, clean.shape, sd, rho), set(), {("delay", "all")}, sd, phi, {})
+    return Dataset(out + noise(rng, clean.shape, sd, rho), set(), {("delay", "all"), ("delay", s.coordinates[j])},
+                   sd, phi, {"d": d})
 
 
 INSIDE = {"viscous": catalogue("viscous_friction"), "coulomb": catalogue("coulomb_friction"),

@@ -166,6 +166,51 @@ def test_diagnose_names_the_simpler_form_when_the_general_one_is_held_back():
         assert not any(u["kind"] == "cogging" for u in d.unsupported)
 
 
+def test_one_drives_delay_is_a_candidate_only_when_named(puma, planar):
+    """``delay`` alone is the recording's delay; ``delay:COORD`` one drive's own, on a
+    mechanism with several coordinates."""
+    from baseparams.errors import InputError
+    from baseparams.identify.candidates import parse_selection
+    assert parse_selection(puma.mechanism, ["delay"]) == [("delay", "all")]
+    assert parse_selection(puma.mechanism, ["delay:q2"]) == [("delay", "q2")]
+    one = C.generated_setting("four_bar2", 100)
+    with pytest.raises(InputError, match="not a place of delay"):
+        parse_selection(one.mechanism, ["delay:qa"])
+
+
+def _with_joint_delays(s):
+    selection = ["delay"] + [f"delay:{c}" for c in s.coordinates] + ["viscous_friction", "offset"]
+    return prepare(s.mechanism, s.motion, evaluate(s.mechanism, s.motion), selection=selection)
+
+
+def test_one_drives_delay_is_named_when_asked_for(puma):
+    """q2's torque alone lags 2 samples: with every drive's delay asked for, q2's is named."""
+    problem = _with_joint_delays(puma)
+    t = puma.motion.t
+    rng = np.random.default_rng(31)
+    for _ in range(3):
+        phi, clean, sd = C.base(puma, rng)
+        lagged = clean.copy()
+        lagged[:, 1] = np.interp(t - 2 * (t[1] - t[0]), t, clean[:, 1])
+        d = diagnose(problem, lagged + C.noise(rng, clean.shape, sd))
+        assert _named(d) == {("delay", "q2")}
+
+
+def test_an_elastic_joint_is_seldom_named_a_delay(puma):
+    """One joint's torque through a second-order lag (an elastic joint), every drive's delay
+    asked for: to first order a delay on that joint, but its second-order term has the
+    elastic sign, and the delay is held back saying so (9 of 20 measured; a delay named in
+    3 of 20, 7 of 20 without the check)."""
+    problem = _with_joint_delays(puma)
+    rng = np.random.default_rng(32)
+    named = second_order = 0
+    for _ in range(10):
+        d = diagnose(problem, C.compliance(puma, rng).tau)
+        named += any(e["kind"] == "delay" for e in d.effects)
+        second_order += any(u["kind"] == "delay" and "second-order lag" in u["reason"] for u in d.unsupported)
+    assert named <= 2 and second_order >= 3
+
+
 def test_gear_loss_is_named_as_load_friction(puma):
     rng = np.random.default_rng(6)
     hits = sum(_named(d) == data.truth for data, d in
@@ -391,7 +436,7 @@ def test_delay_column_is_the_true_torque_rate():
         fit = lambda X, target: WeightedLinearModel(X, target).fit().coefficients  # noqa: E731
         alone = model @ fit(model, y)
         cutoff = derived.DELAY_CUTOFF_PER_BANDWIDTH * bandwidth(problem.qd, t[1] - t[0])
-        column = derived.delay_column(model, y, rows, np.zeros_like(y), t, alone, fit, cutoff)[:, :, 0]
+        column = derived.delay_column(model, y, rows, np.zeros_like(y), t, alone, fit, cutoff)[0][:, :, 0]
         truth = -np.gradient(clean, t, axis=0)
         assert np.linalg.norm(column - truth) < 0.1 * np.linalg.norm(truth)
         assert np.linalg.norm(-np.gradient(alone, t, axis=0) - truth) > 0.2 * np.linalg.norm(truth)

@@ -28,6 +28,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+from scipy.special import ndtri
 
 from baseparams import registry
 from baseparams.errors import InputError
@@ -232,7 +233,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                          f"{model_rank} identifiable inertial parameters: give more samples or a smaller "
                          "--holdout", key="samples")
     rows = slice(0, train)
-    everything = problem.candidates + _derived(problem, model, y, rows)
+    built, curvature = _derived(problem, model, y, rows)
+    everything = problem.candidates + built
     if not everything:
         raise InputError("no candidate effects left to test", key="--candidates")
     candidates = [c.rows(rows) for c in everything]
@@ -248,11 +250,12 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     # out of sample: plausibility, block cross-validation, stability over the blocks
     weights = last.fit.weights
     checks: dict = {}
+    curvature = curvature[rows] if curvature is not None else None
     kept_named, unsupported = _gate(problem, model[rows], candidates, chosen.in_model, named, y[rows],
-                                    weights, alpha, folds, checks)
+                                    weights, alpha, folds, checks, curvature)
     in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
     replaced = _simpler_forms(problem, model[rows], y[rows], chosen, everything, full, unsupported, kept_named,
-                              in_model, weights, alpha / len(named) if named else alpha, folds, checks)
+                              in_model, weights, alpha / len(named) if named else alpha, folds, checks, curvature)
     before = _predict(model, [], y, chosen.steps[0].fit, train)
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
@@ -342,18 +345,20 @@ def reduced_model(columns: np.ndarray, train: int) -> np.ndarray:
     return np.ascontiguousarray(columns @ (vt[:rank].T / scale[:, None]))
 
 
-def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) -> list[Candidate]:
+def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
+             ) -> tuple[list[Candidate], np.ndarray | None]:
     """The candidates built from the model's torque (:mod:`.derived`): the training fit of the
-    model alone predicts it (with a given simulation: the given torque)."""
+    model alone predicts it (with a given simulation: the given torque); and the delay's
+    second-order column (-d2tau/dt2, every row), None without a delay candidate."""
     torque = problem.known.copy()
     wanted = problem.wanted
-    delay = None
+    delay = curvature = None
     if model.shape[-1]:
         fit = WeightedLinearModel(model[rows], y[rows]).fit()
         torque = torque + model @ fit.coefficients
-        if (wanted is None or ("delay", "all") in wanted) and len(problem.t) > 2:
+        if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
             band = bandwidth(problem.qd[rows], float(np.median(np.diff(problem.t)))) if problem.qd is not None else 0.0
-            delay = derived.delay_column(
+            delay, curvature = derived.delay_column(
                 model, y, rows, problem.known, problem.t, torque,
                 lambda X, target: WeightedLinearModel(X, target).fit(fit.weights).coefficients,
                 derived.DELAY_CUTOFF_PER_BANDWIDTH * band if band > 0 else None)
@@ -364,7 +369,7 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice) ->
     if problem.bodies is not None:
         out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
                                         problem.wanted)
-    return out
+    return out, curvature
 
 
 # A named effect on a coordinate whose residual still holds structure must be at least this
@@ -423,10 +428,13 @@ def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
 
 
 def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int], named: list[int],
-          y: np.ndarray, weights: np.ndarray, alpha: float, folds: int, checks: dict) -> tuple[list[int], list[dict]]:
+          y: np.ndarray, weights: np.ndarray, alpha: float, folds: int, checks: dict,
+          curvature: np.ndarray | None = None) -> tuple[list[int], list[dict]]:
     """The named effects that hold up (physical, predicting held-out blocks, one coefficient for
-    the whole recording) and the others with their reasons (:mod:`.outofsample`); ``model``
-    and ``y``: the training rows; ``checks`` receives each kept effect's figures."""
+    the whole recording, a delay not standing in for a second-order lag) and the others with
+    their reasons (:mod:`.outofsample`); ``model``, ``y`` and ``curvature`` (the delay's
+    second-order column, :func:`_derived`): the training rows; ``checks`` receives each kept
+    effect's figures."""
     if not named:
         return [], []
     checks.clear()
@@ -465,6 +473,8 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
             elif stable.unstable(level):
                 reason = (f"its coefficient changes from block to block (spread {stable.spread:.2g} of its value, "
                           f"p = {stable.pvalue:.2g}): it stands in for something the catalogue lacks")
+            elif candidates[i].kind == "delay" and curvature is not None:
+                reason = _second_order(X, y, weights, fit.rank, candidates[i], curvature, level, detail)
         if reason:
             out.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
                         "values": values, "reason": reason, **detail})
@@ -477,7 +487,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
 def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: Selection,
                    everything: list[Candidate], full: list[Candidate], unsupported: list[dict],
                    kept_named: list[int], in_model: list[int], weights: np.ndarray, alpha: float, folds: int,
-                   checks: dict) -> list[str]:
+                   checks: dict, curvature: np.ndarray | None) -> list[str]:
     """Each held-back effect's simpler forms (:func:`.selection.simpler_in_place`) tried in its
     place: one that clears the bar and passes the same checks (:func:`_gate`, at ``alpha``)
     is named instead, entered in ``chosen`` as a step, and the held-back effect leaves
@@ -495,7 +505,7 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
         trial = list(chosen.candidates)
         trial[j] = cand
         figures: dict = {}
-        kept, _ = _gate(problem, model, trial, in_model + [j], [j], y, weights, alpha, folds, figures)
+        kept, _ = _gate(problem, model, trial, in_model + [j], [j], y, weights, alpha, folds, figures, curvature)
         if not kept:
             continue
         if variant >= 0:
@@ -514,6 +524,28 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
                      f"is named in its place (p = {step.tests[j].pvalue:.3g} against the other named effects, "
                      "and it passes the same checks)")
     return notes
+
+
+def _second_order(X: np.ndarray, y: np.ndarray, weights: np.ndarray, rank: int, delay: Candidate,
+                  curvature: np.ndarray, level: float, detail: dict) -> str:
+    """'' when the delay (in the model ``X``, of ``rank``) is a delay; else why not: the
+    second-order term (-d2tau/dt2 on the coordinates it acts on) added to the model has a
+    significantly positive coefficient, where a delay's is negative
+    (:func:`.derived.second_order_lag`; one-sided, at ``level``, prewhitened HAC standard
+    deviation)."""
+    acts = np.any(delay.columns[:, :, 0] != 0, axis=0)
+    column = np.where(acts[None, :], curvature, 0.0)[:, :, None]
+    fit = WeightedLinearModel(np.concatenate([X, column], axis=-1), y).fit(weights, cov_type="hac_prewhitened")
+    if fit.rank <= rank:
+        return ""
+    a2, std = float(fit.coefficients[-1]), float(fit.std[-1])
+    z = derived.second_order_lag(a2, std)
+    detail["second_order_z"] = z
+    if z <= -ndtri(level):
+        return ""
+    return (f"a second-order lag fits beyond it (the -d2tau/dt2 term's coefficient is {a2:.3g} s^2, {z:.1f} SD "
+            "above zero, where a delay's is negative): an elastic transmission or a resonant filter, not in "
+            "the catalogue, that the delay stands in for")
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
