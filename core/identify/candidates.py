@@ -135,9 +135,16 @@ def _reduced(columns: np.ndarray, reduce: Callable[[np.ndarray], np.ndarray]) ->
 
 def _maker(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
            reduce: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[dict], np.ndarray]:
-    """The columns of a shaped effect at any shape value (reduced like the data)."""
+    """The columns of a shaped effect at any shape value (reduced like the data), each value's
+    made once: the search between grid points meets the same values again at later steps
+    (selection.SHAPE_STEP), and each making filters the full-rate columns."""
+    made: dict[tuple, np.ndarray] = {}
+
     def make(shape: dict) -> np.ndarray:
-        columns = np.ascontiguousarray(effect_columns(mechanism, sample, n, kind, coordinate, shape=shape)[1],
-                                       dtype=float)
-        return _reduced(columns, reduce) if reduce is not None else columns
+        key = tuple(sorted(shape.items()))
+        if key not in made:
+            columns = np.ascontiguousarray(effect_columns(mechanism, sample, n, kind, coordinate, shape=shape)[1],
+                                           dtype=float)
+            made[key] = _reduced(columns, reduce) if reduce is not None else columns
+        return made[key]
     return make

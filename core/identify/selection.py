@@ -603,6 +603,11 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
             complete = None                   # i's columns changed: the next one needs a new complete fit
 
 
+# Shape values between grid points are searched on logarithms rounded to this step (2.5 %): the
+# columns of a value met again (the next step's search) are made once (candidates._maker).
+SHAPE_STEP = 0.025
+
+
 def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) -> Candidate | None:
     """The candidate at the shape value between grid points k - 1 and k + 1 that explains the
     most (bounded search on its logarithm), when it has one shape, a column maker and a
@@ -619,7 +624,11 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
     made: dict[float, np.ndarray] = {}          # each shape's columns, made once (a filtering each)
     maker = cand.make
 
+    def snapped(x: float) -> float:
+        return round(x / SHAPE_STEP) * SHAPE_STEP
+
     def columns(x: float) -> np.ndarray:
+        x = snapped(x)
         if x not in made:
             made[x] = maker({name: float(np.exp(x))})
         return made[x]
@@ -627,7 +636,7 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
     # to 5 % of the value: grid points are 3 times apart, and the fit is flat near its best
     found = minimize_scalar(lambda x: -explained(columns(x)), bounds=(np.log(low), np.log(high)),
                             method="bounded", options={"xatol": 0.05})
-    shape = {name: float(np.exp(found.x))}
+    shape = {name: float(np.exp(snapped(found.x)))}
     return Candidate(cand.kind, cand.coordinate, cand.names, columns(found.x), (), (), shape, cand.generalises)
 
 
