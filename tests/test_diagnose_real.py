@@ -211,6 +211,36 @@ def test_an_elastic_joint_is_seldom_named_a_delay(puma):
     assert named <= 2 and second_order >= 3
 
 
+# The campaign's datasets where q4's torque alone lags 4-6 samples (seed 2024, the white
+# joint-delay row, datasets 1, 4, 5, 6, 7): the PCG64 state before each was drawn.
+Q4_LAGS = [
+    (311766082653223283809844186989636472564, 263843294879837360010514471918415607657, 1, 2856601604),
+    (267387390845069555556787537282074402003, 263843294879837360010514471918415607657, 0, 1336749055),
+    (334767923002793273886161685612014143826, 263843294879837360010514471918415607657, 1, 2216573180),
+    (93191115261258054488259420029409838131, 263843294879837360010514471918415607657, 0, 2216573180),
+    (258848044608796513178637532245714498583, 263843294879837360010514471918415607657, 1, 2288286783),
+]
+
+
+def test_what_stands_in_for_one_joints_lag_is_not_named():
+    """q4's torque lags (one drive's own delay, not a default candidate): cogging and a spring
+    or an offset on q4 imitated it, held steady and predicted held-out blocks, and were named
+    in all five; a lag of q4's torque outdoes them, so nothing wrong is named and the report
+    says what they may stand in for."""
+    s = C.setting("puma560", 1200)
+    said = 0
+    for state, inc, has, value in Q4_LAGS:
+        rng = np.random.default_rng()
+        rng.bit_generator.state = {"bit_generator": "PCG64", "state": {"state": state, "inc": inc},
+                                   "has_uint32": has, "uinteger": value}
+        data = C.joint_delay(s, rng)
+        assert ("delay", "q4") in data.acceptable
+        d = diagnose(s.problem, data.tau)
+        assert _named(d) <= data.acceptable
+        said += any("a lag of q4's torque" in u["reason"] for u in d.unsupported)
+    assert said >= 3
+
+
 def test_gear_loss_is_named_as_load_friction(puma):
     rng = np.random.default_rng(6)
     hits = sum(_named(d) == data.truth for data, d in

@@ -70,11 +70,18 @@ def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarra
         column = -np.gradient(torque, t, axis=0)[:, :, None] if delay is None else delay
         if wanted is None or ("delay", "all") in wanted:
             out.append(Candidate("delay", "all", ("d",), column))
-        for j, c in enumerate(coordinates):        # one drive's own lag, when asked for (DEFAULT_PLACES)
-            if f > 1 and wanted is not None and ("delay", c) in wanted:
-                own = np.zeros_like(column)
-                own[:, j] = column[:, j]
-                out.append(Candidate("delay", c, (f"d_{c}",), own))
+        if f > 1 and wanted is not None:          # one drive's own lag, when asked for (DEFAULT_PLACES)
+            out += [cand for c, cand in joint_delays(coordinates, column).items() if ("delay", c) in wanted]
+    return out
+
+
+def joint_delays(coordinates: tuple[str, ...], column: np.ndarray) -> dict[str, Candidate]:
+    """Each coordinate's own delay (``delay:COORD``) from the delay's column (n, f, 1)."""
+    out = {}
+    for j, c in enumerate(coordinates):
+        own = np.zeros_like(column)
+        own[:, j] = column[:, j]
+        out[c] = Candidate("delay", c, (f"d_{c}",), own)
     return out
 
 

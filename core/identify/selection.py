@@ -534,6 +534,44 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
     return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten), variant[best]
 
 
+def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Sequence[int],
+            rivals: dict[int, Candidate], level: float) -> dict[int, tuple[Test, Test]]:
+    """Named effects (keys of ``rivals``, in ``in_model``) that their rival outdoes: given every
+    other effect in ``in_model``, the rival adds significantly (at ``level``) over the effect
+    and the effect adds nothing over the rival; each with (the rival's test over it, its test
+    over the rival). Under the selection's last filter and weights, from one fit of the
+    complete model (each effect left out by Frisch-Waugh-Lovell). Why: rivals that are not
+    candidates (one drive's own delay) still show what a named effect may stand in for."""
+    last = selection.steps[-1]
+    filtered = last.whiten
+    white = isinstance(filtered, Whitening)
+    n, f, p = model.shape
+    candidates = selection.candidates
+    complete = WeightedLinearModel(filtered(np.concatenate([model] + [candidates[i].columns for i in in_model],
+                                                           axis=-1)), filtered(y)).fit(last.fit.weights)
+    offsets = np.cumsum([p] + [candidates[i].columns.shape[-1] for i in in_model])
+    out = {}
+    for i, rival in rivals.items():
+        k = list(in_model).index(i)
+        fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
+        if fit is None:
+            continue
+        own = candidate_basis(filtered(candidates[i].columns) if white else candidates[i].columns, fit)
+        other = candidate_basis(filtered(rival.columns) if white else rival.columns, fit)
+        if own.shape[1] == 0 or other.shape[1] == 0:
+            continue
+        res_own = fit.residual - own @ (own.T @ fit.residual)
+        res_other = fit.residual - other @ (other.T @ fit.residual)
+        over_own = wald(res_own, conditional(other, own), (n, f), fit.rank + own.shape[1], sparse_if_white=True)
+        over_other = wald(res_other, conditional(own, other), (n, f), fit.rank + other.shape[1],
+                          sparse_if_white=True)
+        rival_adds = over_own.tested and over_own.pvalue <= level
+        own_adds = over_other.tested and over_other.pvalue <= level
+        if rival_adds and not own_adds:
+            out[i] = (over_own, over_other)
+    return out
+
+
 # A selection is repeated when the complete model's residual asks for a filter differing from
 # the one it ran with by more than this (in any coordinate's AR(1) coefficient).
 RHO_AGREEMENT = 0.01
