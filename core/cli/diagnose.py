@@ -28,6 +28,7 @@ if TYPE_CHECKING:
                    "`identify`. Bodies, payloads and torque gains become candidates.")
 @click.option("--candidates", "selection", multiple=True, metavar="KIND[:PLACE]",
               help="Candidate effects to test (repeatable); KIND alone: on every place it acts on "
+                   "(delay alone: the recording's one delay; delay:COORD one drive's own) "
                    "[default: every registered effect on every coordinate and coupled motor, load_friction, "
                    "delay; with --params also gain, mass, payload and body].")
 @click.option("--alpha", type=click.FloatRange(0.0, 1.0, min_open=True, max_open=True), default=0.05,

@@ -107,10 +107,11 @@ def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarra
                  torque: np.ndarray, fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
                  cutoff: float | None) -> tuple[np.ndarray, np.ndarray]:
     """The delay's column (n, f, 1) and the second-order term's (n, f) that tells a delay from
-    an elastic lag (:func:`second_order_lag`): -dtau/dt and -d2tau/dt2, tau the model's torque (``known`` + model @
-    coefficients, every row) fitted together with the delay (y = tau - d dtau/dt) by
-    alternating least squares from ``torque`` (the model fitted alone; ``fit(X, y)`` gives the
-    coefficients on the training ``rows``), differentiated after a low-pass at ``cutoff``.
+    an elastic lag (``diagnose._second_order``): -dtau/dt and -d2tau/dt2, tau the model's
+    torque (``known`` + model @ coefficients, every row) fitted together with the delay
+    (y = tau - d dtau/dt) by alternating least squares from ``torque`` (the model fitted
+    alone; ``fit(X, y)`` gives the coefficients on the training ``rows``), differentiated
+    after a low-pass at ``cutoff``.
     Why both: the model fitted alone is bent towards the lagged data, and its fitted noise
     lies partly in fast directions of the model's span whose derivative is large; on a
     generated four-bar (one coordinate, 21 identifiable parameters) the column taken from the
@@ -128,16 +129,6 @@ def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarra
             break
     first = rate(torque, t, cutoff)
     return -first[:, :, None], -np.gradient(first, t, axis=0)
-
-
-def second_order_lag(curvature_coefficient: float, std: float) -> float:
-    """How far (in standard deviations) the second-order term's coefficient lies above zero.
-    A delay d: tau(t - d) = tau - d tau' + d^2/2 tau'' - ..., so on the column -tau'' its
-    coefficient is negative (-d^2/2; the terms beyond, fitted into it, make it less so:
-    -0.0025 s^2 for -0.0045 on a 5-sample delay); a second-order lag (an elastic
-    transmission, a resonant filter: tau - 2 zeta/w tau' - 1/w^2 tau'') gives +1/w^2. Why:
-    one joint's elastic lag is, to first order, a delay of 2 zeta / w on that joint."""
-    return curvature_coefficient / std if std > 0 else 0.0
 
 
 def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,

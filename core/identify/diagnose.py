@@ -364,7 +364,8 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
         fit = WeightedLinearModel(model[rows], y[rows]).fit()
         torque = torque + model @ fit.coefficients
         if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
-            band = bandwidth(problem.qd[rows], float(np.median(np.diff(problem.t)))) if problem.qd is not None else 0.0
+            step = float(np.median(np.diff(problem.t)))
+            band = bandwidth(problem.qd[rows], step) if problem.qd is not None else 0.0
             delay, curvature = derived.delay_column(
                 model, y, rows, problem.known, problem.t, torque,
                 lambda X, target: WeightedLinearModel(X, target).fit(fit.weights).coefficients,
@@ -561,16 +562,19 @@ def _second_order(X: np.ndarray, y: np.ndarray, weights: np.ndarray, rank: int, 
                   curvature: np.ndarray, level: float, detail: dict) -> str:
     """'' when the delay (in the model ``X``, of ``rank``) is a delay; else why not: the
     second-order term (-d2tau/dt2 on the coordinates it acts on) added to the model has a
-    significantly positive coefficient, where a delay's is negative
-    (:func:`.derived.second_order_lag`; one-sided, at ``level``, prewhitened HAC standard
-    deviation)."""
+    significantly positive coefficient (one-sided, at ``level``, prewhitened HAC standard
+    deviation). A delay d: tau(t - d) = tau - d tau' + d^2/2 tau'' - ..., so its coefficient
+    on -tau'' is negative (-d^2/2; the terms beyond, fitted into it, make it less so: -0.0025
+    s^2 for -0.0045 on a 5-sample delay); a second-order lag (an elastic transmission, a
+    resonant filter: tau - 2 zeta/w tau' - tau''/w^2) gives +1/w^2. Why: an elastic joint's
+    lag is, to first order, a delay of 2 zeta / w on that joint."""
     acts = np.any(delay.columns[:, :, 0] != 0, axis=0)
     column = np.where(acts[None, :], curvature, 0.0)[:, :, None]
     fit = WeightedLinearModel(np.concatenate([X, column], axis=-1), y).fit(weights, cov_type="hac_prewhitened")
     if fit.rank <= rank:
         return ""
     a2, std = float(fit.coefficients[-1]), float(fit.std[-1])
-    z = derived.second_order_lag(a2, std)
+    z = a2 / std if std > 0 else 0.0
     detail["second_order_z"] = z
     if z <= -ndtri(level):
         return ""
