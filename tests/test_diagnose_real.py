@@ -472,6 +472,16 @@ def test_delay_column_is_the_true_torque_rate():
         assert np.linalg.norm(-np.gradient(alone, t, axis=0) - truth) > 0.2 * np.linalg.norm(truth)
 
 
+def test_load_friction_on_a_generated_four_bar_is_named_as_such():
+    """Load friction on a four-bar's one coordinate: its column is built from the model's
+    torque fitted together with it (the model fitted alone bent towards it, and Coulomb or
+    position friction was named instead in 11 of 20; 16 of 20 right and 1 wrong measured)."""
+    s = C.generated_setting("four_bar2", 1200)
+    rng = np.random.default_rng(41)
+    outcomes = [C.run(s, C.gear_loss, rng)[2] for _ in range(6)]
+    assert outcomes.count("right") >= 4 and outcomes.count("wrong") <= 1
+
+
 def test_params_from_a_wrong_source_is_refused(tmp_path):
     data = tmp_path / "d.csv"
     assert CliRunner().invoke(main, ["simulate", "planar_2r", "-o", str(data), "--samples", "200"]).exit_code == 0

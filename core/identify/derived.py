@@ -56,16 +56,15 @@ def places(mechanism: Mechanism, kind: str, coordinates: tuple[str, ...]) -> tup
 
 def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarray, torque: np.ndarray,
                       wanted: set | None = None, delay: np.ndarray | None = None) -> list[Candidate]:
-    """load_friction on each coordinate and one delay, from the model's ``torque`` (n, f) and the
-    independent speeds ``qd`` (n, f) at the fit's rows; ``wanted``: (kind, place) pairs to keep
+    """load_friction on each coordinate and one delay, from the model's ``torque`` (n, f; fitted
+    with the load friction: :func:`fitted_torque`) and the independent speeds ``qd`` (n, f); ``wanted``: (kind, place) pairs to keep
     (None: all). ``delay``: the delay's column (:func:`delay_column`; default -dtorque/dt)."""
     n, f = torque.shape
     out = []
+    load = load_columns(torque, qd)
     for j, c in enumerate(coordinates):
         if wanted is None or ("load_friction", c) in wanted:
-            columns = np.zeros((n, f, 1))
-            columns[:, j, 0] = np.abs(torque[:, j]) * np.sign(qd[:, j])
-            out.append(Candidate("load_friction", c, (f"mu_{c}",), columns))
+            out.append(Candidate("load_friction", c, (f"mu_{c}",), np.ascontiguousarray(load[:, :, j:j + 1])))
     if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and n > 2:
         column = -np.gradient(torque, t, axis=0)[:, :, None] if delay is None else delay
         if wanted is None or ("delay", "all") in wanted:
@@ -85,8 +84,8 @@ def joint_delays(coordinates: tuple[str, ...], column: np.ndarray) -> dict[str, 
     return out
 
 
-# Rounds of the alternating fit of a model with a delay, and the change in the torque (in units
-# of its RMS) at which it stops.
+# Rounds of the alternating fit of the model with the effects built from its torque, and the
+# change in the torque (in units of its RMS) at which it stops.
 DELAY_ROUNDS = 20
 DELAY_TOLERANCE = 1e-4
 # The delay's column is the derivative of the model's torque low-passed at this multiple of the
@@ -103,30 +102,48 @@ def rate(torque: np.ndarray, t: np.ndarray, cutoff: float | None) -> np.ndarray:
     return np.gradient(torque, t, axis=0)
 
 
+def fitted_torque(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarray, torque: np.ndarray,
+                  fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                  columns_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The model's torque (``known`` + model @ coefficients, every row) fitted together with the
+    effects built from it (``columns_of(torque)``: (n, f, k)), by alternating least squares
+    from ``torque`` (the model fitted alone; ``fit(X, y)`` gives the coefficients on the
+    training ``rows``). Why: the model fitted alone bends towards what it misses, and an
+    effect built from that torque is built from a wrong one: on a generated four-bar (one
+    coordinate, 21 identifiable parameters) a delay was named viscous friction in half the
+    datasets, and load friction Coulomb or position friction in 11 of 20. With none of the
+    effects in the data the rounds stop at once."""
+    scale = max(float(np.sqrt(np.mean(torque[rows] ** 2))), 1e-300)
+    p = model.shape[-1]
+    for _ in range(DELAY_ROUNDS):
+        coefficients = fit(np.concatenate([model[rows], columns_of(torque)[rows]], axis=-1), y[rows])
+        new = known + model @ coefficients[:p]
+        change = float(np.sqrt(np.mean((new[rows] - torque[rows]) ** 2))) / scale
+        torque = new
+        if change <= DELAY_TOLERANCE:
+            break
+    return torque
+
+
+def load_columns(torque: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Every coordinate's load friction |tau_j| sign(qd_j) (n, f, f), each on its own coordinate."""
+    n, f = torque.shape
+    out = np.zeros((n, f, f))
+    out[:, np.arange(f), np.arange(f)] = np.abs(torque) * np.sign(qd)
+    return out
+
+
 def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarray, t: np.ndarray,
                  torque: np.ndarray, fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
                  cutoff: float | None) -> tuple[np.ndarray, np.ndarray]:
     """The delay's column (n, f, 1) and the second-order term's (n, f) that tells a delay from
     an elastic lag (``diagnose._second_order``): -dtau/dt and -d2tau/dt2, tau the model's
-    torque (``known`` + model @ coefficients, every row) fitted together with the delay
-    (y = tau - d dtau/dt) by alternating least squares from ``torque`` (the model fitted
-    alone; ``fit(X, y)`` gives the coefficients on the training ``rows``), differentiated
-    after a low-pass at ``cutoff``.
-    Why both: the model fitted alone is bent towards the lagged data, and its fitted noise
-    lies partly in fast directions of the model's span whose derivative is large; on a
-    generated four-bar (one coordinate, 21 identifiable parameters) the column taken from the
-    model fitted alone and differentiated as it was differed from the true -dtau/dt by 24-51 %
-    (3-8 % after both), and viscous friction on a dependent joint was named for a delay in
-    half the datasets at effect/noise 5. With no delay the rounds stop at once (d near 0)."""
-    scale = max(float(np.sqrt(np.mean(torque[rows] ** 2))), 1e-300)
-    for _ in range(DELAY_ROUNDS):
-        column = -rate(torque, t, cutoff)[:, :, None]
-        coefficients = fit(np.concatenate([model[rows], column[rows]], axis=-1), y[rows])
-        new = known + model @ coefficients[:-1]
-        change = float(np.sqrt(np.mean((new[rows] - torque[rows]) ** 2))) / scale
-        torque = new
-        if change <= DELAY_TOLERANCE:
-            break
+    torque fitted together with the delay (y = tau - d dtau/dt; :func:`fitted_torque`),
+    differentiated after a low-pass at ``cutoff``. Why the low-pass: the fitted noise lies
+    partly in fast directions of the model's span, whose derivative is large: on a generated
+    four-bar the column differed from the true -dtau/dt by 24-51 % when taken from the model
+    fitted alone and differentiated as it was, 3-8 % after both."""
+    torque = fitted_torque(model, y, rows, known, torque, fit, lambda tau: -rate(tau, t, cutoff)[:, :, None])
     first = rate(torque, t, cutoff)
     return -first[:, :, None], -np.gradient(first, t, axis=0)
 

@@ -360,22 +360,30 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
     torque = problem.known.copy()
     wanted = problem.wanted
     delay = curvature = None
+    alone = torque
     if model.shape[-1]:
         fit = WeightedLinearModel(model[rows], y[rows]).fit()
-        torque = torque + model @ fit.coefficients
+        alone = torque + model @ fit.coefficients
+        torque = alone
+
+        def at_weights(X: np.ndarray, target: np.ndarray) -> np.ndarray:
+            return WeightedLinearModel(X, target).fit(fit.weights).coefficients
+
         if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
             step = float(np.median(np.diff(problem.t)))
             band = bandwidth(problem.qd[rows], step) if problem.qd is not None else 0.0
-            delay, curvature = derived.delay_column(
-                model, y, rows, problem.known, problem.t, torque,
-                lambda X, target: WeightedLinearModel(X, target).fit(fit.weights).coefficients,
-                derived.DELAY_CUTOFF_PER_BANDWIDTH * band if band > 0 else None)
+            delay, curvature = derived.delay_column(model, y, rows, problem.known, problem.t, alone, at_weights,
+                                                    derived.DELAY_CUTOFF_PER_BANDWIDTH * band if band > 0 else None)
+        if problem.qd is not None and (wanted is None or any(kind == "load_friction" for kind, _ in wanted)):
+            qd_ = problem.qd
+            torque = derived.fitted_torque(model, y, rows, problem.known, alone, at_weights,
+                                           lambda tau: derived.load_columns(tau, qd_))
     if problem.qd is None:          # a Problem built without speeds: no load friction to build
         wanted = {("delay", "all")} if wanted is None else {w for w in wanted if w[0] != "load_friction"}
     qd = problem.qd if problem.qd is not None else np.zeros_like(torque)
     out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, wanted, delay)
     if problem.bodies is not None:
-        out += derived.given_candidates(problem.mechanism, problem.coordinates, torque, problem.bodies,
+        out += derived.given_candidates(problem.mechanism, problem.coordinates, alone, problem.bodies,
                                         problem.wanted)
     return out, curvature
 
