@@ -568,14 +568,17 @@ def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
 
 def _second_order(X: np.ndarray, y: np.ndarray, weights: np.ndarray, rank: int, delay: Candidate,
                   curvature: np.ndarray, level: float, detail: dict) -> str:
-    """'' when the delay (in the model ``X``, of ``rank``) is a delay; else why not: the
-    second-order term (-d2tau/dt2 on the coordinates it acts on) added to the model has a
-    significantly positive coefficient (one-sided, at ``level``, prewhitened HAC standard
-    deviation). A delay d: tau(t - d) = tau - d tau' + d^2/2 tau'' - ..., so its coefficient
-    on -tau'' is negative (-d^2/2; the terms beyond, fitted into it, make it less so: -0.0025
-    s^2 for -0.0045 on a 5-sample delay); a second-order lag (an elastic transmission, a
-    resonant filter: tau - 2 zeta/w tau' - tau''/w^2) gives +1/w^2. Why: an elastic joint's
-    lag is, to first order, a delay of 2 zeta / w on that joint."""
+    """'' when the delay (in the model ``X``, of ``rank``) is a delay or a filter's lag; else
+    why not: the second-order term (-d2tau/dt2 on the coordinates it acts on) added to the
+    model has a significantly positive coefficient (one-sided, at ``level``, prewhitened HAC
+    standard deviation). A delay d: tau(t - d) = tau - d tau' + d^2/2 tau'' - ..., so its
+    coefficient on -tau'' is negative (-d^2/2; the terms beyond, fitted into it, make it less
+    so: -0.0025 s^2 for -0.0045 on a 5-sample delay); a resonant lag (an elastic
+    transmission, a resonant filter: tau - 2 zeta/w tau' - tau''/w^2) gives +1/w^2. A
+    first-order filter's lag (time constant 1-3 samples) came out negative too (13-34 SD below
+    zero on the PUMA) and is named a delay. Why: an elastic joint's lag is, to first order, a
+    delay on that joint. (Above d^2, a first-order filter's Taylor coefficient, the check held
+    back no elastic lag: near the motion's band the fitted coefficient is not Taylor's.)"""
     acts = np.any(delay.columns[:, :, 0] != 0, axis=0)
     column = np.where(acts[None, :], curvature, 0.0)[:, :, None]
     fit = WeightedLinearModel(np.concatenate([X, column], axis=-1), y).fit(weights, cov_type="hac_prewhitened")
@@ -586,9 +589,9 @@ def _second_order(X: np.ndarray, y: np.ndarray, weights: np.ndarray, rank: int, 
     detail["second_order_z"] = z
     if z <= -ndtri(level):
         return ""
-    return (f"a second-order lag fits beyond it (the -d2tau/dt2 term's coefficient is {a2:.3g} s^2, {z:.1f} SD "
-            "above zero, where a delay's is negative): an elastic transmission or a resonant filter, not in "
-            "the catalogue, that the delay stands in for")
+    return (f"a resonant lag fits beyond it (the -d2tau/dt2 term's coefficient is {a2:.3g} s^2, {z:.1f} SD above "
+            "zero, where a delay's or a filter's is negative): an elastic transmission or a resonant filter, not "
+            "in the catalogue, that the delay stands in for")
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
