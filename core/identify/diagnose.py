@@ -257,7 +257,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     replaced = _simpler_forms(problem, model[rows], y[rows], chosen, everything, full, unsupported, kept_named,
                               in_model, weights, alpha / len(named) if named else alpha, folds, checks, curvature)
     for i, reason in _lag_stand_ins(problem, model[rows], y[rows], chosen, in_model, kept_named,
-                                    alpha / len(named) if named else alpha):
+                                    alpha / len(named) if named else alpha, curvature):
         kept_named.remove(i)
         in_model.remove(i)
         checks.pop(i, None)
@@ -543,26 +543,33 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
 
 
 def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: Selection, in_model: list[int],
-                   named: list[int], level: float) -> list[tuple[int, str]]:
-    """Named effects that a lag of their own coordinate's torque (``delay:COORD``: not a default
-    candidate) outdoes (:func:`.selection.outdone`), with the reason. Why: with one joint's
-    torque lagging 4-6 samples, cogging and a spring on that joint imitated the lag, held
-    steady over the blocks and predicted them, and were named (5 of 6 such datasets on the
-    PUMA's fourth joint)."""
+                   named: list[int], level: float, curvature: np.ndarray | None = None) -> list[tuple[int, str]]:
+    """Named effects that a lag of their own coordinate's torque outdoes
+    (:func:`.selection.outdone`), with the reason. The lag: -dtau_c/dt and, given
+    ``curvature`` (training rows), -d2tau_c/dt2 (one drive's delay or filter, or an elastic
+    joint: not default candidates). Why: with one joint's torque lagging 4-6 samples, cogging
+    and a spring on that joint imitated the lag, held steady over the blocks and predicted
+    them, and were named (5 of 6 such datasets on the PUMA's fourth joint); with the second
+    order, stand-ins for an elastic joint on a generated chain went from 3 to 2 of 20."""
     lag = next((c for c in chosen.candidates if c.kind == "delay" and c.coordinate == "all"), None)
     if lag is None or len(problem.coordinates) < 2:
         return []
     asked = {c.coordinate for c in chosen.candidates if c.kind == "delay"}
     own = derived.joint_delays(problem.coordinates, lag.columns)
+    if curvature is not None:
+        for j, c in enumerate(problem.coordinates):
+            second = np.zeros_like(lag.columns)
+            second[:, j, 0] = curvature[:, j]
+            own[c] = Candidate("lag", c, ("a1", "a2"), np.concatenate([own[c].columns, second], axis=-1))
     rivals = {i: own[chosen.candidates[i].coordinate] for i in named
               if chosen.candidates[i].coordinate in own and chosen.candidates[i].coordinate not in asked}
     out = []
     for i, (over, under) in outdone(model, y, chosen, in_model, rivals, level).items():
         c = chosen.candidates[i].coordinate
-        out.append((i, f"a lag of {c}'s torque (delay:{c}, one drive's own delay: not a default candidate) "
-                       f"explains what it does and more (p = {over.pvalue:.2g}; it adds nothing over the lag, "
-                       f"p = {under.pvalue:.2g}): it may stand in for that lag; name delay:{c} in --candidates "
-                       "to test it"))
+        out.append((i, f"a lag of {c}'s torque (-dtau/dt, -d2tau/dt2 on {c}: that drive's own delay or filter, "
+                       "or an elastic joint; not default candidates) explains what it does and more "
+                       f"(p = {over.pvalue:.2g}; it adds nothing over the lag, p = {under.pvalue:.2g}): it may stand "
+                       f"in for that lag; name delay:{c} in --candidates to test a delay there"))
     return out
 
 
