@@ -86,8 +86,8 @@ def joint_delays(coordinates: tuple[str, ...], column: np.ndarray) -> dict[str, 
 
 # Rounds of the alternating fit of the model with the effects built from its torque, and the
 # change in the torque (in units of its RMS) at which it stops.
-DELAY_ROUNDS = 20
-DELAY_TOLERANCE = 1e-4
+FIT_ROUNDS = 20
+FIT_TOLERANCE = 1e-4
 # The delay's column is the derivative of the model's torque low-passed at this multiple of the
 # speeds' bandwidth (Gautier's rule for positions, as a recording's filter: recording.py).
 DELAY_CUTOFF_PER_BANDWIDTH = 10.0
@@ -115,12 +115,12 @@ def fitted_torque(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarr
     effects in the data the rounds stop at once."""
     scale = max(float(np.sqrt(np.mean(torque[rows] ** 2))), 1e-300)
     p = model.shape[-1]
-    for _ in range(DELAY_ROUNDS):
+    for _ in range(FIT_ROUNDS):
         coefficients = fit(np.concatenate([model[rows], columns_of(torque)[rows]], axis=-1), y[rows])
         new = known + model @ coefficients[:p]
         change = float(np.sqrt(np.mean((new[rows] - torque[rows]) ** 2))) / scale
         torque = new
-        if change <= DELAY_TOLERANCE:
+        if change <= FIT_TOLERANCE:
             break
     return torque
 
