@@ -57,8 +57,9 @@ def places(mechanism: Mechanism, kind: str, coordinates: tuple[str, ...]) -> tup
 def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarray, torque: np.ndarray,
                       wanted: set | None = None, delay: np.ndarray | None = None) -> list[Candidate]:
     """load_friction on each coordinate and one delay, from the model's ``torque`` (n, f; fitted
-    with the load friction: :func:`fitted_torque`) and the independent speeds ``qd`` (n, f); ``wanted``: (kind, place) pairs to keep
-    (None: all). ``delay``: the delay's column (:func:`delay_column`; default -dtorque/dt)."""
+    with the load friction: :func:`fitted_torque`) and the independent speeds ``qd`` (n, f);
+    ``wanted``: (kind, place) pairs to keep (None: all). ``delay``: the delay's column
+    (:func:`delay_column`; default -dtorque/dt)."""
     n, f = torque.shape
     out = []
     load = load_columns(torque, qd)
@@ -69,18 +70,11 @@ def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarra
         column = -np.gradient(torque, t, axis=0)[:, :, None] if delay is None else delay
         if wanted is None or ("delay", "all") in wanted:
             out.append(Candidate("delay", "all", ("d",), column))
-        if f > 1 and wanted is not None:          # one drive's own lag, when asked for (DEFAULT_PLACES)
-            out += [cand for c, cand in joint_delays(coordinates, column).items() if ("delay", c) in wanted]
-    return out
-
-
-def joint_delays(coordinates: tuple[str, ...], column: np.ndarray) -> dict[str, Candidate]:
-    """Each coordinate's own delay (``delay:COORD``) from the delay's column (n, f, 1)."""
-    out = {}
-    for j, c in enumerate(coordinates):
-        own = np.zeros_like(column)
-        own[:, j] = column[:, j]
-        out[c] = Candidate("delay", c, (f"d_{c}",), own)
+        for j, c in enumerate(coordinates):      # one drive's own lag, when asked for (DEFAULT_PLACES)
+            if f > 1 and wanted is not None and ("delay", c) in wanted:
+                own = np.zeros_like(column)
+                own[:, j] = column[:, j]
+                out.append(Candidate("delay", c, (f"d_{c}",), own))
     return out
 
 

@@ -543,24 +543,24 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
 
 
 def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: Selection, in_model: list[int],
-                   named: list[int], level: float, curvature: np.ndarray | None = None) -> list[tuple[int, str]]:
+                   named: list[int], level: float, curvature: np.ndarray | None) -> list[tuple[int, str]]:
     """Named effects that a lag of their own coordinate's torque outdoes
-    (:func:`.selection.outdone`), with the reason. The lag: -dtau_c/dt and, given
-    ``curvature`` (training rows), -d2tau_c/dt2 (one drive's delay or filter, or an elastic
-    joint: not default candidates). Why: with one joint's torque lagging 4-6 samples, cogging
-    and a spring on that joint imitated the lag, held steady over the blocks and predicted
-    them, and were named (5 of 6 such datasets on the PUMA's fourth joint); with the second
-    order, stand-ins for an elastic joint on a generated chain went from 3 to 2 of 20."""
+    (:func:`.selection.outdone`), with the reason. The lag: -dtau_c/dt and -d2tau_c/dt2 (the
+    delay's columns; ``curvature``: training rows) on coordinate c: one drive's delay or
+    filter, or an elastic joint, not default candidates. Why: with one joint's torque lagging
+    4-6 samples, cogging and a spring on that joint imitated the lag, held steady over the
+    blocks and predicted them, and were named (5 of 6 such datasets on the PUMA's fourth
+    joint); with the second order, stand-ins for an elastic joint on a generated chain went
+    from 3 to 2 of 20."""
     lag = next((c for c in chosen.candidates if c.kind == "delay" and c.coordinate == "all"), None)
-    if lag is None or len(problem.coordinates) < 2:
+    if lag is None or curvature is None or len(problem.coordinates) < 2:
         return []
     asked = {c.coordinate for c in chosen.candidates if c.kind == "delay"}
-    own = derived.joint_delays(problem.coordinates, lag.columns)
-    if curvature is not None:
-        for j, c in enumerate(problem.coordinates):
-            second = np.zeros_like(lag.columns)
-            second[:, j, 0] = curvature[:, j]
-            own[c] = Candidate("lag", c, ("a1", "a2"), np.concatenate([own[c].columns, second], axis=-1))
+    own = {}
+    for j, c in enumerate(problem.coordinates):
+        columns = np.zeros(lag.columns.shape[:2] + (2,))
+        columns[:, j, 0], columns[:, j, 1] = lag.columns[:, j, 0], curvature[:, j]
+        own[c] = Candidate("lag", c, ("a1", "a2"), columns)
     rivals = {i: own[chosen.candidates[i].coordinate] for i in named
               if chosen.candidates[i].coordinate in own and chosen.candidates[i].coordinate not in asked}
     out = []

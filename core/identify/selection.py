@@ -283,6 +283,17 @@ def conditional(first: np.ndarray, given: np.ndarray) -> np.ndarray:
     return orthonormal_basis(project_out(first, given), ABSORB_TOL, reference=first)
 
 
+def encompassing(a: np.ndarray, b: np.ndarray, residual: np.ndarray, shape: tuple[int, int],
+                 dof: int) -> tuple[Test, Test]:
+    """Encompassing tests of two sets of directions (orthonormal, beyond the model whose
+    ``residual`` and ``dof`` are given): (what a adds over b, what b adds over a), each a
+    Wald test on the residual with the other's directions in."""
+    res_b = residual - b @ (b.T @ residual)
+    res_a = residual - a @ (a.T @ residual)
+    return (wald(res_b, conditional(a, b), shape, dof + b.shape[1], sparse_if_white=True),
+            wald(res_a, conditional(b, a), shape, dof + a.shape[1], sparse_if_white=True))
+
+
 def correlation(residual: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """Correlation of what ``a`` and ``b`` each explain of the residual."""
     fa, fb = a @ (a.T @ residual), b @ (b.T @ residual)
@@ -543,8 +554,7 @@ def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Se
     complete model (each effect left out by Frisch-Waugh-Lovell). Why: rivals that are not
     candidates (one drive's own delay) still show what a named effect may stand in for."""
     last = selection.steps[-1]
-    filtered = last.whiten
-    white = isinstance(filtered, Whitening)
+    filtered = last.whiten                  # the identity when the noise was white
     n, f, p = model.shape
     candidates = selection.candidates
     complete = WeightedLinearModel(filtered(np.concatenate([model] + [candidates[i].columns for i in in_model],
@@ -556,15 +566,11 @@ def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Se
         fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
         if fit is None:
             continue
-        own = candidate_basis(filtered(candidates[i].columns) if white else candidates[i].columns, fit)
-        other = candidate_basis(filtered(rival.columns) if white else rival.columns, fit)
+        own = candidate_basis(filtered(candidates[i].columns), fit)
+        other = candidate_basis(filtered(rival.columns), fit)
         if own.shape[1] == 0 or other.shape[1] == 0:
             continue
-        res_own = fit.residual - own @ (own.T @ fit.residual)
-        res_other = fit.residual - other @ (other.T @ fit.residual)
-        over_own = wald(res_own, conditional(other, own), (n, f), fit.rank + own.shape[1], sparse_if_white=True)
-        over_other = wald(res_other, conditional(own, other), (n, f), fit.rank + other.shape[1],
-                          sparse_if_white=True)
+        over_other, over_own = encompassing(own, other, fit.residual, (n, f), fit.rank)
         rival_adds = over_own.tested and over_own.pvalue <= level
         own_adds = over_other.tested and over_other.pvalue <= level
         if rival_adds and not own_adds:
@@ -815,11 +821,7 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
             if j == winner:
                 continue
             B = bases[j]
-            a_given_b, b_given_a = conditional(A, B), conditional(B, A)
-            res_b = fit.residual - B @ (B.T @ fit.residual)
-            res_a = fit.residual - A @ (A.T @ fit.residual)
-            t_ab = wald(res_b, a_given_b, shape, dof + B.shape[1], sparse_if_white=True)
-            t_ba = wald(res_a, b_given_a, shape, dof + A.shape[1], sparse_if_white=True)
+            t_ab, t_ba = encompassing(A, B, fit.residual, shape, dof)
             rival = Rival(j, t_ab, t_ba, correlation(fit.residual, A, B))
             a_adds = t_ab.tested and t_ab.pvalue <= alpha
             b_adds = t_ba.tested and t_ba.pvalue <= alpha
