@@ -327,6 +327,26 @@ def test_verb_end_to_end(tmp_path):
     assert json.loads(result.stdout)["effects"] == [] and result.exit_code == 0
 
 
+def test_data_without_noise_are_explained_to_rounding(tmp_path):
+    """Data simulated without noise fit to rounding (NRMS near 1e-11), which is not white: once
+    said "UNEXPLAINED: structure remains" with exit 1. A residual below ROUNDING of the torque
+    is rounding: nothing missing on clean data, the hidden friction exact on clean data with
+    it."""
+    runner = CliRunner()
+    clean, hidden = tmp_path / "clean.csv", tmp_path / "hidden.csv"
+    assert runner.invoke(main, ["simulate", "puma560", "-o", str(clean)]).exit_code == 0
+    result = runner.invoke(main, ["diagnose", "puma560", str(clean), "--format", "json"])
+    report = json.loads(result.stdout)
+    assert result.exit_code == 0 and report["verdict"] == "nothing missing" and report["effects"] == []
+    assert report["gap"]["after"] < 1e-9
+    runner.invoke(main, ["simulate", "planar_2r", "-o", str(hidden), "--effect", "viscous_friction:q1=0.5"])
+    result = runner.invoke(main, ["diagnose", "planar_2r", str(hidden), "--format", "json"])
+    report = json.loads(result.stdout)
+    assert result.exit_code == 0 and report["verdict"] == "explained"
+    assert [(e["kind"], e["coordinate"]) for e in report["effects"]] == [("viscous_friction", "q1")]
+    assert abs(report["effects"][0]["value"] - 0.5) < 1e-9
+
+
 def test_verb_bad_candidates_exit_2(tmp_path):
     runner = CliRunner()
     data = tmp_path / "d.csv"

@@ -16,10 +16,11 @@ predicted torque or from the bodies' inertial columns, so they exist only inside
   rigid body covers it.)
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
+from scipy.signal import bilinear, butter, lfilter, sosfiltfilt
 
 from baseparams.identify.selection import Candidate
 from baseparams.model.mechanism import Mechanism
@@ -127,19 +128,61 @@ def load_columns(torque: np.ndarray, qd: np.ndarray) -> np.ndarray:
     return out
 
 
+# A resonant lag that a named delay must outdo (diagnose._resonant_rival): damping ratios and
+# natural frequencies (multiples of the speeds' bandwidth) of the grid. Why this range: an
+# elastic joint resonating 1.5-3 times above the motion's band lags it like a delay of
+# 2 zeta / w; resonances above 4 times the band lag like a delay within it (the vocabulary's
+# "delay or phase lag"), and above zeta 0.35 there is no resonance to tell.
+RESONANT_DAMPING = (0.1, 0.2, 0.35)
+RESONANT_FREQUENCIES = tuple(np.geomspace(1.0, 4.0, 17))
+
+
+@dataclass(frozen=True)
+class LagEvidence:
+    """What tells a delay from other lags: the model's torque fitted together with the delay
+    (n, f), its second-order term -d2tau/dt2 (n, f), the sample step (s) and the speeds'
+    bandwidth (Hz; 0 when unknown)."""
+    torque: np.ndarray
+    curvature: np.ndarray
+    step: float
+    band: float
+
+    def rows(self, index: slice) -> "LagEvidence":
+        return LagEvidence(self.torque[index], self.curvature[index], self.step, self.band)
+
+    def resonant(self, acts: np.ndarray) -> Iterator[tuple[float, float, np.ndarray]]:
+        """(zeta, w in rad/s, columns (n, f, 1)) over the grid: the torque on the coordinates
+        ``acts`` (f,) through a second-order low-pass w^2 / (s^2 + 2 zeta w s + w^2)
+        (bilinear, from the first sample at rest), minus the torque: what an elastic
+        transmission or a resonant filter adds, up to its coefficient."""
+        if self.band <= 0:
+            return
+        for zeta in RESONANT_DAMPING:
+            for multiple in RESONANT_FREQUENCIES:
+                w = 2 * np.pi * self.band * multiple
+                if w >= np.pi / self.step:              # at or above the Nyquist frequency
+                    continue
+                b, a = bilinear([w ** 2], [1.0, 2 * zeta * w, w ** 2], fs=1.0 / self.step)
+                columns = np.zeros(self.torque.shape + (1,))
+                start = self.torque[0, acts]
+                columns[:, acts, 0] = lfilter(b, a, self.torque[:, acts] - start, axis=0) + start - self.torque[:, acts]
+                yield zeta, w, columns
+
+
 def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarray, t: np.ndarray,
                  torque: np.ndarray, fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                 cutoff: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """The delay's column (n, f, 1) and the second-order term's (n, f) that tells a delay from
-    an elastic lag (``diagnose._second_order``): -dtau/dt and -d2tau/dt2, tau the model's
-    torque fitted together with the delay (y = tau - d dtau/dt; :func:`fitted_torque`),
-    differentiated after a low-pass at ``cutoff``. Why the low-pass: the fitted noise lies
-    partly in fast directions of the model's span, whose derivative is large: on a generated
-    four-bar the column differed from the true -dtau/dt by 24-51 % when taken from the model
-    fitted alone and differentiated as it was, 3-8 % after both."""
+                 cutoff: float | None, band: float = 0.0) -> tuple[np.ndarray, LagEvidence]:
+    """The delay's column (n, f, 1) -dtau/dt, tau the model's torque fitted together with the
+    delay (y = tau - d dtau/dt; :func:`fitted_torque`), differentiated after a low-pass at
+    ``cutoff``; and the evidence that tells a delay from an elastic lag (``diagnose``), with
+    the speeds' bandwidth ``band``. Why the low-pass: the fitted noise lies partly in fast
+    directions of the model's span, whose derivative is large: on a generated four-bar the
+    column differed from the true -dtau/dt by 24-51 % when taken from the model fitted alone
+    and differentiated as it was, 3-8 % after both."""
     torque = fitted_torque(model, y, rows, known, torque, fit, lambda tau: -rate(tau, t, cutoff)[:, :, None])
     first = rate(torque, t, cutoff)
-    return -first[:, :, None], -np.gradient(first, t, axis=0)
+    step = float(np.median(np.diff(t)))
+    return -first[:, :, None], LagEvidence(torque, -np.gradient(first, t, axis=0), step, band)
 
 
 def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,

@@ -545,6 +545,16 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
     return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten), variant[best]
 
 
+def _complete(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
+              whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray) -> tuple[Fit, np.ndarray]:
+    """The complete model's fit (the model and every effect in ``in_model``, filtered by
+    ``whiten``, at ``weights``) and the column offsets of each effect (len(in_model) + 1)."""
+    p = model.shape[-1]
+    complete = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[i].columns for i in in_model],
+                                                         axis=-1)), whiten(y)).fit(weights)
+    return complete, np.cumsum([p] + [candidates[i].columns.shape[-1] for i in in_model])
+
+
 def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Sequence[int],
             rivals: dict[int, Candidate], level: float) -> dict[int, tuple[Test, Test]]:
     """Named effects (keys of ``rivals``, in ``in_model``) that their rival outdoes: given every
@@ -557,9 +567,7 @@ def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Se
     filtered = last.whiten                  # the identity when the noise was white
     n, f, p = model.shape
     candidates = selection.candidates
-    complete = WeightedLinearModel(filtered(np.concatenate([model] + [candidates[i].columns for i in in_model],
-                                                           axis=-1)), filtered(y)).fit(last.fit.weights)
-    offsets = np.cumsum([p] + [candidates[i].columns.shape[-1] for i in in_model])
+    complete, offsets = _complete(model, y, candidates, in_model, filtered, last.fit.weights)
     out = {}
     for i, rival in rivals.items():
         k = list(in_model).index(i)
@@ -576,6 +584,44 @@ def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Se
         if rival_adds and not own_adds:
             out[i] = (over_own, over_other)
     return out
+
+
+def weakest_over(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
+                 i: int, rivals: Sequence[np.ndarray], whiten: Callable[[np.ndarray], np.ndarray],
+                 weights: np.ndarray, scale: tuple[float, float]) -> tuple[Test, int] | None:
+    """What candidate ``i`` (in ``in_model``) adds over each rival (n, f) whose fitted
+    coefficient lies in ``scale`` (given every other effect in ``in_model``, ``i`` left out):
+    the weakest of those tests (largest p) and its rival's index; None when no rival is in
+    scale or ``i`` has no direction of its own. Why: a named effect that some member of a
+    physical family (a resonant lag over its grid) explains as well cannot be told from that
+    family on these data; the scale keeps the member physical (a third of a resonance, which
+    is no elastic joint, imitated a first-order filter's lag)."""
+    if not rivals:
+        return None
+    n, f, p = model.shape
+    complete, offsets = _complete(model, y, candidates, in_model, whiten, weights)
+    k = list(in_model).index(i)
+    fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
+    if fit is None:
+        return None
+    own = candidate_basis(whiten(candidates[i].columns), fit)
+    if own.shape[1] == 0:
+        return None
+    weakest: tuple[Test, int] | None = None
+    for r, rival in enumerate(rivals):
+        beyond = fit.orthogonal((whiten(rival) * fit.weights[None, :]).reshape(n * f, 1))[:, 0]
+        size = float(beyond @ beyond)
+        if size <= 0 or not scale[0] <= float(beyond @ fit.residual) / size <= scale[1]:
+            continue
+        other = candidate_basis(whiten(rival)[:, :, None], fit)
+        if other.shape[1] == 0:
+            continue
+        over, _ = encompassing(own, other, fit.residual, (n, f), fit.rank)
+        if not over.tested:              # no test to make: the rival is the candidate on these data
+            continue
+        if weakest is None or over.z < weakest[0].z:
+            weakest = (over, r)
+    return weakest
 
 
 # A selection is repeated when the complete model's residual asks for a filter differing from
