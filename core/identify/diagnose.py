@@ -110,6 +110,9 @@ class Problem:
     bodies: np.ndarray | None = None
     given: np.ndarray | None = None            # the given standard parameters (P,), or None
     wanted: set | None = None                  # derived candidates to build (None: all)
+    # white noise's autocorrelation at the fit's lags after the recording's filter and
+    # decimation (MeasuredData.noise_correlation), None when nothing was filtered
+    correlation: np.ndarray | None = None
 
 
 def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
@@ -132,7 +135,9 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     t = np.asarray(motion.t, float)
     qd = np.asarray(motion.qd, float)
     reduce = None
+    correlation = None
     if data is not None:
+        correlation = data.noise_correlation() if data.reduced else None
         if data.payloads:
             known = known + data.payload_force(inertial.matrix)
         reduce, t = data.reduce, data.t
@@ -158,10 +163,10 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
         notes.append("the inertial parameters are held as given (--params): bodies, payloads and "
                      "torque gains are candidates")
         return Problem(mechanism, independent_names(mechanism), t, fitted.matrix, known, candidates, notes,
-                       qd, inertial.matrix, given, wanted)
+                       qd, inertial.matrix, given, wanted, correlation)
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
     return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
-                   None, None, wanted)
+                   None, None, wanted, correlation)
 
 
 def _all_given(spec: EffectSpec) -> bool:
@@ -269,7 +274,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
     size = np.sqrt(np.mean(tau[rows] ** 2, axis=0))
-    unexplained = _unexplained(after, train, problem.coordinates, alpha, size)
+    unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
     dominated = _dominated(after, train, [full[i] for i in in_model], in_model, kept_named, problem.coordinates,
                            alpha, unexplained)
     if dominated:
@@ -278,7 +283,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                                 "values": {}, "reason": reason})
         in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
-        unexplained = _unexplained(after, train, problem.coordinates, alpha, size)
+        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap: dict = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
@@ -627,15 +632,15 @@ def _resonant_rival(model: np.ndarray, y: np.ndarray, candidates: list[Candidate
     0.2) was named a delay in 12 of 20 datasets; over the grid's best rival, true delays added
     with p below 5e-6 and the elastic joints' delays above 0.35 (8 datasets each)."""
     acts = np.any(candidates[delay].columns[:, :, 0] != 0, axis=0)
-    weakest = weakest_over(model, y, candidates, in_model, delay,
-                           [columns[:, :, 0] for _, _, columns in lag.resonant(acts)], whiten, weights,
-                           RESONANT_SCALE)
+    grid = list(lag.resonant(acts))
+    weakest = weakest_over(model, y, candidates, in_model, delay, [columns[:, :, 0] for _, _, columns in grid],
+                           whiten, weights, RESONANT_SCALE)
     if weakest is None:
         return ""
     test, k = weakest
-    zeta, w, _ = list(lag.resonant(acts))[k]
+    zeta, w, _ = grid[k]
     detail["over_resonant_lag_pvalue"] = test.pvalue
-    if test.tested and test.pvalue <= level:
+    if test.pvalue <= level:
         return ""
     return (f"a resonant lag (zeta {zeta:g}, {w / (2 * np.pi):.3g} Hz: an elastic transmission or a resonant "
             f"filter, not in the catalogue) explains what it does (the delay adds p = {test.pvalue:.2g} over it): "
@@ -846,11 +851,15 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> lis
     return out
 
 
-def noise_floor(residual: np.ndarray) -> np.ndarray:
-    """Per-coordinate noise SD from second differences (white noise: var = 6 sigma^2); a
-    smooth missing force barely changes it."""
+def noise_floor(residual: np.ndarray, correlation: np.ndarray | None = None) -> np.ndarray:
+    """Per-coordinate noise SD from second differences (white noise: var = 6 sigma^2; noise
+    with autocorrelation r: (6 - 8 r1 + 2 r2) sigma^2); a smooth missing force barely
+    changes it."""
+    r = np.zeros(3)
+    if correlation is not None:
+        r[:min(3, len(correlation))] = correlation[:3]
     d2 = np.diff(residual, n=2, axis=0)
-    return np.sqrt(np.mean(d2 ** 2, axis=0) / 6.0)
+    return np.sqrt(np.mean(d2 ** 2, axis=0) / max(6.0 - 8.0 * r[1] + 2.0 * r[2], 1e-12))
 
 
 # A coordinate's residual below this fraction of its torque's RMS is the arithmetic's rounding
@@ -859,16 +868,17 @@ ROUNDING = 1e-9
 
 
 def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str], alpha: float,
-                 size: np.ndarray) -> dict:
+                 size: np.ndarray, correlation: np.ndarray | None = None) -> dict:
     """Whiteness of the final fit's residual per coordinate (Ljung-Box, its null simulated
-    through the fit: :mod:`.whiteness`; Holm over the coordinates) and the residual against
-    the noise level; ``size``: each coordinate's torque RMS (training rows)."""
+    through the fit: :mod:`.whiteness`, with the recording's filter's ``correlation``; Holm
+    over the coordinates) and the residual against the noise level; ``size``: each
+    coordinate's torque RMS (training rows)."""
     residual, fit = prediction.residual, prediction.fit
     fit_part, hold_part = residual[:train], residual[train:]
-    sigma = noise_floor(fit_part)
+    sigma = noise_floor(fit_part, correlation)
     lags = min(LJUNG_BOX_LAGS, max(1, train // 5))
     weighted = fit.residual.reshape(train, len(coordinates))
-    stats, pvalues = monte_carlo_pvalues(weighted, fit.basis, lags, alpha)
+    stats, pvalues = monte_carlo_pvalues(weighted, fit.basis, lags, alpha, correlation=correlation)
     flat = np.std(weighted, axis=0) == 0
     flat |= np.sqrt(np.mean(residual[:train] ** 2, axis=0)) <= ROUNDING * size
     pvalues[flat] = 1.0

@@ -44,12 +44,32 @@ def replicates(coordinates: int, alpha: float) -> int:
     return max(MIN_REPLICATES, int(np.ceil(4 * coordinates / alpha)))
 
 
+def coloured_noise(rng: np.random.Generator, n: int, rest: tuple[int, ...], correlation: np.ndarray) -> np.ndarray:
+    """Stationary Gaussian noise (n, *rest) of unit variance with the autocorrelation
+    ``correlation`` (r[0] = 1, r[k] at lag k, zero beyond) along its first axis, by circulant
+    embedding (exact where the embedding's spectrum is non-negative, as a zero-phase
+    low-pass's is; clipped at zero elsewhere)."""
+    k = min(len(correlation) - 1, n - 1)
+    if k <= 0:
+        return rng.standard_normal((n,) + rest)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    row = np.zeros(size)
+    row[:k + 1] = correlation[:k + 1]
+    row[size - k:] = correlation[1:k + 1][::-1]
+    gain = np.sqrt(np.clip(np.fft.fft(row).real, 0.0, None)).reshape((size,) + (1,) * len(rest))
+    white = rng.standard_normal((size,) + rest)
+    return np.fft.ifft(gain * np.fft.fft(white, axis=0), axis=0).real[:n]
+
+
 def monte_carlo_pvalues(residual: np.ndarray, basis: np.ndarray, lags: int, alpha: float,
-                        seed: int = SEED) -> tuple[np.ndarray, np.ndarray]:
+                        seed: int = SEED, correlation: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
     """Per coordinate: the Ljung-Box statistic of ``residual`` (n, f; the weighted fit's
-    residual) and its p value (B + 1 counting) under white noise of unit level per weighted
+    residual) and its p value (B + 1 counting) under noise of unit level per weighted
     coordinate projected out of ``basis`` (n f, rank; orthonormal, the weighted model's range,
-    rows sample-major). Seeded: the same data always gets the same answer."""
+    rows sample-major): white, or with the autocorrelation ``correlation`` the recording's
+    filter and decimation give white noise (:meth:`.data.MeasuredData.noise_correlation`).
+    Seeded: the same data always gets the same answer."""
     n, f = residual.shape
     observed = ljung_box(residual, lags)
     total = replicates(f, alpha)
@@ -58,7 +78,10 @@ def monte_carlo_pvalues(residual: np.ndarray, basis: np.ndarray, lags: int, alph
     done = 0
     while done < total:
         b = min(CHUNK, total - done)
-        noise = rng.standard_normal((n * f, b))
+        if correlation is not None and len(correlation) > 1:
+            noise = coloured_noise(rng, n, (f, b), correlation).reshape(n * f, b)
+        else:
+            noise = rng.standard_normal((n * f, b))
         noise -= basis @ (basis.T @ noise)
         exceed += np.sum(ljung_box(noise.reshape(n, f, b), lags) >= observed[:, None], axis=1)
         done += b
