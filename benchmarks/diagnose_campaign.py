@@ -285,3 +285,83 @@ def payload(s: Setting, rng, rho=0.0, mass_fraction=None):
     from baseparams.identify.derived import body_name
     name = body_name(s.mechanism, s.mechanism.bodies[k].label)
     return clean + noise(rng, clean.shape, sd, rho), name, m, phi
+
+
+# ----- through a recording as a robot writes it --------------------------------------------------
+RECORDING_RATE = 1000.0             # Hz of the logs
+RECORDING_MOTORS = """
+[[motors]]
+name = "mot1"
+ratios = { q1 = "-50" }
+[[motors]]
+name = "mot2"
+ratios = { q2 = "80" }
+[[motors]]
+name = "mot3"
+ratios = { q2 = "30", q3 = "30" }
+"""
+RECORDING_RATIOS = np.array([[-50, 0, 0], [0, 80, 0], [0, 30, 30.0]])     # motor q = N q
+RECORDING_GAINS = np.array([0.5, 2.0, 0.8])
+RECORDING_TOML = """
+[recording]
+rate = {rate}
+[[runs]]
+files = {{ enc = "enc.csv", cur = "cur.csv" }}
+[position]
+mot1 = {{ column = "e1", unit = "deg" }}
+mot2 = {{ column = "e2", unit = "deg" }}
+mot3 = {{ column = "e3", unit = "deg" }}
+[torque]
+mot1 = {{ column = "i1", gain = 0.5 }}
+mot2 = {{ column = "i2", gain = 2.0 }}
+mot3 = {{ column = "i3", gain = 0.8 }}
+"""
+
+
+def motor_side_recording(folder, seed: int, hidden=(), *, delay: float = 0.0, rho: float = 0.0,
+                         ratio: float = 5.0) -> list[tuple[str, str, float]]:
+    """A motor-side log of a generated 3-R chain (``generate.serial_chain(seed, 3)``) with a
+    coupled motor: encoders in degrees (motor q = N q), currents with gains, 10 s at 1 kHz;
+    noise in the motor torques 2 % of each motor's RMS (AR(1) ``rho`` from one log sample to
+    the next); each hidden (kind, coordinate, coefficient name) scaled to effect/noise
+    ``ratio`` on the motor it shows most on; the torques lag ``delay`` s. Writes mech.toml,
+    rec.toml, enc.csv and cur.csv in ``folder``; returns the hidden effects with their values.
+    The recording is read with its defaults (low-pass and decimation: 1 kHz -> about 15 Hz)."""
+    from pathlib import Path
+
+    from baseparams.dynamics.trajectory import Trajectory
+    from baseparams.identify.model import Motion, design, effect_values
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    from baseparams.model.mechanism import EffectSpec
+    from baseparams.numeric.backends import Float64
+
+    folder = Path(folder)
+    text = generate.serial_chain(seed, bodies=3, types="R") + RECORDING_MOTORS
+    mech = parse_mechanism(text)
+    rng = np.random.default_rng(seed)
+    phi = random_physical_inertia(mech, rng)
+    t = np.arange(0, 10, 1 / RECORDING_RATE)
+    z, zd, zdd = Trajectory.default(mech).independent_values(mech, Float64(), t)
+    motion = Motion(t, *(np.stack([np.broadcast_to(np.asarray(v, float), t.shape) for v in a], axis=1)
+                         for a in (z, zd, zdd)))
+    inertial, _ = design(mech, motion)
+    clean = inertial.matrix @ phi
+    to_motors = np.linalg.inv(RECORDING_RATIOS.T)                # tau = N^T tau_motor
+    sd = NOISE * np.sqrt(np.mean((clean @ to_motors.T) ** 2, axis=0))
+    tau, values = clean.copy(), []
+    for kind, coordinate, name in hidden:
+        spec = EffectSpec(kind, coordinate, {name: 1.0})
+        force = design(mech, motion, [spec])[1].matrix @ effect_values(mech, [spec])
+        value = ratio / np.max(np.sqrt(np.mean((force @ to_motors.T) ** 2, axis=0)) / sd)
+        tau = tau + value * force
+        values.append((kind, coordinate, float(value)))
+    if delay:
+        tau = np.stack([np.interp(t - delay, t, tau[:, j]) for j in range(tau.shape[1])], axis=1)
+    current = (tau @ to_motors.T + noise(rng, tau.shape, sd, rho)) / RECORDING_GAINS
+    np.savetxt(folder / "enc.csv", np.degrees(motion.q @ RECORDING_RATIOS.T), delimiter=",", header="e1,e2,e3",
+               comments="", fmt="%.17g")
+    np.savetxt(folder / "cur.csv", current, delimiter=",", header="i1,i2,i3", comments="", fmt="%.17g")
+    (folder / "mech.toml").write_text(text)
+    (folder / "rec.toml").write_text(RECORDING_TOML.format(rate=RECORDING_RATE))
+    return values
