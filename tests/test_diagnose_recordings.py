@@ -57,7 +57,8 @@ def test_nothing_hidden_in_a_filtered_recording_is_nothing_missing(tmp_path):
     """White current noise, reduced by the recording's filter and decimation (r1 = 0.33 at the
     fit's rows): the verdict was "unexplained: structure remains" in 3 of 3 (Ljung-Box p
     0.004-0.008, residual 1.26-1.33 times the noise level); with the filter's colour expected,
-    "nothing missing" and the residual at the noise level (11 of 12 seeds measured)."""
+    "nothing missing" and the residual at the noise level (18 of 20 seeds in
+    ``bench_diagnose.py --outside``; 1 of 20 before)."""
     for seed in range(3):
         folder = tmp_path / str(seed)
         folder.mkdir()

@@ -20,6 +20,8 @@ import numpy as np
 MIN_REPLICATES = 200
 # Replicates simulated at once (memory: samples x coordinates x CHUNK floats).
 CHUNK = 50
+# Values of coloured noise drawn at once, its circulant embedding included (memory: 8 bytes each).
+COLOURED_VALUES = 8_000_000
 SEED = 20241123
 
 
@@ -56,9 +58,9 @@ def coloured_noise(rng: np.random.Generator, n: int, rest: tuple[int, ...], corr
     row = np.zeros(size)
     row[:k + 1] = correlation[:k + 1]
     row[size - k:] = correlation[1:k + 1][::-1]
-    gain = np.sqrt(np.clip(np.fft.fft(row).real, 0.0, None)).reshape((size,) + (1,) * len(rest))
+    gain = np.sqrt(np.clip(np.fft.rfft(row).real, 0.0, None)).reshape((size // 2 + 1,) + (1,) * len(rest))
     white = rng.standard_normal((size,) + rest)
-    return np.fft.ifft(gain * np.fft.fft(white, axis=0), axis=0).real[:n]
+    return np.fft.irfft(gain * np.fft.rfft(white, axis=0), size, axis=0)[:n]
 
 
 def monte_carlo_pvalues(residual: np.ndarray, basis: np.ndarray, lags: int, alpha: float,
@@ -79,6 +81,7 @@ def monte_carlo_pvalues(residual: np.ndarray, basis: np.ndarray, lags: int, alph
     while done < total:
         b = min(CHUNK, total - done)
         if correlation is not None and len(correlation) > 1:
+            b = min(b, max(1, COLOURED_VALUES // (4 * n * f)))      # the embedding is 2-4 times n
             noise = coloured_noise(rng, n, (f, b), correlation).reshape(n * f, b)
         else:
             noise = rng.standard_normal((n * f, b))
