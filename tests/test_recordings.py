@@ -5,6 +5,7 @@ acceleration, irregular time stamps, two runs with a seam, a known payload; iden
 through the description must recover what made the data."""
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,9 @@ from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec
 from baseparams.numeric.backends import Float64
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+from diagnose_campaign import RECORDING_MOTORS  # noqa: E402
 
 RATE = 1000.0          # Hz of the synthetic logs
 # q1..q3 from columns a, b, c and their forces from x, y, z
@@ -63,17 +67,7 @@ def _check_base(result, base, phi, rtol):
     assert error < rtol, (error, result.base_estimates, truth)
 
 
-MOTORS_3 = """
-[[motors]]
-name = "mot1"
-ratios = { q1 = "-50" }
-[[motors]]
-name = "mot2"
-ratios = { q2 = "80" }
-[[motors]]
-name = "mot3"
-ratios = { q2 = "30", q3 = "30" }
-"""
+MOTORS_3 = RECORDING_MOTORS       # mot1 = -50 q1, mot2 = 80 q2, mot3 = 30 (q2 + q3): the campaign's robot
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
