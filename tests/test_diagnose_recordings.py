@@ -73,7 +73,8 @@ def test_nothing_hidden_in_a_filtered_recording_is_nothing_missing(tmp_path):
 def test_friction_on_a_coupled_motor_is_named_through_the_recording(tmp_path, seed):
     """Viscous friction of the coupled motor mot3 (it turns with q2 + q3) and Coulomb friction
     on joint 1, hidden in the currents: both named, values within 5 %, the gap closed."""
-    hidden = motor_side_recording(tmp_path, seed, [("viscous_friction", "mot3", "fv"), ("coulomb_friction", "q1", "fc")])
+    hidden = motor_side_recording(tmp_path, seed, [("viscous_friction", "mot3", "fv"),
+                                                   ("coulomb_friction", "q1", "fc")])
     report = _diagnose(tmp_path)
     named = {(e["kind"], e["coordinate"]): e["value"] for e in report["effects"]}
     assert set(named) == {(kind, coordinate) for kind, coordinate, _ in hidden}

@@ -566,9 +566,9 @@ def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
     such datasets on the PUMA's fourth joint); on a generated chain an elastic joint's lag had
     an offset or cogging named on another joint (the inertial fit's compromise moves the lag
     there) in 2 of 20; with every joint's lag as the rival, none. (The recording's delay is not
-    tested against it: the rival generalises it, and a filter's lag, common to the joints but
-    not a pure delay, is not alike on joints whose torques differ in band: the test held such
-    lags back.)"""
+    tested against it: the rival generalises it; and a filter's phase lag, common to the
+    joints, differs between joints whose torques differ in band, so a test that every joint
+    lags alike held a first-order filter's lag back.)"""
     lag = next((c for c in chosen.candidates if c.kind == "delay" and c.coordinate == "all"), None)
     if lag is None or evidence is None or len(problem.coordinates) < 2:
         return []
@@ -578,8 +578,8 @@ def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
     for k, j in enumerate(lagging):
         columns[:, j, 2 * k], columns[:, j, 2 * k + 1] = lag.columns[:, j, 0], evidence.curvature[:, j]
     every = Candidate("lag", "every", tuple(f"a{k}" for k in range(columns.shape[-1])), columns)
-    rivals = {i: every for i in named
-              if chosen.candidates[i].coordinate in problem.coordinates and chosen.candidates[i].coordinate not in asked}
+    on_joints = set(problem.coordinates) - asked
+    rivals = {i: every for i in named if chosen.candidates[i].coordinate in on_joints}
     out = []
     for i, (over, under) in outdone(model, y, chosen, in_model, rivals, level).items():
         names = ", ".join(problem.coordinates[j] for j in lagging)
@@ -633,8 +633,9 @@ def _resonant_rival(model: np.ndarray, y: np.ndarray, candidates: list[Candidate
     the data cannot tell the two apart. Why: the second-order term alone (:func:`_second_order`)
     did not tell them apart on a one-coordinate four-bar, whose 21 inertial parameters absorb
     most of -d2tau/dt2 there: an elastic joint (resonance 1.5-3 times the torque's band, zeta
-    0.2) was named a delay in 12 of 20 datasets; over the grid's best rival, true delays added
-    with p below 5e-6 and the elastic joints' delays above 0.35 (8 datasets each)."""
+    0.2) was named a delay in 12 of 20 datasets; over the weakest test, true delays added with
+    p below 1e-44 (or had no rival in scale) and the elastic joints' delays with p 0.14-0.99
+    (8 datasets each)."""
     acts = np.any(candidates[delay].columns[:, :, 0] != 0, axis=0)
     grid = list(lag.resonant(acts))
     weakest = weakest_over(model, y, candidates, in_model, delay, [columns[:, :, 0] for _, _, columns in grid],
