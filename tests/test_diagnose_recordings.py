@@ -92,6 +92,13 @@ def test_a_delay_in_the_currents_is_named_through_the_recording(tmp_path):
     assert report["effects"][0]["value"] == pytest.approx(0.003, rel=0.15)
 
 
+def _joint_side_recording(folder: Path, joints: list[str]) -> None:
+    """rec.toml for ``simulate``'s log.csv in ``folder``: its time, positions and torques only."""
+    (folder / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n'
+                                     + "".join(f'{j} = "q_{j}"\n' for j in joints) + "[torque]\n"
+                                     + "".join(f'{j} = "tau_{j}"\n' for j in joints))
+
+
 def test_friction_on_every_joint_of_a_urdf_arm_is_named_through_a_recording(tmp_path):
     """A 7-joint arm from its URDF (the iiwa14: its joints' damping is known viscous friction)
     with Coulomb friction hidden on every joint (1.1 to 2.9 N m; noise 0.3 N m), logged at
@@ -106,12 +113,33 @@ def test_friction_on_every_joint_of_a_urdf_arm_is_named_through_a_recording(tmp_
     result = runner.invoke(main, ["simulate", urdf, "-o", str(log), "--samples", "20000", "--noise", "0.3",
                                   "--seed", "3", *hidden])
     assert result.exit_code == 0, result.output
-    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n'
-                                       + "".join(f'{j} = "q_{j}"\n' for j in joints) + "[torque]\n"
-                                       + "".join(f'{j} = "tau_{j}"\n' for j in joints))
+    _joint_side_recording(tmp_path, joints)
     result = runner.invoke(main, ["diagnose", urdf, str(tmp_path / "rec.toml"), "--format", "json", "--quiet"])
     report = json.loads(result.stdout)
     named = {(e["kind"], e["coordinate"]): e["coefficients"]["fc"]["value"] for e in report["effects"]}
     assert set(named) == {("coulomb_friction", j) for j in joints}
     for j, fc in truth.items():
         assert named["coulomb_friction", j] == pytest.approx(fc, rel=0.02)
+
+
+def test_a_payload_is_named_through_a_recording_against_the_robots_own_urdf(tmp_path):
+    """A UR5 carrying 1.5 kg at its last link's frame, logged at 2 kHz (noise 0.2 N m) and read
+    through a recording, diagnosed against the robot's own URDF held as given (--params): a
+    mass on wrist_3_link of 1.5 kg within 1 %, nothing else, the gap closed."""
+    urdf = Path(__file__).parent / "data" / "urdf" / "ur5.urdf"
+    text = urdf.read_text()
+    assert text.count('<mass value="0.1879"/>') == 1                  # wrist_3_link's
+    loaded = tmp_path / "ur5_payload.urdf"
+    loaded.write_text(text.replace('<mass value="0.1879"/>', '<mass value="1.6879"/>'))
+    runner = CliRunner()
+    result = runner.invoke(main, ["simulate", str(loaded), "-o", str(tmp_path / "log.csv"), "--samples", "20000",
+                                  "--noise", "0.2", "--seed", "4"])
+    assert result.exit_code == 0, result.output
+    joints = [h[2:] for h in (tmp_path / "log.csv").read_text().split("\n", 1)[0].split(",") if h.startswith("q_")]
+    _joint_side_recording(tmp_path, joints)
+    result = runner.invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
+                                  "--format", "json", "--quiet"])
+    report = json.loads(result.stdout)
+    assert [(e["kind"], e["coordinate"]) for e in report["effects"]] == [("mass", "wrist_3_link")]
+    assert report["effects"][0]["value"] == pytest.approx(1.5, rel=0.01)
+    assert report["verdict"] == "explained" and result.exit_code == 0
