@@ -1,8 +1,10 @@
 """diagnose through a recording as a robot writes it (issue 21 on the recordings issue):
 motor-side encoders in degrees, currents with gains, a coupled motor, noise in the currents,
-the recording's default low-pass and decimation. The reduction colours the noise at the fit's
-rows, which the whiteness test and the noise level must expect (else "structure remains"
-with nothing missing); what was hidden must be named with its value."""
+the recording's default low-pass and decimation; and joint-side logs of arms from their URDF
+(friction on every joint; a payload against the robot's own URDF held as given). The
+reduction colours the noise at the fit's rows, which the whiteness test and the noise level
+must expect (else "structure remains" with nothing missing); what was hidden must be named
+with its value."""
 
 import json
 import sys
