@@ -42,8 +42,7 @@ from baseparams.identify.model import Design, Motion, design, effect_values, eva
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.selection import (Candidate, Rival, Selection, Step, holm, outdone, select_whitened,
-                                          weakest_over,
-                                          simpler_in_place)
+                                          simpler_in_place, weakest_over)
 from baseparams.identify.whiteness import monte_carlo_pvalues, replicates
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism
@@ -261,10 +260,10 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     kept_named, unsupported = _gate(problem, model[rows], candidates, chosen.in_model, named, y[rows],
                                     weights, alpha, folds, checks, lag, whiten)
     in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
+    level = alpha / len(named) if named else alpha         # the gate's bar (Bonferroni over the named)
     replaced = _simpler_forms(problem, model[rows], y[rows], chosen, everything, full, unsupported, kept_named,
-                              in_model, weights, alpha / len(named) if named else alpha, folds, checks, lag)
-    for i, reason in _lag_stand_ins(problem, model[rows], y[rows], chosen, in_model, kept_named,
-                                    alpha / len(named) if named else alpha, lag):
+                              in_model, weights, level, folds, checks, lag)
+    for i, reason in _lag_stand_ins(problem, model[rows], y[rows], chosen, in_model, kept_named, level, lag):
         kept_named.remove(i)
         in_model.remove(i)
         checks.pop(i, None)

@@ -520,8 +520,7 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
     last = selection.steps[-1]
     filtered = last.whiten
     n, f, _ = model.shape
-    current = np.concatenate([model] + [candidates[i].columns for i in kept], axis=-1)
-    fit = WeightedLinearModel(filtered(current), filtered(y)).fit(last.fit.weights)
+    fit, _ = _complete(model, y, candidates, kept, filtered, last.fit.weights)
     tests, variant, bases = [NOT_TESTED] * len(candidates), {}, {}
     for j in simpler:
         seen = filtered.candidate(candidates[j]) if isinstance(filtered, Whitening) else candidates[j]
@@ -555,6 +554,18 @@ def _complete(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     return complete, np.cumsum([p] + [candidates[i].columns.shape[-1] for i in in_model])
 
 
+def _left_out(complete: Fit, offsets: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int], i: int,
+              whiten: Callable[[np.ndarray], np.ndarray]) -> tuple[Fit | Reduced, np.ndarray] | None:
+    """The complete fit with effect ``i`` left out (Frisch-Waugh-Lovell) and i's directions
+    beyond it; None when that needs a refit or i has no direction of its own."""
+    k = list(in_model).index(i)
+    fit = complete.without(range(offsets[k], offsets[k + 1]))
+    if fit is None:
+        return None
+    own = candidate_basis(whiten(candidates[i].columns), fit)
+    return (fit, own) if own.shape[1] else None
+
+
 def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Sequence[int],
             rivals: dict[int, Candidate], level: float) -> dict[int, tuple[Test, Test]]:
     """Named effects (keys of ``rivals``, in ``in_model``) that their rival outdoes: given every
@@ -570,13 +581,12 @@ def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Se
     complete, offsets = _complete(model, y, candidates, in_model, filtered, last.fit.weights)
     out = {}
     for i, rival in rivals.items():
-        k = list(in_model).index(i)
-        fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
-        if fit is None:
+        found = _left_out(complete, offsets, candidates, in_model, i, filtered)
+        if found is None:
             continue
-        own = candidate_basis(filtered(candidates[i].columns), fit)
+        fit, own = found
         other = candidate_basis(filtered(rival.columns), fit)
-        if own.shape[1] == 0 or other.shape[1] == 0:
+        if other.shape[1] == 0:
             continue
         over_other, over_own = encompassing(own, other, fit.residual, (n, f), fit.rank)
         rival_adds = over_own.tested and over_own.pvalue <= level
@@ -599,14 +609,10 @@ def weakest_over(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidat
     if not rivals:
         return None
     n, f, p = model.shape
-    complete, offsets = _complete(model, y, candidates, in_model, whiten, weights)
-    k = list(in_model).index(i)
-    fit: Fit | Reduced | None = complete.without(range(offsets[k], offsets[k + 1]))
-    if fit is None:
+    found = _left_out(*_complete(model, y, candidates, in_model, whiten, weights), candidates, in_model, i, whiten)
+    if found is None:
         return None
-    own = candidate_basis(whiten(candidates[i].columns), fit)
-    if own.shape[1] == 0:
-        return None
+    fit, own = found
     weakest: tuple[Test, int] | None = None
     for r, rival in enumerate(rivals):
         beyond = fit.orthogonal((whiten(rival) * fit.weights[None, :]).reshape(n * f, 1))[:, 0]
@@ -672,8 +678,7 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         fit: Fit | Reduced | None = None
         if weights is not None:
             if complete is None:
-                complete = WeightedLinearModel(whiten(np.concatenate(
-                    [model] + [candidates[j].columns for j in in_model], axis=-1)), whiten(y)).fit(weights)
+                complete, _ = _complete(model, y, candidates, in_model, whiten, weights)
             start = model.shape[-1] + sum(candidates[j].columns.shape[-1] for j in in_model[:in_model.index(i)])
             fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
         if fit is None:
