@@ -8,7 +8,7 @@ import pytest
 import statsmodels.api as sm
 from scipy import stats
 
-from baseparams.identify import selection as S
+from baseparams.identify import longrun, selection as S
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.diagnose import diagnose, prepare
 from baseparams.identify.model import evaluate
@@ -202,3 +202,48 @@ def test_sla_upper_arm_friction_is_named_not_left_ambiguous():
     assert any("compared again in the complete model" in note for note in d.notes)
     e = named["viscous_friction:theta_upper"]
     assert abs(e["value"] - truth["viscous_friction:theta_upper"]) < 4 * e["std"]
+
+
+def test_stationary_variance_is_the_double_sum_and_classical_without_lags():
+    """sum over t, s of b_t^T G(s - t) b_s with G the Bartlett-tapered cross-autocovariance
+    (two coordinates, two directions), computed term by term; with no lags, sigma^2 I on
+    orthonormal directions of one coordinate."""
+    rng = np.random.default_rng(3)
+    n, f, r, lags = 40, 2, 2, 3
+    e, b = rng.standard_normal((n, f)), rng.standard_normal((n, f, r))
+    expected = np.zeros((r, r))
+    for t in range(n):
+        for s in range(max(0, t - lags), min(n, t + lags + 1)):
+            h = s - t
+            g = sum(np.outer(e[u], e[u + h]) for u in range(max(0, -h), min(n, n - h)))
+            expected += (1 - abs(h) / (lags + 1)) * b[t].T @ g @ b[s]
+    assert np.allclose(longrun.stationary_variance(e, b, lags, 1.0), expected, rtol=1e-10)
+    Q = np.linalg.qr(rng.standard_normal((n, r)))[0]
+    one = e[:, :1]
+    assert np.allclose(longrun.stationary_variance(one, Q[:, None, :], 0, 7.0), float(one[:, 0] @ one[:, 0]) / 7.0 * np.eye(r))
+
+
+def test_sparse_direction_on_coloured_noise_has_its_size_with_the_stationary_variance():
+    """A direction on 6 samples, AR(1) 0.6 noise: refused without ``sparse_if_coloured``
+    (HAC would rest on 6 scores); with it, the test rejects at about its level."""
+    rng = np.random.default_rng(11)
+    n = 400
+    X = _smooth(n)[:, 0, :]
+    Q = S.orthonormal_basis(X, 1e-12)
+    z = np.zeros(n)
+    z[200:206] = 1.0
+    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    rejections, refused = [], 0
+    for _ in range(400):
+        w = rng.standard_normal(n)
+        y = np.empty(n)
+        y[0] = w[0]
+        for k in range(1, n):
+            y[k] = 0.6 * y[k - 1] + 0.8 * w[k]
+        e = y - Q @ (Q.T @ y)
+        refused += S.wald(e, U, (n, 1), 3, sparse_if_white=True).reason == "support"
+        t = S.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
+        if t.tested and t.lags > 0:
+            rejections.append(t.pvalue <= 0.05)
+    assert refused > 300 and len(rejections) > 300
+    assert 0.02 <= np.mean(rejections) <= 0.09

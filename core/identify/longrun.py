@@ -68,3 +68,21 @@ def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarra
     S = S_hac_simple(e, nlags=hac_lags(e))
     B = np.linalg.inv(np.eye(A.shape[0]) - A)
     return B @ S @ B.T
+
+
+def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int, scale: float) -> np.ndarray:
+    """The covariance (r, r) of directions^T e for noise e (n, f) whose cross-autocovariance
+    is the same at every sample: the residual's (Bartlett-tapered to ``lags``, estimated over
+    all samples, divided by ``scale``) seen through the directions' own (n, f, r)
+    autocorrelation: sum over h, j, k of w(h) R^e_jk(h) R^b_jk(h). Why: a direction acting on
+    a few samples (a friction step, whitened) has a HAC variance resting on a few scores; this
+    one rests on every sample, and with ``lags`` 0 it is the classical sigma^2 I."""
+    n, f, r = directions.shape
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    e = np.fft.rfft(residual, n=size, axis=0)                       # (M, f)
+    b = np.fft.rfft(directions, n=size, axis=0)                     # (M, f, r)
+    noise = np.fft.irfft(np.conj(e)[:, :, None] * e[:, None, :], n=size, axis=0)      # R^e_jk(h)
+    shape = np.fft.irfft(np.conj(b)[:, :, None, :, None] * b[:, None, :, None, :], n=size, axis=0)
+    h = np.concatenate([np.arange(lags + 1), np.arange(size - lags, size)])
+    w = 1.0 - np.minimum(h, size - h) / (lags + 1.0)
+    return np.einsum("h,hjk,hjkab->ab", w, noise[h], shape[h]) / scale
