@@ -610,15 +610,19 @@ CHAIN_ELASTIC_DELAY = [
 def test_one_elastic_joints_lag_is_not_named_the_recordings_delay():
     """q3 of a generated chain is elastic, and a delay of the whole recording was named (cv
     gain 7-9 %). Each joint's own delay: q3's 6.4-6.9 ms, the others' under 1.6 ms, each
-    significantly below half of q3's: one joint's lag, held back. True delays on the same
-    chain agree on every joint and stay named."""
+    significantly below half of q3's: one joint's lag, held back (in the first dataset, once
+    two ambiguous groups that predicted no held-out block left the model, the delay is too
+    small to name before that check). True delays on the same chain agree on every joint and
+    stay named."""
     s = C.generated_setting("chain4", 1200)
+    reasons = []
     for state in CHAIN_ELASTIC_DELAY:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
-        held = next(u for u in d.unsupported if u["kind"] == "delay")
-        assert held["reason"].startswith("only q3 lags")
-        assert held["per_joint_delay"]["q3"] > 4 * max(abs(v) for c, v in held["per_joint_delay"].items() if c != "q3")
+        reasons.append(next(u for u in d.unsupported if u["kind"] == "delay"))
+    held = reasons[1]
+    assert held["reason"].startswith("only q3 lags")
+    assert held["per_joint_delay"]["q3"] > 4 * max(abs(v) for c, v in held["per_joint_delay"].items() if c != "q3")
     rng = np.random.default_rng(5)
     for _ in range(3):
         data = C.delay(s, rng)
@@ -626,3 +630,24 @@ def test_one_elastic_joints_lag_is_not_named_the_recordings_delay():
         assert _named(d) == {("delay", "all")}
         per_joint = np.array(list(d.effects[0]["checks"]["per_joint_delay"].values()))
         assert np.all(np.abs(per_joint - data.extra["d"]) < 0.2 * data.extra["d"])
+
+
+def test_an_ambiguous_group_that_predicts_no_held_out_block_leaves_the_model():
+    """The gate on ambiguous groups, all members left out together: two near-copies of a
+    column the data do not contain are held back with the reason; two near-copies of the
+    hidden effect's column are kept. (On the TX40, a group of position and Stribeck friction
+    on joint 2 improved the held-out blocks by 0.15 %; beside it Coulomb friction on that
+    joint was too small to name, and both left.)"""
+    from baseparams.identify.diagnose import _gate
+    rng = np.random.default_rng(3)
+    n = 600
+    t = np.linspace(0.0, 10.0, n)
+    model = np.stack([np.ones(n), np.sin(t), np.cos(0.7 * t)], axis=1)[:, None, :]
+    effect, unrelated = np.sign(np.sin(2.3 * t)), np.sin(5.1 * t) * np.cos(0.3 * t)
+    candidates = [S.Candidate(kind, "a", ("c",), (column + 0.01 * rng.standard_normal(n))[:, None, None])
+                  for kind, column in [("x", effect), ("y", effect), ("z", unrelated), ("w", unrelated)]]
+    y = (model @ np.array([0.5, 1.0, -2.0]) + 0.5 * effect[:, None] + 0.1 * rng.standard_normal((n, 1)))
+    kept, out = _gate(None, model, candidates, [0, 1, 2, 3], [], y, np.ones(1), 0.05, 5, {},
+                      groups={0: [0, 1], 2: [2, 3]})
+    assert kept == [] and [u["index"] for u in out] == [2]
+    assert out[0]["members"] == [2, 3] and out[0]["reason"].startswith("ambiguous (z:a | w:a); all together: ")

@@ -257,9 +257,19 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     checks: dict = {}
     lag = lag.rows(rows) if lag is not None else None
     whiten = last.whiten
-    kept_named, unsupported = _gate(problem, model[rows], candidates, chosen.in_model, named, y[rows],
-                                    weights, alpha, folds, checks, lag, whiten)
-    in_model = [i for i in chosen.in_model if i not in {u["index"] for u in unsupported}]
+    # ambiguous groups first: one that does not predict held-out blocks leaves the model before
+    # the named effects are judged (it shares what they explain: judged beside it, Coulomb
+    # friction on the TX40's joint 2 was too small to name, and both left)
+    groups = {head: [head] + [r.index for r in rivals] for head, rivals in chosen.ambiguous.items()}
+    _, unsupported = _gate(problem, model[rows], candidates, chosen.in_model, [], y[rows], weights, alpha, folds,
+                           checks, groups=groups)
+    dropped = {j for u in unsupported for j in u["members"]}
+    in_model = [i for i in chosen.in_model if i not in dropped]
+    kept_named, held_back = _gate(problem, model[rows], candidates, in_model, named, y[rows],
+                                  weights, alpha, folds, checks, lag, whiten)
+    unsupported += held_back
+    dropped |= {u["index"] for u in held_back}
+    in_model = [i for i in in_model if i not in dropped]
     level = alpha / len(named) if named else alpha         # the gate's bar (Bonferroni over the named)
     replaced = _simpler_forms(problem, model[rows], y[rows], chosen, everything, full, unsupported, kept_named,
                               in_model, weights, level, folds, checks, lag)
@@ -299,7 +309,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     by_index = dict(zip(in_model, estimates))
     effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {})}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
-    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added if i in ambiguous_idx]
+    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added
+                 if i in ambiguous_idx and i not in dropped]
     white = unexplained["white"]
     closed = bool(white and not remaining and not unsupported)
     unexplained["significant_candidates_left"] = remaining
@@ -315,6 +326,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     notes = list(problem.notes) + replaced
     for u in unsupported:
         u.pop("index")
+        u.pop("members", None)
     for old, new in chosen.regrouped:
         notes.append(f"{candidates[old].label} and its rivals were ambiguous when they entered (their "
                      "difference acts on too few samples to test while other effects were missing from "
@@ -452,14 +464,17 @@ def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
 
 def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int], named: list[int],
           y: np.ndarray, weights: np.ndarray, alpha: float, folds: int, checks: dict,
-          lag: derived.LagEvidence | None = None, whiten: Callable[[np.ndarray], np.ndarray] = lambda x: x
-          ) -> tuple[list[int], list[dict]]:
+          lag: derived.LagEvidence | None = None, whiten: Callable[[np.ndarray], np.ndarray] = lambda x: x,
+          groups: dict[int, list[int]] | None = None) -> tuple[list[int], list[dict]]:
     """The named effects that hold up (physical, predicting held-out blocks, one coefficient for
     the whole recording, a delay not standing in for a resonant lag) and the others with
     their reasons (:mod:`.outofsample`); ``model``, ``y`` and ``lag`` (:func:`_derived`): the
     training rows; ``whiten``: the selection's last filter; ``checks`` receives each kept
-    effect's figures."""
-    if not named:
+    effect's figures. ``groups`` (an ambiguous group's strongest member: every member) must
+    predict held-out blocks too, all members left out together: the ones that do not are
+    returned with the others (index: the strongest member), their reason saying so."""
+    groups = groups or {}
+    if not named and not groups:
         return [], []
     checks.clear()
     blocks_ = [model] + [candidates[i].columns for i in in_model]
@@ -468,11 +483,23 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     estimates = coefficients(model, candidates, in_model, y, weights)
     widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
     offsets = np.cumsum([0] + widths)
-    spans = {i: range(offsets[in_model.index(i) + 1], offsets[in_model.index(i) + 2]) for i in named}
-    cv_all, *cv_drops = cross_validate(X, y, weights, folds, leave_out=list(spans.values()))
+
+    def span(i: int) -> range:
+        return range(offsets[in_model.index(i) + 1], offsets[in_model.index(i) + 2])
+
+    spans = {i: span(i) for i in named}
+    together = {head: [c for j in members for c in span(j)] for head, members in groups.items()}
+    cv_all, *cv_drops = cross_validate(X, y, weights, folds, leave_out=list(spans.values()) + list(together.values()))
     cv_without_of = dict(zip(spans, cv_drops))
     kept, out = [], []
-    level = alpha / len(named)
+    for head, cv_without in zip(together, cv_drops[len(spans):]):
+        reason = _too_small((cv_without.total - cv_all.total) / max(cv_all.total, 1e-300), y.shape[1])
+        if reason:
+            labels = " | ".join(candidates[j].label for j in groups[head])
+            out.append({"index": head, "kind": candidates[head].kind, "coordinate": candidates[head].coordinate,
+                        "values": {}, "reason": f"ambiguous ({labels}); all together: {reason}",
+                        "members": list(groups[head])})
+    level = alpha / len(named) if named else alpha
     for i in named:
         k = in_model.index(i)
         lo, hi = offsets[k + 1], offsets[k + 2]
@@ -487,17 +514,11 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
             stable = stability(partial, candidates[i].columns, weights, folds)
             detail = {"cv_gain": gain, "stability_pvalue": stable.pvalue, "spread": stable.spread,
                       "per_block": stable.values}
-            if gain <= 0:
-                reason = ("does not predict held-out blocks better: block cross-validation without it is "
-                          f"as good ({100 * gain:+.2g} %)")
-            elif gain < MIN_EFFECT_TO_NOISE ** 2 / y.shape[1]:
-                reason = (f"too small to name: held-out blocks improve by {100 * gain:.2g} % of the residual, "
-                          f"what an effect of RMS under {MIN_EFFECT_TO_NOISE:g} times one coordinate's noise "
-                          "SD gives")
-            elif stable.unstable(level):
+            reason = _too_small(gain, y.shape[1])
+            if not reason and stable.unstable(level):
                 reason = (f"its coefficient changes from block to block (spread {stable.spread:.2g} of its value, "
                           f"p = {stable.pvalue:.2g}): it stands in for something the catalogue lacks")
-            elif candidates[i].kind == "delay" and lag is not None:
+            elif not reason and candidates[i].kind == "delay" and lag is not None:
                 reason = (_second_order(X, y, weights, fit.rank, candidates[i], lag.curvature, level, detail)
                           or _one_joints_lag(X[:, :, others], y, weights, candidates[i], problem.coordinates,
                                              level, detail)
@@ -512,6 +533,18 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     return kept, out
 
 
+def _too_small(gain: float, coordinates: int) -> str:
+    """'' when an effect improving the block cross-validated residual by ``gain`` (a fraction)
+    is large enough to name; else why not."""
+    if gain <= 0:
+        return ("does not predict held-out blocks better: block cross-validation without it is "
+                f"as good ({100 * gain:+.2g} %)")
+    if gain < MIN_EFFECT_TO_NOISE ** 2 / coordinates:
+        return (f"too small to name: held-out blocks improve by {100 * gain:.2g} % of the residual, "
+                f"what an effect of RMS under {MIN_EFFECT_TO_NOISE:g} times one coordinate's noise SD gives")
+    return ""
+
+
 def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: Selection,
                    everything: list[Candidate], full: list[Candidate], unsupported: list[dict],
                    kept_named: list[int], in_model: list[int], weights: np.ndarray, alpha: float, folds: int,
@@ -522,7 +555,7 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
     ``unsupported`` (it is superseded, not unexplained). Updates the lists given; returns
     the notes saying what was replaced."""
     notes = []
-    for u in list(unsupported):
+    for u in [u for u in unsupported if "members" not in u]:       # not an ambiguous group
         found = simpler_in_place(model, y, chosen, u["index"], in_model, alpha)
         if found is None:
             continue
