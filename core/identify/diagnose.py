@@ -678,13 +678,13 @@ def _one_joints_lag(others: np.ndarray, y: np.ndarray, weights: np.ndarray, dela
     d, std = fit.coefficients[-acts.size:], fit.std[-acts.size:]
     if not np.all(np.isfinite(std)) or np.any(std <= 0):
         return ""
-    detail["per_joint_delay"] = {coordinates[j]: float(v) for j, v in zip(acts, d)}
+    detail["per_joint_delay"] = {coordinates[int(j)]: float(v) for j, v in zip(acts, d)}
     strongest = int(np.argmax(d / std))
     z = (d - COMMON_DELAY_FRACTION * d[strongest]) / std
     below = np.delete(z, strongest)
     if d[strongest] <= 0 or np.any(below > ndtri(level)):
         return ""
-    name = coordinates[acts[strongest]]
+    name = coordinates[int(acts[strongest])]
     return (f"only {name} lags ({1e3 * d[strongest]:.3g} ms on its own; every other joint significantly less than "
             f"half that, at most {1e3 * float(np.max(np.delete(d, strongest))):.3g} ms): one joint's lag (an elastic "
             f"joint, a drive's own filter), not the recording's; name delay:{name} in --candidates to test a delay "
