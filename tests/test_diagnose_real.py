@@ -229,11 +229,8 @@ def test_what_stands_in_for_one_joints_lag_is_not_named():
     says what they may stand in for."""
     s = C.setting("puma560", 1200)
     said = 0
-    for state, inc, has, value in Q4_LAGS:
-        rng = np.random.default_rng()
-        rng.bit_generator.state = {"bit_generator": "PCG64", "state": {"state": state, "inc": inc},
-                                   "has_uint32": has, "uinteger": value}
-        data = C.joint_delay(s, rng)
+    for state in Q4_LAGS:
+        data = C.joint_delay(s, _at(state))
         assert ("delay", "q4") in data.acceptable
         d = diagnose(s.problem, data.tau)
         assert _named(d) <= data.acceptable
@@ -554,11 +551,8 @@ def test_what_stands_in_for_another_joints_elastic_lag_is_not_named():
     blocks) and on q4 were named, the inertial fit's compromise having moved q2's lag there;
     the lag of every joint's torque outdoes them, so nothing is named."""
     s = C.generated_setting("chain4", 1200)
-    for state, inc, has, value in CHAIN_ELASTIC:
-        rng = np.random.default_rng()
-        rng.bit_generator.state = {"bit_generator": "PCG64", "state": {"state": state, "inc": inc},
-                                   "has_uint32": has, "uinteger": value}
-        d = diagnose(s.problem, C.compliance(s, rng).tau)
+    for state in CHAIN_ELASTIC:
+        d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
         assert any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
 
@@ -577,6 +571,7 @@ FOUR_BAR_AR_GEAR_LOSS = [
 
 
 def _at(state: tuple) -> np.random.Generator:
+    """A generator at a recorded PCG64 state (state, increment, has_uint32, uinteger)."""
     rng = np.random.default_rng()
     rng.bit_generator.state = {"bit_generator": "PCG64", "state": {"state": state[0], "inc": state[1]},
                                "has_uint32": state[2], "uinteger": state[3]}

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import statsmodels.api as sm
 from scipy import stats
+from scipy.signal import lfilter
 
 from baseparams.identify import longrun, selection as S
 from baseparams.identify.linear import WeightedLinearModel
@@ -135,14 +136,18 @@ def test_sparse_direction_on_a_white_residual_gets_the_classical_test():
     assert test.pvalue == pytest.approx(float(ols.pvalues[-1]), rel=1e-6)
 
 
+def _six_samples(n: int, start: int) -> tuple[np.ndarray, np.ndarray]:
+    """The small model's orthonormal basis, and a direction beyond it acting on 6 samples."""
+    Q = S.orthonormal_basis(_smooth(n)[:, 0, :], 1e-12)
+    z = np.zeros(n)
+    z[start:start + 6] = 1.0
+    return Q, S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+
+
 def test_sparse_direction_test_has_its_size_on_white_noise():
     rng = np.random.default_rng(9)
     n = 300
-    X = _smooth(n)[:, 0, :]
-    Q = S.orthonormal_basis(X, 1e-12)
-    z = np.zeros(n)
-    z[100:106] = 1.0
-    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    Q, U = _six_samples(n, 100)
     rejections = []
     for _ in range(400):
         y = rng.standard_normal(n)
@@ -228,18 +233,10 @@ def test_sparse_direction_on_coloured_noise_has_its_size_with_the_stationary_var
     (HAC would rest on 6 scores); with it, the test rejects at about its level."""
     rng = np.random.default_rng(11)
     n = 400
-    X = _smooth(n)[:, 0, :]
-    Q = S.orthonormal_basis(X, 1e-12)
-    z = np.zeros(n)
-    z[200:206] = 1.0
-    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    Q, U = _six_samples(n, 200)
     rejections, refused = [], 0
     for _ in range(400):
-        w = rng.standard_normal(n)
-        y = np.empty(n)
-        y[0] = w[0]
-        for k in range(1, n):
-            y[k] = 0.6 * y[k - 1] + 0.8 * w[k]
+        y = lfilter([0.8], [1.0, -0.6], rng.standard_normal(n))
         e = y - Q @ (Q.T @ y)
         refused += S.wald(e, U, (n, 1), 3, sparse_if_white=True).reason == "support"
         t = S.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)

@@ -665,7 +665,7 @@ def _one_joints_lag(others: np.ndarray, y: np.ndarray, weights: np.ndarray, dela
     prewhitened HAC) than COMMON_DELAY_FRACTION of that one's: one joint's lag (an elastic
     joint, a drive's own filter) that the recording's delay stands in for. Why: on a
     generated chain whose third joint is elastic, a delay was named in 2 of 20 datasets:
-    that joint's own delay was 6.4-7.0 ms, 18 SD from zero, the others' -0.5 to 1.1 ms; true
+    that joint's own delay was 6.4-6.9 ms, 18 SD from zero, the others' -0.5 to 1.5 ms; true
     delays agreed on every joint to 5 %. (An equality test held back a first-order filter's
     lag: its phase lag differs between joints whose torques differ in band; half is far
     from that.)"""

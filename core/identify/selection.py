@@ -789,9 +789,9 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
     as likely. Once the model is complete the residual is white and the comparison can be
     made. (On whitened data the comparison is made at once with the stationary variance:
     there the residual's colour is the noise's, and waiting for a white one would wait for
-    ever.) Groups formed with every comparison made are
-    left as they are: the data did not separate them, and a second look with the same data
-    would only add chances of a wrong name."""
+    ever.) Groups formed with every comparison made are left as they are: the data did not
+    separate them, and a second look with the same data would only add chances of a wrong
+    name."""
     n, f, _ = model.shape
     for head, rivals in list(ambiguous.items()):
         if head in done:
