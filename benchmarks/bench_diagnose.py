@@ -262,7 +262,13 @@ def main():
                         help="issue 21's campaign instead: coloured noise, new kinds, mismatches outside "
                              "the catalogue, payloads with --params, the std calibration, the TX40's timing")
     parser.add_argument("--count", type=int, default=40, help="datasets per scenario with --outside [40]")
+    parser.add_argument("--four-bar-power", action="store_true",
+                        help="only the four-bar under AR noise at effect/noise 5, 10, 20 (--count, --seed)")
     args = parser.parse_args()
+    if args.four_bar_power:
+        from bench_diagnose_outside import four_bar_power_table
+        four_bar_power_table(args)
+        return
     if args.outside:
         from bench_diagnose_outside import run_outside
         run_outside(args)

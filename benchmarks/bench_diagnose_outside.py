@@ -65,6 +65,20 @@ def generated_table(args):
                       f"right of seeable {r['right_of_seeable']}", flush=True)
 
 
+def four_bar_power_table(args):
+    """The one-coordinate four-bar under AR(1) 0.9 noise at rising effect/noise: whether its
+    misses are power (fewer at a larger effect) or a wrong name that stays (load friction taken
+    for position friction). ``--four-bar-power`` runs this alone."""
+    s = C.generated_setting("four_bar2", 1200)
+    for ratio in (5.0, 10.0, 20.0):
+        for label, make in (("gear_loss", C.gear_loss), ("coulomb", C.INSIDE["coulomb"])):
+            rng = np.random.default_rng(args.seed)
+            outcomes = [C.run(s, make, rng, rho=0.9, ratio=ratio)[2] for _ in range(args.count)]
+            r, n = rates(outcomes)
+            print(f"  four_bar2  {label:10s} AR 0.9  effect/noise {ratio:4.0f}  n {n:3d}  right {r['right']}  "
+                  f"ambiguous {r['ambiguous']}  none {r['none']}  WRONG {r['wrong']}", flush=True)
+
+
 def payload_table(s, args, rng):
     hits, within = 0, 0
     for _ in range(args.count):
