@@ -70,13 +70,20 @@ def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarra
     return B @ S @ B.T
 
 
-def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int, scale: float) -> np.ndarray:
+def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int, scale: float,
+                        truncated: bool = False) -> np.ndarray:
     """The covariance (r, r) of directions^T e for noise e (n, f) whose cross-autocovariance
     is the same at every sample: the residual's (Bartlett-tapered to ``lags``, estimated over
     all samples, divided by ``scale``) seen through the directions' own (n, f, r)
     autocorrelation: sum over h, j, k of w(h) R^e_jk(h) R^b_jk(h). Why: a direction acting on
     a few samples (a friction step, whitened) has a HAC variance resting on a few scores; this
-    one rests on every sample, and with ``lags`` 0 it is the classical sigma^2 I."""
+    one rests on every sample, and with ``lags`` 0 it is the classical sigma^2 I.
+
+    ``truncated``: weights 1 up to ``lags`` (no taper), never below the Bartlett form (in
+    the matrix order). Why: for a direction on a few neighbouring samples the taper only
+    biases (under AR(1) 0.6 it leaves out a sixth of the variance, the test rejects 7.7 %
+    at 5 %; truncated 6.3 %), and the estimate rests on every sample, so the taper buys
+    no stability; the floor keeps the variance positive where the truncated kernel is not."""
     n, f, r = directions.shape
     size = 1 << int(np.ceil(np.log2(2 * n)))
     e = np.fft.rfft(residual, n=size, axis=0)                       # (M, f)
@@ -84,5 +91,40 @@ def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int,
     noise = np.fft.irfft(np.conj(e)[:, :, None] * e[:, None, :], n=size, axis=0)      # R^e_jk(h)
     shape = np.fft.irfft(np.conj(b)[:, :, None, :, None] * b[:, None, :, None, :], n=size, axis=0)
     h = np.concatenate([np.arange(lags + 1), np.arange(size - lags, size)])
-    w = 1.0 - np.minimum(h, size - h) / (lags + 1.0)
-    return np.einsum("h,hjk,hjkab->ab", w, noise[h], shape[h]) / scale
+    terms = np.einsum("hjk,hjkab->hab", noise[h], shape[h]) / scale
+    bartlett = np.einsum("h,hab->ab", 1.0 - np.minimum(h, size - h) / (lags + 1.0), terms)
+    if not truncated or lags == 0:
+        return bartlett
+    return at_least(terms.sum(axis=0), bartlett)
+
+
+def at_least(V: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """``V`` raised to at least ``floor`` in the matrix order (floor positive definite):
+    the directions where V is smaller take floor's variance."""
+    try:
+        L = np.linalg.cholesky((floor + floor.T) / 2)
+    except np.linalg.LinAlgError:
+        return floor
+    inner = np.linalg.solve(L, np.linalg.solve(L, (V + V.T) / 2).T)
+    values, vectors = np.linalg.eigh((inner + inner.T) / 2)
+    raised = (vectors * np.maximum(values, 1.0)) @ vectors.T
+    return L @ raised @ L.T
+
+
+# samples in the moving window of the local noise level (at least; wider with the HAC window)
+LOCAL_WINDOW = 25
+
+
+def local_power(residual: np.ndarray, lags: int) -> np.ndarray:
+    """Each sample's noise power (n, f) relative to its coordinate's mean: the moving mean of
+    the squared residual over ``LOCAL_WINDOW`` or 2 ``lags`` + 1 samples, whichever is wider.
+    Why: real residuals are larger in some regimes (at velocity reversals, under load) and a
+    direction acting on a few samples there has a larger variance than the residual's
+    overall level says."""
+    from scipy.ndimage import uniform_filter1d
+    window = min(max(LOCAL_WINDOW, 2 * lags + 1), len(residual))
+    mean = np.mean(residual ** 2, axis=0)
+    live = mean > 0
+    power = np.ones_like(residual)
+    power[:, live] = uniform_filter1d(residual[:, live] ** 2, size=window, axis=0, mode="nearest") / mean[live]
+    return power

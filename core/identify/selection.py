@@ -41,7 +41,7 @@ import numpy as np
 from scipy.special import fdtrc
 from scipy.optimize import minimize_scalar
 
-from baseparams.identify.longrun import hac_lags, long_run, stationary_variance
+from baseparams.identify.longrun import hac_lags, local_power, long_run, stationary_variance
 from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
 from baseparams.numeric.rank import numerical_rank
@@ -245,17 +245,20 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     if sparse:
         rows = n * f
         left = max(rows - dof - r, 1)
+        if lags > 0 and not sparse_if_coloured:
+            return TOO_SPARSE
+        noise, directions = augmented.reshape(n, f), basis.reshape(n, f, r)
         if lags > 0:
-            if not sparse_if_coloured:
-                return TOO_SPARSE
-            V = stationary_variance(augmented.reshape(n, f), basis.reshape(n, f, r), lags, left / f)
-            try:
-                stat = float(gamma @ np.linalg.solve(V, gamma))
-            except np.linalg.LinAlgError:
-                stat = float(gamma @ np.linalg.pinv(V) @ gamma)
+            V = stationary_variance(noise, directions, lags, left / f, truncated=True)
         else:
-            sigma2 = float(augmented @ augmented) / left
-            stat = float(gamma @ gamma) / sigma2
+            V = float(augmented @ augmented) / left * np.eye(r)
+        # each direction's variance scaled up by the noise's local power where it acts, when
+        # that is above the residual's average: a direction where the residual is larger
+        # (at velocity reversals, under load) is not named on that excess
+        power = local_power(noise, lags)
+        energy = directions ** 2
+        factor = np.sqrt(np.maximum(np.einsum("tj,tjr->r", power, energy) / energy.sum(axis=(0, 1)), 1.0))
+        stat = _quadratic(gamma / factor, V)
         pvalue = float(fdtrc(r, left, stat / r))     # F(r, left) upper tail (stats.f.sf, 40x faster)
         return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
     scores = (basis * augmented[:, None]).reshape(n, f, r).sum(axis=1)
@@ -270,13 +273,18 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
         classical = float(augmented @ augmented) / max(rows - dof - r, 1)
         values, vectors = np.linalg.eigh(S)
         S = (vectors * np.maximum(values, classical)) @ vectors.T
-    try:
-        stat = float(gamma @ np.linalg.solve(S, gamma))
-    except np.linalg.LinAlgError:
-        stat = float(gamma @ np.linalg.pinv(S) @ gamma)
+    stat = _quadratic(gamma, S)
     denominator = max(n - int(np.ceil(dof / f)) - r, 1)     # samples left: scores are per sample
     pvalue = float(fdtrc(k, denominator, stat / k))
     return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
+
+
+def _quadratic(gamma: np.ndarray, V: np.ndarray) -> float:
+    """gamma' V^-1 gamma (the pseudo-inverse when V is singular)."""
+    try:
+        return float(gamma @ np.linalg.solve(V, gamma))
+    except np.linalg.LinAlgError:
+        return float(gamma @ np.linalg.pinv(V) @ gamma)
 
 
 def candidate_basis(candidate: "Candidate | np.ndarray", fit: "Fit | Reduced") -> np.ndarray:
