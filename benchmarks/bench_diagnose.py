@@ -264,7 +264,13 @@ def main():
     parser.add_argument("--count", type=int, default=40, help="datasets per scenario with --outside [40]")
     parser.add_argument("--four-bar-power", action="store_true",
                         help="only the four-bar under AR noise at effect/noise 5, 10, 20 (--count, --seed)")
+    parser.add_argument("--uneven", action="store_true",
+                        help="only nothing hidden with the noise's level changing with the motion (--count, --seed)")
     args = parser.parse_args()
+    if args.uneven:
+        from bench_diagnose_outside import uneven_table
+        uneven_table(args)
+        return
     if args.four_bar_power:
         from bench_diagnose_outside import four_bar_power_table
         four_bar_power_table(args)

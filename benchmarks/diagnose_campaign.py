@@ -225,6 +225,28 @@ def joint_delay(s, rng, rho=0.0, ratio=None):
                    sd, phi, {"d": d})
 
 
+# nothing hidden, the noise's level changing with the motion (as real residuals do)
+def reversal_noise(s, rng, rho=0.0, ratio=None):
+    """Nothing hidden; each coordinate's noise up to 4 times larger at its velocity reversals
+    (1 + 3 exp(-(qd / 0.1 RMS)^2), scaled to the same RMS): a friction's unmodelled
+    transition, backlash."""
+    phi, clean, sd = base(s, rng)
+    qd = s.motion.qd
+    level = 1 + 3 * np.exp(-(qd / (0.1 * np.sqrt(np.mean(qd ** 2, axis=0)))) ** 2)
+    level = level / np.sqrt(np.mean(level ** 2, axis=0))
+    return Dataset(clean + noise(rng, clean.shape, sd, rho) * level, set(), set(), sd, phi, {})
+
+
+def load_noise(s, rng, rho=0.0, ratio=None):
+    """Nothing hidden; each coordinate's noise growing with its torque (0.2 + |tau| / RMS,
+    scaled to the same RMS): a current sensor's error proportional to the current."""
+    phi, clean, sd = base(s, rng)
+    level = 0.2 + np.abs(clean) / np.sqrt(np.mean(clean ** 2, axis=0))
+    level = level / np.sqrt(np.mean(level ** 2, axis=0))
+    return Dataset(clean + noise(rng, clean.shape, sd, rho) * level, set(), set(), sd, phi, {})
+
+
+UNEVEN = {"noise 4 x at reversals": reversal_noise, "noise growing with torque": load_noise}
 INSIDE = {"viscous": catalogue("viscous_friction"), "coulomb": catalogue("coulomb_friction"),
           "offset": catalogue("offset"), "spring": catalogue("spring"), "rotor_inertia": catalogue("rotor_inertia")}
 NEW = {"smooth_coulomb": smooth_coulomb, "delay": delay, "gear_loss": gear_loss}
