@@ -378,7 +378,8 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
     delay from other lags (every row), None without a delay candidate."""
     torque = problem.known.copy()
     wanted = problem.wanted
-    delay = lag = None
+    delay: list[tuple[dict, np.ndarray]] = []
+    lag: derived.LagEvidence | None = None
     alone = torque
     if model.shape[-1]:
         fit = WeightedLinearModel(model[rows], y[rows]).fit()
@@ -391,8 +392,13 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
         if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
             step = float(np.median(np.diff(problem.t)))
             band = bandwidth(problem.qd[rows], step) if problem.qd is not None else 0.0
-            delay, lag = derived.delay_column(model, y, rows, problem.known, problem.t, alone, at_weights,
-                                              derived.DELAY_CUTOFF_PER_BANDWIDTH * band if band > 0 else None, band)
+            multiples = derived.DELAY_CUTOFFS_PER_BANDWIDTH if band > 0 else (None,)
+            for multiple in multiples:
+                cutoff = multiple * band if multiple is not None else None
+                column, evidence = derived.delay_column(model, y, rows, problem.known, problem.t, alone,
+                                                        at_weights, cutoff, band)
+                lag = evidence if multiple == derived.DELAY_CUTOFF_PER_BANDWIDTH or lag is None else lag
+                delay.append(({"low_pass": cutoff} if cutoff is not None else {}, column))
         if problem.qd is not None and (wanted is None or any(kind == "load_friction" for kind, _ in wanted)):
             qd_ = problem.qd
             torque = derived.fitted_torque(model, y, rows, problem.known, alone, at_weights,
