@@ -398,7 +398,7 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
                 column, evidence = derived.delay_column(model, y, rows, problem.known, problem.t, alone,
                                                         at_weights, cutoff, band)
                 lag = evidence if multiple == derived.DELAY_CUTOFF_PER_BANDWIDTH or lag is None else lag
-                delay.append(({"low_pass": cutoff} if cutoff is not None else {}, column))
+                delay.append(({"low_pass_hz": cutoff} if cutoff is not None else {}, column))
         if problem.qd is not None and (wanted is None or any(kind == "load_friction" for kind, _ in wanted)):
             qd_ = problem.qd
             torque = derived.fitted_torque(model, y, rows, problem.known, alone, at_weights,
