@@ -83,9 +83,9 @@ def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarra
         for j, c in enumerate(coordinates):      # one drive's own lag, when asked for (DEFAULT_PLACES)
             if f > 1 and wanted is not None and ("delay", c) in wanted:
                 def own(column: np.ndarray, j: int = j) -> np.ndarray:
-                    out = np.zeros_like(column)
-                    out[:, j] = column[:, j]
-                    return out
+                    on_j = np.zeros_like(column)
+                    on_j[:, j] = column[:, j]
+                    return on_j
                 out.append(candidate(c, f"d_{c}", own))
     return out
 

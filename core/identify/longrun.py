@@ -4,6 +4,7 @@ covariance (:mod:`.linear`), the selection's Wald tests (:mod:`.selection`) and 
 stability test (:mod:`.outofsample`) share."""
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 
@@ -81,9 +82,10 @@ def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int,
 
     ``truncated``: weights 1 up to ``lags`` (no taper), never below the Bartlett form (in
     the matrix order). Why: for a direction on a few neighbouring samples the taper only
-    biases (under AR(1) 0.6 it leaves out a sixth of the variance, the test rejects 7.7 %
-    at 5 %; truncated 6.3 %), and the estimate rests on every sample, so the taper buys
-    no stability; the floor keeps the variance positive where the truncated kernel is not."""
+    biases (under AR(1) 0.6 it leaves out a sixth of the variance and the test rejects 7.2 %
+    at 5 %, 5.1 % truncated: benchmarks/bench_stationary_variance.py), and the estimate rests
+    on every sample, so the taper buys no stability; the floor keeps the variance positive
+    where the truncated kernel is not."""
     n, f, r = directions.shape
     size = 1 << int(np.ceil(np.log2(2 * n)))
     e = np.fft.rfft(residual, n=size, axis=0)                       # (M, f)
@@ -121,7 +123,6 @@ def local_power(residual: np.ndarray, lags: int) -> np.ndarray:
     Why: real residuals are larger in some regimes (at velocity reversals, under load) and a
     direction acting on a few samples there has a larger variance than the residual's
     overall level says."""
-    from scipy.ndimage import uniform_filter1d
     window = min(max(LOCAL_WINDOW, 2 * lags + 1), len(residual))
     mean = np.mean(residual ** 2, axis=0)
     live = mean > 0

@@ -230,7 +230,9 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     orthogonal to the null model, the weighted noise has one level per row) is exact for
     white noise however few samples the directions act on (see :func:`resolve`); and, with
     ``sparse_if_coloured`` too, on a coloured residual the variance from its autocovariance
-    over all samples (:func:`~baseparams.identify.longrun.stationary_variance`)."""
+    over all samples (:func:`~baseparams.identify.longrun.stationary_variance`); either
+    scaled up by the noise's local power where the direction acts
+    (:func:`~baseparams.identify.longrun.local_power`) when that is above its average."""
     r = basis.shape[1]
     if r == 0:
         return NOT_TESTED
