@@ -104,7 +104,7 @@ DELAY_CUTOFF_PER_BANDWIDTH = 10.0
 # 10 times, 6e-4 at 20 times; viscous friction was named for the delay in 2 of 20 such
 # datasets, 1 of 20 with the grid). The data chose 20 or 40 times on most datasets, white
 # noise too, and the fitted delay stayed within 1 % (white) and 5 % (AR) of the truth as before.
-DELAY_CUTOFFS_PER_BANDWIDTH = (10.0, 20.0, 40.0)
+DELAY_CUTOFFS_PER_BANDWIDTH = (DELAY_CUTOFF_PER_BANDWIDTH, 20.0, 40.0)
 
 
 def rate(torque: np.ndarray, t: np.ndarray, cutoff: float | None) -> np.ndarray:

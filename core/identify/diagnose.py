@@ -392,12 +392,11 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
         if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
             step = float(np.median(np.diff(problem.t)))
             band = bandwidth(problem.qd[rows], step) if problem.qd is not None else 0.0
-            multiples = derived.DELAY_CUTOFFS_PER_BANDWIDTH if band > 0 else (None,)
-            for multiple in multiples:
-                cutoff = multiple * band if multiple is not None else None
+            cutoffs = [m * band for m in derived.DELAY_CUTOFFS_PER_BANDWIDTH] if band > 0 else [None]
+            for cutoff in cutoffs:               # the first low-pass's evidence tells a delay from a lag
                 column, evidence = derived.delay_column(model, y, rows, problem.known, problem.t, alone,
                                                         at_weights, cutoff, band)
-                lag = evidence if multiple == derived.DELAY_CUTOFF_PER_BANDWIDTH or lag is None else lag
+                lag = lag or evidence
                 delay.append(({"low_pass_hz": cutoff} if cutoff is not None else {}, column))
         if problem.qd is not None and (wanted is None or any(kind == "load_friction" for kind, _ in wanted)):
             qd_ = problem.qd
