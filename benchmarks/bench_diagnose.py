@@ -52,7 +52,7 @@ from collections import Counter, defaultdict  # noqa: E402
 import numpy as np  # noqa: E402
 
 from baseparams.identify import selection as S  # noqa: E402
-from baseparams.identify.linear import WeightedLinearModel  # noqa: E402
+from baseparams.identify.linear import RANK_TOL, WeightedLinearModel  # noqa: E402
 from baseparams.identify.diagnose import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
 from baseparams.identify.model import evaluate  # noqa: E402
 from baseparams.identify.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
@@ -114,7 +114,7 @@ def identifiable_ratio(problem, force, sd, train):
     n, f, p = problem.inertial.shape
     A = (problem.inertial[:train] / sd[None, :, None]).reshape(train * f, p)
     u, s, _ = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), full_matrices=False)
-    u = u[:, s > S.RANK_TOL * s[0]]
+    u = u[:, s > RANK_TOL * s[0]]
     b = (force[:train] / sd).reshape(train * f)
     beyond = (b - u @ (u.T @ b)).reshape(train, f)
     return float(np.max(np.sqrt(np.mean(beyond ** 2, axis=0))))
