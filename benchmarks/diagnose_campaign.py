@@ -7,7 +7,8 @@ answer. A "confident wrong name" is an effect under ``effects`` (named, not ambi
 held back as unsupported) that is not the truth (or, for a mismatch outside the catalogue,
 not in its short list of acceptable names: friction kinds on the joint whose friction has
 an uncatalogued shape). Used by ``benchmarks/bench_diagnose.py --outside`` (the figures of
-docs/diagnosis.md) and, with few seeds, by ``tests/test_diagnose_campaign.py`` (slow).
+docs/diagnosis.md) and by ``tests/test_diagnose_real.py``, ``test_diagnose_recordings.py``
+and ``test_recordings.py`` (single datasets, some replayed from their generator states).
 
 Noise: each coordinate's SD is 2 % of its RMS inertial torque; AR(1) noise has the same
 marginal SD with correlation ``rho`` from one sample to the next.

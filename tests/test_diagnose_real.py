@@ -549,12 +549,16 @@ CHAIN_ELASTIC = [
 def test_what_stands_in_for_another_joints_elastic_lag_is_not_named():
     """q2 of a generated chain is elastic: an offset on q1 (cv gain 78 %, steady over the
     blocks) and on q4 were named, the inertial fit's compromise having moved q2's lag there;
-    the lag of every joint's torque outdoes them, so nothing is named."""
+    the lag of every joint's torque outdoes them, so nothing is named. (Judged on the typical
+    held-out block, the offset on q4 is already too small to name: 5.7 %.)"""
     s = C.generated_setting("chain4", 1200)
+    outdone = 0
     for state in CHAIN_ELASTIC:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
-        assert any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
+        assert any(u["kind"] == "offset" for u in d.unsupported)
+        outdone += any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
+    assert outdone >= 1
 
 
 # The campaign's generated four-bar (seed 2024), AR(1) 0.9 noise: Coulomb friction datasets
@@ -671,3 +675,66 @@ def test_the_delays_low_pass_is_chosen_by_the_data(monkeypatch):
     monkeypatch.setattr(derived, "DELAY_CUTOFFS_PER_BANDWIDTH", (derived.DELAY_CUTOFF_PER_BANDWIDTH,))
     narrow = diagnose(s.problem, data.tau)
     assert _named(narrow) == {("viscous_friction", "qd")}
+
+
+def test_held_out_gain_is_the_typical_blocks_improvement():
+    """The geometric mean over blocks of SSE without / SSE with, minus 1: a block both models
+    extrapolate badly (its SSE scaled by the same factor in both) does not move it, where it
+    decided the ratio of the totals; a block both predict exactly counts as no change."""
+    from baseparams.identify.outofsample import CrossValidation, held_out_gain
+    residual = np.zeros((5, 1))
+    whole = CrossValidation(residual, np.array([1.0, 2.0, 1.0, 4.0, 2.0]))
+    ratios = np.array([4.0, 9.0, 2.0, 1.0, 0.5])
+    without = CrossValidation(residual, whole.sse * ratios)
+    assert held_out_gain(without, whole) == pytest.approx(np.prod(ratios) ** 0.2 - 1, rel=1e-12)
+    bad = np.array([1.0, 1.0, 1.0, 1.0, 300.0])
+    assert held_out_gain(CrossValidation(residual, without.sse * bad), CrossValidation(residual, whole.sse * bad)) \
+        == pytest.approx(held_out_gain(without, whole), rel=1e-12)
+    totals = (np.sum(without.sse * bad) - np.sum(whole.sse * bad)) / np.sum(whole.sse * bad)
+    assert abs(totals - held_out_gain(without, whole)) > 0.5
+    exact = CrossValidation(residual, np.array([0.0, 1.0]))
+    assert held_out_gain(CrossValidation(residual, np.array([0.0, 4.0])), exact) == pytest.approx(1.0)
+
+
+FOUR_BAR_AR_VISCOUS = (333427002749827781086311162658377319386, 263843294879837360010514471918415607657, 0,
+                       1729936829)
+
+
+def test_one_badly_extrapolated_block_does_not_hold_back_a_true_effect(monkeypatch):
+    """Viscous friction on a four-bar's one coordinate under AR(1) 0.9 noise (z 29, one
+    coefficient over the blocks). With 21 inertial parameters on few effective samples, the
+    last held-out block is extrapolated badly with or without it; judged on the totals it
+    'did not predict held-out blocks better' (-4 %) while the other four blocks improved 6 to
+    33 times. Judged on the typical block (:func:`held_out_gain`) it is named."""
+    from baseparams.identify import diagnose as diagnose_module
+    s = C.generated_setting("four_bar2", 1200)
+    data = C.INSIDE["viscous"](s, _at(FOUR_BAR_AR_VISCOUS), rho=0.9)
+    d = diagnose(s.problem, data.tau)
+    assert C.score(d, data) == "right"
+    monkeypatch.setattr(diagnose_module, "held_out_gain",
+                        lambda without, whole: (without.total - whole.total) / whole.total)
+    totals = diagnose(s.problem, data.tau)
+    assert not totals.effects
+    assert any(u["kind"] == "viscous_friction" and "does not predict held-out blocks better" in u["reason"]
+               for u in totals.unsupported)
+
+
+FOUR_BAR_AR_ELASTIC = (314967344717288324771473941610976038462, 336983293413220778415499640756163231851, 0,
+                       795133399)
+
+
+def test_viscous_friction_standing_in_for_an_elastic_lag_is_held_back(monkeypatch):
+    """A four-bar whose one coordinate's torque passes through an elastic joint's resonance,
+    AR(1) 0.9 noise: a resonant lag of a torque that is mostly gravity is to first order a
+    viscous force, and viscous friction was named (it predicts four of five held-out blocks
+    better). It must add over every resonant lag of the grid, as the delay must: it does not,
+    and is held back with that reason; without the check it is named."""
+    from baseparams.identify import diagnose as diagnose_module
+    s = C.generated_setting("four_bar2", 1200)
+    data = C.compliance(s, _at(FOUR_BAR_AR_ELASTIC), rho=0.9)
+    d = diagnose(s.problem, data.tau)
+    assert C.score(d, data) != "wrong"
+    assert any(u["kind"] == "viscous_friction" and "cannot tell viscous friction from an elastic lag" in u["reason"]
+               for u in d.unsupported)
+    monkeypatch.setattr(diagnose_module, "LAG_STAND_INS", ())
+    assert ("viscous_friction", "qa") in _named(diagnose(s.problem, data.tau))

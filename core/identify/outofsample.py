@@ -47,6 +47,18 @@ class CrossValidation:
         return float(self.sse.sum())
 
 
+def held_out_gain(without: CrossValidation, whole: CrossValidation) -> float:
+    """How much better ``whole`` predicts a typical held-out block than ``without`` (the model
+    less an effect): the geometric mean over blocks of their weighted SSE ratio, minus 1.
+    Why not the ratio of the totals: with few effective samples (one coordinate under AR
+    noise) the inertial model extrapolates badly to one block, with the effect or without, and
+    that block alone decided (a viscous friction at z 29 'did not predict better', -4 %, while
+    the other four blocks improved 6 to 33 times). Blocks both predict exactly count as 1."""
+    both_exact = (without.sse <= 0) & (whole.sse <= 0)
+    ratio = np.where(both_exact, 1.0, np.maximum(without.sse, 1e-300) / np.maximum(whole.sse, 1e-300))
+    return float(np.exp(np.mean(np.log(ratio)))) - 1.0
+
+
 def cross_validate(model: np.ndarray, y: np.ndarray, weights: np.ndarray, folds: int = FOLDS,
                    margin: int = MARGIN, leave_out: Sequence[Sequence[int]] = ()) -> list[CrossValidation]:
     """Block cross-validation of the weighted least-squares fit of ``y`` (n, f) on ``model``
