@@ -51,6 +51,7 @@ from collections import Counter, defaultdict  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from baseparams import registry  # noqa: E402
 from baseparams.identify import selection as S  # noqa: E402
 from baseparams.identify.linear import RANK_TOL, WeightedLinearModel  # noqa: E402
 from baseparams.identify.diagnose import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
@@ -132,9 +133,18 @@ def oracle_holdout(problem, hidden, tau, train):
             holdout_floor(fit, model[train:], tau[train:])[0])
 
 
+def simpler_only(wrong, truth) -> bool:
+    """Every wrong name is a simpler form that a hidden effect on its coordinate generalises
+    (Coulomb friction for a position friction whose variation over this travel the data
+    cannot see: a prismatic leg moving 0.1 m has cos q ~ 1)."""
+    effects = registry.effects()
+    return all(any(c == tc and k in effects[tk].item.generalises for tk, tc in truth) for k, c in wrong)
+
+
 def outcome(d, truth):
     """'right' (the truth named, nothing else), 'right+extra', 'ambiguous' (the truth in an
-    ambiguous group, no wrong name), 'wrong' (a wrong name), 'none'."""
+    ambiguous group, no wrong name), 'simpler' (in the truth's place a simpler form it
+    generalises, :func:`simpler_only`), 'wrong' (a wrong name), 'none'."""
     named = {(e["kind"], e["coordinate"]) for e in d.effects}
     groups = [{(c["kind"], c["coordinate"]) for c in a["candidates"]} for a in d.ambiguous]
     truth = set(truth)
@@ -144,6 +154,8 @@ def outcome(d, truth):
         return "right"
     if truth <= named:
         return "right+extra"
+    if wrong and simpler_only(wrong, truth):
+        return "simpler"
     if wrong:
         return "wrong"
     if explained == truth:
@@ -181,7 +193,7 @@ def run_mechanism(name, args, report):
         floor = np.sqrt(np.mean((sd / np.sqrt(np.mean(tau[-held:] ** 2, axis=0))) ** 2))
         seen = identifiable_ratio(problem, tau - clean, sd, motion.count - held) if hidden else 0.0
         started = time.perf_counter()
-        d = diagnose(problem, tau + noise)
+        d = diagnose(problem, tau + noise, holdout=0.3)
         report["time"][name].append(time.perf_counter() - started)
         truth_holdout = oracle_holdout(problem, hidden, tau + noise, motion.count - held) if hidden else (None, None)
         return d, floor, seen, truth_holdout
@@ -202,6 +214,7 @@ def run_mechanism(name, args, report):
                 truth = [(kind, problem.candidates[index].coordinate)]
                 result = outcome(d, truth)
                 report["single"][(kind, ratio)].append(result)
+                log_wrong(report, name, f"single, ratio {ratio}", truth, d)
                 report["identifiable"][(kind, max(r for r in IDENTIFIABLE_BINS if r <= seen)
                                         if seen >= IDENTIFIABLE_BINS[0] else 0)].append(result)
                 if ratio >= 3:
@@ -219,7 +232,9 @@ def run_mechanism(name, args, report):
         if ca.coordinate == cb.coordinate and {ca.kind, cb.kind} == {"spring", "offset"}:
             continue                       # one spring with another rest position: not two effects
         d, *_ = dataset([a, b], 5)
-        report["pairs"][name].append(outcome(d, [(ca.kind, ca.coordinate), (cb.kind, cb.coordinate)]))
+        truth = [(ca.kind, ca.coordinate), (cb.kind, cb.coordinate)]
+        report["pairs"][name].append(outcome(d, truth))
+        log_wrong(report, name, "pair", truth, d)
     # confusable pairs: the truth and a rival nearly collinear beyond the inertial model
     report["confusable_found"][name] = len(confusable) // 2
     for k in range(min(args.confusable, 10 * len(confusable))):
@@ -227,6 +242,18 @@ def run_mechanism(name, args, report):
         d, *_ = dataset([a], 5)
         ca = problem.candidates[a]
         report["confusable"][name].append(outcome(d, [(ca.kind, ca.coordinate)]))
+        log_wrong(report, name, "confusable", [(ca.kind, ca.coordinate)], d)
+
+
+def log_wrong(report, name, scenario, truth, d):
+    """Count what datasets named wrongly, by scenario and kinds (printed at the end: what to
+    look into); 'same joint' when a wrong name sits on a truth's coordinate."""
+    wrong = sorted({(e["kind"], e["coordinate"]) for e in d.effects} - set(truth))
+    if wrong and not simpler_only(wrong, truth):
+        same = any(c == tc for _, c in wrong for _, tc in truth)
+        key = (scenario, " + ".join(sorted(k for k, _ in truth)), " + ".join(k for k, _ in wrong),
+               "same joint" if same else "another joint")
+        report["wrong"][name].append(key)
 
 
 def confusable_pairs(problem, pool, rng, m):
@@ -281,7 +308,7 @@ def main():
         return
     args.null, args.single, args.pairs, args.confusable = (20, 2, 10, 10) if args.quick else (100, 10, 40, 40)
     report = {k: defaultdict(list) for k in ("null", "null_ambiguous", "null_closed", "single", "pairs",
-                                              "confusable", "time", "shrink", "identifiable")}
+                                              "confusable", "time", "shrink", "identifiable", "wrong")}
     report["confusion"] = Counter()
     report.update({"skipped": {}, "pool": {}, "confusable_found": {}})
     started = time.perf_counter()
@@ -328,7 +355,8 @@ def print_report(report, args):
     at3 = [o for (k, r), v in report["single"].items() if r >= 3 for o in v]
     print(f"  all kinds, ratio >= 3: named {rate(at3, {'right', 'right+extra'}):.1%} = right {rate(at3, {'right'}):.1%} "
           f"+ right+extra {rate(at3, {'right+extra'}):.1%}, "
-          f"ambiguous {rate(at3, {'ambiguous'}):.1%}, wrong {rate(at3, {'wrong'}):.1%}, "
+          f"ambiguous {rate(at3, {'ambiguous'}):.1%}, simpler form {rate(at3, {'simpler'}):.1%}, "
+          f"wrong {rate(at3, {'wrong'}):.1%}, "
           f"none {rate(at3, {'none', 'partial'}):.1%} (n={len(at3)})")
     print("\nthe same datasets by identifiable ratio (RMS of the effect's part beyond the inertial model / "
           "noise SD, the largest over the coordinates): right, nothing else / named or ambiguous")
@@ -343,16 +371,18 @@ def print_report(report, args):
     print("  " + " " * 18 + "".join(f"{lab[:10]:>11s}" for lab in labels))
     for kind in kinds:
         print("  " + kind[:18].ljust(18) + "".join(f"{report['confusion'][(kind, lab)]:11d}" for lab in labels))
-    print("\npairs at ratio 5 (two distinguishable effects): both named / both named or ambiguous / a wrong name")
+    print("\npairs at ratio 5 (two distinguishable effects): both named / both named or ambiguous / a wrong name "
+          "/ a simpler form in a truth's place")
     for name, values in report["pairs"].items():
         print(f"  {name:18s} n={len(values):3d}  {rate(values, {'right', 'right+extra'}):6.1%}  "
-              f"{rate(values, {'right', 'right+extra', 'ambiguous'}):6.1%}  {rate(values, {'wrong'}):6.1%}")
+              f"{rate(values, {'right', 'right+extra', 'ambiguous'}):6.1%}  {rate(values, {'wrong'}):6.1%}  "
+              f"{rate(values, {'simpler'}):6.1%}")
     print("\nconfusable pairs (|cos| > 0.95 beyond the model), one hidden at ratio 5: "
-          "confident wrong / ambiguous / right")
+          "confident wrong / ambiguous / right / a simpler form")
     for name, values in report["confusable"].items():
         print(f"  {name:18s} pairs {report['confusable_found'][name]:3d} n={len(values):3d}  wrong "
               f"{rate(values, {'wrong'}):6.1%}  ambiguous {rate(values, {'ambiguous'}):6.1%}  right "
-              f"{rate(values, {'right', 'right+extra'}):6.1%}")
+              f"{rate(values, {'right', 'right+extra'}):6.1%}  simpler {rate(values, {'simpler'}):6.1%}")
     print("\ngap shrink, one effect at ratio >= 3 (medians): fit before -> after; holdout before -> after; "
           "holdout noise floor (the true noise SD); holdout after within 10 % of it; the same for the true "
           "model fitted on the same training part (the yardstick: what the coefficients' own error allows)")
@@ -374,6 +404,10 @@ def print_report(report, args):
               f"within {np.mean(ratio <= 1.1):.0%};  mean^2 {np.mean(ratio ** 2):.3f};  p95 "
               f"{np.quantile(ratio, 0.95):.3f};  true model within {np.mean(true_ratio <= 1.1):.0%};  mean^2 "
               f"{np.mean(true_ratio ** 2):.3f};  p95 {np.quantile(true_ratio, 0.95):.3f}")
+    print("\nwrong names, counted (scenario: hidden kinds -> kinds named wrongly, where):")
+    for name, values in report["wrong"].items():
+        for (scenario, truth, wrong, where), count in sorted(Counter(values).items()):
+            print(f"  {name:18s} {count:3d} x  {scenario}: {truth} -> {wrong} ({where})")
     print("\ndiagnose time per dataset (median, s):")
     for name, values in report["time"].items():
         print(f"  {name:18s} {np.median(values):.3f}")

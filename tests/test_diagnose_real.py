@@ -738,3 +738,20 @@ def test_viscous_friction_standing_in_for_an_elastic_lag_is_held_back(monkeypatc
                for u in d.unsupported)
     monkeypatch.setattr(diagnose_module, "LAG_STAND_INS", ())
     assert ("viscous_friction", "qa") in _named(diagnose(s.problem, data.tau))
+
+
+def test_campaign_counts_a_simpler_form_apart_from_a_wrong_name():
+    """bench_diagnose's scoring: Coulomb friction named where position friction (which
+    generalises it) was hidden on that joint is a simpler form, not a wrong name; on another
+    joint, or a kind the truth does not generalise, it is wrong."""
+    from types import SimpleNamespace
+    import bench_diagnose as BD
+
+    def named(*pairs):
+        return SimpleNamespace(effects=[{"kind": k, "coordinate": c} for k, c in pairs], ambiguous=[])
+    truth = [("position_friction", "s2")]
+    assert BD.outcome(named(("coulomb_friction", "s2")), truth) == "simpler"
+    assert BD.outcome(named(("coulomb_friction", "s3")), truth) == "wrong"
+    assert BD.outcome(named(("viscous_friction", "s2")), truth) == "wrong"
+    assert BD.outcome(named(("position_friction", "s2")), truth) == "right"
+    assert BD.outcome(named(("position_friction", "s2"), ("coulomb_friction", "s2")), truth) == "right+extra"
