@@ -36,11 +36,12 @@ EFFECTS = [
     Effect("position_friction", "tau = sign(qd) * (fcc cos q + fcs sin q): Coulomb friction that varies "
            "with position (a bearing's eccentricity, a seal)", ("fcc", "fcs"),
            lambda q, qd, qdd: [np.sign(qd) * np.cos(q), np.sign(qd) * np.sin(q)],
-           generalises=("coulomb_friction",)),
+           generalises=("coulomb_friction",), angular=True),
     Effect("cogging", "tau = c1 sin q + d1 cos q + c2 sin 2q + d2 cos 2q: a position-periodic torque "
            "(cogging, an unbalanced gear) in its two lowest harmonics", ("c1", "d1", "c2", "d2"),
            lambda q, qd, qdd: [np.sin(q), np.cos(q), np.sin(2 * q), np.cos(2 * q)],
-           generalises=("offset", "spring", "mass", "body")),   # gravity of a mass is harmonics of q too
+           generalises=("offset", "spring", "mass", "body"),    # gravity of a mass is harmonics of q too
+           angular=True),
 ]
 
 

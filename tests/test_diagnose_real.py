@@ -755,3 +755,21 @@ def test_campaign_counts_a_simpler_form_apart_from_a_wrong_name():
     assert BD.outcome(named(("viscous_friction", "s2")), truth) == "wrong"
     assert BD.outcome(named(("position_friction", "s2")), truth) == "right"
     assert BD.outcome(named(("position_friction", "s2"), ("coulomb_friction", "s2")), truth) == "right+extra"
+
+
+def test_harmonics_of_q_are_default_candidates_on_angles_only():
+    """Position friction and cogging (harmonics of q) on a prismatic leg, q in metres, were a
+    Coulomb friction plus a slope: the Stewart platform's legs had Coulomb friction named for
+    position friction and the reverse in 9 of 40 pairs. By default they are tried on angles
+    only; named explicitly (KIND:COORD) they are still tried on a length."""
+    from baseparams.identify.candidates import all_pairs, parse_selection
+    m = resolve("stewart_platform")
+    angles = [c for c in m.coordinates if m.is_angle(c)]
+    lengths = [c for c in m.coordinates if not m.is_angle(c)]
+    assert angles and lengths
+    pairs = all_pairs(m)
+    for kind in ("position_friction", "cogging"):
+        assert {c for k, c in pairs if k == kind} == set(angles)
+        assert {c for k, c in parse_selection(m, [kind]) if k == kind} == set(angles)
+        assert parse_selection(m, [f"{kind}:{lengths[0]}"]) == [(kind, lengths[0])]
+    assert {c for k, c in pairs if k == "coulomb_friction"} >= set(lengths)

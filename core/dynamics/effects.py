@@ -38,6 +38,8 @@ class EffectKind(Protocol):
     ``coefficients``: the coefficient names, one per column; ``shapes``: the nonlinear
     parameters :meth:`columns` takes by keyword; ``generalises``: the kinds this one
     generalises (where the data cannot tell the two apart, diagnosis names the simpler one).
+    Optional: ``angular`` (True: the columns are harmonics of q, so diagnosis does not try the
+    kind on a length coordinate unless asked for by name; :class:`Effect` has it, default False).
     """
 
     @property
@@ -85,6 +87,9 @@ class Effect:
     # kinds this one generalises: where the data cannot tell the two apart, diagnosis names the
     # simpler one (cogging's harmonics look like an offset or a spring over a small range)
     generalises: tuple[str, ...] = ()
+    # columns that are harmonics of q, so q must be an angle: by default not a candidate on a
+    # length coordinate (q in metres has no period: a prismatic leg's cos q is ~1 over its travel)
+    angular: bool = False
 
     def columns(self, q: npt.ArrayLike, qd: npt.ArrayLike, qdd: npt.ArrayLike,
                 **options: float) -> list[FloatArray]:

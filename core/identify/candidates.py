@@ -52,7 +52,7 @@ def parse_selection(mechanism: Mechanism, specs: Sequence[str], given: bool = Fa
             raise InputError(f"{place!r} in {spec!r} is not a place of {kind} on {mechanism.name} "
                              f"(one of: {', '.join(places)})", key="--candidates")
         default = (derived.DEFAULT_PLACES.get(kind) or derived.places(mechanism, kind, independent)
-                   if kind in derived.KINDS else _places(mechanism))
+                   if kind in derived.KINDS else _places(mechanism, kind))
         for c in ([place] if place else default):
             if (kind, c) not in out:
                 out.append((kind, c))
@@ -60,16 +60,23 @@ def parse_selection(mechanism: Mechanism, specs: Sequence[str], given: bool = Fa
 
 
 def all_pairs(mechanism: Mechanism) -> list[tuple[str, str]]:
-    """Every registered effect on every tree coordinate and every coupled motor."""
-    return [(kind, c) for kind in registry.effects() for c in _places(mechanism)]
+    """Every registered effect on every tree coordinate and every coupled motor (an angular
+    effect on angles only, :func:`_places`)."""
+    return [(kind, c) for kind in registry.effects() for c in _places(mechanism, kind)]
 
 
-def _places(mechanism: Mechanism) -> tuple[str, ...]:
-    """Where candidates act by default: every tree coordinate, and the motors that turn with
-    several coordinates (a coupled wrist, a differential). A motor on one joint moves as the
-    joint scaled: its friction, offset or inertia is the joint's own column times its ratio,
-    the same candidate under a second name (name it with KIND:MOTOR to test it anyway)."""
-    return tuple(mechanism.coordinates) + tuple(m.name for m in mechanism.motors if len(m.ratios) > 1)
+def _places(mechanism: Mechanism, kind: str) -> tuple[str, ...]:
+    """Where a registered effect acts by default: every tree coordinate, and the motors that
+    turn with several coordinates (a coupled wrist, a differential). A motor on one joint
+    moves as the joint scaled: its friction, offset or inertia is the joint's own column
+    times its ratio, the same candidate under a second name (name it with KIND:MOTOR to test
+    it anyway). An angular effect (harmonics of q) only where q is an angle: on a prismatic
+    leg it was Coulomb friction plus a slope, and named for either (name it with KIND:COORD
+    to test it anyway)."""
+    places = tuple(mechanism.coordinates) + tuple(m.name for m in mechanism.motors if len(m.ratios) > 1)
+    if getattr(registry.effects()[kind].item, "angular", False):     # optional for a third party's kind
+        places = tuple(c for c in places if mechanism.is_angle(c))
+    return places
 
 
 def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None,
