@@ -78,8 +78,7 @@ def _boxes(mechanism: Mechanism, values: Sequence[Any]) -> list[Box]:
         v = np.asarray(raw, dtype=float)
         lo, hi = float(v.min()), float(v.max())
         joint = mechanism.joint_of_coordinate(name)
-        kind = joint.type.coordinate_kinds[joint.coordinates.index(name)]
-        widen = WIDEN_ANGLE if kind == "angle" else WIDEN_LENGTH
+        widen = WIDEN_ANGLE if mechanism.coordinate_kind(name) == "angle" else WIDEN_LENGTH
         low, high = lo - widen, hi + widen
         if name in joint.limits:
             limit_lo, limit_hi = joint.limits[name]

@@ -43,11 +43,6 @@ class Limits:
                        "torque": number(self.torque[k])} for k, name in enumerate(self.names)}
 
 
-def _kind(mechanism: Mechanism, name: str) -> str:
-    joint = mechanism.joint_of_coordinate(name)
-    return joint.type.coordinate_kinds[joint.coordinates.index(name)]
-
-
 def drive_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
     """{coordinate: {"velocity": v, "effort": e}} as the mechanism carries them (a URDF's
     ``<limit velocity effort>``, a mechanism file's ``drive_limits``)."""
@@ -105,7 +100,7 @@ def limits_of(mechanism: Mechanism, *, positions: str | None = None, velocity: s
     v_max, a_max, t_max = np.empty(f), np.empty(f), np.full(f, np.inf)
     sources = {}
     for k, name in enumerate(names):
-        kind = _kind(mechanism, name)
+        kind = mechanism.coordinate_kind(name)
         joint = mechanism.joint_of_coordinate(name)
         lo, hi = joint.limits.get(name, (-DEFAULT_RANGE[kind], DEFAULT_RANGE[kind]))
         source = "file" if name in joint.limits else "default"

@@ -169,12 +169,16 @@ class Mechanism:
                 return joint
         raise KeyError(name)
 
+    def coordinate_kind(self, name: str) -> str:
+        """'angle' or 'length': what a joint coordinate measures."""
+        joint = self.joint_of_coordinate(name)
+        return joint.type.coordinate_kinds[joint.coordinates.index(name)]
+
     def is_angle(self, name: str) -> bool:
         """Whether a coordinate (or a motor: all its coordinates) is an angle, not a length."""
         if name in self.motor_names:
             return all(self.is_angle(c) for c, _ in self.motor(name).ratios)
-        joint = self.joint_of_coordinate(name)
-        return joint.type.coordinate_kinds[joint.coordinates.index(name)] == "angle"
+        return self.coordinate_kind(name) == "angle"
 
     def body(self, label: int) -> Body:
         for b in self.bodies:

@@ -32,11 +32,7 @@ from baseparams.numeric.backends import Exact, TanHalf
 def coordinate_kinds(mechanism: Mechanism) -> tuple[list[str], list[str]]:
     """'angle' or 'length' for each independent coordinate."""
     names = mechanism.independent or mechanism.coordinates
-    kinds = []
-    for name in names:
-        joint = mechanism.joint_of_coordinate(name)
-        kinds.append(joint.type.coordinate_kinds[list(joint.coordinates).index(name)])
-    return list(names), kinds
+    return list(names), [mechanism.coordinate_kind(name) for name in names]
 
 
 def check_exact_possible(mechanism: Mechanism) -> None:
