@@ -138,7 +138,8 @@ def simpler_only(wrong, truth) -> bool:
     (Coulomb friction for a position friction whose variation over this travel the data
     cannot see: a prismatic leg moving 0.1 m has cos q ~ 1)."""
     effects = registry.effects()
-    return all(any(c == tc and k in effects[tk].item.generalises for tk, tc in truth) for k, c in wrong)
+    return all(any(c == tc and tk in effects and k in effects[tk].item.generalises for tk, tc in truth)
+               for k, c in wrong)
 
 
 def outcome(d, truth):

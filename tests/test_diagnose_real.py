@@ -773,3 +773,4 @@ def test_harmonics_of_q_are_default_candidates_on_angles_only():
         assert {c for k, c in parse_selection(m, [kind]) if k == kind} == set(angles)
         assert parse_selection(m, [f"{kind}:{lengths[0]}"]) == [(kind, lengths[0])]
     assert {c for k, c in pairs if k == "coulomb_friction"} >= set(lengths)
+    assert BD.outcome(named(("viscous_friction", "all")), [("delay", "all")]) == "wrong"   # a derived kind's truth
