@@ -755,6 +755,7 @@ def test_campaign_counts_a_simpler_form_apart_from_a_wrong_name():
     assert BD.outcome(named(("viscous_friction", "s2")), truth) == "wrong"
     assert BD.outcome(named(("position_friction", "s2")), truth) == "right"
     assert BD.outcome(named(("position_friction", "s2"), ("coulomb_friction", "s2")), truth) == "right+extra"
+    assert BD.outcome(named(("viscous_friction", "all")), [("delay", "all")]) == "wrong"   # a derived kind's truth
 
 
 def test_harmonics_of_q_are_default_candidates_on_angles_only():
@@ -773,4 +774,3 @@ def test_harmonics_of_q_are_default_candidates_on_angles_only():
         assert {c for k, c in parse_selection(m, [kind]) if k == kind} == set(angles)
         assert parse_selection(m, [f"{kind}:{lengths[0]}"]) == [(kind, lengths[0])]
     assert {c for k, c in pairs if k == "coulomb_friction"} >= set(lengths)
-    assert BD.outcome(named(("viscous_friction", "all")), [("delay", "all")]) == "wrong"   # a derived kind's truth
