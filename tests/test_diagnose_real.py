@@ -546,19 +546,23 @@ CHAIN_ELASTIC = [
 ]
 
 
-def test_what_stands_in_for_another_joints_elastic_lag_is_not_named():
+def test_what_stands_in_for_another_joints_elastic_lag_is_not_named(monkeypatch):
     """q2 of a generated chain is elastic: an offset on q1 (cv gain 78 %, steady over the
     blocks) and on q4 were named, the inertial fit's compromise having moved q2's lag there;
-    the lag of every joint's torque outdoes them, so nothing is named. (Judged on the typical
-    held-out block, the offset on q4 is already too small to name: 5.7 %.)"""
+    the lag of every joint's torque outdoes them, so nothing is named. (Judged by the
+    predictive score on the typical held-out block, the offsets are already too small to
+    name, 0.4 % and 2.8 %; with that size gate off, the lag's check is what holds back the
+    first dataset's offset.)"""
+    from baseparams.identify import diagnose as diagnose_module
     s = C.generated_setting("chain4", 1200)
-    outdone = 0
     for state in CHAIN_ELASTIC:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
         assert any(u["kind"] == "offset" for u in d.unsupported)
-        outdone += any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
-    assert outdone >= 1
+    monkeypatch.setattr(diagnose_module, "MIN_EFFECT_TO_NOISE", 0.0)
+    d = diagnose(s.problem, C.compliance(s, _at(CHAIN_ELASTIC[0])).tau)
+    assert _named(d) == set()
+    assert any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
 
 
 # The campaign's generated four-bar (seed 2024), AR(1) 0.9 noise: Coulomb friction datasets
@@ -606,21 +610,26 @@ CHAIN_ELASTIC_DELAY = [
 ]
 
 
-def test_one_elastic_joints_lag_is_not_named_the_recordings_delay():
+def test_one_elastic_joints_lag_is_not_named_the_recordings_delay(monkeypatch):
     """q3 of a generated chain is elastic, and a delay of the whole recording was named (cv
     gain 7-9 %). Each joint's own delay: q3's 6.4-6.9 ms, the others' under 1.6 ms, each
-    significantly below half of q3's: one joint's lag, held back (in the first dataset, once
-    two ambiguous groups that predicted no held-out block left the model, the delay is too
-    small to name before that check). True delays on the same chain agree on every joint and
-    stay named."""
+    significantly below half of q3's: one joint's lag, held back. True delays on the same
+    chain agree on every joint and stay named. (Judged by the predictive score the delay is too small to name on both, 1.9 %
+    and 5.5 %; with that size gate off, the per-joint check holds it back on both.)"""
+    from baseparams.identify import diagnose as diagnose_module
     s = C.generated_setting("chain4", 1200)
+    for state in CHAIN_ELASTIC_DELAY:
+        d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
+        assert _named(d) == set()
+        assert any(u["kind"] == "delay" for u in d.unsupported)
+    monkeypatch.setattr(diagnose_module, "MIN_EFFECT_TO_NOISE", 0.0)
     reasons = []
     for state in CHAIN_ELASTIC_DELAY:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
         reasons.append(next(u for u in d.unsupported if u["kind"] == "delay"))
+    assert all(r["reason"].startswith("only q3 lags") for r in reasons)
     held = reasons[1]
-    assert held["reason"].startswith("only q3 lags")
     assert held["per_joint_delay"]["q3"] > 4 * max(abs(v) for c, v in held["per_joint_delay"].items() if c != "q3")
     rng = np.random.default_rng(5)
     for _ in range(3):
@@ -694,6 +703,65 @@ def test_held_out_gain_is_the_typical_blocks_improvement():
     assert abs(totals - held_out_gain(without, whole)) > 0.5
     exact = CrossValidation(residual, np.array([0.0, 1.0]))
     assert held_out_gain(CrossValidation(residual, np.array([0.0, 4.0])), exact) == pytest.approx(1.0)
+
+
+def test_predictive_score_is_the_gaussian_predictive_density():
+    """-2 log N(r; 0, s^2 (I + X H X^T)) less m log 2 pi, from X^T X and X^T r alone
+    (Woodbury), also for a rank-deficient H; and the held-out gain from scores is exp of
+    the mean per-row score difference, minus 1."""
+    from scipy.stats import multivariate_normal
+    from baseparams.identify.outofsample import CrossValidation, held_out_gain, predictive_score
+    rng = np.random.default_rng(3)
+    m, p = 40, 4
+    X = rng.standard_normal((m, p))
+    r = rng.standard_normal(m) * 1.7
+    for H in (np.diag([0.3, 0.01, 2.0, 0.5]), np.outer([1.0, 2.0, 0.0, -1.0], [1.0, 2.0, 0.0, -1.0]) * 0.2):
+        for variance in (0.5, 2.0):
+            dense = -2 * multivariate_normal(np.zeros(m), variance * (np.eye(m) + X @ H @ X.T)).logpdf(r)
+            assert predictive_score(r, X.T @ X, X.T @ r, H, variance) == pytest.approx(
+                dense - m * np.log(2 * np.pi), rel=1e-10)
+    residual = np.zeros((5, 1))
+    rows = np.full(3, 100.0)
+    whole = CrossValidation(residual, np.ones(3), np.array([10.0, 20.0, 30.0]), rows)
+    without = CrossValidation(residual, np.ones(3), whole.score + rows * np.log([2.0, 4.0, 8.0]), rows)
+    assert held_out_gain(without, whole) == pytest.approx(3.0, rel=1e-12)
+
+
+def test_an_effect_extrapolated_with_a_stated_spread_is_not_held_back():
+    """A pendulum's spring at effect/noise 10, fitted on the first 70 %: beyond gravity it is
+    nearly the cubic q - sin q, and the one block holding the motion's large negative angles
+    is where the others' fit extrapolates it, with a large error. Judged on that block's SSE
+    the spring 'did not predict held-out blocks better' (or was too small) in 10 of 12
+    datasets; judged by each model's predictive density, which states that error, it is
+    named in 11 of 12 and in the twelfth cogging (harmonics of q, correlation 0.995 with the
+    spring beyond the model, adding over it at p 0.014) is named with the spring as its rival (bench_diagnose.py's pendulum: springs at ratio 10 and 20 0 -> 100 %)."""
+    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.identify import outofsample
+    from baseparams.identify.simulate import random_physical_inertia
+    s = C.setting("pendulum", 1000)
+    spring = next(c for c in s.problem.candidates if c.kind == "spring")
+    q = np.asarray(s.motion.q, float).reshape(s.motion.count, -1)[:, 0]
+
+    def named(seed):
+        rng = np.random.default_rng(seed)
+        clean = s.problem.inertial @ random_physical_inertia(s.mechanism, rng)
+        sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
+        k = rng.uniform(0.5, 1.5)
+        force = spring.columns @ np.array([k, k * (q.mean() + 0.1 * q.std())])
+        d = diagnose(s.problem, clean + C.scaled(force, sd, 10) + C.noise(rng, clean.shape, sd), holdout=0.3)
+        stand_ins = [e for e in d.effects if e["kind"] != "spring"]
+        return _named(d), all(any(r["candidate"] == "spring:theta" and r["correlation"] > 0.99
+                                  for r in e["rivals"]) for e in stand_ins)
+
+    scored = [named(seed) for seed in range(8)]
+    assert sum(("spring", "theta") in n for n, _ in scored) >= 7
+    assert all(len(n) <= 1 and rival_is_the_spring for n, rival_is_the_spring in scored)
+    plain = outofsample.held_out_gain
+    sse_only = (lambda without, whole: plain(outofsample.CrossValidation(without.residual, without.sse),
+                                             outofsample.CrossValidation(whole.residual, whole.sse)))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(diagnose_module, "held_out_gain", sse_only)
+        assert sum(("spring", "theta") in named(seed)[0] for seed in range(8)) <= 2
 
 
 FOUR_BAR_AR_VISCOUS = (333427002749827781086311162658377319386, 263843294879837360010514471918415607657, 0,
