@@ -187,17 +187,19 @@ def run_mechanism(name, args, report):
         clean = problem.inertial @ phi
         sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
         tau = clean.copy()
-        for index in hidden:
-            tau += scaled(effect_force(problem, index, q_tree, coords, rng), sd, ratio)
+        forces = [scaled(effect_force(problem, index, q_tree, coords, rng), sd, ratio) for index in hidden]
+        for force in forces:
+            tau += force
         noise = rng.standard_normal(clean.shape) * sd
         held = int(round(0.3 * motion.count))
         floor = np.sqrt(np.mean((sd / np.sqrt(np.mean(tau[-held:] ** 2, axis=0))) ** 2))
         seen = identifiable_ratio(problem, tau - clean, sd, motion.count - held) if hidden else 0.0
+        seen_each = [identifiable_ratio(problem, force, sd, motion.count - held) for force in forces]
         started = time.perf_counter()
         d = diagnose(problem, tau + noise, holdout=0.3)
         report["time"][name].append(time.perf_counter() - started)
         truth_holdout = oracle_holdout(problem, hidden, tau + noise, motion.count - held) if hidden else (None, None)
-        return d, floor, seen, truth_holdout
+        return d, floor, seen, truth_holdout, seen_each
 
     # nothing hidden
     for _ in range(args.null):
@@ -211,7 +213,7 @@ def run_mechanism(name, args, report):
         for ratio in RATIOS:
             for _ in range(args.single):
                 index = int(rng.choice(choices))
-                d, floor, seen, truth_holdout = dataset([index], ratio)
+                d, floor, seen, truth_holdout, _ = dataset([index], ratio)
                 truth = [(kind, problem.candidates[index].coordinate)]
                 result = outcome(d, truth)
                 report["single"][(kind, ratio)].append(result)
@@ -232,9 +234,10 @@ def run_mechanism(name, args, report):
         ca, cb = problem.candidates[a], problem.candidates[b]
         if ca.coordinate == cb.coordinate and {ca.kind, cb.kind} == {"spring", "offset"}:
             continue                       # one spring with another rest position: not two effects
-        d, *_ = dataset([a, b], 5)
+        d, _, _, _, seen_each = dataset([a, b], 5)
         truth = [(ca.kind, ca.coordinate), (cb.kind, cb.coordinate)]
         report["pairs"][name].append(outcome(d, truth))
+        report["pairs_seen"][name].append((min(seen_each), report["pairs"][name][-1]))
         log_wrong(report, name, "pair", truth, d)
     # confusable pairs: the truth and a rival nearly collinear beyond the inertial model
     report["confusable_found"][name] = len(confusable) // 2
@@ -309,7 +312,8 @@ def main():
         return
     args.null, args.single, args.pairs, args.confusable = (20, 2, 10, 10) if args.quick else (100, 10, 40, 40)
     report = {k: defaultdict(list) for k in ("null", "null_ambiguous", "null_closed", "single", "pairs",
-                                              "confusable", "time", "shrink", "identifiable", "wrong")}
+                                              "confusable", "time", "shrink", "identifiable", "wrong",
+                                              "pairs_seen")}
     report["confusion"] = Counter()
     report.update({"skipped": {}, "pool": {}, "confusable_found": {}})
     started = time.perf_counter()
@@ -378,6 +382,15 @@ def print_report(report, args):
         print(f"  {name:18s} n={len(values):3d}  {rate(values, {'right', 'right+extra'}):6.1%}  "
               f"{rate(values, {'right', 'right+extra', 'ambiguous'}):6.1%}  {rate(values, {'wrong'}):6.1%}  "
               f"{rate(values, {'simpler'}):6.1%}")
+    print("\nthe same by what the data can see of each: pairs whose weaker effect has an identifiable ratio "
+          ">= 3 (its RMS beyond the inertial model on the training rows / noise SD; as the single effects' "
+          "second table): n, both named, both named or ambiguous; and those below 1")
+    for name, values in report["pairs_seen"].items():
+        seen = [o for r, o in values if r >= 3]
+        unseen = [o for r, o in values if r < 1]
+        print(f"  {name:18s} >= 3: n={len(seen):3d}  {rate(seen, {'right', 'right+extra'}):6.1%}  "
+              f"{rate(seen, {'right', 'right+extra', 'ambiguous'}):6.1%};  < 1: n={len(unseen):3d}  "
+              f"{rate(unseen, {'right', 'right+extra'}):6.1%}")
     print("\nconfusable pairs (|cos| > 0.95 beyond the model), one hidden at ratio 5: "
           "confident wrong / ambiguous / right / a simpler form")
     for name, values in report["confusable"].items():

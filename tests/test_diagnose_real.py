@@ -549,16 +549,18 @@ CHAIN_ELASTIC = [
 def test_what_stands_in_for_another_joints_elastic_lag_is_not_named(monkeypatch):
     """q2 of a generated chain is elastic: an offset on q1 (cv gain 78 %, steady over the
     blocks) and on q4 were named, the inertial fit's compromise having moved q2's lag there;
-    the lag of every joint's torque outdoes them, so nothing is named. (Judged by the
-    predictive score on the typical held-out block, the offsets are already too small to
-    name, 0.4 % and 2.8 %; with that size gate off, the lag's check is what holds back the
-    first dataset's offset.)"""
+    the lag of every joint's torque outdoes them, so nothing is named. (Judged on the typical
+    held-out block, the offset on q4 is already too small to name: 5.7 %. With that size gate
+    off, the lag's check still holds back the first dataset's offset.)"""
     from baseparams.identify import diagnose as diagnose_module
     s = C.generated_setting("chain4", 1200)
+    outdone = 0
     for state in CHAIN_ELASTIC:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
         assert any(u["kind"] == "offset" for u in d.unsupported)
+        outdone += any(u["kind"] == "offset" and "a lag of the joints' torques" in u["reason"] for u in d.unsupported)
+    assert outdone >= 1
     monkeypatch.setattr(diagnose_module, "MIN_EFFECT_TO_NOISE", 0.0)
     d = diagnose(s.problem, C.compliance(s, _at(CHAIN_ELASTIC[0])).tau)
     assert _named(d) == set()
@@ -614,14 +616,16 @@ def test_one_elastic_joints_lag_is_not_named_the_recordings_delay(monkeypatch):
     """q3 of a generated chain is elastic, and a delay of the whole recording was named (cv
     gain 7-9 %). Each joint's own delay: q3's 6.4-6.9 ms, the others' under 1.6 ms, each
     significantly below half of q3's: one joint's lag, held back. True delays on the same
-    chain agree on every joint and stay named. (Judged by the predictive score the delay is too small to name on both, 1.9 %
-    and 5.5 %; with that size gate off, the per-joint check holds it back on both.)"""
+    chain agree on every joint and stay named. (In the first dataset, once two ambiguous
+    groups that predicted no held-out block left the model, the delay is too small to name
+    before that check; with that size gate off, the per-joint check holds it back on both.)"""
     from baseparams.identify import diagnose as diagnose_module
     s = C.generated_setting("chain4", 1200)
     for state in CHAIN_ELASTIC_DELAY:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
         assert _named(d) == set()
         assert any(u["kind"] == "delay" for u in d.unsupported)
+    assert next(u for u in d.unsupported if u["kind"] == "delay")["reason"].startswith("only q3 lags")
     monkeypatch.setattr(diagnose_module, "MIN_EFFECT_TO_NOISE", 0.0)
     reasons = []
     for state in CHAIN_ELASTIC_DELAY:
@@ -705,36 +709,48 @@ def test_held_out_gain_is_the_typical_blocks_improvement():
     assert held_out_gain(CrossValidation(residual, np.array([0.0, 4.0])), exact) == pytest.approx(1.0)
 
 
-def test_predictive_score_is_the_gaussian_predictive_density():
-    """-2 log N(r; 0, s^2 (I + X H X^T)) less m log 2 pi, from X^T X and X^T r alone
-    (Woodbury), also for a rank-deficient H; and the held-out gain from scores is exp of
-    the mean per-row score difference, minus 1."""
-    from scipy.stats import multivariate_normal
-    from baseparams.identify.outofsample import CrossValidation, held_out_gain, predictive_score
-    rng = np.random.default_rng(3)
-    m, p = 40, 4
-    X = rng.standard_normal((m, p))
-    r = rng.standard_normal(m) * 1.7
-    for H in (np.diag([0.3, 0.01, 2.0, 0.5]), np.outer([1.0, 2.0, 0.0, -1.0], [1.0, 2.0, 0.0, -1.0]) * 0.2):
-        for variance in (0.5, 2.0):
-            dense = -2 * multivariate_normal(np.zeros(m), variance * (np.eye(m) + X @ H @ X.T)).logpdf(r)
-            assert predictive_score(r, X.T @ X, X.T @ r, H, variance) == pytest.approx(
-                dense - m * np.log(2 * np.pi), rel=1e-10)
+def test_an_effect_is_judged_on_the_blocks_that_determine_it():
+    """A column nearly a copy of the model's except in one block: fitted without that block it
+    cannot be told from the model's, so its prediction there carries a variance (s^2 tr(X^T X
+    (H_whole - H_smaller))) far above the block's noise, checked against the prediction
+    variances computed directly; the held-out gain is then the geometric mean of the SSE
+    ratios over the other blocks, and over all blocks when fewer than half determine it."""
+    from baseparams.identify.outofsample import CrossValidation, blocks, held_out_gain
+    rng = np.random.default_rng(4)
+    n = 500
+    t = np.linspace(0, 10, n)
+    a = np.sin(t)
+    e = 1.001 * a + 0.001 * np.cos(3 * t)
+    odd = blocks(n)[2]
+    e[odd] = a[odd] + np.cos(3 * t[odd])
+    X = np.stack([a, e], axis=-1)[:, None, :]
+    y = X @ [1.0, 0.5] + rng.standard_normal((n, 1)) * 0.1
+    w = np.array([10.0])
+    whole, without = cross_validate(X, y, w, margin=0, leave_out=[[1]])
+    for k, block in enumerate(blocks(n)):
+        train = np.setdiff1d(np.arange(n), block)
+        A, B = X[train, 0] * 10, X[block, 0] * 10
+        added = (np.einsum("ip,pq,iq->i", B, np.linalg.inv(A.T @ A), B)
+                 - B[:, 0] ** 2 / (A[:, 0] @ A[:, 0]))
+        assert without.determined[k] == (added.sum() <= len(block))
+    assert list(without.determined) == [True, True, False, True, True]
+    ratios = without.sse / whole.sse
+    assert held_out_gain(without, whole) == pytest.approx(np.exp(np.mean(np.log(ratios[[0, 1, 3, 4]]))) - 1)
     residual = np.zeros((5, 1))
-    rows = np.full(3, 100.0)
-    whole = CrossValidation(residual, np.ones(3), np.array([10.0, 20.0, 30.0]), rows)
-    without = CrossValidation(residual, np.ones(3), whole.score + rows * np.log([2.0, 4.0, 8.0]), rows)
-    assert held_out_gain(without, whole) == pytest.approx(3.0, rel=1e-12)
+    sse = np.array([1.0, 2.0, 1.0, 4.0, 2.0])
+    few = CrossValidation(residual, sse * [4.0, 9.0, 2.0, 1.0, 0.5], np.array([True, False, False, True, False]))
+    assert held_out_gain(few, CrossValidation(residual, sse)) == pytest.approx((4 * 9 * 2 * 0.5) ** 0.2 - 1)
 
 
-def test_an_effect_extrapolated_with_a_stated_spread_is_not_held_back():
-    """A pendulum's spring at effect/noise 10, fitted on the first 70 %: beyond gravity it is
+def test_a_block_that_cannot_determine_an_effect_does_not_hold_it_back():
+    """A pendulum's spring at effect/noise 12, fitted on the first 70 %: beyond gravity it is
     nearly the cubic q - sin q, and the one block holding the motion's large negative angles
-    is where the others' fit extrapolates it, with a large error. Judged on that block's SSE
-    the spring 'did not predict held-out blocks better' (or was too small) in 10 of 12
-    datasets; judged by each model's predictive density, which states that error, it is
-    named in 11 of 12 and in the twelfth cogging (harmonics of q, correlation 0.995 with the
-    spring beyond the model, adding over it at p 0.014) is named with the spring as its rival (bench_diagnose.py's pendulum: springs at ratio 10 and 20 0 -> 100 %)."""
+    is where the others' fit cannot pin it down (3-30 times the SSE without it there, though
+    it predicts the other four blocks better). With that block counted, the spring 'did not
+    predict held-out blocks better' or was too small in 7 of these 8 datasets; judged on the
+    blocks that determine it, it is named in 7, and in the eighth cogging (harmonics of q,
+    correlation 0.995 with the spring beyond the model, adding over it at p 0.014) is named
+    with the spring as its rival."""
     from baseparams.identify import diagnose as diagnose_module
     from baseparams.identify import outofsample
     from baseparams.identify.simulate import random_physical_inertia
@@ -748,7 +764,7 @@ def test_an_effect_extrapolated_with_a_stated_spread_is_not_held_back():
         sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
         k = rng.uniform(0.5, 1.5)
         force = spring.columns @ np.array([k, k * (q.mean() + 0.1 * q.std())])
-        d = diagnose(s.problem, clean + C.scaled(force, sd, 10) + C.noise(rng, clean.shape, sd), holdout=0.3)
+        d = diagnose(s.problem, clean + C.scaled(force, sd, 12) + C.noise(rng, clean.shape, sd), holdout=0.3)
         stand_ins = [e for e in d.effects if e["kind"] != "spring"]
         return _named(d), all(any(r["candidate"] == "spring:theta" and r["correlation"] > 0.99
                                   for r in e["rivals"]) for e in stand_ins)
@@ -757,10 +773,10 @@ def test_an_effect_extrapolated_with_a_stated_spread_is_not_held_back():
     assert sum(("spring", "theta") in n for n, _ in scored) >= 7
     assert all(len(n) <= 1 and rival_is_the_spring for n, rival_is_the_spring in scored)
     plain = outofsample.held_out_gain
-    sse_only = (lambda without, whole: plain(outofsample.CrossValidation(without.residual, without.sse),
-                                             outofsample.CrossValidation(whole.residual, whole.sse)))
+    every_block = (lambda without, whole: plain(outofsample.CrossValidation(without.residual, without.sse),
+                                                outofsample.CrossValidation(whole.residual, whole.sse)))
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(diagnose_module, "held_out_gain", sse_only)
+        patch.setattr(diagnose_module, "held_out_gain", every_block)
         assert sum(("spring", "theta") in named(seed)[0] for seed in range(8)) <= 2
 
 
