@@ -510,7 +510,8 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
         k = in_model.index(i)
         lo, hi = offsets[k + 1], offsets[k + 2]
         values = dict(zip(coefficient_names(candidates[i].kind), estimates[k][0].tolist()))
-        reason = implausible(candidates[i].kind, values) or _body_implausible(problem, candidates[i], values)
+        reason = (implausible(candidates[i].kind, values) or _body_implausible(problem, candidates[i], values)
+                  or _cancelling(X, y, fit.coefficients, range(lo, hi), model.shape[-1], problem.coordinates))
         detail: dict = {}
         if not reason:
             others = np.r_[0:lo, hi:X.shape[-1]]
@@ -539,6 +540,30 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
             kept.append(i)
             checks[i] = detail
     return kept, out
+
+
+# A named effect's force larger than this many times what its coordinate's torque holds
+# (the measured torque's RMS, or the inertial model's part if larger) is cancelled by other
+# columns rather than a force of the mechanism.
+CANCELS = 10.0
+
+
+def _cancelling(X: np.ndarray, y: np.ndarray, beta: np.ndarray, span: range, inertial: int,
+                coordinates: Sequence[str]) -> str:
+    """Why an effect's force is not physical when it is many times its coordinate's whole
+    torque ('' otherwise). Why: under a torque ripple in time, a spring (k 17 111) and cogging
+    (c1 -23 222) on one PUMA joint cancelled each other to a few N m, both 'significant' and
+    steady over the blocks: each force was hundreds of times the joint's torque."""
+    force = X[:, :, span.start:span.stop] @ beta[span.start:span.stop]
+    size = np.sqrt(np.mean(force ** 2, axis=0))
+    held = np.maximum(np.sqrt(np.mean(y ** 2, axis=0)),
+                      np.sqrt(np.mean((X[:, :, :inertial] @ beta[:inertial]) ** 2, axis=0)))
+    ratio = size / np.where(held > 0, held, np.inf)
+    j = int(np.argmax(ratio))
+    if ratio[j] > CANCELS:
+        return (f"its force on {coordinates[j]} (RMS {size[j]:.3g}) is {ratio[j]:.0f} times that coordinate's "
+                f"torque (RMS {held[j]:.3g}): other columns cancel it, it is no force of the mechanism")
+    return ""
 
 
 def _too_small(gain: float, coordinates: int) -> str:
