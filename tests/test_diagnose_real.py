@@ -714,12 +714,13 @@ def test_held_out_gain_is_the_typical_blocks_improvement():
     assert held_out_gain(CrossValidation(residual, np.array([0.0, 4.0])), exact) == pytest.approx(1.0)
 
 
-def test_an_effect_is_judged_on_the_blocks_that_determine_it():
+def test_a_block_that_cannot_determine_an_effect_does_not_count_against_it():
     """A column nearly a copy of the model's except in one block: fitted without that block it
     cannot be told from the model's, so its prediction there carries a variance (s^2 tr(X^T X
     (H_whole - H_smaller))) far above the block's noise, checked against the prediction
-    variances computed directly; the held-out gain is then the geometric mean of the SSE
-    ratios over the other blocks, and over all blocks when fewer than half determine it."""
+    variances computed directly. Such a block does not count against the effect (it counts
+    for it when the effect predicts it better anyway), unless fewer than half the blocks
+    determine it."""
     from baseparams.identify.outofsample import CrossValidation, blocks, held_out_gain
     rng = np.random.default_rng(4)
     n = 500
@@ -740,11 +741,17 @@ def test_an_effect_is_judged_on_the_blocks_that_determine_it():
         assert without.determined[k] == (added.sum() <= len(block))
     assert list(without.determined) == [True, True, False, True, True]
     ratios = without.sse / whole.sse
-    assert held_out_gain(without, whole) == pytest.approx(np.exp(np.mean(np.log(ratios[[0, 1, 3, 4]]))) - 1)
+    counted = [0, 1, 3, 4] if ratios[2] < 1 else [0, 1, 2, 3, 4]
+    assert held_out_gain(without, whole) == pytest.approx(np.exp(np.mean(np.log(ratios[counted]))) - 1)
     residual = np.zeros((5, 1))
     sse = np.array([1.0, 2.0, 1.0, 4.0, 2.0])
-    few = CrossValidation(residual, sse * [4.0, 9.0, 2.0, 1.0, 0.5], np.array([True, False, False, True, False]))
-    assert held_out_gain(few, CrossValidation(residual, sse)) == pytest.approx((4 * 9 * 2 * 0.5) ** 0.2 - 1)
+    whole = CrossValidation(residual, sse)
+    undetermined_worse = CrossValidation(residual, sse * [4.0, 9.0, 0.1, 1.0, 0.5], np.array([1, 1, 0, 1, 1], bool))
+    assert held_out_gain(undetermined_worse, whole) == pytest.approx((4 * 9 * 0.5) ** 0.25 - 1)
+    undetermined_better = CrossValidation(residual, sse * [4.0, 9.0, 30.0, 1.0, 0.5], np.array([1, 1, 0, 1, 1], bool))
+    assert held_out_gain(undetermined_better, whole) == pytest.approx((4 * 9 * 30 * 0.5) ** 0.2 - 1)
+    few = CrossValidation(residual, sse * [4.0, 9.0, 0.1, 1.0, 0.5], np.array([True, False, False, True, False]))
+    assert held_out_gain(few, whole) == pytest.approx((4 * 9 * 0.1 * 0.5) ** 0.2 - 1)
 
 
 def test_a_block_that_cannot_determine_an_effect_does_not_hold_it_back():
