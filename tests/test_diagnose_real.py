@@ -811,6 +811,26 @@ def test_effects_that_cancel_each_other_are_not_named(puma_1200, monkeypatch):
     assert _named(diagnose(puma_1200.problem, data.tau)) == {("spring", "q3"), ("cogging", "q3")}
 
 
+def test_an_effect_that_dominates_the_torque_is_not_taken_for_cancelling():
+    """The cancelling check compares a force with the measured torque, which holds a real
+    effect: a spring on a generated chain's q2 with 20 times the inertial torque's RMS is
+    named, with its stiffness, and not held back."""
+    from baseparams.identify.simulate import random_physical_inertia
+    s = C.generated_setting("chain4", 1200)
+    spring = next(c for c in s.problem.candidates if c.kind == "spring" and c.coordinate == "q2")
+    q2 = np.asarray(s.motion.q, float).reshape(s.motion.count, -1)[:, 1]
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        clean = s.problem.inertial @ random_physical_inertia(s.mechanism, rng)
+        unit = spring.columns @ np.array([1.0, np.mean(q2)])
+        k = 20 * np.sqrt(np.mean(clean[:, 1] ** 2) / np.mean(unit[:, 1] ** 2))
+        sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
+        d = diagnose(s.problem, clean + k * unit + C.noise(rng, clean.shape, sd))
+        assert _named(d) == {("spring", "q2")}
+        assert d.effects[0]["value"]["k"] == pytest.approx(k, rel=0.02)
+        assert not d.unsupported
+
+
 FOUR_BAR_AR_VISCOUS = (333427002749827781086311162658377319386, 263843294879837360010514471918415607657, 0,
                        1729936829)
 
