@@ -758,9 +758,9 @@ def test_a_block_that_cannot_determine_an_effect_does_not_hold_it_back():
     """A pendulum's spring at effect/noise 12, fitted on the first 70 %: beyond gravity it is
     nearly the cubic q - sin q, and the one block holding the motion's large negative angles
     is where the others' fit cannot pin it down (3-30 times the SSE without it there, though
-    it predicts the other four blocks better). With that block counted, the spring 'did not
-    predict held-out blocks better' or was too small in 7 of these 8 datasets; where that
-    block does not count against it, it is named in 7, and in the eighth cogging (harmonics of q,
+    it predicts the other four blocks better). With that block counted, the spring is named
+    in 1 of these 8 datasets ('does not predict held-out blocks better' or too small); where
+    that block does not count against it, in 7, and in the eighth cogging (harmonics of q,
     correlation 0.995 with the spring beyond the model, adding over it at p 0.014) is named
     with the spring as its rival."""
     from baseparams.identify import diagnose as diagnose_module
