@@ -506,12 +506,15 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
                         "values": {}, "reason": f"ambiguous ({labels}); all together: {reason}",
                         "members": list(groups[head])})
     level = alpha / len(named) if named else alpha
+    inertial = model.shape[-1]
+    held = np.maximum(np.sqrt(np.mean(y ** 2, axis=0)),             # what each coordinate's torque holds
+                      np.sqrt(np.mean((X[:, :, :inertial] @ fit.coefficients[:inertial]) ** 2, axis=0)))
     for i in named:
         k = in_model.index(i)
         lo, hi = offsets[k + 1], offsets[k + 2]
         values = dict(zip(coefficient_names(candidates[i].kind), estimates[k][0].tolist()))
         reason = (implausible(candidates[i].kind, values) or _body_implausible(problem, candidates[i], values)
-                  or _cancelling(X, y, fit.coefficients, range(lo, hi), model.shape[-1], problem.coordinates))
+                  or _cancelling(X[:, :, lo:hi] @ fit.coefficients[lo:hi], held, problem.coordinates))
         detail: dict = {}
         if not reason:
             others = np.r_[0:lo, hi:X.shape[-1]]
@@ -548,16 +551,13 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
 CANCELS = 10.0
 
 
-def _cancelling(X: np.ndarray, y: np.ndarray, beta: np.ndarray, span: range, inertial: int,
-                coordinates: Sequence[str]) -> str:
-    """Why an effect's force is not physical when it is many times its coordinate's whole
-    torque ('' otherwise). Why: under a torque ripple in time, a spring (k 17 111) and cogging
-    (c1 -23 222) on one PUMA joint cancelled each other to a few N m, both 'significant' and
+def _cancelling(force: np.ndarray, held: np.ndarray, coordinates: Sequence[str]) -> str:
+    """Why an effect's ``force`` (n, f) is not physical when it is many times what its
+    coordinate's torque ``held`` (f,: the measured RMS, or the inertial part's if larger)
+    ('' otherwise). Why: under a torque ripple in time, a spring (k 17 111) and cogging (c1
+    -23 222) on one PUMA joint cancelled each other to a few N m, both 'significant' and
     steady over the blocks: each force was hundreds of times the joint's torque."""
-    force = X[:, :, span.start:span.stop] @ beta[span.start:span.stop]
     size = np.sqrt(np.mean(force ** 2, axis=0))
-    held = np.maximum(np.sqrt(np.mean(y ** 2, axis=0)),
-                      np.sqrt(np.mean((X[:, :, :inertial] @ beta[:inertial]) ** 2, axis=0)))
     ratio = size / np.where(held > 0, held, np.inf)
     j = int(np.argmax(ratio))
     if ratio[j] > CANCELS:

@@ -94,16 +94,14 @@ def cross_validate(model: np.ndarray, y: np.ndarray, weights: np.ndarray, folds:
         fit = WeightedLinearModel(model[train], y[train]).fit(weights, rank_tol=CV_RANK_TOL) if p else None
         Xb = (model[block] * weights[None, :, None]).reshape(-1, p)
         gram = Xb.T @ Xb
-        whole_H = np.zeros((p, p))
+        whole_H = np.zeros((p, p)) if fit is None else fit.spread @ fit.spread.T
         for k, drop in enumerate(sets):
-            beta, H = (np.zeros(p), np.zeros((p, p))) if fit is None else _without(fit, drop, model[train], y[train],
-                                                                                     weights)
+            beta, H = (np.zeros(p), whole_H) if fit is None else _without(fit, whole_H, drop, model[train], y[train],
+                                                                            weights)
             r = y[block] - model[block] @ beta
             residuals[k][block] = r
             sse[k].append(float(np.sum((r * weights[None, :]) ** 2)))
-            if k == 0:
-                whole_H = H
-            else:
+            if k:
                 determined[k].append(float(np.sum(gram * (whole_H - H))) <= len(block))
     return [CrossValidation(r, np.array(e), np.array(d, dtype=bool) if k else None)
             for k, (r, e, d) in enumerate(zip(residuals, sse, determined))]
@@ -113,14 +111,13 @@ def cross_validate(model: np.ndarray, y: np.ndarray, weights: np.ndarray, folds:
 CV_RANK_TOL = 1e-10
 
 
-def _without(fit: LinearFit, drop: np.ndarray | None, model: np.ndarray, y: np.ndarray,
+def _without(fit: LinearFit, H: np.ndarray, drop: np.ndarray | None, model: np.ndarray, y: np.ndarray,
              weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The coefficients (p,) of the fit without the columns ``drop`` (zero there) and their
-    (X_w^T X_w)^+ (p, p; zero rows and columns there): from the whole fit when it has full
-    rank (partitioned inverse: beta_o - H_od H_dd^-1 beta_d, H the inverse normal matrix, and
-    its Schur complement H_oo - H_od H_dd^-1 H_do), else by a fit of the other columns."""
+    (X_w^T X_w)^+ (p, p; zero rows and columns there): from the whole fit and its inverse
+    normal matrix ``H`` when it has full rank (partitioned inverse: beta_o - H_od H_dd^-1
+    beta_d, and the Schur complement H_oo - H_od H_dd^-1 H_do), else by a fit of the others."""
     beta = fit.coefficients
-    H = fit.spread @ fit.spread.T
     if drop is None or not drop.size:
         return beta, H
     p = len(beta)
