@@ -95,3 +95,50 @@ def test_without_on_a_rank_deficient_fit_equals_a_refit_when_the_deficiency_lies
     assert np.allclose(reduced.residual, refit.residual, atol=1e-9 * np.linalg.norm(refit.residual))
     Z = rng.standard_normal((n * f, 2))
     assert np.allclose(reduced.orthogonal(Z), refit.orthogonal(Z), atol=1e-9 * np.linalg.norm(Z))
+
+
+@pytest.mark.parametrize("case", ["random", "nearly collinear", "zero column", "copy of a column"])
+def test_extended_equals_a_fit_of_all_the_columns(case):
+    """A fit grown by columns from the smaller fit's factors (an SVD update) is the direct
+    SVD fit of every column: singular values, rank, coefficients, residual, covariance and
+    the range (its basis spans the direct one's, orthonormal), to rounding; on columns of
+    very different sizes, a new column nearly or exactly a copy of an old one, a zero one."""
+    rng = np.random.default_rng(["random", "nearly collinear", "zero column", "copy of a column"].index(case))
+    n, f, p, k = 160, 3, 8, 3
+    model = rng.standard_normal((n, f, p + k)) * np.logspace(-2, 3, p + k)
+    if case == "nearly collinear":
+        model[:, :, p + 1] = 2.0 * model[:, :, 3] + 1e-9 * rng.standard_normal((n, f))
+    if case == "zero column":
+        model[:, :, p + 2] = 0.0
+    if case == "copy of a column":
+        model[:, :, p] = model[:, :, 5]
+    y = model @ rng.standard_normal(p + k) + rng.standard_normal((n, f))
+    weights = rng.uniform(0.5, 2.0, f)
+    small = WeightedLinearModel(model[:, :, :p], y).fit(weights)
+    grown = small.extended((model[:, :, p:] * weights[None, :, None]).reshape(n * f, k))
+    direct = WeightedLinearModel(model, y).fit(weights)
+    assert grown is not None and grown.rank == direct.rank
+    assert np.allclose(grown.singular_values, direct.singular_values, rtol=0, atol=1e-12 * direct.singular_values[0])
+    assert np.allclose(grown.residual, direct.residual, atol=1e-10 * np.linalg.norm(y))
+    assert np.allclose(grown.basis.T @ grown.basis, np.eye(grown.rank), atol=1e-12)
+    assert np.allclose(grown.basis @ (grown.basis.T @ direct.basis), direct.basis, atol=1e-10)
+    if case != "copy of a column":          # minimum-norm coefficients of a deficient fit differ in rounding only
+        assert np.allclose(grown.coefficients, direct.coefficients, rtol=1e-8)
+        assert np.allclose(grown.covariance, direct.covariance, rtol=1e-7)
+    else:
+        assert np.allclose(grown.coefficients, direct.coefficients, rtol=1e-6, atol=1e-9)
+
+
+def test_extended_refuses_a_rank_deficient_fit_and_reordered_permutes_the_columns():
+    rng = np.random.default_rng(7)
+    model = rng.standard_normal((60, 2, 4))
+    model[:, :, 3] = model[:, :, 0]
+    y = rng.standard_normal((60, 2))
+    deficient = WeightedLinearModel(model, y).fit(np.ones(2))
+    assert deficient.rank == 3 and deficient.extended(rng.standard_normal((120, 1))) is None
+    fit = WeightedLinearModel(model[:, :, :3], y).fit(np.ones(2))
+    swapped = WeightedLinearModel(model[:, :, [2, 0, 1]], y).fit(np.ones(2))
+    moved = fit.reordered([2, 0, 1])
+    assert np.allclose(moved.coefficients, swapped.coefficients)
+    assert np.allclose(moved.covariance, swapped.covariance)
+    assert np.allclose(moved.without([0]).residual, swapped.without([0]).residual)

@@ -20,7 +20,7 @@ from baseparams import registry
 from baseparams.dynamics.evaluator import Sample
 from baseparams.errors import InputError
 from baseparams.identify import derived
-from baseparams.identify.model import coordinate_speed_rms, effect_columns
+from baseparams.identify.model import CoordinateMotion, coordinate_motion, coordinate_speed_rms, effect_columns
 from baseparams.identify.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
@@ -88,13 +88,17 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
     pairs = all_pairs(mechanism) if pairs is None else pairs
     present = {(e.kind, e.coordinate) for e in mechanism.effects}
     out, notes = [], []
+    motions: dict[str, CoordinateMotion] = {}          # each coordinate's, made once for all its effects
     for kind, coordinate in pairs:
         if (kind, coordinate) in present:
             continue
         shapes = shape_grid(mechanism, sample, n, kind, coordinate)
+        if coordinate not in motions:
+            motions[coordinate] = coordinate_motion(mechanism, sample, n, coordinate)
         variants = []
         for shape in shapes:
-            names, columns = effect_columns(mechanism, sample, n, kind, coordinate, shape=shape)
+            names, columns = effect_columns(mechanism, sample, n, kind, coordinate, shape=shape,
+                                            motion=motions[coordinate])
             columns = np.ascontiguousarray(columns, dtype=float)
             if not np.all(np.isfinite(columns)):
                 break
@@ -108,7 +112,8 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
                                  generalises=general))
         else:
             out.append(Candidate(kind, coordinate, tuple(names), variants[0], tuple(variants), tuple(shapes),
-                                 dict(shapes[0]), general, _maker(mechanism, sample, n, kind, coordinate, reduce)))
+                                 dict(shapes[0]), general,
+                                 _maker(mechanism, sample, n, kind, coordinate, reduce, motions[coordinate])))
     return out, notes
 
 
@@ -128,30 +133,24 @@ def shape_grid(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordina
 
 
 def _reduced(columns: np.ndarray, reduce: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """``reduce`` applied to the coordinates an effect's columns (N, f, c) act on only (on an
-    open chain one of f: filtering the zero rows of the others was most of diagnosis's
-    preparation time at 5 kHz)."""
-    live = np.nonzero(np.any(columns != 0, axis=(0, 2)))[0]
-    if len(live) == columns.shape[1]:
-        return np.ascontiguousarray(reduce(columns))
-    part = reduce(columns[:, live, :])
-    out = np.zeros((part.shape[0],) + columns.shape[1:])
-    out[:, live, :] = part
-    return out
+    """``reduce`` applied to an effect's columns (N, f, c), contiguous (the filter skips the
+    coordinates they do not act on: :func:`~baseparams.identify.data.zero_phase`)."""
+    return np.ascontiguousarray(reduce(columns))
 
 
 def _maker(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
-           reduce: Callable[[np.ndarray], np.ndarray] | None) -> Callable[[dict], np.ndarray]:
+           reduce: Callable[[np.ndarray], np.ndarray] | None, motion: CoordinateMotion) -> Callable[[dict], np.ndarray]:
     """The columns of a shaped effect at any shape value (reduced like the data), each value's
     made once: the search between grid points meets the same values again at later steps
-    (selection.SHAPE_STEP), and each making filters the full-rate columns."""
+    (selection.SHAPE_STEP), and each making filters the full-rate columns. ``motion``: the
+    coordinate's (:func:`~baseparams.identify.model.coordinate_motion`)."""
     made: dict[tuple, np.ndarray] = {}
 
     def make(shape: dict) -> np.ndarray:
         key = tuple(sorted(shape.items()))
         if key not in made:
-            columns = np.ascontiguousarray(effect_columns(mechanism, sample, n, kind, coordinate, shape=shape)[1],
-                                           dtype=float)
+            columns = np.ascontiguousarray(effect_columns(mechanism, sample, n, kind, coordinate, shape=shape,
+                                                          motion=motion)[1], dtype=float)
             made[key] = _reduced(columns, reduce) if reduce is not None else columns
         return made[key]
     return make

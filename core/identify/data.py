@@ -62,6 +62,21 @@ CHUNK_ROWS = 20_000
 CHUNK_PAD = 4
 
 
+def zero_phase(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``x`` (rows, ...) through the zero-phase filter ``sos`` (scipy's sosfiltfilt) along the
+    rows, columns that are zero throughout left as they are (they filter to zero). Why: on a
+    serial chain 40 % of the inertial columns are zero (a body moves no joint before it), and
+    an effect acts on one coordinate of f."""
+    flat = x.reshape(len(x), -1)
+    live = np.any(flat != 0, axis=0)
+    if live.all():
+        return sosfiltfilt(sos, x, axis=0)
+    out = np.zeros(flat.shape)
+    if live.any():
+        out[:, live] = sosfiltfilt(sos, flat[:, live], axis=0)
+    return out.reshape(x.shape)
+
+
 @dataclass(frozen=True)
 class Segment:
     """One stretch of uniformly sampled rows of the model's rows (a run, or a piece of one
@@ -84,7 +99,7 @@ class Segment:
     def reduce(self, x: np.ndarray) -> np.ndarray:
         """``x`` (the segment's rows, ...) filtered and decimated to its kept rows."""
         if self.sos is not None:
-            x = sosfiltfilt(self.sos, x, axis=0)
+            x = zero_phase(self.sos, x)
         return x[self.edge: len(x) - self.edge: self.factor]
 
     def noise_correlation(self) -> np.ndarray:
@@ -213,7 +228,7 @@ class MeasuredData:
                     hi = s.stop
                 block = build(self.motion.take(slice(lo, hi)), None, s.run)
                 if s.sos is not None:
-                    block = sosfiltfilt(s.sos, block, axis=0)
+                    block = zero_phase(s.sos, block)
                 out.append(block[rows - lo])
         return np.concatenate(out, axis=0)
 

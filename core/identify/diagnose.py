@@ -38,7 +38,8 @@ from baseparams.identify.derived import KINDS as DERIVED_KINDS
 from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, held_out_gain, implausible, stability
 from baseparams.identify.data import MeasuredData, bandwidth
 from baseparams.io.atomic import atomic_write
-from baseparams.identify.model import Design, Motion, design, effect_values, evaluate, independent_names
+from baseparams.identify.model import (Design, Motion, design, effect_values, effects_design, evaluate,
+                                       independent_names)
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.selection import (Candidate, Rival, Selection, Step, holm, outdone, select_whitened,
@@ -128,9 +129,8 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     known_specs = [e for e in mechanism.effects if _all_given(e)]
     fitted_specs = [e for e in mechanism.effects if not _all_given(e)]
     inertial, fitted = design(mechanism, motion, fitted_specs, sample)
-    _, known_cols = design(mechanism, motion, known_specs, sample)
-    known = known_cols.matrix @ effect_values(mechanism, known_specs) if known_specs else \
-        np.zeros(inertial.matrix.shape[:2])
+    known = effects_design(mechanism, sample, motion.count, known_specs).matrix @ \
+        effect_values(mechanism, known_specs) if known_specs else np.zeros(inertial.matrix.shape[:2])
     t = np.asarray(motion.t, float)
     qd = np.asarray(motion.qd, float)
     reduce = None

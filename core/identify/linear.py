@@ -146,6 +146,45 @@ class LinearFit:
         residual = self.residual + leaving @ (leaving.T @ self.weighted_target())
         return Reduced(self.weights, self.samples, self.rank - removed.shape[1], residual, self.basis, leaving)
 
+    def extended(self, columns: np.ndarray, rank_tol: float = RANK_TOL) -> LinearFit | None:
+        """This fit with the weighted ``columns`` (N f, k) appended, at the same weights, from
+        this fit's factors (an SVD update): [A C] = [U Q] [[S V^T D, U^T C], [0, R]] with
+        Q R the QR factors of C's part beyond the range, so only the small (p + k) square core
+        is factored again. Why: a selection step first fits the previous step's model with
+        the new effect at the previous weights, and an SVD of the N f rows costs ten times
+        this. None when this fit is rank-deficient (the directions it dropped are not kept),
+        not "nonrobust", or the rows are too few."""
+        n_rows, p = self.basis.shape[0], len(self.coefficients)
+        k = columns.shape[1]
+        if self.rank < p or self.cov_type != "nonrobust" or n_rows < p + k:
+            return None
+        U = self.basis
+        inside = U.T @ columns
+        beyond = columns - U @ inside
+        again = U.T @ beyond                      # once more: orthogonal to working precision
+        inside, beyond = inside + again, beyond - U @ again
+        Q, R = np.linalg.qr(beyond)
+        scale = np.concatenate([self.scale, np.linalg.norm(columns, axis=0)])
+        scale[p:][scale[p:] == 0] = 1.0
+        core = np.zeros((p + k, p + k))
+        core[:p, :p] = (self.singular_values[:p, None] * self.right[:p]) * self.scale
+        core[:p, p:], core[p:, p:] = inside, R
+        um, s, vt = np.linalg.svd(core / scale, full_matrices=False)
+        rank = numerical_rank(tol=rank_tol, singular_values=s)
+        target = np.concatenate([self.projection, Q.T @ self.residual])   # [U Q]^T b
+        proj = um[:, :rank].T @ target
+        coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
+        basis = U @ um[:p, :rank] + Q @ um[p:, :rank]
+        residual = self.residual + U @ self.projection - basis @ proj
+        return LinearFit(self.weights, self.samples, scale, s, vt, basis, residual, coefficients, rank, proj)
+
+    def reordered(self, order: Sequence[int]) -> LinearFit:
+        """The same fit with its columns (coefficients, scale, right singular vectors) in ``order``."""
+        order = list(order)
+        return LinearFit(self.weights, self.samples, self.scale[order], self.singular_values, self.right[:, order],
+                         self.basis, self.residual, self.coefficients[order], self.rank, self.projection,
+                         self.cov_type, None if self._columns is None else self._columns[:, order])
+
     def weighted_target(self) -> np.ndarray:
         """The weighted measurements (N f,): the residual plus their projection on the range."""
         return self.residual + self.basis @ self.projection

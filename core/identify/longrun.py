@@ -12,6 +12,10 @@ def newey_west_lags(n: int) -> int:
     return int(np.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
 
 
+# lags hac_lags computes one by one before it turns to an FFT for the rest
+DIRECT_LAGS = 6
+
+
 def hac_lags(residual: np.ndarray) -> int:
     """The HAC window for a residual (N, f), from its mean autocorrelation over the
     coordinates: 0 (White's covariance) when already the first lag is inside the 95 % band
@@ -34,6 +38,12 @@ def hac_lags(residual: np.ndarray) -> int:
     first = np.sum(centred[1:, live] * centred[:-1, live], axis=0) / energy[live]
     if abs(float(np.mean(first))) < band:      # white already at lag 1 (most tests): no FFT
         return 0
+    # the next few lags directly (most windows end there; an FFT costs as much as ~20 of them)
+    live_centred = centred[:, live]
+    for k in range(2, min(DIRECT_LAGS, nlags) + 1):
+        mean_k = float(np.mean(np.sum(live_centred[k:] * live_centred[:-k], axis=0) / energy[live]))
+        if abs(mean_k) < band:
+            return int(min(limit, max(base, 2 * (k - 1))))
     # every coordinate's autocorrelation at once (statsmodels' acf, one FFT for all columns)
     size = 1 << int(np.ceil(np.log2(2 * n)))
     spectrum = np.fft.rfft(centred[:, live], n=size, axis=0)
@@ -62,6 +72,12 @@ def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarra
     if lags == 0 or not prewhiten or len(scores) < 20:
         return S_hac_simple(scores, nlags=lags)
     before, after = scores[:-1], scores[1:]
+    if scores.shape[1] == 1:                  # one direction (most tests): the same in scalars
+        energy = float(before[:, 0] @ before[:, 0])
+        a = float(before[:, 0] @ after[:, 0]) / energy if energy > 0 else 0.0
+        a = float(np.clip(a, -PREWHITEN_LIMIT, PREWHITEN_LIMIT))
+        e = after - a * before
+        return S_hac_simple(e, nlags=hac_lags(e)) / (1.0 - a) ** 2
     At, *_ = np.linalg.lstsq(before, after, rcond=None)
     u, sv, vt = np.linalg.svd(At.T)
     A = (u * np.minimum(sv, PREWHITEN_LIMIT)) @ vt

@@ -104,14 +104,31 @@ def drive_rows(mechanism: Mechanism, names: Sequence[str]) -> np.ndarray:
 
 
 def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str,
-                   key: str = "effect", shape: dict | None = None) -> tuple[list[str], np.ndarray]:
+                   key: str = "effect", shape: dict | None = None,
+                   motion: "CoordinateMotion | None" = None) -> tuple[list[str], np.ndarray]:
     """An effect's coefficient names and columns (N, f, c) on the independent coordinates,
-    at the ``shape`` parameters given (name -> value; the effect's defaults otherwise).
+    at the ``shape`` parameters given (name -> value; the effect's defaults otherwise);
+    ``motion``: the coordinate's, when already made (:func:`coordinate_motion`).
 
     On a motor the effect sees the motor's position, velocity and acceleration (the gear
     ratios times the joints'), and its force reaches each joint coordinate times that
     joint's ratio (power balance), then the independent coordinates by R^T."""
     effect = checked_effect(mechanism, kind, coordinate, key)
+    q, qd, qdd, reach = coordinate_motion(mechanism, sample, n, coordinate) if motion is None else motion
+    with np.errstate(all="ignore"):
+        columns = effect.columns(q, qd, qdd, **(shape or {}))
+    out = np.stack([reach * c[:, None] for c in columns], axis=-1)               # (N, f, c)
+    return effect.coefficient_names(coordinate), out
+
+
+# A coordinate's (or motor's) position, velocity, acceleration (N,) and the factor (N, f) by which a
+# force on it reaches each independent coordinate.
+CoordinateMotion = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def coordinate_motion(mechanism: Mechanism, sample: Sample, n: int, coordinate: str) -> CoordinateMotion:
+    """What every effect on ``coordinate`` is built from (:func:`effect_columns`), made once
+    for the many shapes of one effect."""
     row = drive_rows(mechanism, [coordinate])[0]
     used = np.nonzero(row)[0]
 
@@ -119,12 +136,8 @@ def effect_columns(mechanism: Mechanism, sample: Sample, n: int, kind: str, coor
         return np.sum([row[i] * _as_batch(values[int(i)], n) for i in used], axis=0)
 
     q, qd, qdd = (combined(values) for values in (sample.q, sample.qd, sample.qdd))
-    with np.errstate(all="ignore"):
-        columns = effect.columns(q, qd, qdd, **(shape or {}))
-    r_row = sum(row[i] * np.stack([_as_batch(v, n) for v in sample.projection[i]], axis=-1)
-                for i in used)                                                    # (N, f)
-    out = np.stack([r_row * c[:, None] for c in columns], axis=-1)               # (N, f, c)
-    return effect.coefficient_names(coordinate), out
+    reach = sum(row[i] * np.stack([_as_batch(v, n) for v in sample.projection[i]], axis=-1) for i in used)
+    return q, qd, qdd, reach
 
 
 def coordinate_speed_rms(mechanism: Mechanism, sample: Sample, n: int, coordinate: str) -> float:
@@ -151,17 +164,20 @@ def design(mechanism: Mechanism, motion: Motion, effects: Sequence[EffectSpec] =
            sample: Sample | None = None) -> tuple[Design, Design]:
     """(inertial, effects): the standard-parameter columns K and the named effects' columns."""
     sample = sample if sample is not None else evaluate(mechanism, motion)
-    n = motion.count
-    inertial = Design(tuple(mechanism.parameters), inertial_columns(sample, n))
+    return Design(tuple(mechanism.parameters), inertial_columns(sample, motion.count)), \
+        effects_design(mechanism, sample, motion.count, effects)
+
+
+def effects_design(mechanism: Mechanism, sample: Sample, n: int, effects: Sequence[EffectSpec]) -> Design:
+    """The named effects' columns (n, f, c) at the ``sample``'s n rows."""
     names, blocks = [], []
     for spec in effects:
         shape = registry.effects()[spec.kind].item.shape_values(spec.values)
         cnames, block = effect_columns(mechanism, sample, n, spec.kind, spec.coordinate, shape=shape)
         names.extend(cnames)
         blocks.append(block)
-    f = inertial.matrix.shape[1]
-    matrix = np.concatenate(blocks, axis=-1) if blocks else np.zeros((n, f, 0))
-    return inertial, Design(tuple(names), matrix)
+    matrix = np.concatenate(blocks, axis=-1) if blocks else np.zeros((n, len(independent_names(mechanism)), 0))
+    return Design(tuple(names), matrix)
 
 
 def standard_parameters(mechanism: Mechanism) -> np.ndarray:

@@ -179,6 +179,13 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
     columns before a projection; default: the largest singular value)."""
     if matrix.shape[1] == 0:
         return np.zeros((matrix.shape[0], 0))
+    if matrix.shape[1] == 1:          # one column: its direction (an SVD call costs 10 times more)
+        column = matrix[:, 0]
+        norm = float(np.linalg.norm(column))
+        size = norm if reference is None else float(np.linalg.norm(reference))
+        if norm == 0.0 or (reference is not None and norm <= tol * (size if size > 0 else 1.0)):
+            return np.zeros((matrix.shape[0], 0))
+        return (column / norm)[:, None]
     if reference is not None:
         scale = np.linalg.norm(reference, axis=0)
         scale[scale == 0] = 1.0
@@ -204,9 +211,11 @@ def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
     """The fewest samples any direction of ``basis`` effectively acts on (participation
     ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
     n, f = shape
-    w = (basis ** 2).reshape(n, f, -1).sum(axis=1)
-    w = w / np.maximum(w.sum(axis=0), 1e-300)
-    return float(np.min(1.0 / np.sum(w ** 2, axis=0)))
+    b = basis.reshape(n, f, -1)
+    w = np.einsum("tjr,tjr->tr", b, b)
+    total = w.sum(axis=0)
+    squares = np.einsum("tr,tr->r", w, w)
+    return float(np.min(np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf)))
 
 
 def wilson_hilferty(stat: float, df: int) -> float:
@@ -437,31 +446,37 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         bars, regrouped = dict(resume.bars), set(resume.resolved)
         touched = {"all"}                     # every shape is chosen again under the new filter
         max_steps = len(steps) + max_steps
+    known: KnownFit | None = None             # the last step's fit, which the next complete fit extends
     while len(steps) < max_steps:
-        refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched)
+        refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched, known)
         touched = set()
-        current = np.concatenate([model] + [candidates[i].columns for i in added + companions], axis=-1)
-        fit = WeightedLinearModel(filtered(current), filtered(y)).fit(
+        blocks = [candidates[i].columns for i in added + companions]
+        fit = WeightedLinearModel(filtered(np.concatenate([model] + blocks, axis=-1)), filtered(y)).fit(
             start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
-        previous = fit.weights
+        previous, known = fit.weights, (fit, blocks)
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
         bases, tests, variant = {}, [], {}
         lags = hac_lags(fit.residual.reshape(n, f))     # one window per step: candidates barely change it
+        seen: dict[int, Candidate] = {}
         for i, cand in enumerate(candidates):
             if i in excluded:
-                tests.append(NOT_TESTED)
                 continue
             if whiten is None:
-                seen = cand
+                seen[i] = cand
             else:                                 # whitened once a pass (until its shape changes)
                 if i not in whitened or whitened[i][0] is not cand:
                     whitened[i] = (cand, whiten.candidate(cand))
-                seen = whitened[i][1]
+                seen[i] = whitened[i][1]
+        forms = dict(zip(seen, candidate_bases(list(seen.values()), fit)))
+        for i in range(len(candidates)):
+            if i not in seen:
+                tests.append(NOT_TESTED)
+                continue
             # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
             # variance when the whitened residual is white, else with the stationary one
-            bases[i], test, variant[i] = best_variant(seen, fit, (n, f), dof, sparse_if_white=coloured,
-                                                      lags=lags, sparse_if_coloured=coloured)
+            bases[i], test, variant[i] = best_variant(seen[i], fit, (n, f), dof, sparse_if_white=coloured,
+                                                      lags=lags, sparse_if_coloured=coloured, bases=forms[i])
             tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
@@ -574,14 +589,53 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
     return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten), variant[best]
 
 
+# A fit of the model and some effects' columns (the arrays, in their order), for _complete to extend.
+KnownFit = tuple[Fit, list[np.ndarray]]
+
+
 def _complete(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
-              whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray) -> tuple[Fit, np.ndarray]:
+              whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray,
+              known: KnownFit | None = None) -> tuple[Fit, np.ndarray]:
     """The complete model's fit (the model and every effect in ``in_model``, filtered by
-    ``whiten``, at ``weights``) and the column offsets of each effect (len(in_model) + 1)."""
+    ``whiten``, at ``weights``) and the column offsets of each effect (len(in_model) + 1);
+    extended from ``known`` (the same model and data with fewer effects, at these weights)
+    when it can be."""
     p = model.shape[-1]
-    complete = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[i].columns for i in in_model],
-                                                         axis=-1)), whiten(y)).fit(weights)
-    return complete, np.cumsum([p] + [candidates[i].columns.shape[-1] for i in in_model])
+    blocks = [candidates[i].columns for i in in_model]
+    offsets = np.cumsum([p] + [b.shape[-1] for b in blocks])
+    complete = _extended(known, blocks, p, whiten, weights) if known is not None else None
+    if complete is None:
+        complete = WeightedLinearModel(whiten(np.concatenate([model] + blocks, axis=-1)), whiten(y)).fit(weights)
+    return complete, offsets
+
+
+def _extended(known: KnownFit, blocks: list[np.ndarray], p: int, whiten: Callable[[np.ndarray], np.ndarray],
+              weights: np.ndarray) -> Fit | None:
+    """``known``'s fit with the ``blocks`` it lacks added (:meth:`LinearFit.extended`) and its
+    columns put in ``blocks``' order; None when it is at other weights or has a block that
+    ``blocks`` lacks (a shape changed since)."""
+    fit, old = known
+    if not np.array_equal(fit.weights, weights):
+        return None
+    position: list[int] = []                  # where each of known's blocks is in ``blocks``
+    for block in old:
+        j = next((j for j, b in enumerate(blocks) if b is block and j not in position), None)
+        if j is None:
+            return None
+        position.append(j)
+    new = [j for j in range(len(blocks)) if j not in position]
+    if not new:
+        return None
+    n, f, _ = blocks[new[0]].shape
+    columns = whiten(np.concatenate([blocks[j] for j in new], axis=-1)) * weights[None, :, None]
+    grown = fit.extended(columns.reshape(n * f, -1))
+    if grown is None:
+        return None
+    start, at = {}, p                          # each block's first column in the grown fit
+    for j in position + new:
+        start[j], at = at, at + blocks[j].shape[-1]
+    return grown.reordered(list(range(p)) + [start[j] + c for j in range(len(blocks))
+                                             for c in range(blocks[j].shape[-1])])
 
 
 def _left_out(complete: Fit, offsets: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int], i: int,
@@ -691,13 +745,14 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
 
 def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
                   shaped: dict, weights: np.ndarray | None, whiten: Callable = _same,
-                  touched: set | None = None) -> None:
+                  touched: set | None = None, known: KnownFit | None = None) -> None:
     """Variable projection for the shaped effects in the model: each one's shape is chosen
     again given everything else in the model (the variant that leaves the smallest weighted
     residual), in place. Why: a shape chosen while other effects were still missing fits
     those too (Coulomb friction took a smooth shape, then a Stribeck bump made up the
     difference). ``touched``: the places where the model changed since the last call (a shape
-    is chosen again only where something changed beside it; None: everywhere)."""
+    is chosen again only where something changed beside it; None: everywhere). ``known``: a
+    fit at ``weights`` with fewer effects (the last step's) that the complete fit extends."""
     complete: Fit | None = None
     for i in in_model:
         if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
@@ -708,7 +763,7 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         fit: Fit | Reduced | None = None
         if weights is not None:
             if complete is None:
-                complete, _ = _complete(model, y, candidates, in_model, whiten, weights)
+                complete, _ = _complete(model, y, candidates, in_model, whiten, weights, known)
             start = model.shape[-1] + sum(candidates[j].columns.shape[-1] for j in in_model[:in_model.index(i)])
             fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
         if fit is None:
@@ -765,17 +820,53 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
     return Candidate(cand.kind, cand.coordinate, cand.names, columns(found.x), (), (), shape, cand.generalises)
 
 
+# The most bytes of candidate columns candidate_bases projects off the model at once.
+BATCH_BYTES = 64 << 20
+
+
+def candidate_bases(candidates: Sequence[Candidate], fit: "Fit | Reduced") -> list[list[np.ndarray]]:
+    """:func:`candidate_basis` of every form of each candidate (its one form, or each
+    variant), the projection off the model done for all at once (two matrix products
+    instead of one pair per form: most of a step's cost on a robot's many candidates)."""
+    forms = [list(c.variants) if c.variants else [c.columns] for c in candidates]
+    flat = [columns for each in forms for columns in each]
+    if not flat:
+        return [[] for _ in forms]
+    n, f, _ = flat[0].shape
+    per_batch = max(1, BATCH_BYTES // (8 * n * f))       # columns projected at once (bounded memory)
+    bases: list[np.ndarray] = []
+    first = 0
+    while first < len(flat):
+        last, width = first, 0
+        while last < len(flat) and (last == first or width + flat[last].shape[-1] <= per_batch):
+            width += flat[last].shape[-1]
+            last += 1
+        Z = np.concatenate([(c * fit.weights[None, :, None]).reshape(n * f, -1) for c in flat[first:last]], axis=1)
+        projected = fit.orthogonal(Z)
+        bounds = np.cumsum([0] + [c.shape[-1] for c in flat[first:last]])
+        bases += [orthonormal_basis(projected[:, a:b], ABSORB_TOL, reference=Z[:, a:b])
+                  for a, b in zip(bounds[:-1], bounds[1:])]
+        first = last
+    out, at = [], 0
+    for each in forms:
+        out.append(bases[at:at + len(each)])
+        at += len(each)
+    return out
+
+
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
-                 lags: int | None = None, sparse_if_coloured: bool = False) -> tuple[np.ndarray, Test, int]:
+                 lags: int | None = None, sparse_if_coloured: bool = False,
+                 bases: list[np.ndarray] | None = None) -> tuple[np.ndarray, Test, int]:
     """(basis, test, variant index) of the candidate's best shape against ``fit`` (the
-    largest normal-equivalent statistic; the one form of an unshaped candidate)."""
+    largest normal-equivalent statistic; the one form of an unshaped candidate); ``bases``:
+    each form's :func:`candidate_basis`, when already made (:func:`candidate_bases`)."""
     if not cand.variants:
-        basis = candidate_basis(cand, fit)
+        basis = candidate_basis(cand, fit) if bases is None else bases[0]
         return basis, wald(fit.residual, basis, shape, dof, lags=lags, sparse_if_white=sparse_if_white,
                            sparse_if_coloured=sparse_if_coloured), -1
     best: tuple[np.ndarray, Test, int] | None = None
     for k, columns in enumerate(cand.variants):
-        basis = candidate_basis(columns, fit)
+        basis = candidate_basis(columns, fit) if bases is None else bases[k]
         test = wald(fit.residual, basis, shape, dof, lags=lags, extra_df=cand.extra_df,
                     sparse_if_white=sparse_if_white, sparse_if_coloured=sparse_if_coloured)
         if best is None or test.z > best[1].z:

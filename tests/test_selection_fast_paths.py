@@ -1,0 +1,103 @@
+"""The diagnosis's shortcuts against the plain computations they replace: each must give
+the same answer (to rounding) on every input, not only on the TX40 they were timed on."""
+
+import numpy as np
+import pytest
+from scipy.signal import butter, sosfiltfilt
+from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+from baseparams.identify import longrun
+from baseparams.identify import selection as S
+from baseparams.identify.data import zero_phase
+from baseparams.identify.linear import WeightedLinearModel
+
+
+def _ar(rng, n, f, rho):
+    e = rng.standard_normal((n + 100, f))
+    for t in range(1, len(e)):
+        e[t] += rho * e[t - 1]
+    return e[100:]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_hac_window_from_direct_lags_is_the_fft_ones(seed, monkeypatch):
+    """The first lags computed one by one give the window the FFT of every lag gives, over
+    residuals from white to strongly correlated (windows 0 to N/4)."""
+    rng = np.random.default_rng(seed)
+    residuals = [_ar(rng, int(rng.integers(50, 900)), int(rng.integers(1, 7)), rho)
+                 for rho in (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 0.97, -0.5)]
+    direct = [longrun.hac_lags(r) for r in residuals]
+    monkeypatch.setattr(longrun, "DIRECT_LAGS", 1)            # the FFT for every lag beyond the first
+    assert direct == [longrun.hac_lags(r) for r in residuals]
+    assert len(set(direct)) >= 4
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.9, 1.0, -0.99])
+def test_prewhitened_long_run_of_one_score_is_the_matrix_formula(rho):
+    """One score column: the scalar path equals Andrews and Monahan's matrix form (lstsq,
+    singular values capped at PREWHITEN_LIMIT, (I - A)^-1 S (I - A)^-T), also where the cap
+    acts (a unit root, a negative coefficient past it)."""
+    rng = np.random.default_rng(int(abs(rho) * 100))
+    s = _ar(rng, 600, 1, rho)
+    before, after = s[:-1], s[1:]
+    At, *_ = np.linalg.lstsq(before, after, rcond=None)
+    u, sv, vt = np.linalg.svd(At.T)
+    A = (u * np.minimum(sv, longrun.PREWHITEN_LIMIT)) @ vt
+    e = after - before @ A.T
+    B = np.linalg.inv(np.eye(1) - A)
+    expected = B @ S_hac_simple(e, nlags=longrun.hac_lags(e)) @ B.T
+    assert longrun.long_run(s, 7) == pytest.approx(expected, rel=1e-10)
+
+
+def test_one_column_basis_and_support_are_the_svd_ones():
+    """orthonormal_basis of one column (its direction, or nothing below the tolerance) and the
+    support's participation ratio, against the SVD and the formula 1 / sum w^2."""
+    rng = np.random.default_rng(4)
+    for size in (1.0, 1e-6, 1e-8, 0.0):
+        column = rng.standard_normal((300, 1)) * size
+        reference = rng.standard_normal((300, 1))
+        fast = S.orthonormal_basis(column, S.ABSORB_TOL, reference)
+        u, s, _ = np.linalg.svd(column / np.linalg.norm(reference), full_matrices=False)
+        slow = u[:, s > S.ABSORB_TOL]
+        assert fast.shape == slow.shape and np.allclose(np.abs(fast), np.abs(slow))
+    basis = np.linalg.qr(rng.standard_normal((300, 3)) * np.linspace(0.01, 1, 300)[:, None])[0]
+    w = (basis ** 2).reshape(100, 3, 3).sum(axis=1)
+    w = w / w.sum(axis=0)
+    assert S.support(basis, (100, 3)) == pytest.approx(np.min(1 / np.sum(w ** 2, axis=0)))
+    spike = np.zeros((300, 1))
+    spike[7] = 1.0
+    assert S.support(np.hstack([spike, np.full((300, 1), 300 ** -0.5)]), (100, 3)) == pytest.approx(1.0)
+
+
+def test_bases_projected_together_are_each_ones(monkeypatch):
+    """candidate_bases (all forms projected off the model at once, in batches) gives each
+    form's candidate_basis: one-column, two-column and shaped candidates, a form inside the
+    model's range (no direction left), and batches of one column."""
+    rng = np.random.default_rng(5)
+    n, f = 80, 2
+    model = rng.standard_normal((n, f, 4))
+    fit = WeightedLinearModel(model, rng.standard_normal((n, f))).fit(np.array([1.0, 3.0]))
+    inside = model[:, :, :1] * 2.0
+    cands = [S.Candidate("offset", "q1", ("a",), rng.standard_normal((n, f, 1))),
+             S.Candidate("spring", "q1", ("k", "kq0"), rng.standard_normal((n, f, 2))),
+             S.Candidate("smooth", "q2", ("fc",), inside, (inside, rng.standard_normal((n, f, 1))),
+                       ({"v": 1.0}, {"v": 2.0}), {"v": 1.0})]
+    for batch in (S.BATCH_BYTES, 8 * n * f):
+        monkeypatch.setattr(S, "BATCH_BYTES", batch)
+        together = S.candidate_bases(cands, fit)
+        each = [[S.candidate_basis(c, fit)] if not c.variants else [S.candidate_basis(v, fit) for v in c.variants]
+                for c in cands]
+        assert [[b.shape for b in forms] for forms in together] == [[(n * f, 1)], [(n * f, 2)], [(n * f, 0), (n * f, 1)]]
+        for forms, expected in zip(together, each):
+            for b, e in zip(forms, expected):
+                assert b.shape == e.shape and np.allclose(b @ b.T, e @ e.T, atol=1e-12)
+
+
+def test_zero_phase_skips_zero_columns_and_equals_sosfiltfilt():
+    sos = butter(4, 0.05, output="sos")
+    rng = np.random.default_rng(6)
+    x = rng.standard_normal((3000, 4, 3))
+    x[:, 1, :] = 0.0
+    x[:, :, 2] = 0.0
+    assert np.array_equal(zero_phase(sos, x), sosfiltfilt(sos, x, axis=0))
+    assert np.array_equal(zero_phase(sos, np.zeros((100, 2))), np.zeros((100, 2)))
