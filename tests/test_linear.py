@@ -142,3 +142,29 @@ def test_extended_refuses_a_rank_deficient_fit_and_reordered_permutes_the_column
     assert np.allclose(moved.coefficients, swapped.coefficients)
     assert np.allclose(moved.covariance, swapped.covariance)
     assert np.allclose(moved.without([0]).residual, swapped.without([0]).residual)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_subset_and_reweighted_equal_direct_fits(seed):
+    """A fit of some of the columns (from the full fit's factors) and the fit at other weights
+    (Cholesky QR of the reweighted basis) are the direct SVD fits, to rounding; the fixed
+    point found by refitting from factors is the one found by SVD fits alone."""
+    rng = np.random.default_rng(20 + seed)
+    n, f, p = 200, 3, 10
+    model = rng.standard_normal((n, f, p)) * np.logspace(-2, 3, p)
+    y = model @ rng.standard_normal(p) + rng.standard_normal((n, f)) * np.array([0.3, 1.0, 3.0])
+    weights = rng.uniform(0.5, 2.0, f)
+    full = WeightedLinearModel(model, y).fit(weights)
+    keep = sorted(rng.choice(p, size=6, replace=False).tolist())
+    for got, direct in ((full.subset(keep), WeightedLinearModel(model[:, :, keep], y).fit(weights)),
+                        (full.reweighted(weights * rng.uniform(0.7, 1.4, f)), None)):
+        if direct is None:
+            direct = WeightedLinearModel(model, y).fit(got.weights)
+        assert got.rank == direct.rank
+        assert np.allclose(got.coefficients, direct.coefficients, rtol=1e-9)
+        assert np.allclose(got.residual, direct.residual, atol=1e-10 * np.linalg.norm(y))
+        assert np.allclose(got.covariance, direct.covariance, rtol=1e-8)
+        assert np.allclose(got.basis.T @ got.basis, np.eye(got.rank), atol=1e-12)
+    assert full.reweighted(weights * np.array([1.0, 1.0, 10.0])) is None       # beyond RESCALE_LIMIT
+    from_factors = WeightedLinearModel(model, y).fit(near=full, tolerance=1e-9)
+    assert np.allclose(from_factors.weights, WeightedLinearModel(model, y).fit(tolerance=1e-9).weights, rtol=1e-7)

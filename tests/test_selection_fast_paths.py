@@ -101,3 +101,32 @@ def test_zero_phase_skips_zero_columns_and_equals_sosfiltfilt():
     x[:, :, 2] = 0.0
     assert np.array_equal(zero_phase(sos, x), sosfiltfilt(sos, x, axis=0))
     assert np.array_equal(zero_phase(sos, np.zeros((100, 2))), np.zeros((100, 2)))
+
+
+def test_complete_fit_grown_from_a_known_one_is_the_direct_fit():
+    """_complete from a known fit whose effects were partly taken out, replaced (a new shape)
+    and reordered, with new ones added, equals the direct fit: coefficients in the asked
+    order, residual, and what leaving an effect out gives (the shape search's use)."""
+    rng = np.random.default_rng(8)
+    n, f = 120, 2
+    model = rng.standard_normal((n, f, 5))
+    y = rng.standard_normal((n, f))
+    weights = np.array([0.7, 1.6])
+    blocks = [rng.standard_normal((n, f, k)) for k in (1, 2, 1, 1, 2)]
+    cands = [S.Candidate("offset", f"q{i}", tuple("abc"[:b.shape[-1]]), b) for i, b in enumerate(blocks)]
+    rho = S.Whitening(np.array([0.5, 0.2]))
+    for whiten in (S._same, rho):
+        first = [0, 1, 2]
+        known_fit, _ = S._complete(model, y, cands, first, whiten, weights)
+        known = (known_fit, [cands[i].columns for i in first])
+        changed = list(cands)
+        changed[2] = S.Candidate("offset", "q2", ("a",), rng.standard_normal((n, f, 1)))   # a new shape
+        wanted = [2, 0, 4, 3]                                     # 1 taken out, 3 and 4 new, reordered
+        grown, offsets = S._complete(model, y, changed, wanted, whiten, weights, known)
+        direct, same = S._complete(model, y, changed, wanted, whiten, weights)
+        assert S._extended(known, [changed[i].columns for i in wanted], 5, whiten, weights) is not None
+        assert np.array_equal(offsets, same)
+        assert np.allclose(grown.coefficients, direct.coefficients, rtol=1e-9)
+        assert np.allclose(grown.residual, direct.residual, atol=1e-12)
+        assert np.allclose(grown.without([6, 7]).residual, direct.without([6, 7]).residual, atol=1e-12)
+    assert S._extended(known, [changed[i].columns for i in wanted], 5, rho, weights * 1.1) is None   # other weights

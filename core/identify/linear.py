@@ -33,6 +33,7 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
@@ -41,6 +42,9 @@ from baseparams.numeric.rank import numerical_rank
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
 # RANK_TOL times the largest (structural zeros of K sit near 1e-15 in float64).
 RANK_TOL = 1e-6
+# LinearFit.reweighted refactors only when the largest weight ratio is within this factor of
+# the smallest (Cholesky QR's orthogonality error grows as its square times the rounding).
+RESCALE_LIMIT = 4.0
 # A null direction of a rank-deficient fit involves a column when its component there exceeds this
 # (unit-norm directions; an exact deficiency elsewhere leaves rounding, about 1e-15).
 NULL_INVOLVEMENT = 1e-9
@@ -178,6 +182,57 @@ class LinearFit:
         residual = self.residual + U @ self.projection - basis @ proj
         return LinearFit(self.weights, self.samples, scale, s, vt, basis, residual, coefficients, rank, proj)
 
+    def subset(self, keep: Sequence[int], rank_tol: float = RANK_TOL) -> LinearFit | None:
+        """The fit of the columns ``keep`` only, at the same weights, from this fit's factors:
+        they lie in the range, A[:, keep] = U (S V^T D)[:, keep], so only that p x k core is
+        factored. None when this fit is rank-deficient or not "nonrobust". Why: a shape
+        changed or an effect taken out leaves a model whose columns the last fit had."""
+        p = len(self.coefficients)
+        keep = list(keep)
+        if self.rank < p or self.cov_type != "nonrobust" or not keep:
+            return None
+        columns = ((self.singular_values[:p, None] * self.right[:p]) * self.scale)[:, keep]
+        scale = self.scale[keep]
+        um, s, vt = np.linalg.svd(columns / scale, full_matrices=False)
+        rank = numerical_rank(tol=rank_tol, singular_values=s)
+        proj = um[:, :rank].T @ self.projection                        # U^T b = projection
+        basis = self.basis @ um[:, :rank]
+        coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
+        residual = self.residual + self.basis @ self.projection - basis @ proj
+        return LinearFit(self.weights, self.samples, scale, s, vt, basis, residual, coefficients, rank, proj)
+
+    def reweighted(self, weights: np.ndarray, rank_tol: float = RANK_TOL) -> LinearFit | None:
+        """The same columns and measurements fitted at other ``weights`` (f,), from this fit's
+        factors: with R the rows' weight ratios, R A = (R U) S V^T D, and R U = Q T by Cholesky
+        QR, exact here because R U is as well conditioned as R (a weighting's step changes the
+        weights by a few per cent); then only the square core T S V^T D is factored again.
+        Why: each selection step refits its model at the weights its noise levels moved to,
+        and an SVD of the N f rows costs several times this. None when this fit is
+        rank-deficient or not "nonrobust", or the weights change by more than RESCALE_LIMIT."""
+        p = len(self.coefficients)
+        ratio = np.asarray(weights, dtype=float) / self.weights
+        if (self.rank < p or self.cov_type != "nonrobust" or not np.all(np.isfinite(ratio))
+                or np.min(ratio) <= 0 or np.max(ratio) / np.min(ratio) > RESCALE_LIMIT):
+            return None
+        rows = np.tile(ratio, self.samples)[:, None]
+        RU = rows * self.basis
+        try:
+            T = np.linalg.cholesky(RU.T @ RU).T                      # upper: (R U)^T (R U) = T^T T
+        except np.linalg.LinAlgError:
+            return None
+        columns = (self.singular_values[:p, None] * self.right[:p]) * self.scale      # S V^T D (p x p)
+        core = T @ columns
+        scale = np.linalg.norm(core, axis=0)                          # column norms of R A (Q orthonormal)
+        scale[scale == 0] = 1.0
+        um, s, vt = np.linalg.svd(core / scale)
+        rank = numerical_rank(tol=rank_tol, singular_values=s)
+        target = rows[:, 0] * self.weighted_target()
+        basis = RU @ solve_triangular(T, um[:, :rank])                # Q um with Q = R U T^-1
+        proj = basis.T @ target
+        coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
+        return LinearFit(np.asarray(weights, dtype=float), self.samples, scale, s, vt, basis,
+                         target - basis @ proj, coefficients, rank, proj)
+
     def reordered(self, order: Sequence[int]) -> LinearFit:
         """The same fit with its columns (coefficients, scale, right singular vectors) in ``order``."""
         order = list(order)
@@ -234,13 +289,18 @@ class WeightedLinearModel:
 
     def fit(self, weights: np.ndarray | None = None, *, start: np.ndarray | None = None,
             tolerance: float = TOLERANCE, floor: float = 0.0, rank_tol: float = RANK_TOL,
-            cov_type: CovType = "nonrobust") -> LinearFit:
+            cov_type: CovType = "nonrobust", near: LinearFit | None = None) -> LinearFit:
         """Least squares with per-coordinate ``weights`` (f,); None: Gautier's noise weighting
         iterated to its fixed point (to ``tolerance``, each SD at least ``floor``), starting
-        from the weights ``start``."""
+        from the weights ``start``. ``near``: a fit of these columns and measurements at other
+        weights, refitted from its factors when it can be (:meth:`LinearFit.reweighted`)."""
         n, f, p = self.model.shape
         if weights is None:
-            return self._at_fixed_point(start, tolerance, floor, rank_tol, cov_type)
+            return self._at_fixed_point(start, tolerance, floor, rank_tol, cov_type, near)
+        if near is not None and cov_type == "nonrobust":
+            again = near.reweighted(weights, rank_tol)
+            if again is not None:
+                return again
         A = (self.model * weights[None, :, None]).reshape(n * f, p)
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
@@ -254,16 +314,17 @@ class WeightedLinearModel:
                          None if cov_type == "nonrobust" else A)
 
     def _at_fixed_point(self, start: np.ndarray | None, tolerance: float, floor: float, rank_tol: float,
-                        cov_type: CovType) -> LinearFit:
+                        cov_type: CovType, near: LinearFit | None = None) -> LinearFit:
         """The fit at Gautier's weights: the fixed point is first found on the per-coordinate
         Gram matrices (p x p: a pass costs no factorisation of the N f rows), then confirmed,
-        and if need be continued, by the SVD fits themselves, so the result is the SVD's
+        and if need be continued, by the SVD fits themselves (each pass after the first, or
+        from ``near``, refitted from the last one's factors), so the result is the SVD's
         whatever the Gram matrices' squared condition number lost."""
         n, f, _ = self.model.shape
         sigma, _ = fixed_point(_GramStatistics(self.model, self.y, rank_tol), n, f, floor,
                                start=None if start is None else 1.0 / start, tolerance=tolerance)
         for _ in range(PASSES):
-            fit = self.fit(1.0 / sigma, rank_tol=rank_tol, cov_type=cov_type)
+            fit = near = self.fit(1.0 / sigma, rank_tol=rank_tol, cov_type=cov_type, near=near)
             again = noise_levels(*coordinate_statistics(fit.unweighted_residual(), fit.basis), n, floor)
             if np.max(np.abs(again / sigma - 1.0)) < tolerance:
                 break

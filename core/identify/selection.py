@@ -448,11 +448,15 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         max_steps = len(steps) + max_steps
     known: KnownFit | None = None             # the last step's fit, which the next complete fit extends
     while len(steps) < max_steps:
-        refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched, known)
+        complete = refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched,
+                                 known)
         touched = set()
         blocks = [candidates[i].columns for i in added + companions]
+        if complete is None and known is not None and previous is not None:
+            complete = _extended(known, blocks, model.shape[-1], filtered, previous)
+        # the step's fit, at the weights its noise levels move to, refitted from the complete one
         fit = WeightedLinearModel(filtered(np.concatenate([model] + blocks, axis=-1)), filtered(y)).fit(
-            start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE)
+            start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE, near=complete)
         previous, known = fit.weights, (fit, blocks)
         dof = fit.rank
         excluded = set(added) | set(companions) | {i for i, _, _ in removed}
@@ -611,26 +615,36 @@ def _complete(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
 
 def _extended(known: KnownFit, blocks: list[np.ndarray], p: int, whiten: Callable[[np.ndarray], np.ndarray],
               weights: np.ndarray) -> Fit | None:
-    """``known``'s fit with the ``blocks`` it lacks added (:meth:`LinearFit.extended`) and its
-    columns put in ``blocks``' order; None when it is at other weights or has a block that
-    ``blocks`` lacks (a shape changed since)."""
+    """``known``'s fit with the blocks it has that ``blocks`` lacks taken out (a shape changed
+    or an effect taken out since: :meth:`LinearFit.subset`), those it lacks added
+    (:meth:`LinearFit.extended`), and its columns put in ``blocks``' order; None when it is
+    at other weights or rank-deficient."""
     fit, old = known
     if not np.array_equal(fit.weights, weights):
         return None
-    position: list[int] = []                  # where each of known's blocks is in ``blocks``
+    position: list[int] = []                  # where each of known's blocks still in use is in ``blocks``
+    dropped: list[int] = []                   # known's columns no longer in use
+    at = p
     for block in old:
         j = next((j for j, b in enumerate(blocks) if b is block and j not in position), None)
         if j is None:
+            dropped += range(at, at + block.shape[-1])
+        else:
+            position.append(j)
+        at += block.shape[-1]
+    if dropped:
+        fit = fit.subset([c for c in range(at) if c not in set(dropped)])
+        if fit is None:
             return None
-        position.append(j)
     new = [j for j in range(len(blocks)) if j not in position]
-    if not new:
-        return None
-    n, f, _ = blocks[new[0]].shape
-    columns = whiten(np.concatenate([blocks[j] for j in new], axis=-1)) * weights[None, :, None]
-    grown = fit.extended(columns.reshape(n * f, -1))
-    if grown is None:
-        return None
+    if new:
+        n, f, _ = blocks[new[0]].shape
+        columns = whiten(np.concatenate([blocks[j] for j in new], axis=-1)) * weights[None, :, None]
+        grown = fit.extended(columns.reshape(n * f, -1))
+        if grown is None:
+            return None
+    else:
+        grown = fit                               # the same columns (a step that added nothing)
     start, at = {}, p                          # each block's first column in the grown fit
     for j in position + new:
         start[j], at = at, at + blocks[j].shape[-1]
@@ -745,14 +759,15 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
 
 def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
                   shaped: dict, weights: np.ndarray | None, whiten: Callable = _same,
-                  touched: set | None = None, known: KnownFit | None = None) -> None:
+                  touched: set | None = None, known: KnownFit | None = None) -> Fit | None:
     """Variable projection for the shaped effects in the model: each one's shape is chosen
     again given everything else in the model (the variant that leaves the smallest weighted
     residual), in place. Why: a shape chosen while other effects were still missing fits
     those too (Coulomb friction took a smooth shape, then a Stribeck bump made up the
     difference). ``touched``: the places where the model changed since the last call (a shape
     is chosen again only where something changed beside it; None: everywhere). ``known``: a
-    fit at ``weights`` with fewer effects (the last step's) that the complete fit extends."""
+    fit at ``weights`` with fewer effects (the last step's) that the complete fit extends.
+    Returns the complete fit with the shapes as left, when one was made, else None."""
     complete: Fit | None = None
     for i in in_model:
         if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
@@ -764,6 +779,7 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         if weights is not None:
             if complete is None:
                 complete, _ = _complete(model, y, candidates, in_model, whiten, weights, known)
+                known = (complete, [candidates[j].columns for j in in_model])
             start = model.shape[-1] + sum(candidates[j].columns.shape[-1] for j in in_model[:in_model.index(i)])
             fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
         if fit is None:
@@ -781,6 +797,7 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         candidates[i] = _between(shaped[i], best, explained) or shaped[i].at(best)
         if candidates[i].columns is not before.columns:
             complete = None                   # i's columns changed: the next one needs a new complete fit
+    return complete
 
 
 # Shape values between grid points are searched on logarithms rounded to this step (2.5 %): the
