@@ -244,7 +244,10 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         raise InputError("no candidate effects left to test", key="--candidates")
     candidates = [c.rows(rows) for c in everything]
     limit = max_steps if max_steps is not None else 2 * len(candidates) + 2
-    chosen = select_whitened(model[rows], y[rows], candidates, alpha, limit)
+    # data the inertial model reproduces to rounding (simulated without noise) leave nothing
+    # to test: every candidate would be judged on the arithmetic's rounding
+    exact = _at_rounding(model[rows], y[rows], tau[rows])
+    chosen = select_whitened(model[rows], y[rows], [] if exact else candidates, alpha, limit)
     candidates = chosen.candidates                       # shaped ones fixed where they entered
     full = [_fixed(everything[i], c) for i, c in enumerate(candidates)]
     last = chosen.steps[-1]
@@ -293,6 +296,15 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
         unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
+    # physical in the final model too: a sign judged beside effects that later checks took out
+    # can turn without them (a noise-free SLA: a rotor inertia of -162 was named)
+    while turned := _turned(problem, model[rows], candidates, in_model, kept_named, y[rows], after.fit.weights):
+        for i, reason in turned:
+            unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
+                                "values": {}, "reason": reason})
+        in_model = [i for i in in_model if i not in dict(turned)]
+        after = _predict(model, [full[i] for i in in_model], y, None, train)
+        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap: dict = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
@@ -324,6 +336,14 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     verdict = ("explained" if closed else "partly explained") if named_any else \
         ("nothing missing" if closed else "unexplained")
     notes = list(problem.notes) + replaced
+    if exact:
+        notes.append(f"the inertial model reproduces the data to rounding (NRMS {gap['before']:.3g}): data "
+                     "without noise; no effect was tested")
+    if gap["cv_before"] > CV_BLOWUP * max(gap["before"], 1e-300) and not exact:
+        notes.append(f"the inertial model predicts held-out blocks {gap['cv_before'] / gap['before']:.3g} times "
+                     f"worse than it fits them ({gap['cv_before']:.3g} against {gap['before']:.3g}): too few "
+                     "samples or too little motion in each block to cross-validate; the verdict rests on the "
+                     "fit alone")
     for u in unsupported:
         u.pop("index")
         u.pop("members", None)
@@ -768,6 +788,21 @@ def _resonant_rival(model: np.ndarray, y: np.ndarray, candidates: list[Candidate
             f"these data cannot tell {what} from an elastic lag")
 
 
+def _turned(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int],
+            named: list[int], y: np.ndarray, weights: np.ndarray) -> list[tuple[int, str]]:
+    """The named effects whose coefficients in the model ``in_model`` are not physical, each
+    with the reason."""
+    out = []
+    for i, (values, _) in zip(in_model, coefficients(model, candidates, in_model, y, weights)):
+        if i in named:
+            coefficients_ = dict(zip(coefficient_names(candidates[i].kind), values.tolist()))
+            reason = implausible(candidates[i].kind, coefficients_) or _body_implausible(problem, candidates[i],
+                                                                                        coefficients_)
+            if reason:
+                out.append((i, f"{reason} in the final model, without the effects held back"))
+    return out
+
+
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
     """A changed body keeps a positive mass (its other parameters are not all identifiable:
     the estimate is one of many changes with the same torques, so only the mass is checked)."""
@@ -986,6 +1021,16 @@ def noise_floor(residual: np.ndarray, correlation: np.ndarray | None = None) -> 
 # A coordinate's residual below this fraction of its torque's RMS is the arithmetic's rounding
 # (data simulated without noise fit to 1e-11), not structure: it counts as white.
 ROUNDING = 1e-9
+# The inertial model's cross-validated gap this many times its fitted gap: the blocks cannot be
+# predicted from each other (a note says so).
+CV_BLOWUP = 5.0
+
+
+def _at_rounding(model: np.ndarray, y: np.ndarray, tau: np.ndarray) -> bool:
+    """Whether the model alone fits every coordinate to ROUNDING of its torque's RMS."""
+    fit = WeightedLinearModel(model, y).fit(np.ones(y.shape[1]))
+    size = np.sqrt(np.mean(tau ** 2, axis=0))
+    return bool(np.all(np.sqrt(np.mean(fit.unweighted_residual() ** 2, axis=0)) <= ROUNDING * size))
 
 
 def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str], alpha: float,

@@ -271,7 +271,24 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
         parts.append(part)
     # each part's kinematics were checked with its own rows named; several parts are
     # evaluated again, stacked, when a fit needs them
-    return concatenate(parts), model or mechanism
+    data = concatenate(parts)
+    data.notes = data.notes + tuple(constant_torques(data))
+    return data, model or mechanism
+
+
+def constant_torques(data: MeasuredData) -> list[str]:
+    """A note for each coordinate whose force is one value in every row while it moves: a
+    channel that was not recorded (a dead sensor, a column of zeros). Why: it is fitted as
+    measured, and the noise weighting then trusts that coordinate without limit, so a fit
+    and a diagnosis bend every coupled coordinate to it (a zero torque on a PUMA's fifth
+    joint named a spring and rotor inertia elsewhere)."""
+    out = []
+    for j, name in enumerate(data.coordinates):
+        tau = data.tau[:, j]
+        if len(tau) > 1 and np.ptp(tau) == 0 and np.ptp(data.motion.q[:, j]) > 0:
+            out.append(f"tau_{name} is {tau[0]:g} in every row while {name} moves: a force that was not "
+                       "recorded? It is fitted as measured, and the coordinates it couples to follow it")
+    return out
 
 
 def _read_run(description: Description, index: int, run: dict) -> MeasuredData:

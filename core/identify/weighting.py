@@ -37,6 +37,11 @@ def coordinate_statistics(residual: np.ndarray, basis: np.ndarray) -> tuple[np.n
     return np.sum(residual ** 2, axis=0), leverage
 
 
+# The smallest noise level relative to the largest coordinate's: far below any real ratio (data
+# simulated without noise have 1e-16), it only keeps a weight finite (squares below 1e308).
+LEVEL_FLOOR = 1e-100
+
+
 def noise_levels(rss: np.ndarray, leverage: np.ndarray, samples: int, floor: float = 0.0) -> np.ndarray:
     """Per-coordinate noise SD from its residual sum of squares, each with its own degrees of
     freedom ``samples`` - (leverage of that coordinate's rows); at least ``floor`` (a
@@ -44,7 +49,10 @@ def noise_levels(rss: np.ndarray, leverage: np.ndarray, samples: int, floor: flo
     dof = np.maximum(samples - leverage, 1.0)
     level = np.sqrt(rss / dof)
     positive = level[level > 0]
-    tiny = (positive.min() if positive.size else 1.0) * 1e-12 or 1e-300
+    # relative to the largest level: relative to the smallest, a coordinate the model can fit
+    # exactly (a torque not recorded, all zeros) sank by 1e-12 each pass (to 1e-161 on a
+    # PUMA), until its weight overflowed
+    tiny = (positive.max() if positive.size else 1.0) * LEVEL_FLOOR or 1e-300
     return np.maximum(level, max(floor, tiny))
 
 
