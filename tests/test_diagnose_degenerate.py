@@ -68,3 +68,23 @@ def test_a_recording_too_short_to_cross_validate_says_so(tmp_path):
     _, report = _diagnose(tmp_path, header, values[:40])
     assert report["gap"]["cv_before"] > 5 * report["gap"]["before"]
     assert any("too few samples or too little motion in each block" in n for n in report["notes"])
+
+
+
+def test_a_named_effect_is_physical_in_the_final_model():
+    """diagnose._turned, run on the final model's estimates after every check has taken its
+    effects out: a named effect whose sign turned there is returned with its reason (on the
+    SLA simulated without noise, at a version of this check's session, a rotor inertia judged
+    positive beside effects held back later was -162 without them, and was named); an
+    ambiguous group's member (not named) and a physical effect are left alone."""
+    from baseparams.identify import diagnose as D
+    from baseparams.identify.selection import Candidate
+    n = 10
+    cands = [Candidate("rotor_inertia", "q1", ("Ia",), np.zeros((n, 1, 1))),
+             Candidate("viscous_friction", "q1", ("fv",), np.zeros((n, 1, 1))),
+             Candidate("coulomb_friction", "q1", ("fc",), np.zeros((n, 1, 1)))]
+    estimates = [(np.array([-162.0]), np.array([20.0])), (np.array([0.3]), np.array([0.01])),
+                 (np.array([-1.0]), np.array([0.1]))]
+    turned = D._turned(None, cands, [0, 1, 2], [0, 1], estimates)
+    assert [i for i, _ in turned] == [0]
+    assert "must be positive" in turned[0][1] and "in the final model" in turned[0][1]

@@ -298,7 +298,11 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
     # physical in the final model too: a sign judged beside effects that later checks took out
     # can turn without them (a noise-free SLA: a rotor inertia of -162 was named)
-    while turned := _turned(problem, model[rows], candidates, in_model, kept_named, y[rows], after.fit.weights):
+    while True:
+        estimates = coefficients(model[rows], candidates, in_model, y[rows], after.fit.weights)
+        turned = _turned(problem, candidates, in_model, kept_named, estimates)
+        if not turned:
+            break
         for i, reason in turned:
             unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
                                 "values": {}, "reason": reason})
@@ -317,7 +321,6 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                                  "after": nrms(after.residual[rows, j:j + 1], tau[rows, j:j + 1])}
                              for j, c in enumerate(problem.coordinates)}
 
-    estimates = coefficients(model[rows], candidates, in_model, y[rows], after.fit.weights)
     by_index = dict(zip(in_model, estimates))
     effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {})}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
@@ -788,12 +791,12 @@ def _resonant_rival(model: np.ndarray, y: np.ndarray, candidates: list[Candidate
             f"these data cannot tell {what} from an elastic lag")
 
 
-def _turned(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int],
-            named: list[int], y: np.ndarray, weights: np.ndarray) -> list[tuple[int, str]]:
-    """The named effects whose coefficients in the model ``in_model`` are not physical, each
-    with the reason."""
+def _turned(problem: Problem, candidates: list[Candidate], in_model: list[int], named: list[int],
+            estimates: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, str]]:
+    """The named effects whose coefficients in the model ``in_model`` (``estimates``:
+    :func:`coefficients`) are not physical, each with the reason."""
     out = []
-    for i, (values, _) in zip(in_model, coefficients(model, candidates, in_model, y, weights)):
+    for i, (values, _) in zip(in_model, estimates):
         if i in named:
             coefficients_ = dict(zip(coefficient_names(candidates[i].kind), values.tolist()))
             reason = implausible(candidates[i].kind, coefficients_) or _body_implausible(problem, candidates[i],

@@ -633,9 +633,10 @@ def _extended(known: KnownFit, blocks: list[np.ndarray], p: int, whiten: Callabl
             position.append(j)
         at += block.shape[-1]
     if dropped:
-        fit = fit.subset([c for c in range(at) if c not in set(dropped)])
-        if fit is None:
+        kept = fit.subset([c for c in range(at) if c not in set(dropped)])
+        if kept is None:
             return None
+        fit = kept
     new = [j for j in range(len(blocks)) if j not in position]
     if new:
         n, f, _ = blocks[new[0]].shape
