@@ -345,7 +345,7 @@ def test_bad_recordings_are_named(tmp_path, case):
     mech_path.write_text(_chain(2, bodies=2))
     rows = [[k * 0.01, 0.1 * k, 0.2 * k, 1.0, 2.0] for k in range(30)]
     if case == 2:
-        rows[3][1] = "nan"
+        rows[3][1] = "inf"           # NaN and empty fields are missing samples (test_missing_values_...)
     if case == 3:
         rows[2][0] = 0.0
     (tmp_path / "log.csv").write_text("t,a,b,x,y\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
@@ -529,6 +529,32 @@ def test_a_gap_in_the_log_splits_the_run(tmp_path):
     result = identify(model, data, base=_base(mech))
     _check_base(result, _base(mech), phi, 2e-3)
 
+
+
+def test_missing_values_leave_their_samples_out(tmp_path):
+    """Empty and NaN fields in the channels used (as a logger that merges topics, or drops a
+    packet, writes them): those samples are left out with a note naming the first row; a few
+    scattered ones are resampled across, 50 in a row split the run; a NaN in a column the
+    description does not use costs nothing; the base parameters come back. An infinite
+    value is still an error (test_bad_recordings_are_named)."""
+    mech = parse_mechanism(_chain(11))
+    phi = random_physical_inertia(mech, np.random.default_rng(11))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    table = np.column_stack([t, *motion.q.T, *tau.T, np.zeros_like(t)]).astype(object)
+    table[[700, 2100, 6300], 2] = ""                         # b (q2) empty in three rows
+    table[4000:4050, 5] = "NaN"                               # y (tau2) missing for 50 ms
+    table[::7, 7] = "nan"                                     # an unused column
+    lines = [",".join(v if isinstance(v, str) else f"{v:.17g}" for v in row) for row in table]
+    (tmp_path / "log.csv").write_text("t,a,b,c,x,y,z,unused\n" + "\n".join(lines) + "\n")
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert any(n.startswith("53 sample(s) with a missing value") and "first at row 702" in n for n in data.notes), \
+        data.notes
+    assert any("split at 1 gap(s)" in n for n in data.notes) and any("resampled" in n for n in data.notes)
+    assert len(data.segments) == 2
+    result = identify(model, data, base=_base(mech))
+    _check_base(result, _base(mech), phi, 2e-3)
 
 
 @pytest.mark.parametrize("settings", ["", "[filter]\ndecimate = 1\n"], ids=["decimated", "filtered only"])

@@ -530,13 +530,18 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
     return {name: k for name, k in seen.items() if name in known}, notes
 
 
-def _numbers(path: str, header: list[str], rows: list[tuple[int, list[str]]]) -> np.ndarray:
-    """All fields as float64; a field that is not a finite number names its row and column."""
+def _numbers(path: str, header: list[str], rows: list[tuple[int, list[str]]], missing: bool = False
+             ) -> np.ndarray:
+    """All fields as float64; a field that is not a finite number names its row and column.
+    ``missing``: an empty or NaN field is a missing value (NaN), for the caller to leave out."""
     out = np.empty((len(rows), len(header)))
     match = NUMBER.fullmatch
     for i, (line, fields) in enumerate(rows):
         for k, text in enumerate(fields):
             stripped = text.strip()
+            if missing and (not stripped or stripped.lower().lstrip("+-") == "nan"):
+                out[i, k] = np.nan
+                continue
             value = float(stripped) if match(stripped) else None
             if value is None or not abs(value) <= MAX_MAGNITUDE:
                 shown = stripped if len(stripped) <= 40 else stripped[:37] + "..."

@@ -330,7 +330,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                              file=str(folder / files[alias]), key="header")
         with np.errstate(all="ignore"):
             out = channel.scale * table[:, header.index(channel.column)] + channel.offset
-        if not np.all(np.abs(out) <= MAX_MAGNITUDE):
+        if not np.all(np.abs(out[~np.isnan(out)]) <= MAX_MAGNITUDE):
             raise InputError(f"scaled by {channel.scale:g} (and shifted by {channel.offset:g}) the column leaves "
                              f"the range |value| <= {MAX_MAGNITUDE:g}", file=path, key=channel.key)
         return out
@@ -357,6 +357,18 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
     notes = [_drive_note(description)] if any(c.coordinate in mechanism.motor_names
                                               for chans in description.channels.values() for c in chans) else []
+    # samples with a missing value (an empty or NaN field) in a channel used are left out; the
+    # steps around them are resampled, or the run split where GAP_STEPS or more are missing
+    present = np.all([np.all(np.isfinite(a.reshape(len(t), -1)), axis=1)
+                      for a in (q, qd, qdd, forces) if a is not None], axis=0)
+    if not present.all():
+        lost = np.nonzero(~present)[0]
+        notes.append(f"{lost.size} sample(s) with a missing value (an empty or NaN field) in a channel used "
+                     f"left out (first at row {rows[int(lost[0])]})")
+        t, rows = t[present], [line for line, keep in zip(rows, present) if keep]
+        q, forces = q[present], forces[present]
+        qd = None if qd is None else qd[present]
+        qdd = None if qdd is None else qdd[present]
     pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
     notes += split_notes
     settings = dict(description.data.get("filter", {}))
@@ -403,7 +415,7 @@ def log_format(description: Description) -> tuple[str, str | None]:
 def _table(path: str, delimiter: str = "auto", comment: str | None = None
            ) -> tuple[list[str], np.ndarray, list[int]]:
     header, rows = _parse_rows(path, _read_text(path), delimiter, comment)
-    return header, _numbers(path, header, rows), [line for line, _ in rows]
+    return header, _numbers(path, header, rows, missing=True), [line for line, _ in rows]
 
 
 def _only(tables: dict, channel: Channel, path: str) -> str:
