@@ -334,6 +334,7 @@ BAD = [
     ("", "row 4", "does not increase"),
     ("", "header", "no column 'nope'"),
     ("[[motors]]\nname = 'q1'\nratios = { q1 = 1 }\n", "motors[0].name", "joint coordinate"),
+    ("", "row 5, column t", "time is not finite"),
 ]
 
 
@@ -348,6 +349,8 @@ def test_bad_recordings_are_named(tmp_path, case):
         rows[3][1] = "inf"           # NaN and empty fields are missing samples (test_missing_values_...)
     if case == 3:
         rows[2][0] = 0.0
+    if case == 6:
+        rows[3][0] = "nan"            # a missing time stamp: no sample can be placed
     (tmp_path / "log.csv").write_text("t,a,b,x,y\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
     position = 'q1 = "a"\nq2 = "b"\n' if case != 1 else 'ma = "a"\nmb = "b"\n'
     if case == 4:

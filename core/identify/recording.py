@@ -438,8 +438,12 @@ def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray
     if len(owners) != 1:
         raise InputError(f"time column {head['time']!r} found in {len(owners)} files of the run",
                          file=path, key="recording.time")
-    header, table, _ = tables[owners[0]]
-    return table[:, header.index(column)] * TIME_UNITS[head.get("time_unit", "s")], str(files[owners[0]])
+    header, table, rows = tables[owners[0]]
+    t = table[:, header.index(column)]
+    if np.isnan(t).any():                    # a missing time stamp: no sample can be placed
+        raise InputError("time is not finite (an empty or NaN field)", file=str(files[owners[0]]),
+                         key=f"row {rows[int(np.nonzero(np.isnan(t))[0][0])]}, column {column}")
+    return t * TIME_UNITS[head.get("time_unit", "s")], str(files[owners[0]])
 
 
 def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple, path: str,
