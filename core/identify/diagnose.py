@@ -536,7 +536,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
         k = in_model.index(i)
         lo, hi = offsets[k + 1], offsets[k + 2]
         values = dict(zip(coefficient_names(candidates[i].kind), estimates[k][0].tolist()))
-        reason = (implausible(candidates[i].kind, values) or _body_implausible(problem, candidates[i], values)
+        reason = (_unphysical(problem, candidates[i], values)
                   or _cancelling(X[:, :, lo:hi] @ fit.coefficients[lo:hi], held, problem.coordinates))
         detail: dict = {}
         if not reason:
@@ -795,15 +795,16 @@ def _turned(problem: Problem, candidates: list[Candidate], in_model: list[int], 
             estimates: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, str]]:
     """The named effects whose coefficients in the model ``in_model`` (``estimates``:
     :func:`coefficients`) are not physical, each with the reason."""
-    out = []
-    for i, (values, _) in zip(in_model, estimates):
-        if i in named:
-            coefficients_ = dict(zip(coefficient_names(candidates[i].kind), values.tolist()))
-            reason = implausible(candidates[i].kind, coefficients_) or _body_implausible(problem, candidates[i],
-                                                                                        coefficients_)
-            if reason:
-                out.append((i, f"{reason} in the final model, without the effects held back"))
-    return out
+    reasons = [(i, _unphysical(problem, candidates[i], dict(zip(coefficient_names(candidates[i].kind),
+                                                                 values.tolist()))))
+               for i, (values, _) in zip(in_model, estimates) if i in named]
+    return [(i, f"{reason} in the final model, without the effects held back") for i, reason in reasons if reason]
+
+
+def _unphysical(problem: Problem, cand: Candidate, values: dict) -> str:
+    """Why an effect with coefficients ``values`` (name -> value) is not physical ('' when it
+    is): its kind's signs and ranges, and a changed body's mass."""
+    return implausible(cand.kind, values) or _body_implausible(problem, cand, values)
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:

@@ -479,10 +479,7 @@ def _ratio(value: Fraction) -> str:
 
 def _uniform_pieces(t: np.ndarray, t_file: str, rows: list[int], path: str
                     ) -> tuple[list[tuple[int, int]], list[str]]:
-    """Row ranges of the run between gaps; times must increase."""
-    if not np.all(np.isfinite(t)):
-        k = int(np.nonzero(~np.isfinite(t))[0][0])
-        raise InputError("time is not finite", file=t_file, key=f"row {rows[k]}")
+    """Row ranges of the run between gaps; times (finite: :func:`_times`) must increase."""
     steps = np.diff(t)
     bad = np.nonzero(steps <= 0)[0]
     if bad.size:
