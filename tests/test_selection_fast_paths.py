@@ -101,6 +101,14 @@ def test_zero_phase_skips_zero_columns_and_equals_sosfiltfilt():
     x[:, :, 2] = 0.0
     assert np.array_equal(zero_phase(sos, x), sosfiltfilt(sos, x, axis=0))
     assert np.array_equal(zero_phase(sos, np.zeros((100, 2))), np.zeros((100, 2)))
+    # only the kept rows (a segment's decimation), by slice or by index; many columns
+    rows = slice(40, 3000 - 40, 7)
+    assert np.array_equal(zero_phase(sos, x, rows), sosfiltfilt(sos, x, axis=0)[rows])
+    index = np.arange(3000)[rows]
+    assert np.array_equal(zero_phase(sos, x, index), sosfiltfilt(sos, x, axis=0)[index])
+    wide = rng.standard_normal((500, 40))
+    wide[:, ::3] = 0.0
+    assert np.array_equal(zero_phase(sos, wide, rows), sosfiltfilt(sos, wide, axis=0)[rows])
 
 
 def test_complete_fit_grown_from_a_known_one_is_the_direct_fit():
