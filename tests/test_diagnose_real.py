@@ -483,8 +483,8 @@ def test_delay_column_is_the_true_torque_rate():
         sd = 0.02 * np.sqrt(np.mean(clean ** 2, axis=0))
         lagged = np.stack([np.interp(t - 2 * (t[1] - t[0]), t, clean[:, k]) for k in range(clean.shape[1])], axis=1)
         y = lagged + rng.standard_normal(clean.shape) * sd
-        fit = lambda X, target: WeightedLinearModel(X, target).fit().coefficients  # noqa: E731
-        alone = model @ fit(model, y)
+        alone = model @ WeightedLinearModel(model, y).fit().coefficients
+        fit = lambda extra: WeightedLinearModel(np.concatenate([model, extra], axis=-1), y).fit().coefficients  # noqa: E731
         cutoff = derived.DELAY_CUTOFF_PER_BANDWIDTH * bandwidth(problem.qd, t[1] - t[0])
         column = derived.delay_column(model, y, rows, np.zeros_like(y), t, alone, fit, cutoff)[0][:, :, 0]
         truth = -np.gradient(clean, t, axis=0)

@@ -138,3 +138,143 @@ def test_complete_fit_grown_from_a_known_one_is_the_direct_fit():
         assert np.allclose(grown.residual, direct.residual, atol=1e-12)
         assert np.allclose(grown.without([6, 7]).residual, direct.without([6, 7]).residual, atol=1e-12)
     assert S._extended(known, [changed[i].columns for i in wanted], 5, rho, weights * 1.1) is None   # other weights
+
+
+def _window_by_acf(residual: np.ndarray) -> int:
+    """hac_lags' rule from statsmodels' acf of each live coordinate (the reference)."""
+    from statsmodels.tsa.stattools import acf
+    n = len(residual)
+    base = longrun.newey_west_lags(n)
+    limit = max(base, n // 4)
+    if n < 8:
+        return base
+    live = [c for c in residual.T if np.any(c != np.mean(c))]
+    if not live:
+        return base
+    mean = np.mean([acf(c, nlags=min(limit, n - 1), fft=False) for c in live], axis=0)
+    inside = np.nonzero(np.abs(mean[1:]) < 1.96 / np.sqrt(n))[0]
+    leading = int(inside[0]) if inside.size else min(limit, n - 1)
+    return 0 if leading == 0 else min(limit, max(base, 2 * leading))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_windows_of_many_residuals_at_once_are_each_ones(seed):
+    """hac_lags_each over m residuals (N, f, m) gives each one's window by the rule computed
+    from statsmodels' acf: white to strongly correlated, a dead coordinate, an all-zero
+    residual, fewer than 8 samples."""
+    rng = np.random.default_rng(10 + seed)
+    for n in (5, 60, 700):
+        f = int(rng.integers(1, 5))
+        stack = np.stack([_ar(rng, n, f, rho) for rho in (0.0, 0.3, 0.7, 0.95, -0.6, 0.0)], axis=2)
+        stack[:, 0, 1] = 0.0                      # a coordinate that does not move
+        stack[:, :, 5] = 0.0                      # nothing at all
+        expected = [_window_by_acf(stack[:, :, j]) for j in range(stack.shape[2])]
+        assert list(longrun.hac_lags_each(stack)) == expected
+        assert [longrun.hac_lags(stack[:, :, j]) for j in range(stack.shape[2])] == expected
+
+
+def _long_run_reference(s: np.ndarray, lags: int) -> np.ndarray:
+    """Andrews and Monahan's prewhitened Newey-West by lstsq and statsmodels (the reference)."""
+    if lags == 0 or len(s) < 20:
+        return S_hac_simple(s, nlags=lags)
+    before, after = s[:-1], s[1:]
+    At, *_ = np.linalg.lstsq(before, after, rcond=None)
+    u, sv, vt = np.linalg.svd(At.T)
+    A = (u * np.minimum(sv, longrun.PREWHITEN_LIMIT)) @ vt
+    e = after - before @ A.T
+    B = np.linalg.inv(np.eye(s.shape[1]) - A)
+    return B @ S_hac_simple(e, nlags=_window_by_acf(e)) @ B.T
+
+
+@pytest.mark.parametrize("r", [1, 2, 4])
+def test_long_runs_of_many_score_series_at_once_are_each_ones(r):
+    """long_run_each over m series (m, n, r) with their own lags equals the reference for
+    each: prewhitened (white to a unit root), lags 0, too few samples, not prewhitened."""
+    rng = np.random.default_rng(r)
+    for n in (15, 400):
+        scores = np.stack([_ar(rng, n, r, rho) for rho in (0.0, 0.5, 0.9, 1.0, -0.99, 0.3)])
+        lags = np.array([0, 3, 7, 5, 2, 0])
+        got = longrun.long_run_each(scores, lags)
+        for j in range(len(scores)):
+            assert got[j] == pytest.approx(_long_run_reference(scores[j], int(lags[j])), rel=1e-9, abs=1e-12)
+        plain = longrun.long_run_each(scores, lags, prewhiten=False)
+        for j in range(len(scores)):
+            assert plain[j] == pytest.approx(S_hac_simple(scores[j], nlags=int(lags[j])), rel=1e-12)
+
+
+def _dense_reference(residual, basis, shape, dof, lags, extra_df=0):
+    """The HAC Wald statistic and p value written out (the reference for wald's dense path)."""
+    from scipy import stats
+    n, f = shape
+    r = basis.shape[1]
+    gamma = basis.T @ residual
+    augmented = residual - basis @ gamma
+    lags = _window_by_acf(augmented.reshape(n, f)) if lags is None else lags
+    scores = (basis * augmented[:, None]).reshape(n, f, r).sum(axis=1)
+    rows = n * f
+    V = _long_run_reference(scores, lags) * rows / (rows - dof - r)
+    if lags == 0:
+        values, vectors = np.linalg.eigh(V)
+        V = (vectors * np.maximum(values, augmented @ augmented / (rows - dof - r))) @ vectors.T
+    stat = float(gamma @ np.linalg.solve(V, gamma))
+    k = r + extra_df
+    return stat, float(stats.f.sf(stat / k, k, n - int(np.ceil(dof / f)) - r)), lags
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.8])
+def test_wald_tests_of_many_forms_at_once_are_each_ones(rho):
+    """wald_each on forms of 0, 1, 2 and 3 directions, some acting on few samples, each with
+    its own residual and null model: each test equals wald alone, and the dense ones the
+    statistic written out (HAC with its window, White's never below the classical variance)."""
+    rng = np.random.default_rng(int(rho * 10))
+    n, f, dof = 300, 2, 7
+    shape, rows = (n, f), n * f
+    Q, _ = np.linalg.qr(rng.standard_normal((rows, dof)))
+    bases, residuals = [], []
+    for width in (1, 2, 1, 3, 0, 1, 2):
+        X = rng.standard_normal((rows, width))
+        if len(bases) in (2, 6):                  # a step: acts on a few samples only
+            X[30:] = 0.0
+        X -= Q @ (Q.T @ X)
+        bases.append(S.orthonormal_basis(X, S.ABSORB_TOL) if width else np.zeros((rows, 0)))
+        e = _ar(rng, n, f, rho).reshape(rows) + (X @ rng.standard_normal(width) * 0.1 if width else 0.0)
+        residuals.append(e - Q @ (Q.T @ e))
+    dofs = [dof + j for j in range(len(bases))]
+    extra = [j % 2 for j in range(len(bases))]
+    for sparse in (False, True):
+        tests = S.wald_each(residuals, bases, shape, dofs, None, extra, sparse_if_white=sparse,
+                            sparse_if_coloured=sparse)
+        alone = [S.wald(e, b, shape, d, extra_df=x, sparse_if_white=sparse, sparse_if_coloured=sparse)
+                 for e, b, d, x in zip(residuals, bases, dofs, extra)]
+        assert [(t.df, t.reason, t.lags) for t in tests] == [(t.df, t.reason, t.lags) for t in alone]
+        for t, a in zip(tests, alone):
+            assert t.stat == pytest.approx(a.stat, rel=1e-9) and t.pvalue == pytest.approx(a.pvalue, rel=1e-8, abs=1e-300)
+    tests = S.wald_each(residuals, bases, shape, dofs, None, extra)
+    assert [t.reason for t in tests] == ["", "", "support", "", "absorbed", "", "support"]
+    for j in (0, 1, 3, 5):
+        stat, p, lags = _dense_reference(residuals[j], bases[j], shape, dofs[j], None, extra[j])
+        assert tests[j].lags == lags
+        assert tests[j].stat == pytest.approx(stat, rel=1e-9) and tests[j].pvalue == pytest.approx(p, rel=1e-7)
+    # one residual for all, a given window
+    shared = S.wald_each([residuals[0]], bases, shape, [dof], 4, [0])
+    for j in (0, 1, 3, 5):
+        stat, p, _ = _dense_reference(residuals[0], bases[j], shape, dof, 4)
+        assert shared[j].stat == pytest.approx(stat, rel=1e-9) and shared[j].lags == 4
+
+
+def test_encompassing_with_many_rivals_at_once_is_each_pairs():
+    """encompassing_each of one winner with several rivals equals encompassing pair by pair."""
+    rng = np.random.default_rng(12)
+    n, f = 250, 3
+    rows = n * f
+    residual = _ar(rng, n, f, 0.5).reshape(rows)
+    a = S.orthonormal_basis(rng.standard_normal((rows, 1)), S.ABSORB_TOL)
+    rivals = [S.orthonormal_basis(a + 0.3 * rng.standard_normal((rows, 1)), S.ABSORB_TOL),
+              S.orthonormal_basis(rng.standard_normal((rows, 2)), S.ABSORB_TOL), a.copy()]
+    together = S.encompassing_each(a, rivals, residual, (n, f), 5, sparse_if_coloured=True)
+    for (t_ab, t_ba), b in zip(together, rivals):
+        o_ab, o_ba = S.encompassing(a, b, residual, (n, f), 5, sparse_if_coloured=True)
+        for t, o in ((t_ab, o_ab), (t_ba, o_ba)):
+            assert (t.df, t.reason, t.lags) == (o.df, o.reason, o.lags)
+            assert t.stat == pytest.approx(o.stat, rel=1e-9)
+    assert together[2][0].reason == "absorbed" and together[2][1].reason == "absorbed"

@@ -117,12 +117,12 @@ def rate(torque: np.ndarray, t: np.ndarray, cutoff: float | None) -> np.ndarray:
 
 
 def fitted_torque(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarray, torque: np.ndarray,
-                  fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                  fit: Callable[[np.ndarray], np.ndarray],
                   columns_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """The model's torque (``known`` + model @ coefficients, every row) fitted together with the
     effects built from it (``columns_of(torque)``: (n, f, k)), by alternating least squares
-    from ``torque`` (the model fitted alone; ``fit(X, y)`` gives the coefficients on the
-    training ``rows``). Why: the model fitted alone bends towards what it misses, and an
+    from ``torque`` (the model fitted alone; ``fit(extra)`` gives the coefficients of the
+    model's columns and ``extra``'s, fitted to ``y`` on the training ``rows``). Why: the model fitted alone bends towards what it misses, and an
     effect built from that torque is built from a wrong one: on a generated four-bar (one
     coordinate, 21 identifiable parameters) a delay was named viscous friction in half the
     datasets, and load friction Coulomb or position friction in 11 of 20. With none of the
@@ -130,7 +130,7 @@ def fitted_torque(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarr
     scale = max(float(np.sqrt(np.mean(torque[rows] ** 2))), 1e-300)
     p = model.shape[-1]
     for _ in range(FIT_ROUNDS):
-        coefficients = fit(np.concatenate([model[rows], columns_of(torque)[rows]], axis=-1), y[rows])
+        coefficients = fit(columns_of(torque)[rows])
         new = known + model @ coefficients[:p]
         change = float(np.sqrt(np.mean((new[rows] - torque[rows]) ** 2))) / scale
         torque = new
@@ -189,7 +189,7 @@ class LagEvidence:
 
 
 def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarray, t: np.ndarray,
-                 torque: np.ndarray, fit: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                 torque: np.ndarray, fit: Callable[[np.ndarray], np.ndarray],
                  cutoff: float | None, band: float = 0.0) -> tuple[np.ndarray, LagEvidence]:
     """The delay's column (n, f, 1) -dtau/dt, tau the model's torque fitted together with the
     delay (y = tau - d dtau/dt; :func:`fitted_torque`), differentiated after a low-pass at

@@ -409,8 +409,14 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
         alone = torque + model @ fit.coefficients
         torque = alone
 
-        def at_weights(X: np.ndarray, target: np.ndarray) -> np.ndarray:
-            return WeightedLinearModel(X, target).fit(fit.weights).coefficients
+        def at_weights(extra: np.ndarray) -> np.ndarray:
+            """The model and ``extra`` (training rows) fitted at the model's weights: the
+            model's fit grown by the extra columns (an SVD update), else a refit."""
+            grown = fit.extended((extra * fit.weights[None, :, None]).reshape(-1, extra.shape[-1]))
+            if grown is not None:
+                return grown.coefficients
+            X = np.concatenate([model[rows], extra], axis=-1)
+            return WeightedLinearModel(X, y[rows]).fit(fit.weights).coefficients
 
         if (wanted is None or any(kind == "delay" for kind, _ in wanted)) and len(problem.t) > 2:
             step = float(np.median(np.diff(problem.t)))

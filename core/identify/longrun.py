@@ -5,7 +5,6 @@ stability test (:mod:`.outofsample`) share."""
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 
 def newey_west_lags(n: int) -> int:
@@ -23,37 +22,52 @@ def hac_lags(residual: np.ndarray) -> int:
     it, at least the Newey-West rule 4 (N/100)^(2/9), at most N/4. (A fixed Newey-West window
     on a white residual makes small-sample tests reject too often; one too short for a
     correlated residual makes them reject far too often.)"""
-    n = residual.shape[0]
+    return int(hac_lags_each(residual[:, :, None])[0])
+
+
+def hac_lags_each(residuals: np.ndarray) -> np.ndarray:
+    """:func:`hac_lags` of each residual in ``residuals`` (N, f, m) (or (N, m): one
+    coordinate each) at once: the first DIRECT_LAGS autocorrelations directly (most windows
+    end there; an FFT costs as much as ~20 of them), the rest by one FFT for the residuals
+    still open. Why: a selection step tests a hundred candidate forms, each with its own
+    residual, and one call each was most of the step's small numpy calls."""
+    x = residuals[:, None, :] if residuals.ndim == 2 else residuals
+    n, f, m = x.shape
     base = newey_west_lags(n)
+    out = np.full(m, base, dtype=int)
+    if n < 8 or m == 0:
+        return out
     limit = max(base, n // 4)
-    if n < 8:
-        return base
     nlags = min(limit, n - 1)
-    centred = residual - residual.mean(axis=0)
-    energy = np.sum(centred ** 2, axis=0)
+    centred = x - x.mean(axis=0)
+    energy = np.einsum("tjm,tjm->jm", centred, centred)
     live = energy > 0
-    if not live.any():
-        return base
+    count = live.sum(axis=0)
+    open_ = count > 0                               # nothing live: the Newey-West window
+    safe = np.where(live, energy, 1.0)
     band = 1.96 / np.sqrt(n)
-    first = np.sum(centred[1:, live] * centred[:-1, live], axis=0) / energy[live]
-    if abs(float(np.mean(first))) < band:      # white already at lag 1 (most tests): no FFT
-        return 0
-    # the next few lags directly (most windows end there; an FFT costs as much as ~20 of them)
-    live_centred = centred[:, live]
-    for k in range(2, min(DIRECT_LAGS, nlags) + 1):
-        mean_k = float(np.mean(np.sum(live_centred[k:] * live_centred[:-k], axis=0) / energy[live]))
-        if abs(mean_k) < band:
-            return int(min(limit, max(base, 2 * (k - 1))))
-    # every coordinate's autocorrelation at once (statsmodels' acf, one FFT for all columns)
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    spectrum = np.fft.rfft(centred[:, live], n=size, axis=0)
-    autocovariance = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)[:nlags + 1]
-    mean = np.mean(autocovariance / energy[live], axis=1)
-    inside = np.nonzero(np.abs(mean[1:]) < band)[0]
-    leading = int(inside[0]) if inside.size else nlags
-    if leading == 0:
-        return 0
-    return int(min(limit, max(base, 2 * leading)))
+
+    def mean_autocorrelation(lagged: np.ndarray) -> np.ndarray:
+        return np.where(live, lagged / safe, 0.0).sum(axis=0) / np.maximum(count, 1)
+
+    for k in range(1, min(DIRECT_LAGS, nlags) + 1):
+        if not open_.any():
+            return out
+        inside = open_ & (np.abs(mean_autocorrelation(np.einsum("tjm,tjm->jm", centred[k:], centred[:-k]))) < band)
+        out[inside] = 0 if k == 1 else min(limit, max(base, 2 * (k - 1)))
+        open_ &= ~inside
+    rest = np.nonzero(open_)[0]
+    if rest.size:                                   # every coordinate's autocorrelation by one FFT
+        size = 1 << int(np.ceil(np.log2(2 * n)))
+        spectrum = np.fft.rfft(centred[:, :, rest], n=size, axis=0)
+        autocovariance = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)[:nlags + 1]
+        mean = (np.where(live[:, rest], autocovariance / safe[:, rest], 0.0).sum(axis=1)
+                / count[rest])                                          # (nlags + 1, len(rest))
+        for column, j in enumerate(rest):
+            inside = np.nonzero(np.abs(mean[1:, column]) < band)[0]
+            leading = int(inside[0]) if inside.size else nlags
+            out[j] = 0 if leading == 0 else min(limit, max(base, 2 * leading))
+    return out
 
 
 # Andrews and Monahan's bound on the prewhitening filter's singular values: a near-unit
@@ -69,22 +83,46 @@ def long_run(scores: np.ndarray, lags: int, prewhiten: bool = True) -> np.ndarra
     (AR(1) at 0.9) the Bartlett kernel alone underestimates the long-run variance by a
     fifth or more at any practical window, and the tests named effects in noise (4 of 10
     datasets); prewhitening removes most of that bias."""
-    if lags == 0 or not prewhiten or len(scores) < 20:
-        return S_hac_simple(scores, nlags=lags)
-    before, after = scores[:-1], scores[1:]
-    if scores.shape[1] == 1:                  # one direction (most tests): the same in scalars
-        energy = float(before[:, 0] @ before[:, 0])
-        a = float(before[:, 0] @ after[:, 0]) / energy if energy > 0 else 0.0
-        a = float(np.clip(a, -PREWHITEN_LIMIT, PREWHITEN_LIMIT))
-        e = after - a * before
-        return S_hac_simple(e, nlags=hac_lags(e)) / (1.0 - a) ** 2
-    At, *_ = np.linalg.lstsq(before, after, rcond=None)
-    u, sv, vt = np.linalg.svd(At.T)
-    A = (u * np.minimum(sv, PREWHITEN_LIMIT)) @ vt
-    e = after - before @ A.T
-    S = S_hac_simple(e, nlags=hac_lags(e))
-    B = np.linalg.inv(np.eye(A.shape[0]) - A)
-    return B @ S @ B.T
+    return long_run_each(scores[None], np.array([lags]), prewhiten)[0]
+
+
+def long_run_each(scores: np.ndarray, lags: np.ndarray, prewhiten: bool = True) -> np.ndarray:
+    """:func:`long_run` of each of m score series (m, n, r), each with its ``lags`` (m,), as
+    (m, r, r), in matrix form (a least-squares fit of the prewhitening filter per series
+    when r > 1). Why: as for :func:`hac_lags_each`."""
+    m, n, r = scores.shape
+    lags = np.asarray(lags, dtype=int)
+    coloured = (lags > 0) & prewhiten & (n >= 20)
+    out = bartlett_each(scores, np.where(coloured, 0, lags))
+    which = np.nonzero(coloured)[0]
+    if which.size == 0:
+        return out
+    before, after = scores[which, :-1], scores[which, 1:]
+    if r == 1:                                      # one direction (most tests): in scalars
+        energy = np.einsum("mt,mt->m", before[:, :, 0], before[:, :, 0])
+        a = np.einsum("mt,mt->m", before[:, :, 0], after[:, :, 0]) / np.where(energy > 0, energy, 1.0)
+        A = np.clip(np.where(energy > 0, a, 0.0), -PREWHITEN_LIMIT, PREWHITEN_LIMIT)[:, None, None]
+    else:
+        At = np.stack([np.linalg.lstsq(b, c, rcond=None)[0] for b, c in zip(before, after)])
+        u, sv, vt = np.linalg.svd(np.swapaxes(At, 1, 2))
+        A = np.einsum("mab,mb,mbc->mac", u, np.minimum(sv, PREWHITEN_LIMIT), vt)
+    e = after - before @ np.swapaxes(A, 1, 2)
+    S = bartlett_each(e, hac_lags_each(np.moveaxis(e, 0, 2)))
+    B = np.linalg.inv(np.eye(r) - A)
+    out[which] = B @ S @ np.swapaxes(B, 1, 2)
+    return out
+
+
+def bartlett_each(scores: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    """Newey-West sums (statsmodels' S_hac_simple: Bartlett weights, not divided by n) of
+    each of m score series (m, n, r), each with its window ``lags`` (m,), as (m, r, r)."""
+    transposed = np.swapaxes(scores, 1, 2)
+    S = transposed @ scores
+    for lag in range(1, int(np.max(lags, initial=0)) + 1):
+        on = np.nonzero(lags >= lag)[0]
+        s = transposed[on, :, lag:] @ scores[on, :-lag]
+        S[on] += (1.0 - lag / (lags[on] + 1.0))[:, None, None] * (s + np.swapaxes(s, 1, 2))
+    return S
 
 
 def stationary_variance(residual: np.ndarray, directions: np.ndarray, lags: int, scale: float,
@@ -145,3 +183,4 @@ def local_power(residual: np.ndarray, lags: int) -> np.ndarray:
     power = np.ones_like(residual)
     power[:, live] = uniform_filter1d(residual[:, live] ** 2, size=window, axis=0, mode="nearest") / mean[live]
     return power
+

@@ -41,7 +41,7 @@ import numpy as np
 from scipy.special import fdtrc
 from scipy.optimize import minimize_scalar
 
-from baseparams.identify.longrun import hac_lags, local_power, long_run, stationary_variance
+from baseparams.identify.longrun import hac_lags, hac_lags_each, local_power, long_run_each, stationary_variance
 from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
 from baseparams.numeric.rank import numerical_rank
@@ -62,6 +62,8 @@ STEP_TOLERANCE = 0.02
 # directions spread over fewer samples than this fraction of the data (a Stribeck bump
 # sampled at a few zero crossings) is not tested (its statistic would be one spike).
 MIN_SUPPORT = 0.05
+# The most bytes of candidate columns projected off the model, or of directions tested, at once.
+BATCH_BYTES = 64 << 20
 
 
 @dataclass(frozen=True)
@@ -242,52 +244,115 @@ def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: i
     over all samples (:func:`~baseparams.identify.longrun.stationary_variance`); either
     scaled up by the noise's local power where the direction acts
     (:func:`~baseparams.identify.longrun.local_power`) when that is above its average."""
-    r = basis.shape[1]
-    if r == 0:
-        return NOT_TESTED
+    return wald_each([residual], [basis], shape, [dof], lags, [extra_df], sparse_if_white, sparse_if_coloured,
+                     prewhiten)[0]
+
+
+def wald_each(residuals: Sequence[np.ndarray], bases: Sequence[np.ndarray], shape: tuple[int, int],
+              dofs: Sequence[int], lags: int | None, extra_df: Sequence[int], sparse_if_white: bool = False,
+              sparse_if_coloured: bool = False, prewhiten: bool = True) -> list[Test]:
+    """:func:`wald` of each basis against its residual (one residual for all when
+    ``residuals`` has one), with its null model's ``dofs`` and its ``extra_df``; the bases of
+    one width that are not sparse (most: a friction or offset column) all at once, in matrix
+    form (BATCH_BYTES at a time). Why: a step tests every form of every candidate (about 130
+    on the TX40) and compares the winner with each rival, and one call per form was a fifth
+    of diagnose's time, most of it in small numpy calls."""
     n, f = shape
-    sparse = support(basis, shape) < max(MIN_SUPPORT * n, 10)
-    if sparse and not sparse_if_white:
-        return TOO_SPARSE
+    rows = n * f
+    count = len(bases)
+    residual_of = (lambda i: residuals[0]) if len(residuals) == 1 else (lambda i: residuals[i])
+    dof_of = (lambda i: dofs[0]) if len(dofs) == 1 else (lambda i: dofs[i])
+    tests: list[Test | None] = [None] * count
+    for r in sorted({b.shape[1] for b in bases}):
+        group = [i for i in range(count) if bases[i].shape[1] == r]
+        if r == 0:
+            for i in group:
+                tests[i] = NOT_TESTED
+            continue
+        per_batch = max(1, BATCH_BYTES // (8 * rows * r))
+        for first in range(0, len(group), per_batch):
+            members = group[first:first + per_batch]
+            B = np.stack([bases[i] for i in members])                            # (m, rows, r)
+            w = np.einsum("mtjr,mtjr->mtr", B.reshape(-1, n, f, r), B.reshape(-1, n, f, r))
+            total, squares = w.sum(axis=1), np.einsum("mtr,mtr->mr", w, w)
+            spread = np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf).min(axis=1)
+            dense = spread >= max(MIN_SUPPORT * n, 10)
+            for i, is_dense in zip(members, dense):
+                if not is_dense:
+                    tests[i] = (_sparse_test(residual_of(i), bases[i], shape, dof_of(i), lags, sparse_if_coloured)
+                                if sparse_if_white else TOO_SPARSE)
+            chosen = [i for i, is_dense in zip(members, dense) if is_dense]
+            if chosen:
+                R = np.stack([residual_of(i) for i in chosen])
+                results = _dense_tests(R, B[dense], shape, np.array([dof_of(i) for i in chosen]), lags,
+                                       np.array([extra_df[0] if len(extra_df) == 1 else extra_df[i] for i in chosen]),
+                                       prewhiten)
+                for i, test in zip(chosen, results):
+                    tests[i] = test
+    return tests                                                                     # type: ignore[return-value]
+
+
+def _dense_tests(R: np.ndarray, B: np.ndarray, shape: tuple[int, int], dofs: np.ndarray, lags: int | None,
+                 extra_df: np.ndarray, prewhiten: bool) -> list[Test]:
+    """HAC Wald tests of m sets of r directions B (m, rows, r) that are not sparse, each
+    against its residual R (m, rows) (:func:`wald`)."""
+    n, f = shape
+    m, rows, r = B.shape
+    gamma = np.einsum("mxr,mx->mr", B, R)
+    augmented = R - np.einsum("mxr,mr->mx", B, gamma)
+    windows = (hac_lags_each(np.moveaxis(augmented.reshape(m, n, f), 0, 2)) if lags is None
+               else np.full(m, lags, dtype=int))
+    scores = np.einsum("mtjr,mtj->mtr", B.reshape(m, n, f, r), augmented.reshape(m, n, f))
+    left = np.maximum(rows - dofs - r, 1)
+    S = long_run_each(scores, windows, prewhiten) * (rows / left)[:, None, None]     # small-sample factor
+    white = np.nonzero((windows == 0) & prewhiten)[0]
+    if white.size:
+        # no autocorrelation left: White's variance, but never below the classical one
+        # (sigma^2 I on orthonormal directions), which White's underestimates where few
+        # samples carry a direction (liberal in the tails: 1.7 times at 1 % on the PUMA)
+        classical = np.einsum("mx,mx->m", augmented[white], augmented[white]) / left[white]
+        values, vectors = np.linalg.eigh(S[white])
+        S[white] = (vectors * np.maximum(values, classical[:, None])[:, None, :]) @ np.swapaxes(vectors, 1, 2)
+    try:
+        stat = np.einsum("mr,mr->m", gamma, np.linalg.solve(S, gamma[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:                   # a singular one among them: each alone
+        stat = np.array([_quadratic(g, V) for g, V in zip(gamma, S)])
+    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
+    denominator = np.maximum(n - np.ceil(dofs / f).astype(int) - r, 1)   # samples left: scores are per sample
+    pvalues = fdtrc(k, denominator, stat / k)      # F upper tail (stats.f.sf, 40x faster)
+    return [Test(float(s_), r, float(p), wilson_hilferty(float(s_), int(kk)), int(L))
+            for s_, p, kk, L in zip(stat, pvalues, k, windows)]
+
+
+def _sparse_test(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int, lags: int | None,
+                 sparse_if_coloured: bool) -> Test:
+    """:func:`wald` of directions acting on few samples: the classical variance on a white
+    residual, the stationary one on a coloured residual (with ``sparse_if_coloured``, else
+    not tested), scaled by the noise's local power where they act."""
+    n, f = shape
+    r = basis.shape[1]
     gamma = basis.T @ residual
     augmented = residual - basis @ gamma
     if lags is None:
         lags = hac_lags(augmented.reshape(n, f))
-    if sparse:
-        rows = n * f
-        left = max(rows - dof - r, 1)
-        if lags > 0 and not sparse_if_coloured:
-            return TOO_SPARSE
-        noise, directions = augmented.reshape(n, f), basis.reshape(n, f, r)
-        if lags > 0:
-            V = stationary_variance(noise, directions, lags, left / f, truncated=True)
-        else:
-            V = float(augmented @ augmented) / left * np.eye(r)
-        # each direction's variance scaled up by the noise's local power where it acts, when
-        # that is above the residual's average: a direction where the residual is larger
-        # (at velocity reversals, under load) is not named on that excess
-        power = local_power(noise, lags)
-        energy = directions ** 2
-        factor = np.sqrt(np.maximum(np.einsum("tj,tjr->r", power, energy) / energy.sum(axis=(0, 1)), 1.0))
-        stat = _quadratic(gamma / factor, V)
-        pvalue = float(fdtrc(r, left, stat / r))     # F(r, left) upper tail (stats.f.sf, 40x faster)
-        return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
-    scores = (basis * augmented[:, None]).reshape(n, f, r).sum(axis=1)
     rows = n * f
-    small = rows / max(rows - dof - r, 1)                   # small-sample factor
-    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
-    S = long_run(scores, lags, prewhiten) * small
-    if lags == 0 and prewhiten:
-        # no autocorrelation left: White's variance, but never below the classical one
-        # (sigma^2 I on orthonormal directions), which White's underestimates where few
-        # samples carry a direction (liberal in the tails: 1.7 times at 1 % on the PUMA)
-        classical = float(augmented @ augmented) / max(rows - dof - r, 1)
-        values, vectors = np.linalg.eigh(S)
-        S = (vectors * np.maximum(values, classical)) @ vectors.T
-    stat = _quadratic(gamma, S)
-    denominator = max(n - int(np.ceil(dof / f)) - r, 1)     # samples left: scores are per sample
-    pvalue = float(fdtrc(k, denominator, stat / k))
-    return Test(stat, r, pvalue, wilson_hilferty(stat, k), lags)
+    left = max(rows - dof - r, 1)
+    if lags > 0 and not sparse_if_coloured:
+        return TOO_SPARSE
+    noise, directions = augmented.reshape(n, f), basis.reshape(n, f, r)
+    if lags > 0:
+        V = stationary_variance(noise, directions, lags, left / f, truncated=True)
+    else:
+        V = float(augmented @ augmented) / left * np.eye(r)
+    # each direction's variance scaled up by the noise's local power where it acts, when
+    # that is above the residual's average: a direction where the residual is larger
+    # (at velocity reversals, under load) is not named on that excess
+    power = local_power(noise, lags)
+    energy = directions ** 2
+    factor = np.sqrt(np.maximum(np.einsum("tj,tjr->r", power, energy) / energy.sum(axis=(0, 1)), 1.0))
+    stat = _quadratic(gamma / factor, V)
+    pvalue = float(fdtrc(r, left, stat / r))
+    return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
 
 
 def _quadratic(gamma: np.ndarray, V: np.ndarray) -> float:
@@ -316,12 +381,21 @@ def encompassing(a: np.ndarray, b: np.ndarray, residual: np.ndarray, shape: tupl
     """Encompassing tests of two sets of directions (orthonormal, beyond the model whose
     ``residual`` and ``dof`` are given): (what a adds over b, what b adds over a), each a
     Wald test on the residual with the other's directions in."""
-    res_b = residual - b @ (b.T @ residual)
-    res_a = residual - a @ (a.T @ residual)
-    return (wald(res_b, conditional(a, b), shape, dof + b.shape[1], sparse_if_white=True,
-                 sparse_if_coloured=sparse_if_coloured),
-            wald(res_a, conditional(b, a), shape, dof + a.shape[1], sparse_if_white=True,
-                 sparse_if_coloured=sparse_if_coloured))
+    return encompassing_each(a, [b], residual, shape, dof, sparse_if_coloured)[0]
+
+
+def encompassing_each(a: np.ndarray, rivals: Sequence[np.ndarray], residual: np.ndarray, shape: tuple[int, int],
+                      dof: int, sparse_if_coloured: bool = False) -> list[tuple[Test, Test]]:
+    """:func:`encompassing` of ``a`` with each rival's directions, all tests made at once
+    (:func:`wald_each`)."""
+    residuals, bases, dofs = [], [], []
+    for b in rivals:
+        residuals += [residual - b @ (b.T @ residual), residual - a @ (a.T @ residual)]
+        bases += [conditional(a, b), conditional(b, a)]
+        dofs += [dof + b.shape[1], dof + a.shape[1]]
+    tests = wald_each(residuals, bases, shape, dofs, None, [0], sparse_if_white=True,
+                      sparse_if_coloured=sparse_if_coloured)
+    return [(tests[2 * j], tests[2 * j + 1]) for j in range(len(rivals))]
 
 
 def correlation(residual: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -473,14 +547,21 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                     whitened[i] = (cand, whiten.candidate(cand))
                 seen[i] = whitened[i][1]
         forms = dict(zip(seen, candidate_bases(list(seen.values()), fit)))
+        # every form of every candidate tested at once; whitened, a step (Coulomb friction)
+        # is a few spikes: tested with the classical variance when the whitened residual is
+        # white, else with the stationary one
+        flat = [basis for i in seen for basis in forms[i]]
+        extra = [seen[i].extra_df if seen[i].variants else 0 for i in seen for _ in forms[i]]
+        each = wald_each([fit.residual], flat, (n, f), [dof], lags, extra, sparse_if_white=coloured,
+                         sparse_if_coloured=coloured)
+        form_tests, at = {}, 0
+        for i in seen:
+            form_tests[i], at = each[at:at + len(forms[i])], at + len(forms[i])
         for i in range(len(candidates)):
             if i not in seen:
                 tests.append(NOT_TESTED)
                 continue
-            # whitened, a step (Coulomb friction) is a few spikes: tested with the classical
-            # variance when the whitened residual is white, else with the stationary one
-            bases[i], test, variant[i] = best_variant(seen[i], fit, (n, f), dof, sparse_if_white=coloured,
-                                                      lags=lags, sparse_if_coloured=coloured, bases=forms[i])
+            bases[i], test, variant[i] = best_variant(seen[i], fit, (n, f), dof, bases=forms[i], tests=form_tests[i])
             tests.append(test)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
@@ -509,7 +590,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                     ambiguous[winner] = confusable
                     companions.extend(r.index for r in confusable)
                 continue
-            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, filtered)
+            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, filtered,
+                            complete=fit)    # this step's fit: the final model at these weights
             if out is None:
                 break
             removed.append(out)
@@ -770,6 +852,8 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
     fit at ``weights`` with fewer effects (the last step's) that the complete fit extends.
     Returns the complete fit with the shapes as left, when one was made, else None."""
     complete: Fit | None = None
+    start: Fit | None = None                  # without weights: the whole model at its own, once
+    start_columns: list[np.ndarray] = []
     for i in in_model:
         if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
                                and "all" not in touched):
@@ -785,8 +869,19 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
             fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
         if fit is None:
             others = [j for j in in_model if j != i]
+            near = None
+            if weights is None:           # at its own weights: refitted from the whole model's factors
+                if start is None:
+                    start = WeightedLinearModel(whiten(np.concatenate(
+                        [model] + [candidates[j].columns for j in in_model], axis=-1)), whiten(y)).fit()
+                    start_columns = [candidates[j].columns for j in in_model]
+                widths = [c.shape[-1] for c in start_columns]
+                if all(candidates[j].columns is c for j, c in zip(in_model, start_columns)):
+                    first = model.shape[-1] + sum(widths[:in_model.index(i)])
+                    drop = set(range(first, first + widths[in_model.index(i)]))
+                    near = start.subset([c for c in range(len(start.coefficients)) if c not in drop])
             fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others],
-                                                            axis=-1)), whiten(y)).fit(weights)
+                                                            axis=-1)), whiten(y)).fit(weights, near=near)
 
         def explained(columns: np.ndarray) -> float:
             basis = candidate_basis(whiten(columns), fit)
@@ -838,10 +933,6 @@ def _between(cand: Candidate, k: int, explained: Callable[[np.ndarray], float]) 
     return Candidate(cand.kind, cand.coordinate, cand.names, columns(found.x), (), (), shape, cand.generalises)
 
 
-# The most bytes of candidate columns candidate_bases projects off the model at once.
-BATCH_BYTES = 64 << 20
-
-
 def candidate_bases(candidates: Sequence[Candidate], fit: "Fit | Reduced") -> list[list[np.ndarray]]:
     """:func:`candidate_basis` of every form of each candidate (its one form, or each
     variant), the projection off the model done for all at once (two matrix products
@@ -874,23 +965,26 @@ def candidate_bases(candidates: Sequence[Candidate], fit: "Fit | Reduced") -> li
 
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
                  lags: int | None = None, sparse_if_coloured: bool = False,
-                 bases: list[np.ndarray] | None = None) -> tuple[np.ndarray, Test, int]:
+                 bases: list[np.ndarray] | None = None,
+                 tests: list[Test] | None = None) -> tuple[np.ndarray, Test, int]:
     """(basis, test, variant index) of the candidate's best shape against ``fit`` (the
     largest normal-equivalent statistic; the one form of an unshaped candidate); ``bases``:
-    each form's :func:`candidate_basis`, when already made (:func:`candidate_bases`)."""
+    each form's :func:`candidate_basis`, when already made (:func:`candidate_bases`);
+    ``tests``: each form's Wald test, when already made (:func:`wald_each`)."""
+    forms = list(cand.variants) if cand.variants else [cand.columns]
+    if bases is None:
+        bases = [candidate_basis(columns, fit) for columns in forms]
+    if tests is None:
+        extra = cand.extra_df if cand.variants else 0
+        tests = [wald(fit.residual, basis, shape, dof, lags=lags, extra_df=extra, sparse_if_white=sparse_if_white,
+                      sparse_if_coloured=sparse_if_coloured) for basis in bases]
     if not cand.variants:
-        basis = candidate_basis(cand, fit) if bases is None else bases[0]
-        return basis, wald(fit.residual, basis, shape, dof, lags=lags, sparse_if_white=sparse_if_white,
-                           sparse_if_coloured=sparse_if_coloured), -1
-    best: tuple[np.ndarray, Test, int] | None = None
-    for k, columns in enumerate(cand.variants):
-        basis = candidate_basis(columns, fit) if bases is None else bases[k]
-        test = wald(fit.residual, basis, shape, dof, lags=lags, extra_df=cand.extra_df,
-                    sparse_if_white=sparse_if_white, sparse_if_coloured=sparse_if_coloured)
-        if best is None or test.z > best[1].z:
-            best = (basis, test, k)
-    assert best is not None
-    return best
+        return bases[0], tests[0], -1
+    best = 0
+    for k in range(1, len(tests)):
+        if tests[k].z > tests[best].z:
+            best = k
+    return bases[best], tests[best], best
 
 
 def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], added: list[int],
@@ -935,7 +1029,7 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
 
 def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], added: list[int],
               companions: list[int], ambiguous: dict, bars: dict, weights: np.ndarray,
-              whiten: Callable = _same) -> tuple[int, Test, float] | None:
+              whiten: Callable = _same, complete: Fit | None = None) -> tuple[int, Test, float] | None:
     """Backward elimination, one effect at a time: each named effect (not an ambiguous
     group: those are not named) is tested beyond everything else in the final model, at the
     Bonferroni bar alpha / m it cleared to enter (the most significant of m candidates under
@@ -946,14 +1040,16 @@ def eliminate(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate],
     that imitates two hidden effects at once
     (on the SLA, Coulomb friction on the hub imitating viscous friction on the hub plus
     Coulomb friction on a damper joint); once those are in, it adds nothing, and naming it
-    is a wrong name. The noise weights are the final model's (one weighted fit per test)."""
+    is a wrong name. The noise weights are the final model's (one weighted fit per test);
+    ``complete``: the final model's fit at them, when made (the last step's)."""
     named = [i for i in added if i not in ambiguous]
     if not named:
         return None
     n, f, p = model.shape
     in_model = added + companions
-    complete = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in in_model],
-                                                         axis=-1)), whiten(y)).fit(weights)
+    if complete is None:
+        complete = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in in_model],
+                                                             axis=-1)), whiten(y)).fit(weights)
     offsets = np.cumsum([p] + [candidates[j].columns.shape[-1] for j in in_model])
     worst = None
     for i in named:
@@ -1012,12 +1108,10 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
         confusable: list[Rival] = []
         beaten: list[Rival] = []
         switch: list[Rival] = []
-        for j in rivals:
-            if j == winner:
-                continue
-            B = bases[j]
-            t_ab, t_ba = encompassing(A, B, fit.residual, shape, dof, sparse_if_coloured)
-            rival = Rival(j, t_ab, t_ba, correlation(fit.residual, A, B))
+        others = [j for j in rivals if j != winner]
+        pairs = encompassing_each(A, [bases[j] for j in others], fit.residual, shape, dof, sparse_if_coloured)
+        for j, (t_ab, t_ba) in zip(others, pairs):
+            rival = Rival(j, t_ab, t_ba, correlation(fit.residual, A, bases[j]))
             a_adds = t_ab.tested and t_ab.pvalue <= alpha
             b_adds = t_ba.tested and t_ba.pvalue <= alpha
             if not t_ba.tested:                 # rival nested in the winner
