@@ -515,7 +515,6 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     blocks_ = [model] + [candidates[i].columns for i in in_model]
     X = np.concatenate(blocks_, axis=-1)
     fit = WeightedLinearModel(X, y).fit(weights)
-    estimates = coefficients(model, candidates, in_model, y, weights)
     widths = [model.shape[-1]] + [candidates[i].columns.shape[-1] for i in in_model]
     offsets = np.cumsum([0] + widths)
 
@@ -541,7 +540,7 @@ def _gate(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_m
     for i in named:
         k = in_model.index(i)
         lo, hi = offsets[k + 1], offsets[k + 2]
-        values = dict(zip(coefficient_names(candidates[i].kind), estimates[k][0].tolist()))
+        values = dict(zip(coefficient_names(candidates[i].kind), fit.coefficients[lo:hi].tolist()))
         reason = (_unphysical(problem, candidates[i], values)
                   or _cancelling(X[:, :, lo:hi] @ fit.coefficients[lo:hi], held, problem.coordinates))
         detail: dict = {}

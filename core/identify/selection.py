@@ -794,16 +794,16 @@ def weakest_over(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidat
     if found is None:
         return None
     fit, own = found
+    Z = np.stack([(whiten(rival) * fit.weights[None, :]).reshape(n * f) for rival in rivals], axis=1)
+    beyond = fit.orthogonal(Z)                       # every rival projected off the model at once
+    size = np.einsum("xr,xr->r", beyond, beyond)
+    fitted = (beyond.T @ fit.residual) / np.where(size > 0, size, 1.0)
+    in_scale = [r for r in range(len(rivals)) if size[r] > 0 and scale[0] <= fitted[r] <= scale[1]]
+    others = {r: orthonormal_basis(beyond[:, r:r + 1], ABSORB_TOL, reference=Z[:, r:r + 1]) for r in in_scale}
+    others = {r: b for r, b in others.items() if b.shape[1]}
     weakest: tuple[Test, int] | None = None
-    for r, rival in enumerate(rivals):
-        beyond = fit.orthogonal((whiten(rival) * fit.weights[None, :]).reshape(n * f, 1))[:, 0]
-        size = float(beyond @ beyond)
-        if size <= 0 or not scale[0] <= float(beyond @ fit.residual) / size <= scale[1]:
-            continue
-        other = candidate_basis(whiten(rival)[:, :, None], fit)
-        if other.shape[1] == 0:
-            continue
-        over, _ = encompassing(own, other, fit.residual, (n, f), fit.rank)
+    pairs = encompassing_each(own, list(others.values()), fit.residual, (n, f), fit.rank)
+    for r, (over, _) in zip(others, pairs):
         if not over.tested:              # no test to make: the rival is the candidate on these data
             continue
         if weakest is None or over.z < weakest[0].z:
@@ -887,7 +887,8 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
             basis = candidate_basis(whiten(columns), fit)
             return float(np.sum((basis.T @ fit.residual) ** 2))
 
-        gains = [explained(columns) for columns in shaped[i].variants]
+        gains = [float(np.sum((basis.T @ fit.residual) ** 2))
+                 for basis in column_bases([whiten(columns) for columns in shaped[i].variants], fit)]
         best = int(np.argmax(gains))
         before = candidates[i]
         candidates[i] = _between(shaped[i], best, explained) or shaped[i].at(best)
@@ -938,29 +939,35 @@ def candidate_bases(candidates: Sequence[Candidate], fit: "Fit | Reduced") -> li
     variant), the projection off the model done for all at once (two matrix products
     instead of one pair per form: most of a step's cost on a robot's many candidates)."""
     forms = [list(c.variants) if c.variants else [c.columns] for c in candidates]
-    flat = [columns for each in forms for columns in each]
-    if not flat:
-        return [[] for _ in forms]
-    n, f, _ = flat[0].shape
-    per_batch = max(1, BATCH_BYTES // (8 * n * f))       # columns projected at once (bounded memory)
-    bases: list[np.ndarray] = []
-    first = 0
-    while first < len(flat):
-        last, width = first, 0
-        while last < len(flat) and (last == first or width + flat[last].shape[-1] <= per_batch):
-            width += flat[last].shape[-1]
-            last += 1
-        Z = np.concatenate([(c * fit.weights[None, :, None]).reshape(n * f, -1) for c in flat[first:last]], axis=1)
-        projected = fit.orthogonal(Z)
-        bounds = np.cumsum([0] + [c.shape[-1] for c in flat[first:last]])
-        bases += [orthonormal_basis(projected[:, a:b], ABSORB_TOL, reference=Z[:, a:b])
-                  for a, b in zip(bounds[:-1], bounds[1:])]
-        first = last
+    bases = column_bases([columns for each in forms for columns in each], fit)
     out, at = [], 0
     for each in forms:
         out.append(bases[at:at + len(each)])
         at += len(each)
     return out
+
+
+def column_bases(arrays: Sequence[np.ndarray], fit: "Fit | Reduced") -> list[np.ndarray]:
+    """:func:`candidate_basis` of each array of columns (n, f, c), projected off the model
+    together, BATCH_BYTES at a time."""
+    if not arrays:
+        return []
+    n, f, _ = arrays[0].shape
+    per_batch = max(1, BATCH_BYTES // (8 * n * f))       # columns projected at once (bounded memory)
+    bases: list[np.ndarray] = []
+    first = 0
+    while first < len(arrays):
+        last, width = first, 0
+        while last < len(arrays) and (last == first or width + arrays[last].shape[-1] <= per_batch):
+            width += arrays[last].shape[-1]
+            last += 1
+        Z = np.concatenate([(c * fit.weights[None, :, None]).reshape(n * f, -1) for c in arrays[first:last]], axis=1)
+        projected = fit.orthogonal(Z)
+        bounds = np.cumsum([0] + [c.shape[-1] for c in arrays[first:last]])
+        bases += [orthonormal_basis(projected[:, a:b], ABSORB_TOL, reference=Z[:, a:b])
+                  for a, b in zip(bounds[:-1], bounds[1:])]
+        first = last
+    return bases
 
 
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
