@@ -583,3 +583,28 @@ def test_stated_standard_deviations_match_the_spread_on_filtered_data(tmp_path, 
         z.append((result.base_estimates - truth) / result.std[:base.rank])
     spread = np.std(z, axis=0)
     assert 0.7 < np.median(spread) < 1.5, spread
+
+
+@pytest.mark.parametrize("still", ["constant", "jitter"])
+def test_a_joint_held_still_does_not_set_the_filter(tmp_path, still):
+    """A joint that does not move (a gripper held still: constant, or an encoder jittering by
+    a count or two) has a flat spectrum; the positions' bandwidth, and so the low-pass and
+    the decimation, are the moving joints'. (One still Panda finger made the bandwidth 12 Hz
+    instead of 0.57: the filter kept 121 Hz, the decimation was 3 instead of 70, every
+    joint's residual was 3.5 times its noise and diagnose took 28 s instead of 5.)"""
+    from baseparams.identify.data import bandwidth
+    mech = parse_mechanism(_chain(12))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, random_physical_inertia(mech, np.random.default_rng(12)))
+    q = motion.q.copy()
+    rng = np.random.default_rng(3)
+    q[:, 2] = 0.3 if still == "constant" else 0.3 + 1e-5 * np.round(rng.standard_normal(len(t)) * 1.5)
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *q.T, *tau.T])
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    data, _ = read_recording(tmp_path / "rec.toml", mech)
+    moving = bandwidth(motion.q[:, :2], 1 / RATE)
+    assert 0 < moving < 2.0
+    assert any(f"positions' bandwidth {moving:.3g} Hz" in n for n in data.notes), data.notes
+    assert bandwidth(q, 1 / RATE) == moving
+    # alone, a still coordinate keeps the old answer: 0 when constant, its noise's band else
+    assert bandwidth(q[:, 2:], 1 / RATE) == (0.0 if still == "constant" else pytest.approx(0.5 * RATE, rel=0.05))

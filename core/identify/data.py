@@ -42,6 +42,9 @@ UNIFORM_TOLERANCE = 1e-3
 SG_BIAS = 1e-3
 # Bandwidth: the frequency below which this fraction of the (detrended) positions' power lies.
 BANDWIDTH_POWER = 0.9999
+# A coordinate with half its power above this fraction of the Nyquist frequency does not move
+# beyond its noise (white noise has half its power above 0.5): its bandwidth is the noise's.
+STILL_BAND = 0.25
 MAX_FILE_BYTES = 2_000_000_000
 # Reading a CSV takes about this many bytes of memory per byte of text (the text, the rows'
 # field strings, the float array; measured ~16 on a 70 MB file): a file is refused before it
@@ -599,18 +602,31 @@ def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], e
 def bandwidth(q: np.ndarray, step: float) -> float:
     """The positions' bandwidth (Hz): the frequency below which a fraction BANDWIDTH_POWER of
     their power lies (detrended, Blackman-tapered so the ends leak no power to high
-    frequencies; the largest over the coordinates); 0 for constant positions."""
+    frequencies; the largest over the coordinates that move); 0 for constant positions.
+
+    A coordinate that does not move (constant) or not beyond its noise (a locked joint's
+    encoder jitter: a flat spectrum, half its power above STILL_BAND times the Nyquist
+    frequency) is left out, unless no coordinate moves. Why: one still Panda finger made the bandwidth 12 Hz instead of 0.5, the filter
+    kept 121 Hz and the decimation 3 instead of 70: every other joint's residual was 3.5 times
+    its noise level, and diagnose took 28 s instead of 5."""
     n = q.shape[0]
-    fb = 0.0
+    moving, still = 0.0, 0.0
+    frequencies = np.fft.rfftfreq(n, step)
     for column in np.atleast_2d(np.asarray(q).T):
+        if np.ptp(column) == 0:
+            continue
         detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
         power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
         if power.sum() <= 0:
             continue
         cumulative = np.cumsum(power) / power.sum()
-        index = int(np.searchsorted(cumulative, BANDWIDTH_POWER))
-        fb = max(fb, float(np.fft.rfftfreq(n, step)[min(index, len(power) - 1)]))
-    return fb
+        band = float(frequencies[min(int(np.searchsorted(cumulative, BANDWIDTH_POWER)), len(power) - 1)])
+        half = float(frequencies[min(int(np.searchsorted(cumulative, 0.5)), len(power) - 1)])
+        if half > STILL_BAND * frequencies[-1]:
+            still = max(still, band)
+        else:
+            moving = max(moving, band)
+    return moving if moving > 0 else still
 
 
 def savgol_window(q: np.ndarray, step: float) -> int:
