@@ -909,3 +909,25 @@ def test_harmonics_of_q_are_default_candidates_on_angles_only():
         assert {c for k, c in parse_selection(m, [kind]) if k == kind} == set(angles)
         assert parse_selection(m, [f"{kind}:{lengths[0]}"]) == [(kind, lengths[0])]
     assert {c for k, c in pairs if k == "coulomb_friction"} >= set(lengths)
+
+
+def test_friction_the_model_has_but_the_data_lack_is_not_named_as_position_friction(tmp_path):
+    """The mechanism says Coulomb friction fc 3 on q2 and q3 (known, subtracted); the data
+    (a PUMA 560 simulated without it) have none. Coulomb friction is no candidate there (the
+    model has it), and before, position friction was named on both joints with fcc -3.2
+    about q = 0: a negative Coulomb friction that drives the motion everywhere. It is held
+    back now, its reason says why, and the verdict says structure remains."""
+    from baseparams.identify.diagnose import effects_toml
+    from baseparams.model.mechanism import EffectSpec
+    mech = tmp_path / "puma_known.toml"
+    mech.write_text(Path(resolve("puma560").path).read_text() + "\n" + effects_toml(
+        [EffectSpec("coulomb_friction", "q2", {"fc": 3.0}), EffectSpec("coulomb_friction", "q3", {"fc": 3.0})], "test"))
+    runner = CliRunner()
+    log = tmp_path / "plain.csv"
+    assert runner.invoke(main, ["simulate", "puma560", "-o", str(log), "--samples", "1200", "--noise", "0.5",
+                                "--seed", "1", "--quiet"]).exit_code == 0
+    result = runner.invoke(main, ["diagnose", str(mech), str(log), "--format", "json", "--quiet"])
+    report = json.loads(result.stdout)
+    assert report["effects"] == [] and report["verdict"] == "unexplained" and result.exit_code == 1
+    held = {u["coordinate"]: u["reason"] for u in report["unsupported"] if u["kind"] == "position_friction"}
+    assert set(held) == {"q2", "q3"} and all("drives the motion" in r for r in held.values())

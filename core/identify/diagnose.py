@@ -808,8 +808,37 @@ def _turned(problem: Problem, candidates: list[Candidate], in_model: list[int], 
 
 def _unphysical(problem: Problem, cand: Candidate, values: dict) -> str:
     """Why an effect with coefficients ``values`` (name -> value) is not physical ('' when it
-    is): its kind's signs and ranges, and a changed body's mass."""
-    return implausible(cand.kind, values) or _body_implausible(problem, cand, values)
+    is): its kind's signs and ranges, a friction that drives the motion, and a changed body's
+    mass."""
+    return implausible(cand.kind, values) or _drives(problem, cand, values) or _body_implausible(problem, cand, values)
+
+
+# Frictions whose coefficients' signs alone do not make them resist the motion (position
+# friction: fcc cos q + fcs sin q changes sign with q), and the share of the samples where
+# such a force may drive the motion before it is no friction: it changes sign once over a
+# wide travel when it stands for a bearing's eccentricity beside Coulomb friction.
+DRIVES_CHECKED = ("position_friction",)
+DRIVES_LIMIT = 0.5
+
+
+def _drives(problem: Problem, cand: Candidate, values: dict) -> str:
+    """Why a friction of a kind in DRIVES_CHECKED is not friction ('' when it is): its force
+    does positive work on the motion (force . qd < 0: the measured torque is lowered) on
+    more than DRIVES_LIMIT of the samples where it acts. Why: a Z1 arm whose URDF gives
+    Coulomb friction that its data lack got position friction named on four joints, fcc
+    -0.9 to -1.2 about q = 0: a negative Coulomb friction, resisting nowhere."""
+    if cand.kind not in DRIVES_CHECKED or problem.qd is None:
+        return ""
+    force = cand.columns @ np.array(list(values.values()), dtype=float)            # (n, f)
+    power = np.sum(force * problem.qd[:len(force)], axis=1)
+    acting = np.abs(power) > 1e-9 * np.max(np.abs(power), initial=0.0)
+    if not acting.any():
+        return ""
+    share = float(np.mean(power[acting] < 0))
+    if share <= DRIVES_LIMIT:
+        return ""
+    return (f"its force drives the motion instead of resisting it on {100 * share:.0f} % of the samples where "
+            "it acts: no friction does (it may stand in for friction the model has but the data lack)")
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
