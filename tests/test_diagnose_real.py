@@ -911,23 +911,86 @@ def test_harmonics_of_q_are_default_candidates_on_angles_only():
     assert {c for k, c in pairs if k == "coulomb_friction"} >= set(lengths)
 
 
-def test_friction_the_model_has_but_the_data_lack_is_not_named_as_position_friction(tmp_path):
-    """The mechanism says Coulomb friction fc 3 on q2 and q3 (known, subtracted); the data
-    (a PUMA 560 simulated without it) have none. Coulomb friction is no candidate there (the
-    model has it), and before, position friction was named on both joints with fcc -3.2
-    about q = 0: a negative Coulomb friction that drives the motion everywhere. It is held
-    back now, its reason says why, and the verdict says structure remains."""
-    from baseparams.identify.diagnose import effects_toml
-    from baseparams.model.mechanism import EffectSpec
-    mech = tmp_path / "puma_known.toml"
-    mech.write_text(Path(resolve("puma560").path).read_text() + "\n" + effects_toml(
-        [EffectSpec("coulomb_friction", "q2", {"fc": 3.0}), EffectSpec("coulomb_friction", "q3", {"fc": 3.0})], "test"))
+def test_friction_the_model_has_but_the_data_lack_is_corrected_not_stood_in_for(tmp_path):
+    """The mechanism says Coulomb friction fc 3 on q2 and q3 (known, subtracted); the data (a
+    PUMA 560 simulated without it) have none. Named: a correction of -3 on each (total within
+    ABSENT of zero: the model's own is not in the data). Before, Coulomb friction was no
+    candidate where the model had it, and position friction was named on both joints with
+    fcc -3.2 about q = 0: a negative Coulomb friction that drives the motion everywhere."""
+    mech = _puma_with(tmp_path, [("coulomb_friction", "q2", {"fc": 3.0}), ("coulomb_friction", "q3", {"fc": 3.0})])
     runner = CliRunner()
     log = tmp_path / "plain.csv"
     assert runner.invoke(main, ["simulate", "puma560", "-o", str(log), "--samples", "1200", "--noise", "0.5",
                                 "--seed", "1", "--quiet"]).exit_code == 0
-    result = runner.invoke(main, ["diagnose", str(mech), str(log), "--format", "json", "--quiet"])
+    report = json.loads(runner.invoke(main, ["diagnose", str(mech), str(log), "--format", "json", "--quiet"]).stdout)
+    named = {(e["kind"], e["coordinate"]): e for e in report["effects"]}
+    assert set(named) == {("coulomb_friction", "q2"), ("coulomb_friction", "q3")}
+    for e in named.values():
+        assert e["known"] == {"fc": 3.0} and abs(e["value"] + 3.0) < 0.05 * 3.0
+
+
+def test_position_friction_that_drives_the_motion_is_not_friction():
+    """Position friction fcc -3 about the PUMA's q2 travel resists nowhere (a negative
+    Coulomb friction in its clothes): held back with the reason; +3 resists and passes."""
+    from baseparams.identify.diagnose import _unphysical
+    from baseparams.identify.simulate import trajectory_motion as motion_of
+    m = resolve("puma560")
+    problem = prepare(m, motion_of(m, 300))
+    cand = next(c for c in problem.candidates if (c.kind, c.coordinate) == ("position_friction", "q2"))
+    assert "drives the motion instead of resisting it" in _unphysical(problem, cand, {"fcc": -3.0, "fcs": 0.0})
+    assert _unphysical(problem, cand, {"fcc": 3.0, "fcs": 0.0}) == ""
+
+
+def _puma_with(tmp_path, effects) -> Path:
+    from baseparams.identify.diagnose import effects_toml
+    from baseparams.model.mechanism import EffectSpec
+    mech = tmp_path / "puma_known.toml"
+    mech.write_text(Path(resolve("puma560").path).read_text() + "\n"
+                    + effects_toml([EffectSpec(k, c, v) for k, c, v in effects], "test"))
+    return mech
+
+
+@pytest.mark.parametrize("known, truth", [(0.5, 3.0), (4.0, 3.0)])
+def test_an_effect_the_model_knows_is_corrected_to_the_datas_value(tmp_path, known, truth):
+    """The model's own viscous friction on q2 (known: a URDF's damping) is 0.5 or 4 where the
+    data have 3: the candidate of its kind there estimates the correction (2.5, or -1: less
+    friction than the model says, still physical in total), reported with ``known`` and the
+    total, and --write leaves the file to the user with the value to set. Before, a known
+    effect barred its kind's candidate: a Panda's URDF damping of 0.003 kept its viscous
+    friction (0.07-1.4 N m s/rad in the data) from being named on every joint."""
+    mech = _puma_with(tmp_path, [("viscous_friction", "q2", {"fv": known})])
+    runner = CliRunner()
+    log = tmp_path / "data.csv"
+    assert runner.invoke(main, ["simulate", "puma560", "-o", str(log), "--samples", "1200", "--noise", "0.5",
+                                "--seed", "2", "--effect", f"viscous_friction:q2={truth}", "--quiet"]).exit_code == 0
+    out = tmp_path / "written.toml"
+    result = runner.invoke(main, ["diagnose", str(mech), str(log), "--format", "json", "--quiet", "--write", str(out)])
     report = json.loads(result.stdout)
-    assert report["effects"] == [] and report["verdict"] == "unexplained" and result.exit_code == 1
-    held = {u["coordinate"]: u["reason"] for u in report["unsupported"] if u["kind"] == "position_friction"}
-    assert set(held) == {"q2", "q3"} and all("drives the motion" in r for r in held.values())
+    named = {(e["kind"], e["coordinate"]): e for e in report["effects"]}
+    assert set(named) == {("viscous_friction", "q2")}, named
+    entry = named["viscous_friction", "q2"]
+    assert entry["known"] == {"fv": known}
+    assert entry["value"] + known == pytest.approx(truth, rel=0.03)
+    assert any(n.startswith("--write: viscous_friction:q2 corrects the model's own fv = ") for n in report["notes"])
+    assert not out.exists()
+    text = runner.invoke(main, ["diagnose", str(mech), str(log), "--quiet"]).stdout
+    assert f"correcting the model's own fv = {known:.4g} (total fv = " in text
+
+
+def test_a_correction_whose_total_is_not_physical_is_held_back():
+    """A correction is judged on the total: -1.5 beside a known fv = 1 is a negative viscous
+    friction (not named), -0.5 is fine; without a known value -0.5 is not."""
+    from baseparams.identify.diagnose import _unphysical, effects_toml
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.identify.simulate import trajectory_motion as motion_of
+    from baseparams.model.mechanism import EffectSpec
+    text = Path(resolve("puma560").path).read_text()
+    for known, correction, physical in ((1.0, -1.5, False), (1.0, -0.5, True), (None, -0.5, False)):
+        extra = "" if known is None else effects_toml([EffectSpec("viscous_friction", "q2", {"fv": known})], "test")
+        m = parse_mechanism(text + "\n" + extra)
+        problem = prepare(m, motion_of(m, 200))
+        cand = next(c for c in problem.candidates if (c.kind, c.coordinate) == ("viscous_friction", "q2"))
+        reason = _unphysical(problem, cand, {"fv": correction})
+        assert (reason == "") == physical, reason
+        if known is not None and not physical:
+            assert reason.startswith("with the model's own fv = 1 the total is not physical")

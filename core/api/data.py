@@ -201,13 +201,26 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = 
                            folds=folds, holdout=holdout, max_steps=max_steps, given=given)
     written = None
     if write:
-        named = result.named()
+        existing = {(e.kind, e.coordinate) for e in mechanism.effects}
+        named = [e for e in result.named() if (e.kind, e.coordinate) not in existing]
+        for entry in result.effects:          # a correction of the model's own known value
+            if entry.get("known"):
+                result.notes.append(
+                    f"--write: {entry['kind']}:{entry['coordinate']} corrects the model's own "
+                    + ", ".join(f"{k} = {v:.6g}" for k, v in entry["known"].items()) + ": set "
+                    + ", ".join(f"{k} = {v + _value_of(entry, k):.6g}" for k, v in entry["known"].items())
+                    + f" in {mechanism.path} yourself (--write appends new effects only)")
         if named:
             write_fixed(mechanism, named, write, origin=f"data {', '.join(paths)}")
             written = str(write)
         else:
-            result.notes.append(f"--write: no mechanism effect named, {write} not written")
+            result.notes.append(f"--write: no new mechanism effect named, {write} not written")
     return Diagnosed(result, written)
+
+
+def _value_of(entry: dict, coefficient: str) -> float:
+    """A named effect's estimated coefficient (its report entry)."""
+    return float(entry["coefficients"][coefficient]["value"])
 
 
 def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":

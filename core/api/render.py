@@ -33,7 +33,7 @@ def diagnosis_text(result: "Diagnosis", written: str | None = None) -> str:
     lines.append("named effects:" if result.effects else "named effects: none")
     for e in result.effects:
         shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
-        lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}  "
+        lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}  "
                      f"(p = {e['test']['pvalue_holm']:.2g}, Holm)")
     for a in result.ambiguous:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in a["candidates"])
@@ -65,6 +65,19 @@ def diagnosis_text(result: "Diagnosis", written: str | None = None) -> str:
     if written:
         lines.append(f"written: {written}")
     return "\n".join(lines)
+
+
+def _known_text(effect: dict) -> str:
+    """What a named effect corrects: the model's own known coefficients, and the total."""
+    known = effect.get("known")
+    if not known:
+        return ""
+    from baseparams.identify.diagnose import absent
+    values = effect["value"] if isinstance(effect["value"], dict) else {next(iter(known)): effect["value"]}
+    gone = all(absent(values[k] + v, v) for k, v in known.items())
+    return (" correcting the model's own " + ", ".join(f"{k} = {v:.4g}" for k, v in known.items())
+            + " (total " + ", ".join(f"{k} = {values[k] + v:.4g}" for k, v in known.items())
+            + (": the model's own is not in the data" if gone else "") + ")")
 
 
 def _where_text(result: "Diagnosis") -> str:

@@ -22,7 +22,7 @@ from baseparams.errors import InputError
 from baseparams.identify import derived
 from baseparams.identify.model import CoordinateMotion, coordinate_motion, coordinate_speed_rms, effect_columns
 from baseparams.identify.selection import Candidate
-from baseparams.model.mechanism import Mechanism
+from baseparams.model.mechanism import EffectSpec, Mechanism
 
 
 def parse_selection(mechanism: Mechanism, specs: Sequence[str], given: bool = False) -> list[tuple[str, str]]:
@@ -79,6 +79,21 @@ def _places(mechanism: Mechanism, kind: str) -> tuple[str, ...]:
     return places
 
 
+def known_effect(spec: EffectSpec) -> bool:
+    """Whether a mechanism's effect has every coefficient given (its force is known and
+    subtracted from the measurements), not fitted with the inertial model."""
+    return all(name in spec.values for name in registry.effects()[spec.kind].item.coefficients)
+
+
+def known_values(mechanism: Mechanism, kind: str, coordinate: str) -> dict[str, float]:
+    """The coefficients of the mechanism's known effect of ``kind`` on ``coordinate`` (what a
+    named effect of that kind there corrects); {} when it has none."""
+    for spec in mechanism.effects:
+        if spec.kind == kind and spec.coordinate == coordinate and known_effect(spec):
+            return {name: float(spec.values[name]) for name in registry.effects()[kind].item.coefficients}
+    return {}
+
+
 def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[str, str]] | None = None,
             reduce: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[list[Candidate], list[str]]:
     """(candidates, notes): the candidates' columns at ``n`` samples (then ``reduce``d to the
@@ -86,7 +101,9 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
     effects; an effect whose columns are not finite on this data (a plugin's bug) is left
     out with a note rather than stopping the diagnosis."""
     pairs = all_pairs(mechanism) if pairs is None else pairs
-    present = {(e.kind, e.coordinate) for e in mechanism.effects}
+    # an effect fitted with the model has its columns in it; a known one (every value given,
+    # subtracted) leaves the candidate of its kind free to correct its value
+    present = {(e.kind, e.coordinate) for e in mechanism.effects if not known_effect(e)}
     out, notes = [], []
     motions: dict[str, CoordinateMotion] = {}          # each coordinate's, made once for all its effects
     for kind, coordinate in pairs:

@@ -33,7 +33,7 @@ from scipy.special import ndtri
 from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.identify import derived
-from baseparams.identify.candidates import library, parse_selection
+from baseparams.identify.candidates import known_effect, known_values, library, parse_selection
 from baseparams.identify.derived import KINDS as DERIVED_KINDS
 from baseparams.identify.outofsample import FOLDS, blocks, cross_validate, held_out_gain, implausible, stability
 from baseparams.identify.data import MeasuredData, bandwidth
@@ -126,8 +126,8 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     given (diagnose a simulation): their torque is known, and bodies become candidates."""
     sample = sample if sample is not None else evaluate(mechanism, motion)
     pairs = parse_selection(mechanism, selection, given is not None) if selection else None
-    known_specs = [e for e in mechanism.effects if _all_given(e)]
-    fitted_specs = [e for e in mechanism.effects if not _all_given(e)]
+    known_specs = [e for e in mechanism.effects if known_effect(e)]
+    fitted_specs = [e for e in mechanism.effects if not known_effect(e)]
     inertial, fitted = design(mechanism, motion, fitted_specs, sample)
     known = effects_design(mechanism, sample, motion.count, known_specs).matrix @ \
         effect_values(mechanism, known_specs) if known_specs else np.zeros(inertial.matrix.shape[:2])
@@ -166,10 +166,6 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
     return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
                    None, None, wanted, correlation)
-
-
-def _all_given(spec: EffectSpec) -> bool:
-    return all(name in spec.values for name in registry.effects()[spec.kind].item.coefficients)
 
 
 # ----- the result ----------------------------------------------------------------------------
@@ -322,7 +318,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                              for j, c in enumerate(problem.coordinates)}
 
     by_index = dict(zip(in_model, estimates))
-    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {})}
+    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {}),
+                **_known_entry(problem, candidates[i])}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added
                  if i in ambiguous_idx and i not in dropped]
@@ -810,7 +807,18 @@ def _unphysical(problem: Problem, cand: Candidate, values: dict) -> str:
     """Why an effect with coefficients ``values`` (name -> value) is not physical ('' when it
     is): its kind's signs and ranges, a friction that drives the motion, and a changed body's
     mass."""
-    return implausible(cand.kind, values) or _drives(problem, cand, values) or _body_implausible(problem, cand, values)
+    known = known_values(problem.mechanism, cand.kind, cand.coordinate)
+    if known:             # a correction of the model's own known value: the total must be physical
+        total = {name: value + known.get(name, 0.0) for name, value in values.items()}
+        # a total near zero is the model's effect absent from the data: physical
+        reason = implausible(cand.kind, {name: abs(known[name]) if absent(total[name], known.get(name)) else value
+                                         for name, value in total.items()})
+        if reason:
+            return ("with the model's own " + ", ".join(f"{k} = {v:.3g}" for k, v in known.items())
+                    + f" the total is not physical: {reason}")
+    else:
+        reason = implausible(cand.kind, values)
+    return reason or _drives(problem, cand, values) or _body_implausible(problem, cand, values)
 
 
 # Frictions whose coefficients' signs alone do not make them resist the motion (position
@@ -983,6 +991,24 @@ def _effect_entry(all_candidates: list[Candidate], values: np.ndarray, stds: np.
                      "pvalue_holm": float(step.adjusted[index])},
             "rivals": [_rival_json(all_candidates[r.index], r) for r in step.beaten],
             **({"shape": {k: float(v) for k, v in cand.shape.items()}} if cand.shape else {})}
+
+
+# A correction leaving a total within this fraction of the model's own value of zero says the
+# model's known effect is not in the data (the total's sign is then the noise's).
+ABSENT = 0.05
+
+
+def absent(total: float, known: float | None) -> bool:
+    """Whether a corrected coefficient's ``total`` is zero for the purpose: within ABSENT of
+    the model's own ``known`` value."""
+    return known is not None and abs(total) <= ABSENT * abs(known)
+
+
+def _known_entry(problem: Problem, cand: Candidate) -> dict:
+    """``known``: the model's own coefficients of this effect (subtracted as known) that the
+    named value corrects, when it has them; the effect's total is their sum."""
+    known = known_values(problem.mechanism, cand.kind, cand.coordinate)
+    return {"known": known} if known else {}
 
 
 def _rival_json(rival_candidate: Candidate, rival: Rival) -> dict:
