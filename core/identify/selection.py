@@ -212,12 +212,16 @@ def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
 def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
     """The fewest samples any direction of ``basis`` effectively acts on (participation
     ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
+    return float(support_each(basis[None], shape)[0])
+
+
+def support_each(bases: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`support` of each of m bases (m, rows, r) of one width."""
     n, f = shape
-    b = basis.reshape(n, f, -1)
-    w = np.einsum("tjr,tjr->tr", b, b)
-    total = w.sum(axis=0)
-    squares = np.einsum("tr,tr->r", w, w)
-    return float(np.min(np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf)))
+    b = bases.reshape(len(bases), n, f, -1)
+    w = np.einsum("mtjr,mtjr->mtr", b, b)
+    total, squares = w.sum(axis=1), np.einsum("mtr,mtr->mr", w, w)
+    return np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf).min(axis=1)
 
 
 def wilson_hilferty(stat: float, df: int) -> float:
@@ -273,10 +277,7 @@ def wald_each(residuals: Sequence[np.ndarray], bases: Sequence[np.ndarray], shap
         for first in range(0, len(group), per_batch):
             members = group[first:first + per_batch]
             B = np.stack([bases[i] for i in members])                            # (m, rows, r)
-            w = np.einsum("mtjr,mtjr->mtr", B.reshape(-1, n, f, r), B.reshape(-1, n, f, r))
-            total, squares = w.sum(axis=1), np.einsum("mtr,mtr->mr", w, w)
-            spread = np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf).min(axis=1)
-            dense = spread >= max(MIN_SUPPORT * n, 10)
+            dense = support_each(B, shape) >= max(MIN_SUPPORT * n, 10)
             for i, is_dense in zip(members, dense):
                 if not is_dense:
                     tests[i] = (_sparse_test(residual_of(i), bases[i], shape, dof_of(i), lags, sparse_if_coloured)
