@@ -1,0 +1,144 @@
+"""diagnose on robots it was not tuned on: arms of example-robot-data simulated by an
+independent simulator (Pinocchio's RNEA, with the URDF's damping and friction, which the
+reader makes known effects), logged at 1 kHz with AR(1) noise, read through a recording
+description and diagnosed against each robot's own URDF through the command line
+(docs/diagnosis.md, "Robots that are not the ones the project tuned on").
+
+Scenarios: nothing hidden; viscous and smooth (tanh) Coulomb friction on every moving joint;
+a power-law friction outside the catalogue. Printed per run: exit code, CPU seconds of the
+command, verdict, gap, the named effects (a correction of a known effect with the model's
+value) and the truth.
+
+    pip install example-robot-data pin
+    python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1]
+"""
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))                      # tests/ is not a package
+
+from urdf_reference import example_robot_data, robot_id  # noqa: E402
+
+ROBOTS = {"panda": "panda_description/panda", "ur10": "ur_description/ur10_robot", "ur3": "ur_description/ur3_robot",
+          "z1": "z1_description/z1", "kinova": "kinova_description/kinova", "so101": "so_arm_description/so101"}
+RATE, SECONDS, RHO, NOISE = 1000.0, 30.0, 0.95, 0.02       # Hz, s, AR(1) per sample, SD / RMS torque
+STILL = ("finger", "ripper")                                 # grippers are held still
+
+
+def motion(model, rng, t):
+    """A 5-harmonic Fourier series per joint (0.1 Hz base) inside 60 % of its range."""
+    import pinocchio as pin
+    nv = model.nv
+    q, qd, qdd = (np.zeros((len(t), nv)) for _ in range(3))
+    names = [model.names[i] for i in range(1, model.njoints)]
+    w0 = 2 * np.pi * 0.1
+    for joint, name in zip(model.joints[1:], names):
+        j = joint.idx_v
+        if joint.nq == 1:
+            lo, hi = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+            lo, hi = (lo, hi) if np.isfinite(lo) and np.isfinite(hi) and hi > lo else (-np.pi, np.pi)
+        else:                                                # continuous: (cos, sin)
+            lo, hi = -np.pi, np.pi
+        centre, span = (lo + hi) / 2, min((hi - lo) / 2, np.pi) * 0.6
+        a, b = rng.standard_normal(5) / np.arange(1, 6), rng.standard_normal(5) / np.arange(1, 6)
+        for k in range(1, 6):
+            s, c = np.sin(k * w0 * t), np.cos(k * w0 * t)
+            q[:, j] += a[k - 1] * s + b[k - 1] * c
+            qd[:, j] += k * w0 * (a[k - 1] * c - b[k - 1] * s)
+            qdd[:, j] -= (k * w0) ** 2 * (a[k - 1] * s + b[k - 1] * c)
+        scale = 0.0 if any(word in name for word in STILL) else span / max(np.max(np.abs(q[:, j])), 1e-9)
+        q[:, j] = centre + scale * q[:, j]
+        qd[:, j] *= scale
+        qdd[:, j] *= scale
+    configuration = (lambda v: v) if model.nq == model.nv else (lambda v: pin.integrate(model, pin.neutral(model), v))
+    return names, q, qd, qdd, configuration
+
+
+def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
+    import pinocchio as pin
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, SECONDS, 1 / RATE)
+    names, q, qd, qdd, configuration = motion(model, rng, t)
+    tau = np.array([pin.rnea(model, data, configuration(q[i]), qd[i], qdd[i]) for i in range(len(t))])
+    tau += qd * np.asarray(model.damping) + np.sign(qd) * np.asarray(model.friction)    # the URDF's own
+    rms = np.sqrt(np.mean(tau ** 2, axis=0)) + 1e-3
+    truth = {}
+    for j in (j for j in range(model.nv) if scenario != "none" and np.std(qd[:, j]) > 0):
+        fv, fc, vs = 0.05 * rms[j], 0.08 * rms[j], 0.02 * np.std(qd[:, j])
+        shape = np.tanh(qd[:, j] / vs) if scenario == "friction" else \
+            np.sign(qd[:, j]) * (np.abs(qd[:, j]) / np.std(qd[:, j])) ** 0.4
+        tau[:, j] += fv * qd[:, j] + fc * shape
+        truth[names[j]] = {"fv": round(float(fv), 4), "fc": round(float(fc), 4)}
+    e = rng.standard_normal(tau.shape)
+    for i in range(1, len(e)):
+        e[i] += RHO * e[i - 1]
+    tau += e * NOISE * rms / e.std(axis=0)
+    header = ["t"] + [f"q_{n}" for n in names] + [f"tau_{n}" for n in names]
+    np.savetxt(folder / "log.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
+               comments="", fmt="%.9g")
+    listed = [n for n in names if n != "panda_finger_joint2"]          # a mimic joint: not independent
+    (folder / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n'
+                                     + "".join(f'{n} = "q_{n}"\n' for n in listed) + "[torque]\n"
+                                     + "".join(f'{n} = "tau_{n}"\n' for n in listed))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.time()
+    done = subprocess.run(["baseparams", "diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json",
+                           "--quiet"], capture_output=True, text=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = {"exit": done.returncode, "cpu": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime,
+           "wall": time.time() - start, "truth": truth}
+    try:
+        report = json.loads(done.stdout)
+    except json.JSONDecodeError:
+        out["error"] = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "no output"
+        return out
+    out.update(verdict=report["verdict"], gap=(report["gap"]["cv_before"], report["gap"]["cv_after"]),
+               named=[(e["kind"], e["coordinate"], {k: round(v["value"], 4) for k, v in e["coefficients"].items()},
+                       e.get("known")) for e in report["effects"]],
+               ambiguous=len(report["ambiguous"]), unsupported=len(report["unsupported"]))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
+    parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power"],
+                        choices=["none", "friction", "power"])
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args()
+    files = {robot_id(p): p for p in example_robot_data()}
+    if not files:
+        sys.exit("example-robot-data is not installed: pip install example-robot-data pin")
+    with tempfile.TemporaryDirectory() as tmp:
+        for robot in args.robots:
+            for scenario in args.scenarios:
+                folder = Path(tmp) / f"{robot}_{scenario}"
+                folder.mkdir()
+                r = run(files[ROBOTS[robot]], scenario, args.seed, folder)
+                if "error" in r:
+                    print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s: {r['error']}", flush=True)
+                    continue
+                print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s ({r['wall']:.1f} s): "
+                      f"{r['verdict']}, gap {r['gap'][0]:.3f} -> {r['gap'][1]:.3f}, named {len(r['named'])}, "
+                      f"ambiguous {r['ambiguous']}, unsupported {r['unsupported']}", flush=True)
+                for kind, coordinate, values, known in r["named"]:
+                    correction = f" correcting {known}" if known else ""
+                    print(f"      {kind}:{coordinate} {values}{correction}", flush=True)
+                if r["truth"]:
+                    print(f"      truth (per joint, fv fc): {r['truth']}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
