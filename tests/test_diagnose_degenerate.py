@@ -85,6 +85,8 @@ def test_a_named_effect_is_physical_in_the_final_model():
              Candidate("coulomb_friction", "q1", ("fc",), np.zeros((n, 1, 1)))]
     estimates = [(np.array([-162.0]), np.array([20.0])), (np.array([0.3]), np.array([0.01])),
                  (np.array([-1.0]), np.array([0.1]))]
-    turned = D._turned(None, cands, [0, 1, 2], [0, 1], estimates)
+    from types import SimpleNamespace
+    problem = SimpleNamespace(mechanism=SimpleNamespace(effects=()), qd=None, given=None)    # no known effects
+    turned = D._turned(problem, cands, [0, 1, 2], [0, 1], estimates)
     assert [i for i, _ in turned] == [0]
     assert "must be positive" in turned[0][1] and "in the final model" in turned[0][1]

@@ -853,8 +853,8 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
     fit at ``weights`` with fewer effects (the last step's) that the complete fit extends.
     Returns the complete fit with the shapes as left, when one was made, else None."""
     complete: Fit | None = None
-    start: Fit | None = None                  # without weights: the whole model at its own, once
-    start_columns: list[np.ndarray] = []
+    whole: Fit | None = None                  # without weights: the whole model at its own, once
+    whole_columns: list[np.ndarray] = []
     for i in in_model:
         if i not in shaped or (touched is not None and candidates[i].coordinate not in touched
                                and "all" not in touched):
@@ -872,15 +872,15 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
             others = [j for j in in_model if j != i]
             near = None
             if weights is None:           # at its own weights: refitted from the whole model's factors
-                if start is None:
-                    start = WeightedLinearModel(whiten(np.concatenate(
+                if whole is None:
+                    whole = WeightedLinearModel(whiten(np.concatenate(
                         [model] + [candidates[j].columns for j in in_model], axis=-1)), whiten(y)).fit()
-                    start_columns = [candidates[j].columns for j in in_model]
-                widths = [c.shape[-1] for c in start_columns]
-                if all(candidates[j].columns is c for j, c in zip(in_model, start_columns)):
+                    whole_columns = [candidates[j].columns for j in in_model]
+                widths = [c.shape[-1] for c in whole_columns]
+                if all(candidates[j].columns is c for j, c in zip(in_model, whole_columns)):
                     first = model.shape[-1] + sum(widths[:in_model.index(i)])
                     drop = set(range(first, first + widths[in_model.index(i)]))
-                    near = start.subset([c for c in range(len(start.coefficients)) if c not in drop])
+                    near = whole.subset([c for c in range(len(whole.coefficients)) if c not in drop])
             fit = WeightedLinearModel(whiten(np.concatenate([model] + [candidates[j].columns for j in others],
                                                             axis=-1)), whiten(y)).fit(weights, near=near)
 
