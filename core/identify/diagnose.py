@@ -276,8 +276,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         kept_named.remove(i)
         in_model.remove(i)
         checks.pop(i, None)
-        unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
-                            "values": {}, "reason": reason})
+        unsupported.append(_held_back(candidates, i, reason))
     before = _predict(model, [], y, chosen.steps[0].fit, train)
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
@@ -287,8 +286,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                            alpha, unexplained)
     if dominated:
         for i, reason in dominated:
-            unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
-                                "values": {}, "reason": reason})
+            unsupported.append(_held_back(candidates, i, reason))
         in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
         unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
@@ -300,8 +298,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         if not turned:
             break
         for i, reason in turned:
-            unsupported.append({"index": i, "kind": candidates[i].kind, "coordinate": candidates[i].coordinate,
-                                "values": {}, "reason": reason})
+            unsupported.append(_held_back(candidates, i, reason))
         in_model = [i for i in in_model if i not in dict(turned)]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
         unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
@@ -1002,6 +999,12 @@ def absent(total: float, known: float | None) -> bool:
     """Whether a corrected coefficient's ``total`` is zero for the purpose: within ABSENT of
     the model's own ``known`` value."""
     return known is not None and abs(total) <= ABSENT * abs(known)
+
+
+def _held_back(candidates: list[Candidate], index: int, reason: str) -> dict:
+    """An ``unsupported`` entry for a named effect a final check took out, with its reason."""
+    return {"index": index, "kind": candidates[index].kind, "coordinate": candidates[index].coordinate,
+            "values": {}, "reason": reason}
 
 
 def _known_entry(problem: Problem, cand: Candidate) -> dict:

@@ -150,6 +150,12 @@ class LinearFit:
         residual = self.residual + leaving @ (leaving.T @ self.weighted_target())
         return Reduced(self.weights, self.samples, self.rank - removed.shape[1], residual, self.basis, leaving)
 
+    def _in_basis(self) -> np.ndarray:
+        """The weighted columns in the basis' coordinates, S V^T D (p x p): A = U S V^T D for a
+        full-rank fit, so every update below factors only this."""
+        p = len(self.coefficients)
+        return (self.singular_values[:p, None] * self.right[:p]) * self.scale
+
     def extended(self, columns: np.ndarray, rank_tol: float = RANK_TOL) -> LinearFit | None:
         """This fit with the weighted ``columns`` (N f, k) appended, at the same weights, from
         this fit's factors (an SVD update): [A C] = [U Q] [[S V^T D, U^T C], [0, R]] with
@@ -171,7 +177,7 @@ class LinearFit:
         scale = np.concatenate([self.scale, np.linalg.norm(columns, axis=0)])
         scale[p:][scale[p:] == 0] = 1.0
         core = np.zeros((p + k, p + k))
-        core[:p, :p] = (self.singular_values[:p, None] * self.right[:p]) * self.scale
+        core[:p, :p] = self._in_basis()
         core[:p, p:], core[p:, p:] = inside, R
         um, s, vt = np.linalg.svd(core / scale, full_matrices=False)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
@@ -191,7 +197,7 @@ class LinearFit:
         keep = list(keep)
         if self.rank < p or self.cov_type != "nonrobust" or not keep:
             return None
-        columns = ((self.singular_values[:p, None] * self.right[:p]) * self.scale)[:, keep]
+        columns = self._in_basis()[:, keep]
         scale = self.scale[keep]
         um, s, vt = np.linalg.svd(columns / scale, full_matrices=False)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
@@ -220,7 +226,7 @@ class LinearFit:
             T = np.linalg.cholesky(RU.T @ RU).T                      # upper: (R U)^T (R U) = T^T T
         except np.linalg.LinAlgError:
             return None
-        columns = (self.singular_values[:p, None] * self.right[:p]) * self.scale      # S V^T D (p x p)
+        columns = self._in_basis()
         core = T @ columns
         scale = np.linalg.norm(core, axis=0)                          # column norms of R A (Q orthonormal)
         scale[scale == 0] = 1.0
