@@ -33,7 +33,7 @@ def diagnosis_text(result: "Diagnosis", written: str | None = None) -> str:
     lines.append("named effects:" if result.effects else "named effects: none")
     for e in result.effects:
         shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
-        lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}  "
+        lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}{_payload_text(e)}  "
                      f"(p = {e['test']['pvalue_holm']:.2g}, Holm)")
     for a in result.ambiguous:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in a["candidates"])
@@ -78,6 +78,17 @@ def _known_text(effect: dict) -> str:
     return (" correcting the model's own " + ", ".join(f"{k} = {v:.4g}" for k, v in known.items())
             + " (total " + ", ".join(f"{k} = {values[k] + v:.4g}" for k, v in known.items())
             + (": the model's own is not in the data" if gone else "") + ")")
+
+
+def _payload_text(effect: dict) -> str:
+    """Where a changed body's added mass sits: its centre of mass in the body's axes (the
+    first moments over the mass), when the added mass is positive."""
+    c = effect["coefficients"]
+    if effect["kind"] != "body" or c["m"]["value"] <= 0:
+        return ""
+    m = c["m"]["value"]
+    centre = ", ".join(f"{c[k]['value'] / m:.4g}" for k in ("mx", "my", "mz"))
+    return f" (added mass {m:.4g} at ({centre}) in {effect['coordinate']}'s axes)"
 
 
 def _where_text(result: "Diagnosis") -> str:

@@ -51,8 +51,8 @@ def parse_selection(mechanism: Mechanism, specs: Sequence[str], given: bool = Fa
         if place and place not in places:
             raise InputError(f"{place!r} in {spec!r} is not a place of {kind} on {mechanism.name} "
                              f"(one of: {', '.join(places)})", key="--candidates")
-        default = (derived.DEFAULT_PLACES.get(kind) or derived.places(mechanism, kind, independent)
-                   if kind in derived.KINDS else _places(mechanism, kind))
+        default = derived.default_places(mechanism, kind, independent) if kind in derived.KINDS \
+            else _places(mechanism, kind)
         for c in ([place] if place else default):
             if (kind, c) not in out:
                 out.append((kind, c))

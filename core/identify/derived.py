@@ -55,6 +55,103 @@ def places(mechanism: Mechanism, kind: str, coordinates: tuple[str, ...]) -> tup
     return coordinates
 
 
+def default_places(mechanism: Mechanism, kind: str, coordinates: tuple[str, ...]) -> tuple[str, ...]:
+    """Where a bare KIND puts a derived kind: :data:`DEFAULT_PLACES`, else every place, less
+    the bodies that are another's candidate under a second name (:func:`welded_duplicates`;
+    name them with KIND:BODY to test them anyway)."""
+    if kind in DEFAULT_PLACES:
+        return DEFAULT_PLACES[kind]
+    twins = welded_duplicates(mechanism, kind)
+    return tuple(p for p in places(mechanism, kind, coordinates) if p not in twins)
+
+
+def welded(mechanism: Mechanism) -> dict[int, int]:
+    """Each body's rigid body: the bodies joined by joints without coordinates (a URDF's fixed
+    joints to a flange, a tool or sensor frame) move as one, and each maps to the one of its
+    group placed first from the ground (the tree's order), the link the group's moving joint
+    carries."""
+    parent = {0: 0} | {b.label: b.label for b in mechanism.bodies}        # ground is body 0
+
+    def root(label: int) -> int:
+        while parent[label] != label:
+            label = parent[label]
+        return label
+
+    placed = [0] + [edge.new for edge in mechanism.tree]
+    rank = {b: placed.index(b) if b in placed else len(placed) for b in parent}
+    for joint in mechanism.joints:
+        if not joint.coordinates:
+            a, b = root(joint.parent), root(joint.child)
+            if a != b:
+                first, second = (a, b) if rank[a] <= rank[b] else (b, a)
+                parent[second] = first
+    return {b: root(b) for b in parent}
+
+
+# Two frame origins closer than this (m) are one point: URDF angles written to five or six
+# digits (so100's 1.57079 for pi/2) move a frame 0.1 m away by up to 1e-6 m.
+SAME_POINT = 1e-6
+
+
+def welded_duplicates(mechanism: Mechanism, kind: str) -> dict[str, str]:
+    """The bodies whose ``kind`` candidate is another's under a second name -> that other:
+    for ``body`` every body welded to another (their ten parameters span the same forces:
+    one rigid body's, in another frame); for ``mass`` a welded body whose frame origin is
+    that of a body of its group before it (a point mass at the same point). Why: a UR10's
+    payload was reported as ambiguous between its last link and the tool0 and ee_link frames
+    fixed to it (|corr| 1.000), with advice to move through a wider range, which cannot
+    separate them."""
+    if kind not in BODY_PARTS:
+        return {}
+    group = welded(mechanism)
+    origins = _welded_origins(mechanism, group) if kind == "mass" else {}
+    out: dict[str, str] = {}
+    kept: dict[int, list[int]] = {}
+    for label in sorted(group, key=lambda b: b != group[b]):          # each group's first body first
+        representative = group[label]
+        if label == 0:
+            kept.setdefault(0, []).append(0)
+            continue
+        if kind == "body" and label != representative:
+            twin = representative
+        elif kind == "mass":
+            twin = next((k for k in kept.get(representative, [])
+                         if np.max(np.abs(origins[k] - origins[label])) <= SAME_POINT), None)
+            if twin is None:
+                kept.setdefault(representative, []).append(label)
+                continue
+        else:
+            continue
+        out[body_name(mechanism, label)] = "ground" if twin == 0 else body_name(mechanism, twin)
+    return out
+
+
+def _welded_origins(mechanism: Mechanism, group: dict[int, int]) -> dict[int, np.ndarray]:
+    """Each body's frame origin in its rigid body's axes (:func:`welded`), through the fixed
+    joints' frames (floats: only compared with each other)."""
+    from baseparams.numeric.backends import Float64
+    backend = Float64()
+    pose = {b: (np.eye(3), np.zeros(3)) for b in group if group[b] == b}     # body axes -> group axes
+    fixed = [j for j in mechanism.joints if not j.coordinates]
+    while len(pose) < len(group):
+        grown = False
+        for joint in fixed:
+            for known, new in ((joint.parent, joint.child), (joint.child, joint.parent)):
+                if known in pose and new not in pose:
+                    r_k, p_k = (np.array(x, float) for x in mechanism.numeric_frame(
+                        joint.parent_frame if known == joint.parent else joint.child_frame, backend))
+                    r_n, p_n = (np.array(x, float) for x in mechanism.numeric_frame(
+                        joint.child_frame if known == joint.parent else joint.parent_frame, backend))
+                    rotation = r_k @ r_n.T                    # new's axes -> known's (the frames coincide)
+                    origin = p_k - rotation @ p_n
+                    r, p = pose[known]
+                    pose[new] = (r @ rotation, p + r @ origin)
+                    grown = True
+        if not grown:
+            break
+    return {b: pose[b][1] if b in pose else np.full(3, np.nan) for b in group}
+
+
 def torque_candidates(coordinates: tuple[str, ...], t: np.ndarray, qd: np.ndarray, torque: np.ndarray,
                       wanted: set | None = None,
                       delay: Sequence[tuple[dict, np.ndarray]] | None = None) -> list[Candidate]:
@@ -207,7 +304,8 @@ def delay_column(model: np.ndarray, y: np.ndarray, rows: slice, known: np.ndarra
 def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,
                      inertial: np.ndarray, wanted: set | None = None) -> list[Candidate]:
     """gain per coordinate (columns: the given torque) and mass/body per body (its
-    columns of the inertial regressor ``inertial`` (n, f, 10 bodies))."""
+    columns of the inertial regressor ``inertial`` (n, f, 10 bodies)); by default
+    (``wanted`` None) not a candidate a welded body repeats (:func:`welded_duplicates`)."""
     n, f = torque.shape
     out = []
     for j, c in enumerate(coordinates):
@@ -215,13 +313,14 @@ def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque:
             columns = np.zeros((n, f, 1))
             columns[:, j, 0] = torque[:, j]
             out.append(Candidate("gain", c, (f"g_{c}",), columns))
+    twins = {kind: welded_duplicates(mechanism, kind) for kind in BODY_PARTS} if wanted is None else {}
     for k, body in enumerate(mechanism.bodies):
         name = body_name(mechanism, body.label)
         block = inertial[:, :, 10 * k: 10 * k + 10]
         if not np.any(block):
             continue                                   # the ground, or a body nothing moves
         for kind, part in BODY_PARTS.items():
-            if wanted is None or (kind, name) in wanted:
+            if (kind, name) in wanted if wanted is not None else name not in twins[kind]:
                 out.append(Candidate(kind, name, tuple(f"{p}_{name}" for p in COEFFICIENTS[kind]),
                                      np.ascontiguousarray(block[:, :, part]),
                                      generalises=GENERALISES.get(kind, ())))
