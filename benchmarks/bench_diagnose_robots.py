@@ -5,9 +5,12 @@ description and diagnosed against each robot's own URDF through the command line
 (docs/diagnosis.md, "Robots that are not the ones the project tuned on").
 
 Scenarios: nothing hidden; viscous and smooth (tanh) Coulomb friction on every moving joint;
-a power-law friction outside the catalogue. Printed per run: exit code, CPU seconds of the
-command, verdict, gap, the named effects (a correction of a known effect with the model's
-value) and the truth.
+a power-law friction outside the catalogue; a payload run: friction on every joint in two
+recordings of different motions, the second carrying a rigid payload (a fifth of the robot's
+mass, off the last moving joint's axis), the first identified (``identify --effect
+viscous_friction:* --effect coulomb_friction:*``) and the second diagnosed against that
+result (``--params``). Printed per run: exit code, CPU seconds of the command, verdict, gap,
+the named effects (a correction of a known effect with the model's value) and the truth.
 
     pip install example-robot-data pin
     python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1]
@@ -64,9 +67,12 @@ def motion(model, rng, t):
     return names, q, qd, qdd, configuration
 
 
-def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
+def record(model, seed: int, folder: Path, name: str, friction: str, given: dict | None = None) -> dict:
+    """Simulate ``model`` along a motion of ``seed`` with the URDF's own damping and friction,
+    the ``friction`` scenario's ('none', 'friction', 'power'; its coefficients ``given`` by
+    joint name, else drawn from this run's torques) and AR(1) noise; write ``name``.csv and
+    its recording description ``name``.toml; return the hidden friction."""
     import pinocchio as pin
-    model = pin.buildModelFromUrdf(str(urdf))
     data = model.createData()
     rng = np.random.default_rng(seed)
     t = np.arange(0, SECONDS, 1 / RATE)
@@ -75,9 +81,11 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
     tau += qd * np.asarray(model.damping) + np.sign(qd) * np.asarray(model.friction)    # the URDF's own
     rms = np.sqrt(np.mean(tau ** 2, axis=0)) + 1e-3
     truth = {}
-    for j in (j for j in range(model.nv) if scenario != "none" and np.std(qd[:, j]) > 0):
+    for j in (j for j in range(model.nv) if friction != "none" and np.std(qd[:, j]) > 0):
         fv, fc, vs = 0.05 * rms[j], 0.08 * rms[j], 0.02 * np.std(qd[:, j])
-        shape = np.tanh(qd[:, j] / vs) if scenario == "friction" else \
+        if given:
+            fv, fc = given[names[j]]["fv"], given[names[j]]["fc"]
+        shape = np.tanh(qd[:, j] / vs) if friction == "friction" else \
             np.sign(qd[:, j]) * (np.abs(qd[:, j]) / np.std(qd[:, j])) ** 0.4
         tau[:, j] += fv * qd[:, j] + fc * shape
         truth[names[j]] = {"fv": round(float(fv), 4), "fc": round(float(fc), 4)}
@@ -86,19 +94,57 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
         e[i] += RHO * e[i - 1]
     tau += e * NOISE * rms / e.std(axis=0)
     header = ["t"] + [f"q_{n}" for n in names] + [f"tau_{n}" for n in names]
-    np.savetxt(folder / "log.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
+    np.savetxt(folder / f"{name}.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
                comments="", fmt="%.9g")
     listed = [n for n in names if n != "panda_finger_joint2"]          # a mimic joint: not independent
-    (folder / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n'
-                                     + "".join(f'{n} = "q_{n}"\n' for n in listed) + "[torque]\n"
-                                     + "".join(f'{n} = "tau_{n}"\n' for n in listed))
+    (folder / f"{name}.toml").write_text(f'[recording]\ntime = "t"\n[[runs]]\nfile = "{name}.csv"\n[position]\n'
+                                         + "".join(f'{n} = "q_{n}"\n' for n in listed) + "[torque]\n"
+                                         + "".join(f'{n} = "tau_{n}"\n' for n in listed))
+    return truth
+
+
+def with_payload(model) -> tuple[object, dict]:
+    """A copy of ``model`` carrying a rigid payload of a fifth of its mass on the last moving
+    joint's body, its centre (0.05, 0.03, 0.08) m off that joint's frame, and the truth."""
+    import pinocchio as pin
+    loaded = model.copy()
+    last = max(j for j in range(1, model.njoints) if not any(word in model.names[j] for word in STILL))
+    mass = 0.2 * sum(model.inertias[j].mass for j in range(1, model.njoints))
+    centre = np.array([0.05, 0.03, 0.08])
+    loaded.inertias[last] = loaded.inertias[last] + pin.Inertia(mass, centre, np.diag([1.0, 1.0, 0.5]) * 1e-3 * mass)
+    return loaded, {"joint": model.names[last], "mass": round(float(mass), 4), "centre": centre.tolist()}
+
+
+def command(args: list[str]) -> tuple[subprocess.CompletedProcess, float, float]:
+    """Run ``baseparams ARGS``: the process, its CPU seconds and its wall seconds."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.time()
-    done = subprocess.run(["baseparams", "diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json",
-                           "--quiet"], capture_output=True, text=True)
+    done = subprocess.run(["baseparams", *args], capture_output=True, text=True)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = {"exit": done.returncode, "cpu": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime,
-           "wall": time.time() - start, "truth": truth}
+    return done, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, time.time() - start
+
+
+def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
+    import pinocchio as pin
+    model = pin.buildModelFromUrdf(str(urdf))
+    extra: list[str] = []
+    cpu_before = 0.0
+    if scenario == "payload":
+        friction = record(model, seed + 1000, folder, "empty", "friction")
+        fitted, cpu_before, _ = command(["identify", str(urdf), str(folder / "empty.toml"), "--effect",
+                                         "viscous_friction:*", "--effect", "coulomb_friction:*", "--format", "json",
+                                         "-o", str(folder / "empty.json"), "--quiet"])
+        if fitted.returncode != 0:
+            return {"exit": fitted.returncode, "cpu": cpu_before, "wall": 0.0,
+                    "error": "identify: " + (fitted.stderr.strip().splitlines() or ["no output"])[-1]}
+        model, truth = with_payload(model)
+        record(model, seed, folder, "rec", "friction", friction)      # the same friction, another motion
+        extra = ["--params", str(folder / "empty.json")]
+    else:
+        truth = record(model, seed, folder, "rec", scenario)
+    done, cpu, wall = command(["diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json", "--quiet",
+                               *extra])
+    out = {"exit": done.returncode, "cpu": cpu, "wall": wall, "truth": truth, "identify_cpu": cpu_before}
     try:
         report = json.loads(done.stdout)
     except json.JSONDecodeError:
@@ -114,8 +160,8 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
-    parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power"],
-                        choices=["none", "friction", "power"])
+    parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power", "payload"],
+                        choices=["none", "friction", "power", "payload"])
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     files = {robot_id(p): p for p in example_robot_data()}
@@ -136,7 +182,10 @@ def main() -> None:
                 for kind, coordinate, values, known in r["named"]:
                     correction = f" correcting {known}" if known else ""
                     print(f"      {kind}:{coordinate} {values}{correction}", flush=True)
-                if r["truth"]:
+                if scenario == "payload":
+                    print(f"      truth: {r['truth']} (identify of the payload-free run {r['identify_cpu']:.1f} CPU s)",
+                          flush=True)
+                elif r["truth"]:
                     print(f"      truth (per joint, fv fc): {r['truth']}", flush=True)
 
 

@@ -113,13 +113,19 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     measured, mechanism = read_data(_paths(data), mechanism)
     others = [read_data([str(path)], mechanism)[0] for path in validate]
     texts = [e for e in effects if isinstance(e, str)]
-    named = parse_effects(texts, mechanism) + [e for e in effects if not isinstance(e, str)]
+    import numpy as np
+    qd = np.asarray(measured.motion.qd, float)
+    still = [c for j, c in enumerate(measured.coordinates) if not np.any(qd[:, j])]
+    named = parse_effects(texts, mechanism, still) + [e for e in effects if not isinstance(e, str)]
     to_identify, known = split_effects(mechanism, named)
     _say(progress, f"base parameters ({solver})")
     result = run_solver(chosen, mechanism, solver_options)         # quiet: no inner progress lines
     base = BaseModel.from_result(result, mechanism)
     _say(progress, f"fitting {measured.count} samples")
     identification = fit(mechanism, measured, effects=to_identify, base=base, known=known)
+    if still and any(":" in t and t.partition(":")[2].strip() == "*" for t in texts):
+        identification.notes += (f"KIND:* left out {', '.join(still)}: held still in the data (no effect to "
+                                 "identify there)",)
     if physical:
         _say(progress, "physically consistent parameters (cvxpy)")
         _physical(identification, mechanism, base)
@@ -190,15 +196,21 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = 
     if write:
         check_writable(mechanism, write)          # before the run, not after it
     given = None
+    replaced: list[str] = []
     if params:
         given, known = given_parameters(mechanism, str(params))
-        if known:
-            mechanism = replace(mechanism, effects=tuple(mechanism.effects) + tuple(known))
+        if known:                 # an identify result's effects: its totals, as identify overrode the model's
+            keys = {(e.kind, e.coordinate) for e in known}
+            replaced = [f"{e.kind}:{e.coordinate}" for e in mechanism.effects if (e.kind, e.coordinate) in keys]
+            mechanism = replace(mechanism, effects=tuple(e for e in mechanism.effects
+                                                         if (e.kind, e.coordinate) not in keys) + tuple(known))
     _say(progress, "reading the data")
     measured, mechanism = read_data(paths, mechanism)
     _say(progress, f"testing candidate effects on {measured.count} samples")
     result = diagnose_data(mechanism, measured, selection=list(candidates) if candidates else None, alpha=alpha,
                            folds=folds, holdout=holdout, max_steps=max_steps, given=given)
+    if replaced:
+        result.notes.append(f"--params {params}: its identified values replace the model's own {', '.join(replaced)}")
     written = None
     if write:
         existing = {(e.kind, e.coordinate) for e in mechanism.effects}

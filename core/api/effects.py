@@ -70,14 +70,17 @@ def parse_noise(text: str) -> list[float] | float:
     return values[0] if len(values) == 1 else values
 
 
-def parse_effects(texts: Iterable[str], mechanism: Mechanism) -> list[EffectSpec]:
-    """``--effect`` values; ``KIND:*`` is the effect on every independent coordinate."""
+def parse_effects(texts: Iterable[str], mechanism: Mechanism, still: Iterable[str] = ()) -> list[EffectSpec]:
+    """``--effect`` values; ``KIND:*`` is the effect on every independent coordinate but the
+    ``still`` ones (held still in the data: the effect has no column there)."""
     from baseparams.identify.model import independent_names
     out = []
+    skip = set(still)
     for text in texts:
         kind, sep, coordinate = text.partition(":")
         if sep and coordinate.strip() == "*":
-            out += [parse_effect(f"{kind}:{c}", mechanism, values=False) for c in independent_names(mechanism)]
+            out += [parse_effect(f"{kind}:{c}", mechanism, values=False) for c in independent_names(mechanism)
+                    if c not in skip]
         else:
             out.append(parse_effect(text, mechanism, values=False))
     return out

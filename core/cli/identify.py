@@ -79,7 +79,8 @@ def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str
 @click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
               help="An effect to identify with the inertial parameters, on a joint coordinate or a "
-                   "motor; KIND:* on every independent coordinate; repeatable.")
+                   "motor; KIND:* on every independent coordinate that moves in the data (one held still "
+                   "is left out, with a note); repeatable.")
 @solver_option(help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
                     "carry too few digits on badly conditioned mechanisms, which the result notes).")
 @solver_options_option()

@@ -92,7 +92,7 @@ def cross_validate(model: np.ndarray, y: np.ndarray, weights: np.ndarray, folds:
         lo, hi = max(block[0] - margin, 0), min(block[-1] + 1 + margin, n)
         train = np.r_[0:lo, hi:n]
         fit = WeightedLinearModel(model[train], y[train]).fit(weights, rank_tol=CV_RANK_TOL) if p else None
-        Xb = (model[block] * weights[None, :, None]).reshape(-1, p)
+        Xb = (model[block] * weights[None, :, None]).reshape(len(block) * f, p)
         gram = Xb.T @ Xb
         whole_H = np.zeros((p, p)) if fit is None else fit.spread @ fit.spread.T
         for k, drop in enumerate(sets):

@@ -1,0 +1,100 @@
+"""The payload run as a user does it: identify a run without the payload (its friction with
+``KIND:*``), then diagnose the payload run against that result held as given (``--params``).
+Each test is a fault that workflow hit on robots simulated by Pinocchio
+(benchmarks/bench_diagnose_robots.py, scenario payload)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from baseparams.cli import main
+from baseparams.identify.diagnose import effects_toml
+from baseparams.io.loader import resolve
+from baseparams.model.mechanism import EffectSpec
+
+
+def test_effect_on_every_coordinate_leaves_out_one_held_still(tmp_path):
+    """``--effect viscous_friction:*`` on a log where q6 is held still: the friction is
+    identified on the five joints that move (within 3 % of the truth) and q6 is left out with
+    a note. Before, the command failed (exit 2: fv_q6 has no effect on these data), and
+    KIND:* gave the user no way to drop one (an SO-101 whose gripper does not move)."""
+    from baseparams.api import identify
+    from baseparams.identify.model import standard_parameters
+    from baseparams.identify.simulate import trajectory_motion
+    from baseparams.identify.diagnose import prepare
+    from baseparams.identify.model import evaluate
+    mechanism = resolve("puma560")
+    motion = trajectory_motion(mechanism, 1500)
+    motion.q[:, 5], motion.qd[:, 5], motion.qdd[:, 5] = 0.2, 0.0, 0.0
+    problem = prepare(mechanism, motion, evaluate(mechanism, motion))
+    clean = problem.inertial @ standard_parameters(mechanism)
+    truth = np.array([2.0, 3.0, 1.5, 0.4, 0.3, 0.0])
+    rng = np.random.default_rng(3)
+    tau = clean + motion.qd * truth + rng.standard_normal(clean.shape) * 0.01 * np.sqrt(np.mean(clean ** 2, axis=0))
+    names = list(mechanism.independent)
+    header = ["t"] + [f"{k}_{c}" for k in ("q", "qd", "qdd", "tau") for c in names]
+    rows = np.column_stack([motion.t, motion.q, motion.qd, motion.qdd, tau])
+    log = tmp_path / "log.csv"
+    log.write_text(",".join(header) + "\n" + "\n".join(",".join(repr(float(v)) for v in r) for r in rows) + "\n")
+    fit = identify("puma560", str(log), effects=["viscous_friction:*"])
+    values = fit.to_json()
+    found = {e["coordinate"]: e["coefficients"][0]["value"] for e in values["effects"]}
+    assert sorted(found) == ["q1", "q2", "q3", "q4", "q5"]
+    for k, c in enumerate(names[:5]):
+        assert found[c] == pytest.approx(truth[k], rel=0.03)
+    assert any("KIND:* left out q6" in n for n in values["notes"])
+
+
+def test_an_identify_results_friction_replaces_the_models_own_when_held_as_given(tmp_path):
+    """The model's file knows viscous friction 1 on q2 (a URDF's damping); identify with
+    ``--effect viscous_friction:q2`` estimates the total (3, as in the data) in its place.
+    Diagnosing the same robot's next run against that result (``--params``) subtracts 3, not
+    1 + 3: nothing is named, and a note says the result's value replaced the model's. Before,
+    both were subtracted and a correction of -1 was named (a Z1 arm: friction 'corrections'
+    on every joint, gains of -0.45 and a body with a first moment of 7e13)."""
+    mech = tmp_path / "puma_known.toml"
+    mech.write_text(Path(resolve("puma560").path).read_text() + "\n"
+                    + effects_toml([EffectSpec("viscous_friction", "q2", {"fv": 1})], "test"))
+    runner = CliRunner()
+    logs = []
+    for seed in (2, 3):
+        log = tmp_path / f"run{seed}.csv"
+        assert runner.invoke(main, ["simulate", "puma560", "-o", str(log), "--samples", "1200", "--noise", "0.5",
+                                    "--seed", str(seed), "--effect", "viscous_friction:q2=3", "--quiet"]).exit_code == 0
+        logs.append(log)
+    fitted = tmp_path / "fit.json"
+    result = runner.invoke(main, ["identify", str(mech), str(logs[0]), "--effect", "viscous_friction:q2",
+                                  "--format", "json", "-o", str(fitted), "--quiet"])
+    assert result.exit_code == 0, result.output
+    fv = json.loads(fitted.read_text())["effects"][0]["coefficients"][0]["value"]
+    assert fv == pytest.approx(3.0, rel=0.05)
+    result = runner.invoke(main, ["diagnose", str(mech), str(logs[1]), "--params", str(fitted), "--format", "json",
+                                  "--quiet"])
+    report = json.loads(result.stdout)
+    assert [(e["kind"], e["coordinate"]) for e in report["effects"]] == [], report["effects"]
+    assert any("replace the model's own viscous_friction:q2" in n for n in report["notes"])
+
+
+def test_a_body_alone_with_nothing_else_to_fit_is_cross_validated(tmp_path):
+    """``--candidates body:BODY`` with every effect known from an identify result: the model
+    fitted beside the candidates has no column at all. Block cross-validation of an empty
+    model once failed with an internal error (a reshape of 0 columns)."""
+    runner = CliRunner()
+    logs = []
+    for seed in (4, 5):
+        log = tmp_path / f"run{seed}.csv"
+        args = ["simulate", "planar_2r", "-o", str(log), "--samples", "600", "--noise", "0.01", "--seed", str(seed),
+                "--quiet"]
+        assert runner.invoke(main, args).exit_code == 0
+        logs.append(log)
+    fitted = tmp_path / "fit.json"
+    assert runner.invoke(main, ["identify", "planar_2r", str(logs[0]), "--format", "json", "-o", str(fitted),
+                                "--quiet"]).exit_code == 0
+    result = runner.invoke(main, ["diagnose", "planar_2r", str(logs[1]), "--params", str(fitted),
+                                  "--candidates", "body:link2", "--format", "json", "--quiet"])
+    assert result.exit_code in (0, 1), result.output + result.stderr
+    report = json.loads(result.stdout)
+    assert report["effects"] == [] and report["gap"]["cv_before"] == pytest.approx(report["gap"]["cv_after"])
