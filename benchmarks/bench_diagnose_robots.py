@@ -1,7 +1,7 @@
 """diagnose on robots it was not tuned on: arms of example-robot-data simulated by an
 independent simulator (Pinocchio's RNEA, with the URDF's damping and friction, which the
 reader makes known effects), logged at 1 kHz with AR(1) noise, read through a recording
-description and diagnosed against each robot's own URDF through the command line
+description (a gripper that does not move is not logged: it is held, ``[held]``) and diagnosed against each robot's own URDF through the command line
 (docs/diagnosis.md, "Robots that are not the ones the project tuned on").
 
 Scenarios: nothing hidden; viscous and smooth (tanh) Coulomb friction on every moving joint;
@@ -96,10 +96,14 @@ def record(model, seed: int, folder: Path, name: str, friction: str, given: dict
     header = ["t"] + [f"q_{n}" for n in names] + [f"tau_{n}" for n in names]
     np.savetxt(folder / f"{name}.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
                comments="", fmt="%.9g")
-    listed = [n for n in names if n != "panda_finger_joint2"]          # a mimic joint: not independent
+    # a gripper held still is not logged, as on a real arm: held at its value ([held]); its mimic
+    # joint (panda_finger_joint2) follows it
+    still = [n for n in names if any(word in n for word in STILL) and n != "panda_finger_joint2"]
+    listed = [n for n in names if n not in still and n != "panda_finger_joint2"]
     (folder / f"{name}.toml").write_text(f'[recording]\ntime = "t"\n[[runs]]\nfile = "{name}.csv"\n[position]\n'
                                          + "".join(f'{n} = "q_{n}"\n' for n in listed) + "[torque]\n"
-                                         + "".join(f'{n} = "tau_{n}"\n' for n in listed))
+                                         + "".join(f'{n} = "tau_{n}"\n' for n in listed) + "[held]\n"
+                                         + "".join(f"{n} = {float(q[0, names.index(n)])!r}\n" for n in still))
     return truth
 
 

@@ -42,6 +42,7 @@ from baseparams.identify.model import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.expressions import ExpressionError, parse_expression
+from baseparams.model.held import hold
 from baseparams.model.mechanism import Mechanism
 
 # Default filter: the positions' cut-off is this multiple of their bandwidth (Gautier's rule
@@ -81,6 +82,7 @@ SCHEMA = Table({
     "acceleration": (Map(CHANNEL), False),
     "torque": (Map(CHANNEL), True),
     "zero": (Map(VALUE), False),
+    "held": (Map(VALUE), False),
     "filter": (Table({"cutoff": (VALUE, False), "order": (INTEGER, False), "decimate": (INTEGER, False)}),
                False),
 })
@@ -129,6 +131,13 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
             data[quantity] = {k: {"column": v} if isinstance(v, str) else v for k, v in table.items()}
     _Validator(path).check(SCHEMA, data, "")
     mechanism = _with_motors(mechanism, data.get("motors", []), path)
+    held = {name: _exact(value, path, f"held.{name}") for name, value in data.get("held", {}).items()}
+    for quantity in QUANTITIES:
+        for name in data.get(quantity, {}):
+            if name in held:
+                raise InputError(f"{name!r} is held ([held]): it has no {quantity} channel", file=path,
+                                 key=f"{quantity}.{name}")
+    mechanism = hold(mechanism, held, file=path)
     channels = {q: [_channel(q, name, spec, mechanism, path) for name, spec in data.get(q, {}).items()]
                 for q in QUANTITIES}
     if channels["acceleration"] and not channels["velocity"]:
@@ -166,6 +175,13 @@ def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
                                  key=f"{key}.ratios.{coordinate}")
         added.append(motor)
     return replace(mechanism, motors=tuple(mechanism.motors) + tuple(added))
+
+
+def _exact(value: object, path: str, key: str) -> Fraction:
+    """A decimal as its exact fraction; an expression such as ``pi/4`` to double precision."""
+    if isinstance(value, (int, Decimal)):
+        return Fraction(str(value))
+    return Fraction(_number(value, path, key))
 
 
 def _number(value: object, path: str, key: str) -> float:
@@ -265,10 +281,16 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
             if model is not None and with_motors.motors != model.motors:
                 raise InputError("declares other motors than the descriptions before it", file=path,
                                  key="motors")
+            if model is not None and with_motors.coordinates != model.coordinates:
+                raise InputError("holds other coordinates than the descriptions before it", file=path, key="held")
             model = with_motors
         else:
             part = read_measured(path, mechanism, check_kinematics=check_kinematics)
         parts.append(part)
+    if model is not None and model.coordinates != mechanism.coordinates and any(not is_description(p) for p in paths):
+        raise InputError("a CSV log cannot be fitted beside a recording that holds joints ([held]): describe it "
+                         "with a recording description holding the same ones", file=next(
+                             p for p in paths if not is_description(p)))
     # each part's kinematics were checked with its own rows named; several parts are
     # evaluated again, stacked, when a fit needs them
     data = concatenate(parts)
@@ -458,8 +480,12 @@ def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple
                          file=path, key=quantity)
     matrix = rows[:, index]
     if len(names) != len(coordinates):
+        missing = [c for c in coordinates if c not in names]
+        hint = (f"; a joint that does not move in the recording ({', '.join(missing)}?) is held at its value in "
+                "[held] (COORD = value)") if missing and len(names) < len(coordinates) else ""
         raise InputError(f"{len(names)} {quantity} channels for {len(coordinates)} independent coordinates "
-                         f"({', '.join(coordinates)}): give one channel per coordinate", file=path, key=quantity)
+                         f"({', '.join(coordinates)}): give one channel per coordinate{hint}", file=path,
+                         key=quantity)
     singular = np.linalg.svd(matrix, compute_uv=False)
     if singular[-1] <= 1e-12 * singular[0]:
         raise InputError(f"the {quantity} channels {', '.join(names)} do not determine "

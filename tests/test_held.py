@@ -1,0 +1,132 @@
+"""Joints held still (a recording's ``[held]``): the held mechanism moves as the original with
+those coordinates at their values, and a log without their channels is identified with the
+held mechanism's base parameters. Why: a Panda's fingers do not move and a real log has no
+channels for them; fitted as joints, identify's condition number was 5e13 and its base
+parameters 1e7 +- 1e13, and a log without them could not be read."""
+
+import json
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from baseparams.cli import main
+from baseparams.errors import InputError
+from baseparams.identify.diagnose import prepare
+from baseparams.identify.model import Motion, evaluate, standard_parameters
+from baseparams.identify.simulate import trajectory_motion
+from baseparams.io.loader import parse_mechanism, resolve
+from baseparams.model import generate
+from baseparams.model.held import hold
+
+URDF = Path(__file__).parent / "data" / "urdf" / "gripper_arm.urdf"
+
+
+def _torques(mechanism, motion: Motion) -> np.ndarray:
+    problem = prepare(mechanism, motion, evaluate(mechanism, motion))
+    return problem.known + problem.inertial @ standard_parameters(mechanism)
+
+
+def _still(mechanism, motion: Motion, values: dict[str, float]) -> Motion:
+    """``motion`` with the coordinates of ``values`` held there."""
+    out = Motion(motion.t, motion.q.copy(), motion.qd.copy(), motion.qdd.copy())
+    for name, value in values.items():
+        k = list(mechanism.independent).index(name)
+        out.q[:, k], out.qd[:, k], out.qdd[:, k] = value, 0.0, 0.0
+    return out
+
+
+def _without(mechanism, motion: Motion, names) -> Motion:
+    keep = [k for k, c in enumerate(mechanism.independent) if c not in names]
+    return Motion(motion.t, motion.q[:, keep], motion.qd[:, keep], motion.qdd[:, keep])
+
+
+def _mimic_arm(tmp_path) -> Path:
+    """gripper_arm whose right finger follows the left one (a URDF <mimic>)."""
+    text = URDF.read_text().replace('<axis xyz="0 -1 0"/>', '<axis xyz="0 -1 0"/>\n    <mimic joint="finger_left"/>')
+    path = tmp_path / "mimic_arm.urdf"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("source, values", [
+    ("puma560", {"q2": "0.37"}), ("puma560", {"q6": "-1.2", "q4": "0.5"}), ("scara", {"d3": "0.1"}),
+    ("chain", {"q3": "2.5"}), ("gripper", {"finger_left": "0.01", "finger_right": "0.03"}),
+    ("gripper", {"camera_pan": "-0.8"}), ("mimic", {"finger_left": "0.02"})])
+def test_a_held_joint_moves_its_child_as_the_joint_at_that_value(tmp_path, source, values):
+    """Forces on the other coordinates along a motion equal the original mechanism's with the
+    held coordinates at their values (turning and sliding joints, several at once, a branch,
+    a mimic joint held with its leader), to rounding."""
+    mechanism = {"chain": lambda: parse_mechanism(generate.serial_chain(4)), "gripper": lambda: resolve(str(URDF)),
+                 "mimic": lambda: resolve(str(_mimic_arm(tmp_path)))}.get(source, lambda: resolve(source))()
+    held = hold(mechanism, {k: Fraction(v) for k, v in values.items()})
+    gone = set(values) | ({"finger_right"} if source == "mimic" else set())
+    assert set(held.independent) == set(mechanism.independent) - gone
+    motion = _still(mechanism, trajectory_motion(mechanism, 60), {k: float(v) for k, v in values.items()})
+    keep = [k for k, c in enumerate(mechanism.independent) if c not in gone]
+    original = _torques(mechanism, motion)[:, keep]
+    assert np.max(np.abs(_torques(held, _without(mechanism, motion, gone)) - original)) \
+        <= 1e-12 * np.max(np.abs(original))
+
+
+def test_what_cannot_be_held_is_refused_with_the_reason(tmp_path):
+    puma = resolve("puma560")
+    with pytest.raises(InputError, match="not a joint coordinate"):
+        hold(puma, {"q9": Fraction(0)})
+    with pytest.raises(InputError, match="closed loops"):
+        hold(resolve("four_bar"), {resolve("four_bar").independent[0]: Fraction(0)})
+    with pytest.raises(InputError, match="follows 'finger_left'"):
+        hold(resolve(str(_mimic_arm(tmp_path))), {"finger_right": Fraction(0)})
+
+
+def _gripper_log(tmp_path, seed: int = 0) -> tuple[dict, float]:
+    """gripper_arm with its fingers still at 0.01 and 0.03 m, logged without them (noise 1 %
+    of each moving joint's RMS force): the log's file, and the noise's relative size."""
+    mechanism = resolve(str(URDF))
+    still = {"finger_left": 0.01, "finger_right": 0.03}
+    motion = _still(mechanism, trajectory_motion(mechanism, 1500), still)
+    tau = _torques(mechanism, motion)
+    rng = np.random.default_rng(seed)
+    tau += rng.standard_normal(tau.shape) * 0.01 * np.sqrt(np.mean(tau ** 2, axis=0))
+    moving = [c for c in mechanism.independent if c not in still]
+    columns = [list(mechanism.independent).index(c) for c in moving]
+    header = ["t"] + [f"q_{c}" for c in moving] + [f"tau_{c}" for c in moving]
+    rows = np.column_stack([motion.t, motion.q[:, columns], tau[:, columns]])
+    np.savetxt(tmp_path / "log.csv", rows, delimiter=",", header=",".join(header), comments="", fmt="%.12g")
+    (tmp_path / "plain.toml").write_text(
+        '[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n'
+        + "".join(f'{c} = "q_{c}"\n' for c in moving) + "[torque]\n" + "".join(f'{c} = "tau_{c}"\n' for c in moving))
+    (tmp_path / "held.toml").write_text((tmp_path / "plain.toml").read_text()
+                                        + "[held]\nfinger_left = 0.01\nfinger_right = 0.03\n")
+    return still, 0.01
+
+
+def test_a_log_without_the_still_joints_is_identified_with_them_held(tmp_path):
+    """The log has the four moving joints only. Without ``[held]`` the error names the
+    coordinates without channels and says how to hold them (exit 2); with it, identify fits
+    the held mechanism's base parameters (fewer than the mechanism's), the fit is
+    well-conditioned and its residual is the noise (1 % white, about a third of it after the
+    recording's low-pass and decimation)."""
+    _gripper_log(tmp_path)
+    runner = CliRunner()
+    refused = runner.invoke(main, ["identify", str(URDF), str(tmp_path / "plain.toml"), "--quiet"])
+    assert refused.exit_code == 2
+    assert "[held]" in refused.stderr and "finger_left" in refused.stderr
+    result = runner.invoke(main, ["identify", str(URDF), str(tmp_path / "held.toml"), "--format", "json", "--quiet"])
+    assert result.exit_code == 0, result.output + result.stderr
+    report = json.loads(result.stdout)
+    assert report["coordinates"] == ["turret", "shoulder", "elbow", "camera_pan"]
+    full = json.loads(runner.invoke(main, ["solve", str(URDF), "--format", "json"]).stdout)["rank"]
+    assert report["rank"] < full
+    assert report["condition_number"] < 1e4
+    assert all(0.001 < v < 0.01 for v in report["nrms"].values()), report["nrms"]     # the filtered noise
+
+
+def test_a_description_must_not_give_channels_to_a_held_coordinate(tmp_path):
+    _gripper_log(tmp_path)
+    text = (tmp_path / "held.toml").read_text().replace("[torque]\n", '[torque]\nfinger_left = "tau_turret"\n')
+    (tmp_path / "both.toml").write_text(text)
+    result = CliRunner().invoke(main, ["identify", str(URDF), str(tmp_path / "both.toml"), "--quiet"])
+    assert result.exit_code == 2 and "'finger_left' is held ([held])" in result.stderr
