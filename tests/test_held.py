@@ -130,3 +130,20 @@ def test_a_description_must_not_give_channels_to_a_held_coordinate(tmp_path):
     (tmp_path / "both.toml").write_text(text)
     result = CliRunner().invoke(main, ["identify", str(URDF), str(tmp_path / "both.toml"), "--quiet"])
     assert result.exit_code == 2 and "'finger_left' is held ([held])" in result.stderr
+
+
+def test_a_motor_of_held_joints_stops_and_a_coupled_one_is_refused():
+    """A motor turning with the held joint alone stops with it (dropped, with its effects: the
+    SO-101's URDF gives its gripper a motor); one coupling it with a moving joint (a TX40-like
+    wrist) cannot be held apart: refused."""
+    from dataclasses import replace
+
+    from baseparams.model.mechanism import EffectSpec, Motor
+    puma = resolve("puma560")
+    alone = replace(puma, motors=(Motor("m6", (("q6", Fraction(50)),)),),
+                    effects=(EffectSpec("viscous_friction", "m6", {"fv": Fraction(1)}),))
+    held = hold(alone, {"q6": Fraction(0)})
+    assert held.motors == () and held.effects == ()
+    coupled = replace(puma, motors=(Motor("m56", (("q5", Fraction(32)), ("q6", Fraction(32)))),))
+    with pytest.raises(InputError, match="coupled motor"):
+        hold(coupled, {"q6": Fraction(0)})

@@ -32,8 +32,9 @@ ANGLE_DENOMINATOR = 10 ** 12
 def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | None = None,
          key: str = "held") -> Mechanism:
     """``mechanism`` with each coordinate of ``values`` held at its value (a rigid connection);
-    a coordinate that follows a held one (``<mimic>``) is held with it, and the mechanism's
-    effects on held coordinates are dropped. Bad requests are InputErrors at ``key``."""
+    a coordinate that follows a held one (``<mimic>``) is held with it, a motor that turns
+    with held joints only stops (it is dropped), and the mechanism's effects on held
+    coordinates and stopped motors are dropped. Bad requests are InputErrors at ``key``."""
     if not values:
         return mechanism
     if mechanism.loops:
@@ -49,13 +50,15 @@ def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | No
         if leader is not None:
             raise InputError(f"{name!r} follows {leader.leader!r} (a coupling): hold {leader.leader!r}",
                              file=file, key=where)
-        for motor in mechanism.motors:
-            if any(c == name for c, _ in motor.ratios):
-                raise InputError(f"motor {motor.name!r} turns with {name!r}: a held joint cannot drive a motor",
-                                 file=file, key=where)
     for coupling in mechanism.couplings:
         if coupling.leader in held:
             held[coupling.coordinate] = coupling.ratio * held[coupling.leader] + coupling.offset
+    still_motors = {m.name for m in mechanism.motors if all(c in held for c, _ in m.ratios)}
+    for motor in mechanism.motors:
+        turning = [c for c, _ in motor.ratios if c in held]
+        if turning and motor.name not in still_motors:
+            raise InputError(f"motor {motor.name!r} turns with {turning[0]!r} and with joints that move: a "
+                             "coupled motor's joints cannot be held apart", file=file, key=f"{key}.{turning[0]}")
     fixed_type = registry.joint_types()["Fixed"].item
     swapped: dict[int, Joint] = {}
     for joint in mechanism.joints:
@@ -85,7 +88,8 @@ def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | No
         coordinates=kept,
         independent=tuple(c for c in mechanism.independent if c not in held),
         couplings=tuple(c for c in mechanism.couplings if c.coordinate not in held),
-        effects=tuple(e for e in mechanism.effects if e.coordinate not in held),
+        motors=tuple(m for m in mechanism.motors if m.name not in still_motors),
+        effects=tuple(e for e in mechanism.effects if e.coordinate not in held and e.coordinate not in still_motors),
         trajectory=trajectory,
         gruebler=mechanism.gruebler - sum(1 for c in values if c in mechanism.independent),
     )
