@@ -102,6 +102,19 @@ def _joint_side_recording(folder: Path, joints: list[str]) -> None:
                                      + "".join(f'{j} = "tau_{j}"\n' for j in joints))
 
 
+def _diagnosed_against(folder: Path, urdf: Path, loaded: Path, seed: int):
+    """``loaded`` simulated (20 000 samples, noise 0.2), read through a recording and
+    diagnosed against ``urdf`` held as given: the command's result (JSON)."""
+    runner = CliRunner()
+    result = runner.invoke(main, ["simulate", str(loaded), "-o", str(folder / "log.csv"), "--samples", "20000",
+                                  "--noise", "0.2", "--seed", str(seed)])
+    assert result.exit_code == 0, result.output
+    joints = [h[2:] for h in (folder / "log.csv").read_text().split("\n", 1)[0].split(",") if h.startswith("q_")]
+    _joint_side_recording(folder, joints)
+    return runner.invoke(main, ["diagnose", str(urdf), str(folder / "rec.toml"), "--params", str(urdf),
+                                "--format", "json", "--quiet"])
+
+
 def test_friction_on_every_joint_of_a_urdf_arm_is_named_through_a_recording(tmp_path):
     """A 7-joint arm from its URDF (the iiwa14: its joints' damping is known viscous friction)
     with Coulomb friction hidden on every joint (1.1 to 2.9 N m; noise 0.3 N m), logged at
@@ -134,14 +147,7 @@ def test_a_payload_is_named_through_a_recording_against_the_robots_own_urdf(tmp_
     assert text.count('<mass value="0.1879"/>') == 1                  # wrist_3_link's
     loaded = tmp_path / "ur5_payload.urdf"
     loaded.write_text(text.replace('<mass value="0.1879"/>', '<mass value="1.6879"/>'))
-    runner = CliRunner()
-    result = runner.invoke(main, ["simulate", str(loaded), "-o", str(tmp_path / "log.csv"), "--samples", "20000",
-                                  "--noise", "0.2", "--seed", "4"])
-    assert result.exit_code == 0, result.output
-    joints = [h[2:] for h in (tmp_path / "log.csv").read_text().split("\n", 1)[0].split(",") if h.startswith("q_")]
-    _joint_side_recording(tmp_path, joints)
-    result = runner.invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
-                                  "--format", "json", "--quiet"])
+    result = _diagnosed_against(tmp_path, urdf, loaded, seed=4)
     report = json.loads(result.stdout)
     assert [(e["kind"], e["coordinate"]) for e in report["effects"]] == [("mass", "wrist_3_link")]
     assert report["effects"][0]["value"] == pytest.approx(1.5, rel=0.01)
@@ -196,15 +202,7 @@ def test_a_rigid_payload_beyond_the_tool_frames_is_named_once_with_its_mass_and_
         '<origin xyz="0.06 0 0.05" rpy="0 0 0"/></joint>\n  <link name="payload"><inertial><mass value="1.2"/>'
         '<origin xyz="0 0 0" rpy="0 0 0"/><inertia ixx="0.002" ixy="0" ixz="0" iyy="0.002" iyz="0" '
         'izz="0.001"/></inertial></link>\n'))
-    runner = CliRunner()
-    result = runner.invoke(main, ["simulate", str(loaded), "-o", str(tmp_path / "log.csv"), "--samples", "20000",
-                                  "--noise", "0.2", "--seed", "5"])
-    assert result.exit_code == 0, result.output
-    joints = [h[2:] for h in (tmp_path / "log.csv").read_text().split("\n", 1)[0].split(",") if h.startswith("q_")]
-    _joint_side_recording(tmp_path, joints)
-    result = runner.invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
-                                  "--format", "json", "--quiet"])
-    report = json.loads(result.stdout)
+    report = json.loads(_diagnosed_against(tmp_path, urdf, loaded, seed=5).stdout)
     assert [(e["kind"], e["coordinate"]) for e in report["effects"]] == [("body", "wrist_3_link")], report
     assert not report["ambiguous"]
     c = {k: v["value"] for k, v in report["effects"][0]["coefficients"].items()}
@@ -213,5 +211,6 @@ def test_a_rigid_payload_beyond_the_tool_frames_is_named_once_with_its_mass_and_
     # and its x is wrist_3_link's x, so the payload sits at (0.06, 0.0823 + 0.03 + 0.05, 0) there
     centre = np.array([c["mx"], c["my"], c["mz"]]) / c["m"]
     assert np.allclose(centre, [0.06, 0.1623, 0.0], atol=0.005), centre
-    text = runner.invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf), "--quiet"])
+    text = CliRunner().invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
+                                     "--quiet"])
     assert "in wrist_3_link's axes" in text.stdout
