@@ -198,7 +198,8 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = 
     given = None
     replaced: list[str] = []
     if params:
-        given, known = given_parameters(mechanism, str(params))
+        given = given_parameters(mechanism, str(params))
+        known = given.effects
         if known:                 # an identify result's effects: its totals, as identify overrode the model's
             keys = {(e.kind, e.coordinate) for e in known}
             replaced = [f"{e.kind}:{e.coordinate}" for e in mechanism.effects if (e.kind, e.coordinate) in keys]

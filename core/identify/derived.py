@@ -112,6 +112,7 @@ def welded_duplicates(mechanism: Mechanism, kind: str) -> dict[str, str]:
         if label == 0:
             kept.setdefault(0, []).append(0)
             continue
+        twin: int | None = None
         if kind == "body" and label != representative:
             twin = representative
         elif kind == "mass":
@@ -119,10 +120,8 @@ def welded_duplicates(mechanism: Mechanism, kind: str) -> dict[str, str]:
                          if np.max(np.abs(origins[k] - origins[label])) <= SAME_POINT), None)
             if twin is None:
                 kept.setdefault(representative, []).append(label)
-                continue
-        else:
-            continue
-        out[body_name(mechanism, label)] = "ground" if twin == 0 else body_name(mechanism, twin)
+        if twin is not None:
+            out[body_name(mechanism, label)] = "ground" if twin == 0 else body_name(mechanism, twin)
     return out
 
 

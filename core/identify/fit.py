@@ -14,6 +14,7 @@ computed from a QR factorisation of the column-scaled weighted matrix (no normal
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -142,6 +143,11 @@ class Identification:
         gains = [self._entry(k) for k, kind in enumerate(self.kinds) if kind == "gain"]
         if gains:
             out["gains"] = gains
+        # every estimate's covariance: what a later `diagnose --params` of this result allows
+        # the given model to be off by (a change within it is the fit's own error)
+        covariance: dict[str, Any] = {"names": list(self.names), "matrix": [
+            [_finite(v) for v in row] for row in np.asarray(self.covariance, float)]}
+        out["covariance"] = covariance
         out.update(self.extras)
         if self.physical is not None:
             out["physical"] = dict(self.physical)

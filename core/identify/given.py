@@ -1,12 +1,15 @@
 """The simulation a user already has, as standard parameters: ``diagnose --params SOURCE``.
 
 SOURCE is a mechanism file (TOML or URDF: its own inertias, e.g. the CAD model's) with the
-same bodies as the mechanism diagnosed, or the JSON of an earlier ``identify`` (its base
-parameters; any standard parameters that reproduce them give the same torques, so the
-least-norm ones are used, and its identified effects become known effects).
+same bodies as the mechanism diagnosed, or the JSON of an earlier ``identify``: its base
+parameters (any standard parameters that reproduce them give the same torques: those
+nearest the mechanism's own inertias when it has them, so that each body's mass means
+something, else the least-norm ones), its identified effects (known effects now), and the
+base parameters' covariance, within which a change is the fit's own error, not a change.
 """
 
 import json
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
 
@@ -17,8 +20,22 @@ from baseparams.identify.model import standard_parameters
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 
-def given_parameters(mechanism: Mechanism, source: str) -> tuple[np.ndarray, list[EffectSpec]]:
-    """(standard parameters (P,), known effects) of ``source`` for ``mechanism``."""
+@dataclass(frozen=True)
+class Given:
+    """A simulation held as given: standard ``parameters`` (P,), the ``effects`` it brings;
+    for an identify result the map ``base_map`` E (r, P) from standard to base parameters and
+    their ``covariance`` (r, r; None when the JSON does not carry it); ``masses``: whether
+    each body's mass in ``parameters`` is the body's (a file's, or completed from the
+    mechanism's own inertias), not an arbitrary member of a group."""
+    parameters: np.ndarray
+    effects: list[EffectSpec] = field(default_factory=list)
+    base_map: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    masses: bool = True
+
+
+def given_parameters(mechanism: Mechanism, source: str) -> Given:
+    """What ``source`` holds as given for ``mechanism``."""
     path = Path(source)
     if path.suffix.lower() == ".json":
         return _from_identify(mechanism, path)
@@ -30,10 +47,10 @@ def given_parameters(mechanism: Mechanism, source: str) -> tuple[np.ndarray, lis
         raise InputError(f"its bodies do not match {mechanism.name}'s ({len(other.parameters)} standard "
                          f"parameters against {len(mechanism.parameters)}): give the same robot's file",
                          file=source, key="--params")
-    return standard_parameters(other), []
+    return Given(standard_parameters(other))
 
 
-def _from_identify(mechanism: Mechanism, path: Path) -> tuple[np.ndarray, list[EffectSpec]]:
+def _from_identify(mechanism: Mechanism, path: Path) -> Given:
     try:
         report = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -57,7 +74,9 @@ def _from_identify(mechanism: Mechanism, path: Path) -> tuple[np.ndarray, list[E
                              f"needed ({exc})", file=str(path), key=where) from None
     if not np.all(np.isfinite(beta)):
         raise InputError("a base parameter value is not finite", file=str(path), key="base")
-    phi = np.linalg.lstsq(E, beta, rcond=None)[0]
+    own = all(b.inertia is not None for b in mechanism.bodies)
+    prior = standard_parameters(mechanism) if own else np.zeros(len(names))
+    phi = prior + np.linalg.lstsq(E, beta - E @ prior, rcond=None)[0]
     effects = []
     for k, entry in enumerate(report.get("effects") or []):
         try:
@@ -67,4 +86,24 @@ def _from_identify(mechanism: Mechanism, path: Path) -> tuple[np.ndarray, list[E
         except (KeyError, TypeError, AttributeError) as exc:
             raise InputError(f"an effect needs kind, coordinate and coefficients ({exc})", file=str(path),
                              key=f"effects[{k}]") from None
-    return phi, effects
+    return Given(phi, effects, E, _base_covariance(report, base, path), masses=own)
+
+
+def _base_covariance(report: dict, base: list, path: Path) -> np.ndarray | None:
+    """The base parameters' covariance (r, r) from the result's ``covariance`` (names and
+    matrix over every estimate), None when it has none (a result of an older version)."""
+    held = report.get("covariance")
+    if held is None:
+        return None
+    try:
+        names = list(held["names"])
+        matrix = np.array([[np.nan if v is None else float(v) for v in row] for row in held["matrix"]])
+        index = [names.index(entry["name"]) for entry in base]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"expected {{\"names\": [...], \"matrix\": [[...]]}} naming every base parameter "
+                         f"({exc})", file=str(path), key="covariance") from None
+    if matrix.shape != (len(names), len(names)):
+        raise InputError(f"a {len(names)} x {len(names)} matrix is needed, not {matrix.shape}", file=str(path),
+                         key="covariance.matrix")
+    block = matrix[np.ix_(index, index)]
+    return block if np.all(np.isfinite(block)) else None
