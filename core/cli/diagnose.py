@@ -25,7 +25,9 @@ if TYPE_CHECKING:
 @click.option("--params", "params_source", default=None, metavar="SOURCE",
               help="Hold the inertial parameters as given instead of refitting them: a mechanism file "
                    "(TOML, URDF) of the same robot with its inertias, or the JSON of an earlier "
-                   "`identify`. Bodies, payloads and torque gains become candidates.")
+                   "`identify` (its effects replace the model's own; a change within its covariance is "
+                   "its own error). Bodies (once per rigid body), payloads and torque gains become "
+                   "candidates.")
 @click.option("--candidates", "selection", multiple=True, metavar="KIND[:PLACE]",
               help="Candidate effects to test (repeatable); KIND alone: on every place it acts on "
                    "(delay alone: the recording's one delay; delay:COORD one drive's own) "
