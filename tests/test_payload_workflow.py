@@ -157,3 +157,15 @@ def test_an_identify_result_held_as_given_keeps_the_models_own_masses_where_the_
     least_norm = np.linalg.lstsq(given.base_map, beta, rcond=None)[0]
     assert np.linalg.norm(given.parameters - own) <= np.linalg.norm(least_norm - own)
     assert given.masses and all(given.parameters[10 * k] > 0 for k in range(2))
+
+
+def test_a_broken_covariance_in_an_identify_result_is_bad_input(tmp_path):
+    """A hand-edited result whose covariance does not name its base parameters: exit 2, the
+    file and the key named, before the run."""
+    fitted, log = _planar_runs(tmp_path, "0.4")
+    report = json.loads(fitted.read_text())
+    report["covariance"]["names"] = ["x"] * len(report["covariance"]["names"])
+    fitted.write_text(json.dumps(report))
+    result = CliRunner().invoke(main, ["diagnose", "planar_2r", str(log), "--params", str(fitted), "--quiet"])
+    assert result.exit_code == 2
+    assert "covariance" in result.stderr and str(fitted) in result.stderr and "Traceback" not in result.stderr

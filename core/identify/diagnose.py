@@ -883,7 +883,7 @@ def _given_errors(problem: Problem, inertial: np.ndarray, candidates: list[Candi
     planar arm's last link is also the previous link's first moment and inertia, so the two
     bodies share it in any proportion; only the base parameters they change together are
     determined, and what the second adds to them is the given fit's error, which a quiet
-    second run makes significant (a PUMA-like planar arm: 0.4 kg named as 0.21 kg on link 2
+    second run makes significant (planar_2r: 0.4 kg named as 0.21 kg on link 2
     and 0.12 kg m on link 1)."""
     if problem.given_uncertainty is None:
         return []
