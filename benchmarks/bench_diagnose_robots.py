@@ -33,9 +33,13 @@ sys.path.insert(0, str(ROOT / "tests"))                      # tests/ is not a p
 from urdf_reference import example_robot_data, robot_id  # noqa: E402
 
 ROBOTS = {"panda": "panda_description/panda", "ur10": "ur_description/ur10_robot", "ur3": "ur_description/ur3_robot",
-          "z1": "z1_description/z1", "kinova": "kinova_description/kinova", "so101": "so_arm_description/so101"}
+          "z1": "z1_description/z1", "kinova": "kinova_description/kinova", "so101": "so_arm_description/so101",
+          "xarm7": "xarm_description/xarm7", "talos_arm": "talos_data/talos_left_arm",
+          "ur5_gripper": "ur_description/ur5_gripper", "baxter": "baxter_description/baxter",
+          "finger": "finger_edu_description/finger_edu"}
+DEFAULT = ("panda", "ur10", "ur3", "z1", "kinova", "so101")        # the table in docs/diagnosis.md
 RATE, SECONDS, RHO, NOISE = 1000.0, 30.0, 0.95, 0.02       # Hz, s, AR(1) per sample, SD / RMS torque
-STILL = ("finger", "ripper")                                 # grippers are held still
+STILL = ("finger_joint", "ripper")                           # grippers are held still
 
 
 def motion(model, rng, t):
@@ -163,7 +167,7 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
+    parser.add_argument("--robots", nargs="+", default=list(DEFAULT), choices=list(ROBOTS))
     parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power", "payload"],
                         choices=["none", "friction", "power", "payload"])
     parser.add_argument("--seed", type=int, default=1)

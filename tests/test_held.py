@@ -147,3 +147,17 @@ def test_a_motor_of_held_joints_stops_and_a_coupled_one_is_refused():
     coupled = replace(puma, motors=(Motor("m56", (("q5", Fraction(32)), ("q6", Fraction(32)))),))
     with pytest.raises(InputError, match="coupled motor"):
         hold(coupled, {"q6": Fraction(0)})
+
+
+@pytest.mark.parametrize("held, message", [
+    ("[held]\nturret = 0\nshoulder = 0\nelbow = 0\ncamera_pan = 0\nfinger_left = 0.01\nfinger_right = 0.03\n",
+     "every coordinate is held"),
+    ("", "no position channels")])
+def test_a_description_with_nothing_to_read_is_bad_input(tmp_path, held, message):
+    """Every coordinate held, or no channel at all: exit 2 with the reason (both were internal
+    errors: an assertion in the run's reader)."""
+    _gripper_log(tmp_path)
+    (tmp_path / "none.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\n[torque]\n'
+                                        + held)
+    result = CliRunner().invoke(main, ["identify", str(URDF), str(tmp_path / "none.toml"), "--quiet"])
+    assert result.exit_code == 2 and message in result.stderr, result.output + result.stderr

@@ -138,8 +138,16 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
                 raise InputError(f"{name!r} is held ([held]): it has no {quantity} channel", file=path,
                                  key=f"{quantity}.{name}")
     mechanism = hold(mechanism, held, file=path)
+    if held and not independent_names(mechanism):
+        raise InputError("every coordinate is held: nothing moves in this recording to fit", file=path,
+                         key="held")
     channels = {q: [_channel(q, name, spec, mechanism, path) for name, spec in data.get(q, {}).items()]
                 for q in QUANTITIES}
+    for quantity in ("position", "torque"):
+        if not channels[quantity]:
+            raise InputError(f"no {quantity} channels: give one per independent coordinate "
+                             f"({', '.join(independent_names(mechanism))}), or hold a joint that does not move "
+                             "in [held]", file=path, key=quantity)
     if channels["acceleration"] and not channels["velocity"]:
         raise InputError("acceleration channels need velocity channels too", file=path, key="acceleration")
     for name in data.get("zero", {}):
