@@ -100,9 +100,9 @@ def record(model, seed: int, folder: Path, name: str, friction: str, given: dict
     header = ["t"] + [f"q_{n}" for n in names] + [f"tau_{n}" for n in names]
     np.savetxt(folder / f"{name}.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
                comments="", fmt="%.9g")
-    # a gripper held still is not logged, as on a real arm: held at its value ([held]); its mimic
-    # joint (panda_finger_joint2) follows it
-    still = [n for n in names if any(word in n for word in STILL) and n != "panda_finger_joint2"]
+    # a gripper held still is not logged, as on a real arm: held at its value ([held]), a mimic
+    # joint (panda_finger_joint2) listed with it at the value it follows
+    still = [n for n in names if any(word in n for word in STILL)]
     listed = [n for n in names if n not in still and n != "panda_finger_joint2"]
     (folder / f"{name}.toml").write_text(f'[recording]\ntime = "t"\n[[runs]]\nfile = "{name}.csv"\n[position]\n'
                                          + "".join(f'{n} = "q_{n}"\n' for n in listed) + "[torque]\n"

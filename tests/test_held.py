@@ -77,8 +77,13 @@ def test_what_cannot_be_held_is_refused_with_the_reason(tmp_path):
         hold(puma, {"q9": Fraction(0)})
     with pytest.raises(InputError, match="closed loops"):
         hold(resolve("four_bar"), {resolve("four_bar").independent[0]: Fraction(0)})
+    mimic = resolve(str(_mimic_arm(tmp_path)))
     with pytest.raises(InputError, match="follows 'finger_left'"):
-        hold(resolve(str(_mimic_arm(tmp_path))), {"finger_right": Fraction(0)})
+        hold(mimic, {"finger_right": Fraction(0)})
+    with pytest.raises(InputError, match=r"at 0.02 with it"):
+        hold(mimic, {"finger_left": Fraction("0.02"), "finger_right": Fraction("0.03")})
+    both = hold(mimic, {"finger_left": Fraction("0.02"), "finger_right": Fraction("0.02")})   # listed as it follows
+    assert both.coordinates == hold(mimic, {"finger_left": Fraction("0.02")}).coordinates
 
 
 def _gripper_log(tmp_path, seed: int = 0) -> tuple[dict, float]:

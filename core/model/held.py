@@ -32,7 +32,8 @@ ANGLE_DENOMINATOR = 10 ** 12
 def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | None = None,
          key: str = "held") -> Mechanism:
     """``mechanism`` with each coordinate of ``values`` held at its value (a rigid connection);
-    a coordinate that follows a held one (``<mimic>``) is held with it, a motor that turns
+    a coordinate that follows a held one (``<mimic>``) is held with it (it may be listed too,
+    at the value it follows), a motor that turns
     with held joints only stops (it is dropped), and the mechanism's effects on held
     coordinates and stopped motors are dropped. Bad requests are InputErrors at ``key``."""
     if not values:
@@ -46,10 +47,13 @@ def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | No
         if name not in mechanism.coordinates:
             raise InputError(f"{name!r} is not a joint coordinate of {mechanism.name} "
                              f"({', '.join(mechanism.coordinates)})", file=file, key=where)
-        leader = next((c for c in mechanism.couplings if c.coordinate == name), None)
-        if leader is not None:
-            raise InputError(f"{name!r} follows {leader.leader!r} (a coupling): hold {leader.leader!r}",
-                             file=file, key=where)
+        coupling = next((c for c in mechanism.couplings if c.coordinate == name), None)
+        if coupling is not None:
+            follows = coupling.ratio * values[coupling.leader] + coupling.offset if coupling.leader in values else None
+            if follows is None or abs(float(values[name] - follows)) > 1e-9 * max(1.0, abs(float(follows))):
+                at = f" (at {float(follows):.6g} with it)" if follows is not None else ""
+                raise InputError(f"{name!r} follows {coupling.leader!r} (a coupling): hold {coupling.leader!r}, and "
+                                 f"{name!r} is held with it{at}", file=file, key=where)
     for coupling in mechanism.couplings:
         if coupling.leader in held:
             held[coupling.coordinate] = coupling.ratio * held[coupling.leader] + coupling.offset
