@@ -22,7 +22,8 @@ import sympy
 
 from baseparams import registry
 from baseparams.errors import InputError
-from baseparams.model.mechanism import Frame, Joint, Mechanism, TreeEdge
+from baseparams.model.mechanism import Frame, Joint, Mechanism, TreeEdge, _default_ref
+from baseparams.numeric.backends import Symbolic
 
 # The held angle's half-angle tangent as a fraction with at most this denominator: cos and
 # sin of the rotation are then exact rationals, within about 1e-12 rad of the value.
@@ -33,9 +34,9 @@ def hold(mechanism: Mechanism, values: Mapping[str, Fraction], *, file: str | No
          key: str = "held") -> Mechanism:
     """``mechanism`` with each coordinate of ``values`` held at its value (a rigid connection);
     a coordinate that follows a held one (``<mimic>``) is held with it (it may be listed too,
-    at the value it follows), a motor that turns
-    with held joints only stops (it is dropped), and the mechanism's effects on held
-    coordinates and stopped motors are dropped. Bad requests are InputErrors at ``key``."""
+    at the value it follows), a motor that turns with held joints only stops (it is dropped),
+    and the mechanism's effects on held coordinates and stopped motors are dropped. Bad
+    requests are InputErrors at ``key``."""
     if not values:
         return mechanism
     if mechanism.loops:
@@ -109,13 +110,8 @@ def _moved(mechanism: Mechanism, frame: Frame, motion: str, value: Fraction) -> 
         return replace(frame, point=tuple(p + step * a for p, a in zip(frame.point, axis)))
     if value == 0:
         return frame
-    if frame.ref is None:
-        subs = mechanism.geometry_subs
-        sizes = [abs(c.xreplace(subs)) for c in axis]
-        k = min(range(3), key=lambda i: (sizes[i], i))
-        ref = [sympy.Integer(int(i == k)) for i in range(3)]
-    else:
-        ref = [sympy.sympify(c) for c in frame.ref]
+    ref = [sympy.sympify(c) for c in frame.ref] if frame.ref is not None else \
+        _default_ref(frame.axis, mechanism.geometry_subs, Symbolic())       # the frame's own default
     along = sum(r * a for r, a in zip(ref, axis)) / length ** 2
     perpendicular = [r - along * a for r, a in zip(ref, axis)]
     cross = [axis[1] * ref[2] - axis[2] * ref[1], axis[2] * ref[0] - axis[0] * ref[2],
