@@ -39,6 +39,13 @@ def body_name(mechanism: Mechanism, label: int) -> str:
     return body.name or f"body{label}"
 
 
+def body_columns(mechanism: Mechanism, name: str) -> slice:
+    """Where the body a mass/body candidate names (:func:`body_name`) has its ten standard
+    parameters."""
+    k = next(k for k, b in enumerate(mechanism.bodies) if body_name(mechanism, b.label) == name)
+    return slice(10 * k, 10 * k + 10)
+
+
 # Where a bare KIND (and the default selection) puts a derived kind, when not everywhere it may
 # act: one drive's own delay (delay:COORD) is a candidate only when named. Why: an elastic
 # joint's lag is, to first order, a delay on that joint; with every joint's delay a candidate,

@@ -860,9 +860,7 @@ def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
     without inertias: least-norm parameters)."""
     if cand.kind != "body" or problem.given is None or not problem.given_masses:
         return ""
-    k = next(k for k, b in enumerate(problem.mechanism.bodies)
-             if derived.body_name(problem.mechanism, b.label) == cand.coordinate)
-    mass = problem.given[10 * k] + values["m"]
+    mass = problem.given[derived.body_columns(problem.mechanism, cand.coordinate)][0] + values["m"]
     return f"the changed body's mass {mass:.3g} is not positive" if mass <= 0 else ""
 
 
@@ -894,13 +892,11 @@ def _given_errors(problem: Problem, inertial: np.ndarray, candidates: list[Candi
     precision = np.linalg.pinv(covariance, hermitian=True)
     rank = int(np.linalg.matrix_rank(covariance))
     bar = float(chi2.ppf(WITHIN_GIVEN_LEVEL, max(rank, 1)))
-    labels = {derived.body_name(problem.mechanism, b.label): k for k, b in enumerate(problem.mechanism.bodies)}
-
     def change(indices: list[int], values: list[np.ndarray]) -> np.ndarray:
         total = np.zeros(base_map.shape[0])
         for i, v in zip(indices, values):
-            k, part = labels[candidates[i].coordinate], derived.BODY_PARTS[candidates[i].kind]
-            total += base_map[:, 10 * k:10 * k + 10][:, part] @ v
+            columns = derived.body_columns(problem.mechanism, candidates[i].coordinate)
+            total += base_map[:, columns][:, derived.BODY_PARTS[candidates[i].kind]] @ v
         return total
 
     by_index = dict(zip(in_model, (v for v, _ in estimates)))

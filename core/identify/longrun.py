@@ -183,4 +183,3 @@ def local_power(residual: np.ndarray, lags: int) -> np.ndarray:
     power = np.ones_like(residual)
     power[:, live] = uniform_filter1d(residual[:, live] ** 2, size=window, axis=0, mode="nearest") / mean[live]
     return power
-
