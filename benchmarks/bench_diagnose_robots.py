@@ -159,7 +159,7 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
         out["error"] = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "no output"
         return out
     out.update(verdict=report["verdict"], gap=(report["gap"]["cv_before"], report["gap"]["cv_after"]),
-               named=[(e["kind"], e["coordinate"], {k: round(v["value"], 4) for k, v in e["coefficients"].items()},
+               named=[(e["kind"], e["coordinate"], {k: None if v["value"] is None else round(v["value"], 4) for k, v in e["coefficients"].items()},
                        e.get("known")) for e in report["effects"]],
                ambiguous=len(report["ambiguous"]), unsupported=len(report["unsupported"]))
     return out

@@ -10,7 +10,21 @@ if TYPE_CHECKING:
 
 
 def _value_text(entry: dict[str, Any]) -> str:
-    return ", ".join(f"{name} = {c['value']:.6g} +- {c['std']:.2g}" for name, c in entry["coefficients"].items())
+    """Each coefficient with its std; where some are not identifiable on their own (a changed
+    body on a mechanism of low mobility), the combinations the data determine, then what
+    they cannot."""
+    coefficients = entry["coefficients"]
+    absorbed = {name: c["absorbed_into"] for name, c in coefficients.items() if c["value"] is None}
+    parts = []
+    for name, c in coefficients.items():
+        if c["value"] is None:
+            continue
+        terms = "".join(f" {'-' if into[name] < 0 else '+'} {abs(into[name]):.4g} {other}"
+                        for other, into in absorbed.items() if into.get(name))
+        parts.append(f"{name}{terms} = {c['value']:.6g} +- {c['std']:.2g}")
+    if absorbed:
+        parts.append(f"not identifiable on their own here: {', '.join(absorbed)}")
+    return ", ".join(parts)
 
 
 VERDICTS = {
@@ -84,7 +98,8 @@ def _payload_text(effect: dict) -> str:
     """Where a changed body's added mass sits: its centre of mass in the body's axes (the
     first moments over the mass), when the added mass is positive."""
     c = effect["coefficients"]
-    if effect["kind"] != "body" or c["m"]["value"] <= 0:
+    if effect["kind"] != "body" or any(c[k]["value"] is None for k in ("m", "mx", "my", "mz")) \
+            or c["m"]["value"] <= 0:
         return ""
     m = c["m"]["value"]
     centre = ", ".join(f"{c[k]['value'] / m:.4g}" for k in ("mx", "my", "mz"))

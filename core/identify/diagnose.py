@@ -36,6 +36,7 @@ from baseparams.errors import InputError
 from baseparams.identify import derived
 from baseparams.identify.candidates import known_effect, known_values, library, parse_selection
 from baseparams.identify.given import Given
+from baseparams.identify.identifiable import Regrouping, regroup
 from baseparams.identify.derived import KINDS as DERIVED_KINDS
 from baseparams.identify.outofsample import (FOLDS, CrossValidation, blocks, cross_validate, held_out_gain,
                                              implausible, stability)
@@ -325,8 +326,9 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                              for j, c in enumerate(problem.coordinates)}
 
     by_index = dict(zip(in_model, estimates))
-    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i), "checks": checks.get(i, {}),
-                **_known_entry(problem, candidates[i])}
+    regrouped = _regroupings(model[rows], candidates, in_model, kept_named, y[rows], after.fit.weights)
+    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i, regrouped.get(i)),
+                "checks": checks.get(i, {}), **_known_entry(problem, candidates[i])}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added
                  if i in ambiguous_idx and i not in dropped]
@@ -1095,15 +1097,54 @@ def coefficient_names(kind: str) -> tuple[str, ...]:
     return effects[kind].item.coefficients if kind in effects else derived.COEFFICIENTS[kind]
 
 
-def _coefficient_map(cand: Candidate, values: np.ndarray, stds: np.ndarray) -> dict:
+def _coefficient_map(cand: Candidate, values: np.ndarray, stds: np.ndarray,
+                     regrouped: Regrouping | None = None) -> dict:
+    """{coefficient: {"value", "std"}}; with ``regrouped``, the kept ones are the identified
+    combinations and the others have value and std None and ``absorbed_into`` {kept:
+    coefficient} (empty: the rest of the model absorbs it), as ``identify`` writes them."""
     names = coefficient_names(cand.kind)
-    return {name: {"value": float(v), "std": float(s)} for name, v, s in zip(names, values, stds)}
+    if regrouped is None:
+        return {name: {"value": float(v), "std": float(s)} for name, v, s in zip(names, values, stds)}
+    out: dict = {}
+    for k, name in enumerate(names):
+        if k in regrouped.kept:
+            t = regrouped.kept.index(k)
+            out[name] = {"value": float(regrouped.values[t]),
+                         "std": float(np.sqrt(max(regrouped.covariance[t, t], 0.0)))}
+        else:
+            column = regrouped.into[:, regrouped.absorbed.index(k)]
+            out[name] = {"value": None, "std": None,
+                         "absorbed_into": {names[regrouped.kept[t]]: float(v) for t, v in enumerate(column) if v}}
+    return out
+
+
+def _regroupings(inertial: np.ndarray, candidates: list[Candidate], in_model: list[int], named: list[int],
+                 y: np.ndarray, weights: np.ndarray) -> dict[int, Regrouping]:
+    """The named changed bodies whose ten parameters the data do not each determine beside
+    the rest of the final model: their identifiable combinations (:mod:`.identifiable`)."""
+    bodies = [i for i in in_model if i in named and candidates[i].kind == "body"]
+    if not bodies:
+        return {}
+    blocks = [candidates[i].columns for i in in_model]
+    X = np.concatenate([inertial] + blocks, axis=-1)
+    fit = WeightedLinearModel(X, y).fit(weights, cov_type="hac")
+    n, f, p = X.shape
+    weighted = (X * fit.weights[None, :, None]).reshape(n * f, p)
+    ends = np.cumsum([inertial.shape[-1]] + [b.shape[-1] for b in blocks])
+    out = {}
+    for i in bodies:
+        lo, hi = ends[in_model.index(i)], ends[in_model.index(i) + 1]
+        found = regroup(np.delete(weighted, np.s_[lo:hi], axis=1), weighted[:, lo:hi], fit.coefficients[lo:hi],
+                        fit.covariance[lo:hi, lo:hi])
+        if found is not None:
+            out[i] = found
+    return out
 
 
 def _effect_entry(all_candidates: list[Candidate], values: np.ndarray, stds: np.ndarray, chosen: Selection,
-                  index: int) -> dict:
+                  index: int, regrouped: Regrouping | None = None) -> dict:
     cand = all_candidates[index]
-    coefficients_ = _coefficient_map(cand, values, stds)
+    coefficients_ = _coefficient_map(cand, values, stds, regrouped)
     single = len(coefficients_) == 1
     step = next(s for s in chosen.steps if s.chosen == index)
     test = step.tests[index]
