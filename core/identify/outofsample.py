@@ -26,7 +26,7 @@ from baseparams.identify.linear import LinearFit, WeightedLinearModel
 
 FOLDS = 5
 MARGIN = 10                 # samples dropped from the training rows beside a held-out block
-UNSTABLE = 1.0 / 3.0        # a coefficient spread (RMS over blocks / |pooled|) counted as real
+UNSTABLE = 1.0 / 3.0        # a spread (RMS over blocks of the force's change / the force) counted as real
 DELAY_LIMIT = 0.1           # s: a longer delay between positions and torques is not plausible
 
 
@@ -156,7 +156,7 @@ def block_coefficients(partial: np.ndarray, columns: np.ndarray, weights: np.nda
 @dataclass(frozen=True)
 class Stability:
     pvalue: float
-    spread: float               # RMS over blocks of |gamma_k - pooled| / |pooled|
+    spread: float               # RMS over blocks of |X (gamma_k - pooled)| / |X pooled| (X: the columns, weighted)
     blocks: int
     values: list                # per block (None where the effect barely acts)
 
@@ -178,8 +178,14 @@ def stability(partial: np.ndarray, columns: np.ndarray, weights: np.ndarray, fol
     q = float(sum((estimates[k] - pooled) @ Pk @ (estimates[k] - pooled) for Pk, k in zip(precisions, ok)))
     c = estimates.shape[1]
     pvalue = float(stats.chi2.sf(q, (len(ok) - 1) * c))
-    norm = float(np.linalg.norm(pooled))
-    spread = float(np.sqrt(np.mean([np.sum((estimates[k] - pooled) ** 2) for k in ok])) / norm) \
+    # the spread in the force the effect exerts over the whole recording (weighted), not in
+    # its coefficients: for one coefficient the same ratio; for several (a changed body's ten,
+    # in kg, kg m and kg m^2) a block's estimate along a direction the motion barely excites
+    # is not a change of the effect
+    n, f = columns.shape[:2]
+    exerted = (columns * weights[None, :, None]).reshape(n * f, c)
+    norm = float(np.linalg.norm(exerted @ pooled))
+    spread = float(np.sqrt(np.mean([np.sum((exerted @ (estimates[k] - pooled)) ** 2) for k in ok])) / norm) \
         if norm > 0 else np.inf
     return Stability(pvalue, spread, len(ok), values)
 
