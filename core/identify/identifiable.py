@@ -34,6 +34,9 @@ class Regrouping:
     into: np.ndarray
     values: np.ndarray
     covariance: np.ndarray
+    # (absorbed ones determined without the other named bodies, those bodies' indices): set
+    # by the caller that knows which columns are bodies
+    shared: tuple[tuple[int, ...], tuple[int, ...]] | None = None
 
 
 def regroup(others: np.ndarray, columns: np.ndarray, values: np.ndarray, covariance: np.ndarray
