@@ -15,6 +15,7 @@ import numpy as np
 from scipy.linalg import qr
 
 from baseparams.identify.derived import ROUNDING   # a column this much smaller than the largest is zero
+from baseparams.identify.selection import orthonormal_basis, project_out
 
 # a direction of the scaled columns below this fraction of the largest is not seen (the
 # fits' own rank tolerance, baseparams.identify.linear.RANK_TOL)
@@ -46,12 +47,7 @@ def regroup(others: np.ndarray, columns: np.ndarray, values: np.ndarray, covaria
     ``covariance`` (c, c) (any solution: the combinations do not depend on which); None when
     every coefficient is identified on its own."""
     c = columns.shape[1]
-    if others.shape[1]:
-        u, s, _ = np.linalg.svd(others, full_matrices=False)
-        u = u[:, s > TOLERANCE * max(s.max(initial=0.0), 1e-300)]
-        beyond = columns - u @ (u.T @ columns)
-    else:
-        beyond = columns
+    beyond = project_out(columns, orthonormal_basis(others, TOLERANCE))
     scale = np.linalg.norm(columns, axis=0)
     rounding = scale <= ROUNDING * max(scale.max(initial=0.0), 1e-300)     # a column of rounding: zero
     beyond = np.where(rounding[None, :], 0.0, beyond)
