@@ -214,3 +214,38 @@ def test_a_rigid_payload_beyond_the_tool_frames_is_named_once_with_its_mass_and_
     text = CliRunner().invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
                                      "--quiet"])
     assert "in wrist_3_link's axes" in text.stdout
+
+
+def test_diagnose_builds_long_recordings_chunk_by_chunk_like_identify(tmp_path, monkeypatch):
+    """diagnose's model columns, known forces (a known payload on one run, the torque of the
+    inertial parameters held as given) and candidates come out of the chunked build (bounded
+    memory: a Panda logged 120 s at 1 kHz held 3.6 GB before) as the whole recording's
+    columns evaluated at once and filtered: the real TX40 subset, two runs."""
+    from baseparams.identify import data as data_module
+    from baseparams.identify.diagnose import prepare
+    from baseparams.identify.model import design, evaluate, standard_parameters
+    from baseparams.identify.recording import read_recording
+    tx40 = Path(__file__).parent / "data" / "tx40"
+    text = (tx40 / "recording.toml").read_text().replace("pos_read_data.csv", str(tx40 / "pos_read_data.csv")) \
+        .replace("curr_data.csv", str(tx40 / "curr_data.csv"))
+    text = text.replace('window = [6, 9]\n', 'window = [6, 9]\n[runs.payload]\nbody = "link_6"\nmass = 1.5\n'
+                        'com = [0.01, 0.02, 0.05]\ninertia = [0.002, 0, 0, 0.002, 0, 0.001]\n', 1)
+    assert "[runs.payload]" in text
+    (tmp_path / "rec.toml").write_text(text)
+    mech = resolve(str(tx40 / "tx40_mdh_modified.urdf"))
+    monkeypatch.setattr(data_module, "CHUNK_ROWS", 700)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert data.payloads and data.motion.count > 3 * 700
+    given = standard_parameters(model)
+    chunked = prepare(model, data.motion, data.sample, ["viscous_friction:joint_2", "body:link_6"], data, given)
+    sample = evaluate(model, data.motion)                    # the whole recording at once
+    inertial = design(model, data.motion, [], sample)[0].matrix
+    bodies = data.reduce(inertial)
+    known = data.reduce(data.payload_force(inertial)) + bodies @ given
+    assert np.abs(data.reduce(data.payload_force(inertial))).max() > 1e-3 * np.abs(known).max()
+    np.testing.assert_allclose(chunked.bodies, bodies, rtol=0, atol=1e-10 * np.abs(bodies).max())
+    np.testing.assert_allclose(chunked.known, known, rtol=0, atol=1e-10 * np.abs(known).max())
+    whole = prepare(model, data.motion, sample, ["viscous_friction:joint_2"], None, given)
+    (friction,) = [c for c in chunked.candidates if c.kind == "viscous_friction"]
+    expected = data.reduce(whole.candidates[0].columns)
+    np.testing.assert_allclose(friction.columns, expected, rtol=0, atol=1e-10 * np.abs(expected).max())

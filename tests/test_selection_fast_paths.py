@@ -111,6 +111,23 @@ def test_zero_phase_skips_zero_columns_and_equals_sosfiltfilt():
     assert np.array_equal(zero_phase(sos, wide, rows), sosfiltfilt(sos, wide, axis=0)[rows])
 
 
+def test_zero_phase_in_batches_of_columns_is_the_same_filter(monkeypatch):
+    """The filter takes the columns a few at a time (bounded memory on long recordings):
+    runs of live columns, scattered ones and all of them give sosfiltfilt's numbers exactly."""
+    from baseparams.identify import data as data_module
+    sos = butter(4, 0.05, output="sos")
+    rng = np.random.default_rng(7)
+    x = rng.standard_normal((2000, 3, 7))
+    x[:, 0, 1:4] = 0.0                                    # live columns in runs and scattered
+    rows = slice(30, 2000 - 30, 9)
+    whole = sosfiltfilt(sos, x, axis=0)[rows]
+    for width in (1, 2, 5, 21):
+        monkeypatch.setattr(data_module, "FILTER_BATCH_BYTES", 8 * 2000 * width)
+        assert np.array_equal(zero_phase(sos, x, rows), whole)
+        dense = rng.standard_normal((2000, 4))
+        assert np.array_equal(zero_phase(sos, dense, rows), sosfiltfilt(sos, dense, axis=0)[rows])
+
+
 def test_complete_fit_grown_from_a_known_one_is_the_direct_fit():
     """_complete from a known fit whose effects were partly taken out, replaced (a new shape)
     and reordered, with new ones added, equals the direct fit: coefficients in the asked

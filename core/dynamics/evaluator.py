@@ -466,7 +466,10 @@ class Evaluator:
         for i, leader, ratio, _ in self._couplings():
             qd[i], qdd[i] = ratio * qd[leader], ratio * qdd[leader]
             r[i] = [ratio * v for v in r[leader]]
-        return Sample(q, qd, qdd, self.kin.forward(q, qd), r, self.kin)
+        # float64 batches: the body states when first read (the generated regressor does not
+        # read them; at every sample of a long recording they are most of its memory)
+        states = None if isinstance(self.backend, Float64) else self.kin.forward(q, qd)
+        return Sample(q, qd, qdd, states, r, self.kin)
 
     def _couplings(self) -> list[tuple[int, int, Any, Any]]:
         """(coordinate index, leader index, ratio, offset) in this backend, per coupling."""

@@ -63,6 +63,8 @@ NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 # filter's transient at a chunk's border has decayed below 1e-12 where rows are kept.
 CHUNK_ROWS = 20_000
 CHUNK_PAD = 4
+# Bytes of columns given to the zero-phase filter at once (it copies what it is given 4 times).
+FILTER_BATCH_BYTES = 32 << 20
 
 
 def zero_phase(sos: np.ndarray, x: np.ndarray, rows: slice | np.ndarray = slice(None),
@@ -72,15 +74,23 @@ def zero_phase(sos: np.ndarray, x: np.ndarray, rows: slice | np.ndarray = slice(
     to zero). ``live``: which columns of x (flattened after the rows) are not zero, when
     known. Why: on a serial chain 40 % of the inertial columns are zero (a body moves no
     joint before it), and an effect acts on one coordinate of f; the zero columns are only
-    placed at the kept rows."""
+    placed at the kept rows. The columns go through the filter FILTER_BATCH_BYTES at a time
+    (each column is filtered on its own, so the result is the same): sosfiltfilt holds four
+    copies of what it is given, 2.4 GB for a Panda's inertial columns over 120 s at 1 kHz."""
     flat = x.reshape(len(x), -1)
     live = live_columns(flat) if live is None else live
-    if live.all():
-        return sosfiltfilt(sos, x, axis=0)[rows]
     kept = np.arange(len(x))[rows]
     out = np.zeros((len(kept), flat.shape[1]))
-    if live.any():
-        out[:, live] = sosfiltfilt(sos, flat[:, live], axis=0)[kept]
+    columns = np.flatnonzero(live)
+    width = max(1, FILTER_BATCH_BYTES // (8 * max(1, len(x))))
+    for first in range(0, len(columns), width):
+        batch = columns[first:first + width]
+        if len(batch) == flat.shape[1]:
+            out[:] = sosfiltfilt(sos, flat, axis=0)[kept]
+        elif len(batch) == batch[-1] - batch[0] + 1:          # a run of columns: a view, no copy
+            out[:, batch[0]:batch[-1] + 1] = sosfiltfilt(sos, flat[:, batch[0]:batch[-1] + 1], axis=0)[kept]
+        else:
+            out[:, batch] = sosfiltfilt(sos, flat[:, batch], axis=0)[kept]
     return out.reshape((len(kept),) + x.shape[1:])
 
 

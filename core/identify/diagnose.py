@@ -136,22 +136,18 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     pairs = parse_selection(mechanism, selection, given is not None) if selection else None
     known_specs = [e for e in mechanism.effects if known_effect(e)]
     fitted_specs = [e for e in mechanism.effects if not known_effect(e)]
-    inertial, fitted = design(mechanism, motion, fitted_specs, sample)
-    known = effects_design(mechanism, sample, motion.count, known_specs).matrix @ \
-        effect_values(mechanism, known_specs) if known_specs else np.zeros(inertial.matrix.shape[:2])
     t = np.asarray(motion.t, float)
     qd = np.asarray(motion.qd, float)
     reduce = None
     correlation = None
     if data is not None:
         correlation = data.noise_correlation() if data.reduced else None
-        if data.payloads:
-            known = known + data.payload_force(inertial.matrix)
+        inertial, fitted, known = _reduced_model(mechanism, data, fitted_specs, known_specs, sample)
         reduce, t = data.reduce, data.t
         qd = qd[data.kept_rows()]
-        inertial = Design(inertial.names, data.reduce(inertial.matrix))
-        fitted = Design(fitted.names, data.reduce(fitted.matrix))
-        known = data.reduce(known)
+    else:
+        inertial, fitted = design(mechanism, motion, fitted_specs, sample)
+        known = _known_force(mechanism, sample, motion.count, known_specs)
     registered = None if pairs is None else [(k, c) for k, c in pairs if k not in DERIVED_KINDS]
     candidates, notes = library(mechanism, sample, motion.count, registered, reduce) \
         if registered is None or registered else ([], [])
@@ -174,6 +170,38 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
     return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
                    None, None, wanted, correlation)
+
+
+def _known_force(mechanism: Mechanism, sample: Sample, n: int, known_specs: Sequence[EffectSpec]) -> np.ndarray:
+    """The force (n, f) of the mechanism's effects whose every value is given."""
+    if not known_specs:
+        return np.zeros((n, len(independent_names(mechanism))))
+    return effects_design(mechanism, sample, n, known_specs).matrix @ effect_values(mechanism, known_specs)
+
+
+def _reduced_model(mechanism: Mechanism, data: MeasuredData, fitted_specs: Sequence[EffectSpec],
+                   known_specs: Sequence[EffectSpec], sample: Sample) -> tuple[Design, Design, np.ndarray]:
+    """(inertial, fitted effects, known force) at the fit's rows, made as ``identify`` makes
+    them (:meth:`MeasuredData.reduced_columns`: chunk by chunk on long data). Why: the columns
+    at every model row are 10 x bodies x f numbers a sample, 0.8 GB for a Panda logged 120 s
+    at 1 kHz, which a whole-recording evaluation held at once. ``sample``: the kinematics at
+    every model row, used where the recording goes in one piece (a chunk evaluates its own)."""
+    p = len(mechanism.parameters)
+    names: list[str] = []
+
+    def build(motion: Motion, _: Sample | None, run: int) -> np.ndarray:
+        part = sample if motion.count == data.motion.count else evaluate(mechanism, motion)
+        inertial, fitted = design(mechanism, motion, fitted_specs, part)
+        names[:] = fitted.names
+        force = _known_force(mechanism, part, motion.count, known_specs)
+        payload = data.payload_of_run(run)
+        if payload is not None:
+            force = force + inertial.matrix[:, :, :len(payload)] @ payload
+        return np.concatenate([inertial.matrix, fitted.matrix, force[:, :, None]], axis=-1)
+
+    full = data.reduced_columns(build)
+    inertial, fitted, known = (np.ascontiguousarray(a) for a in (full[:, :, :p], full[:, :, p:-1], full[:, :, -1]))
+    return Design(tuple(mechanism.parameters), inertial), Design(tuple(names), fitted), known
 
 
 # ----- the result ----------------------------------------------------------------------------
