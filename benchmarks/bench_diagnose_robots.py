@@ -13,12 +13,15 @@ result (``--params``). Printed per run: exit code, CPU seconds of the command, v
 the named effects (a correction of a known effect with the model's value) and the truth.
 
     pip install example-robot-data pin
-    python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1]
+    python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1] [--seconds 30]
+
+Each diagnose prints its CPU seconds and peak resident memory (a long log: ``--robots panda
+--scenarios friction --seconds 120``).
 """
 
 import argparse
 import json
-import resource
+import os
 import subprocess
 import sys
 import tempfile
@@ -123,13 +126,19 @@ def with_payload(model) -> tuple[object, dict]:
     return loaded, {"joint": model.names[last], "mass": round(float(mass), 4), "centre": centre.tolist()}
 
 
-def command(args: list[str]) -> tuple[subprocess.CompletedProcess, float, float]:
-    """Run ``baseparams ARGS``: the process, its CPU seconds and its wall seconds."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+def command(args: list[str]) -> tuple[subprocess.CompletedProcess, float, float, float]:
+    """Run ``baseparams ARGS``: the process, its CPU seconds, its wall seconds and its peak
+    resident memory (MB; the kernel's count for this one child, ``os.wait4``)."""
     start = time.time()
-    done = subprocess.run(["baseparams", *args], capture_output=True, text=True)
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return done, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, time.time() - start
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        process = subprocess.Popen(["baseparams", *args], stdout=out, stderr=err, text=True)
+        _, status, usage = os.wait4(process.pid, 0)
+        wall = time.time() - start
+        out.seek(0)
+        err.seek(0)
+        done = subprocess.CompletedProcess(process.args, os.waitstatus_to_exitcode(status), out.read(), err.read())
+    process.returncode = done.returncode                      # reaped by wait4: Popen must not wait again
+    return done, usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024
 
 
 def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
@@ -139,7 +148,7 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
     cpu_before = 0.0
     if scenario == "payload":
         friction = record(model, seed + 1000, folder, "empty", "friction")
-        fitted, cpu_before, _ = command(["identify", str(urdf), str(folder / "empty.toml"), "--effect",
+        fitted, cpu_before, _, _ = command(["identify", str(urdf), str(folder / "empty.toml"), "--effect",
                                          "viscous_friction:*", "--effect", "coulomb_friction:*", "--format", "json",
                                          "-o", str(folder / "empty.json"), "--quiet"])
         if fitted.returncode != 0:
@@ -150,9 +159,10 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
         extra = ["--params", str(folder / "empty.json")]
     else:
         truth = record(model, seed, folder, "rec", scenario)
-    done, cpu, wall = command(["diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json", "--quiet",
+    done, cpu, wall, memory = command(["diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json", "--quiet",
                                *extra])
-    out = {"exit": done.returncode, "cpu": cpu, "wall": wall, "truth": truth, "identify_cpu": cpu_before}
+    out = {"exit": done.returncode, "cpu": cpu, "wall": wall, "memory": memory, "truth": truth,
+           "identify_cpu": cpu_before}
     try:
         report = json.loads(done.stdout)
     except json.JSONDecodeError:
@@ -166,12 +176,16 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
 
 
 def main() -> None:
+    global SECONDS
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=list(DEFAULT), choices=list(ROBOTS))
     parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power", "payload"],
                         choices=["none", "friction", "power", "payload"])
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seconds", type=float, default=SECONDS,
+                        help="length of each simulated log (s, at 1 kHz): memory and time on long recordings")
     args = parser.parse_args()
+    SECONDS = args.seconds
     files = {robot_id(p): p for p in example_robot_data()}
     if not files:
         sys.exit("example-robot-data is not installed: pip install example-robot-data pin")
@@ -184,7 +198,8 @@ def main() -> None:
                 if "error" in r:
                     print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s: {r['error']}", flush=True)
                     continue
-                print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s ({r['wall']:.1f} s): "
+                print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s ({r['wall']:.1f} s, "
+                      f"peak {r['memory']:.0f} MB): "
                       f"{r['verdict']}, gap {r['gap'][0]:.3f} -> {r['gap'][1]:.3f}, named {len(r['named'])}, "
                       f"ambiguous {r['ambiguous']}, unsupported {r['unsupported']}", flush=True)
                 for kind, coordinate, values, known in r["named"]:
