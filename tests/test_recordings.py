@@ -608,3 +608,37 @@ def test_a_joint_held_still_does_not_set_the_filter(tmp_path, still):
     assert bandwidth(q, 1 / RATE) == moving
     # alone, a still coordinate keeps the old answer: 0 when constant, its noise's band else
     assert bandwidth(q[:, 2:], 1 / RATE) == (0.0 if still == "constant" else pytest.approx(0.5 * RATE, rel=0.05))
+
+
+def test_a_logs_columns_no_channel_uses_are_not_read(tmp_path, monkeypatch):
+    """A robot's log has many columns a description does not use, some of them text (a UR's
+    RTDE log: robot mode, safety status): they are not read, so their content is no error
+    and costs no memory; the columns used come back exactly, parsed in batches of rows; a
+    bad field in a used column still names its row and column, in whichever batch."""
+    from baseparams.identify import data as data_module
+    mech = parse_mechanism(_chain(11))
+    phi = random_physical_inertia(mech, np.random.default_rng(11))
+    t = np.arange(0, 4, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    table = np.column_stack([t, *motion.q.T, *tau.T, np.arange(len(t))])
+    lines = ["t,a,b,c,x,y,z,counter,robot_mode,comment"]
+    lines += [",".join(f"{v:.17g}" for v in row) + ",RUNNING,ok; 1_0 inf" for row in table]
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    whole, _ = read_recording(tmp_path / "rec.toml", mech)
+    monkeypatch.setattr(data_module, "PARSE_BATCH_ROWS", 7)
+    batched, model = read_recording(tmp_path / "rec.toml", mech)
+    assert np.array_equal(batched.motion.q, whole.motion.q) and np.array_equal(batched.tau, whole.tau)
+    # the columns read are the columns written, to the last bit (before any filtering)
+    header, values, rows = data_module.read_columns("log.csv", (tmp_path / "log.csv").read_text(),
+                                                    wanted={"t", "a", "z"})
+    assert header[-1] == "comment" and set(values) == {"t", "a", "z"} and rows[:2] == [2, 3]
+    assert np.array_equal(values["a"], motion.q[:, 0]) and np.array_equal(values["z"], tau[:, 2])
+    result = identify(model, batched, base=_base(mech))
+    _check_base(result, _base(mech), phi, 1e-3)
+    # a bad field in a used column, in a later batch: its row and column
+    lines[1000] = lines[1000].replace(lines[1000].split(",")[5], "1_0", 1)
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError) as error:
+        read_recording(tmp_path / "rec.toml", mech)
+    assert error.value.key == "row 1001, column y" and "not a number" in str(error.value)

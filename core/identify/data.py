@@ -17,7 +17,8 @@ import io
 import math
 import os
 import re
-from collections.abc import Callable, Iterator
+from operator import itemgetter
+from collections.abc import Callable, Collection, Iterator
 from typing import Any
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,10 +47,12 @@ BANDWIDTH_POWER = 0.9999
 # beyond its noise (white noise has half its power above 0.5): its bandwidth is the noise's.
 STILL_BAND = 0.25
 MAX_FILE_BYTES = 2_000_000_000
-# Reading a CSV takes about this many bytes of memory per byte of text (the text, the rows'
-# field strings, the float array; measured ~16 on a 70 MB file): a file is refused before it
-# is parsed when that exceeds BASEPARAMS_MAX_MEMORY (default 2 GiB, so about 70 MB of text).
-PARSE_BYTES_PER_BYTE = 30
+# Reading a CSV takes at most about this many bytes of memory per byte of text (the bytes and
+# the text, a batch of the used fields' strings, the used columns as floats: measured 2.9 on a
+# 147 MB log of 101 columns and 4.0 on a 116 MB one of 15, reading and filtering included): a
+# file is refused before it is parsed when that exceeds BASEPARAMS_MAX_MEMORY (default 2 GiB,
+# so about 350 MB of text). It was 30 while every field of every row was kept as a string.
+PARSE_BYTES_PER_BYTE = 6
 READ_CHUNK = 1 << 20
 # |value| above this is refused as out of range: the fit squares and sums the columns, and
 # 1e150 squared is still finite where 1e300 is not.
@@ -57,6 +60,12 @@ MAX_MAGNITUDE = 1e150
 # A number as the project's CSV takes it: ASCII digits, one optional sign, point and exponent
 # (Python's float() also reads 1_0 as 10 and other scripts' digits).
 NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+# The characters of NUMBERs, spaces (and NaN's, where values may be missing): a batch of fields
+# made of these alone that float() takes is a batch of NUMBERs between spaces (float takes no
+# other string of them), checked at once; rows are parsed per batch (bounded memory for the fields' strings).
+NUMBER_CHARACTERS = b"0123456789+-.eE \t"
+MISSING_CHARACTERS = NUMBER_CHARACTERS + b"nNaA"
+PARSE_BATCH_ROWS = 1 << 13
 # Model rows evaluated at once when the model's columns are built for a fit (bounded memory
 # on long recordings), and how far beyond its kept rows a chunk reaches: this many times the
 # rows a segment drops at its ends (each 3 periods of the cut-off), so the zero-phase
@@ -324,16 +333,17 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     path = str(path)
     text = _read_text(path)
     coordinates = independent_names(mechanism)
-    header, rows = _parse_rows(path, text)
-    columns, notes = _columns(path, header, coordinates)
-    values = _numbers(path, header, rows)
-    t = values[:, columns["t"]]
+    found: list = []
+    header, values, rows = read_columns(path, text, wanted=layout_names(coordinates),
+                                        on_header=lambda header: found.extend(_columns(path, header, coordinates)))
+    columns, notes = found
+    t = values["t"]
     _check_times(path, t, rows)
     if len(t) < MIN_SAMPLES:
         raise InputError(f"{len(t)} samples; at least {MIN_SAMPLES} are needed", file=path)
 
     def block(prefix: str) -> np.ndarray:
-        return np.stack([values[:, columns[f"{prefix}_{c}"]] for c in coordinates], axis=1)
+        return np.stack([values[f"{prefix}_{c}"] for c in coordinates], axis=1)
 
     q, tau = block("q"), block("tau")
     given = {kind: all(f"{kind}_{c}" in columns for c in coordinates) for kind in ("qd", "qdd")}
@@ -362,7 +372,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     motion = Motion(t, q, qd, qdd)
     data = MeasuredData(motion, tau, coordinates, path, tuple(notes), estimated)
     if check_kinematics:
-        data.sample = kinematics(mechanism, data, [line for line, _ in rows])
+        data.sample = kinematics(mechanism, data, rows)
     return data
 
 
@@ -479,34 +489,54 @@ def _too_large(size: int, budget: int, more: bool = False) -> str:
 DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " "}
 
 
-def _parse_rows(path: str, text: str, delimiter: str = ",", comment: str | None = None
-                ) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """The header and the data rows with their line numbers; blank lines (and lines starting
-    with ``comment``) skipped. ``delimiter``: ",", ";", "\t", " " (any run of spaces and
-    tabs: loggers that align columns) or "auto" (the header's first of these)."""
+def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None = None,
+                 wanted: Collection[str] | None = None, missing: bool = False,
+                 on_header: Callable[[list[str]], None] | None = None
+                 ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+    """(header, values, lines) of a delimited text: the header's names, the columns in
+    ``wanted`` (None: all) that the header has as float64 by name, and each data row's line.
+    Blank lines (and lines starting with ``comment``) are skipped. ``delimiter``: ",", ";",
+    "\t", " " (any run of spaces and tabs: loggers that align columns) or "auto" (the
+    header's first of these). A field of a wanted column that is not a finite number names
+    its row and column (``missing``: an empty or NaN field is NaN, for the caller to leave
+    out); the other columns are not read. ``on_header``: checks the header before any row.
+    Why columns by name, row by row: a robot's log has many columns a description does not use
+    (a UR's RTDE log 100 and more, some of them text), and its rows kept as strings took 30
+    times the file's size in memory."""
     if delimiter == "auto":
-        head = next((line for line in text.splitlines()
+        head = next((line for line in _lines(text)
                      if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
         delimiter = next((d for d in (",", ";", "\t") if d in head), " " if " " in head.strip() else ",")
     if delimiter == " ":
         reader: Any = _Whitespace(text)
-    else:
-        reader = csv.reader(io.StringIO(text, newline=""), strict=True, delimiter=delimiter)
-    header, rows = None, []
+    else:                                  # line by line: a StringIO holds 4 bytes a character
+        reader = csv.reader(_lines(text), strict=True, delimiter=delimiter)
+    header: list[str] | None = None
+    header_line, lines = 0, []
+    used: list[int] = []
+    pending: list[list[str]] = []              # the rows not yet converted, whole
+    done: list[list[np.ndarray]] = []
     try:
         for fields in reader:
-            if not fields or all(not f.strip() for f in fields):
-                continue
+            if not fields or (not fields[0].strip() and not "".join(fields).strip()):
+                continue                                          # a blank line
             if comment and fields[0].lstrip().startswith(comment):
                 continue
             if header is None:
                 header = [f.strip() for f in fields]
                 header_line = reader.line_num
+                if on_header is not None:
+                    on_header(header)
+                used = [k for k, name in enumerate(header) if wanted is None or name in wanted]
+                done = [[] for _ in used]
                 continue
             if len(fields) != len(header):
                 raise InputError(f"{len(fields)} fields, the header has {len(header)}: not a CSV file "
                                  "with this header", file=path, key=f"row {reader.line_num}")
-            rows.append((reader.line_num, fields))
+            lines.append(reader.line_num)
+            pending.append(fields)
+            if len(pending) >= PARSE_BATCH_ROWS:
+                _convert(path, header, used, pending, done, lines, missing)
     except csv.Error as exc:
         raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
     if header is None:
@@ -515,21 +545,92 @@ def _parse_rows(path: str, text: str, delimiter: str = ",", comment: str | None 
         raise InputError(f"the header {','.join(header)!r} has one column: not a comma-separated "
                          "file with columns t, q_<coordinate>, tau_<coordinate>", file=path,
                          key=f"row {header_line}")
-    if not rows:
+    if not lines:
         raise InputError("a header but no samples", file=path)
-    return header, rows
+    _convert(path, header, used, pending, done, lines, missing)
+    values = {}
+    for k, parts in zip(used, done):
+        values.setdefault(header[k], np.concatenate(parts) if parts else np.zeros(0))
+    return header, values, lines
+
+
+def _convert(path: str, header: list[str], used: list[int], pending: list[list[str]],
+             done: list[list[np.ndarray]], lines: list[int], missing: bool) -> None:
+    """The used fields of the pending rows as numbers (appended to ``done``; ``pending``
+    emptied): a column's batch is checked against NUMBER at once and converted by ``float``; a
+    batch that fails is gone through field by field to name the first bad field's row and column."""
+    if not pending or not used:
+        pending.clear()
+        return
+    first = len(lines) - len(pending)
+    rows = map(itemgetter(*used), pending) if len(used) > 1 else ((row[used[0]],) for row in pending)
+    allowed = MISSING_CHARACTERS if missing else NUMBER_CHARACTERS
+    for k, fields, parts in zip(used, zip(*rows), done):
+        values = None
+        try:                                       # float() takes the spaces around a field
+            if not "".join(fields).encode("ascii").translate(None, allowed):
+                values = np.array(list(map(float, fields)) if not (missing and "" in fields) else
+                                  [float(f) if f else math.nan for f in fields])
+        except (UnicodeEncodeError, ValueError):   # not ASCII, or a field float() does not take
+            values = None
+        if values is not None and not np.all(np.abs(values[~np.isnan(values)]) <= MAX_MAGNITUDE):
+            values = None
+        if values is None:
+            values = _checked(path, header[k], [f.strip() for f in fields], lines[first:], missing)
+        parts.append(values)
+    pending.clear()
+
+
+def _checked(path: str, name: str, fields: list[str], lines: list[int], missing: bool) -> np.ndarray:
+    """Stripped fields as float64, field by field; the first that is not a finite number in
+    range is an InputError naming its row and column."""
+    out = np.empty(len(fields))
+    match = NUMBER.fullmatch
+    for i, (line, stripped) in enumerate(zip(lines, fields)):
+        if missing and (not stripped or stripped.lower().lstrip("+-") == "nan"):
+            out[i] = np.nan
+            continue
+        value = float(stripped) if match(stripped) else None
+        if value is None or not abs(value) <= MAX_MAGNITUDE:
+            shown = stripped if len(stripped) <= 40 else stripped[:37] + "..."
+            if value is not None:
+                reason = "is not finite" if not math.isfinite(value) else \
+                    f"is out of range (|value| > {MAX_MAGNITUDE:g})"
+            elif stripped.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                reason = "is not finite"
+            else:
+                reason = "is not a number (ASCII digits, sign, point and exponent only)"
+            raise InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {name}")
+        out[i] = value
+    return out
+
+
+def _lines(text: str) -> Iterator[str]:
+    """The text's lines with their ends, one at a time (no list of them all); lines end at
+    "\n" ("\r\n" included), or at "\r" in a text that has no "\n"."""
+    start, end_of_line = 0, "\n" if "\n" in text or "\r" not in text else "\r"
+    while start < len(text):
+        end = text.find(end_of_line, start)
+        end = len(text) if end < 0 else end + 1
+        yield text[start:end]
+        start = end
 
 
 class _Whitespace:
     """Rows split at runs of spaces and tabs, with csv.reader's ``line_num``."""
 
     def __init__(self, text: str):
-        self.lines = text.splitlines()
+        self.text = text
         self.line_num = 0
 
     def __iter__(self) -> Iterator[list[str]]:
-        for self.line_num, line in enumerate(self.lines, start=1):
+        for self.line_num, line in enumerate(_lines(self.text), start=1):
             yield line.split()
+
+
+def layout_names(coordinates: tuple[str, ...]) -> set[str]:
+    """The column names of the project's CSV layout for these coordinates."""
+    return {"t"} | {f"{kind}_{c}" for c in coordinates for kind in ("q", "qd", "qdd", "tau")}
 
 
 def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tuple[dict[str, int], list[str]]:
@@ -543,7 +644,7 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
             raise InputError(f"column {name!r} appears twice (columns {seen[name] + 1} and {k + 1})",
                              file=path, key="header")
         seen[name] = k
-    known = {"t"} | {f"{kind}_{c}" for c in coordinates for kind in ("q", "qd", "qdd", "tau")}
+    known = layout_names(coordinates)
     required = ["t"] + [f"{kind}_{c}" for c in coordinates for kind in ("q", "tau")]
     missing = [name for name in required if name not in seen]
     if missing:
@@ -557,42 +658,15 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
     return {name: k for name, k in seen.items() if name in known}, notes
 
 
-def _numbers(path: str, header: list[str], rows: list[tuple[int, list[str]]], missing: bool = False
-             ) -> np.ndarray:
-    """All fields as float64; a field that is not a finite number names its row and column.
-    ``missing``: an empty or NaN field is a missing value (NaN), for the caller to leave out."""
-    out = np.empty((len(rows), len(header)))
-    match = NUMBER.fullmatch
-    for i, (line, fields) in enumerate(rows):
-        for k, text in enumerate(fields):
-            stripped = text.strip()
-            if missing and (not stripped or stripped.lower().lstrip("+-") == "nan"):
-                out[i, k] = np.nan
-                continue
-            value = float(stripped) if match(stripped) else None
-            if value is None or not abs(value) <= MAX_MAGNITUDE:
-                shown = stripped if len(stripped) <= 40 else stripped[:37] + "..."
-                if value is not None:
-                    reason = "is not finite" if not math.isfinite(value) else \
-                        f"is out of range (|value| > {MAX_MAGNITUDE:g})"
-                elif stripped.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-                    reason = "is not finite"
-                else:
-                    reason = "is not a number (ASCII digits, sign, point and exponent only)"
-                raise InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {header[k]}")
-            out[i, k] = value
-    return out
-
-
-def _check_times(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]]) -> None:
+def _check_times(path: str, t: np.ndarray, rows: list[int]) -> None:
     bad = np.nonzero(np.diff(t) <= 0)[0]
     if bad.size:
         k = int(bad[0]) + 1
         raise InputError(f"t = {t[k]:.17g} does not increase (previous row: t = {t[k - 1]:.17g})",
-                         file=path, key=f"row {rows[k][0]}, column t")
+                         file=path, key=f"row {rows[k]}, column t")
 
 
-def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], estimated: tuple[str, ...]
+def _uniform_step(path: str, t: np.ndarray, rows: list[int], estimated: tuple[str, ...]
                   ) -> float:
     """The sampling step, checked uniform (Savitzky-Golay assumes it)."""
     steps = np.diff(t)
@@ -604,7 +678,7 @@ def _uniform_step(path: str, t: np.ndarray, rows: list[tuple[int, list[str]]], e
                          f"{' and '.join(estimated)} can only be estimated from uniformly sampled data "
                          f"(Savitzky-Golay); resample, or give the columns "
                          f"{', '.join(kind + '_<coordinate>' for kind in estimated)}",
-                         file=path, key=f"row {rows[k][0]}, column t")
+                         file=path, key=f"row {rows[k]}, column t")
     return step
 
 

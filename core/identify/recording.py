@@ -36,8 +36,8 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
-from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment, _numbers,
-                                      _parse_rows, _read_text, bandwidth, concatenate, kinematics)
+from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment,
+                                      _read_text, read_columns, bandwidth, concatenate, kinematics)
 from baseparams.identify.model import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
 from baseparams.model.builder import MechanismBuilder
@@ -330,13 +330,16 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         raise InputError("give file (one log) or files (alias = log, read side by side)", file=path, key=key)
     files = {None: run["file"]} if "file" in run else dict(run["files"])
     delimiter = log_format(description)
-    tables = {alias: _table(str(folder / name), *delimiter) for alias, name in files.items()}
-    lengths = {alias: len(values) for alias, (_, values, _) in tables.items()}
+    head = description.data.get("recording", {})
+    wanted = {c.column for chans in description.channels.values() for c in chans}
+    if "time" in head:
+        wanted.add(str(head["time"]).rpartition(":")[2])
+    tables = {alias: _table(str(folder / name), *delimiter, wanted=wanted) for alias, name in files.items()}
+    lengths = {alias: len(rows) for alias, (_, _, rows) in tables.items()}
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
         raise InputError(f"the files of one run must have the same rows ({shown})", file=path, key=key)
     name = run.get("name", str(files[next(iter(files))]))
-    head = description.data.get("recording", {})
     t, t_file = _times(head, tables, files, path)
     rows = next(iter(tables.values()))[2]
     if "window" in run:
@@ -346,7 +349,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
             raise InputError(f"{int(inside.sum())} samples between {start:g} and {end:g} s", file=path,
                              key=f"{key}.window")
         t, rows = t[inside], [line for line, keep in zip(rows, inside) if keep]
-        tables = {alias: (header, table[inside], rows) for alias, (header, table, _) in tables.items()}
+        tables = {alias: (header, {c: v[inside] for c, v in table.items()}, rows)
+                  for alias, (header, table, _) in tables.items()}
 
     def values(channel: Channel) -> np.ndarray:
         alias = channel.file if channel.file is not None else (None if None in tables else
@@ -359,7 +363,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
             raise InputError(f"no column {channel.column!r} (columns: {', '.join(header)})",
                              file=str(folder / files[alias]), key="header")
         with np.errstate(all="ignore"):
-            out = channel.scale * table[:, header.index(channel.column)] + channel.offset
+            out = channel.scale * table[channel.column] + channel.offset
         if not np.all(np.abs(out[~np.isnan(out)]) <= MAX_MAGNITUDE):
             raise InputError(f"scaled by {channel.scale:g} (and shifted by {channel.offset:g}) the column leaves "
                              f"the range |value| <= {MAX_MAGNITUDE:g}", file=path, key=channel.key)
@@ -442,10 +446,11 @@ def log_format(description: Description) -> tuple[str, str | None]:
     return DELIMITERS.get(delimiter, delimiter), comment
 
 
-def _table(path: str, delimiter: str = "auto", comment: str | None = None
-           ) -> tuple[list[str], np.ndarray, list[int]]:
-    header, rows = _parse_rows(path, _read_text(path), delimiter, comment)
-    return header, _numbers(path, header, rows, missing=True), [line for line, _ in rows]
+def _table(path: str, delimiter: str = "auto", comment: str | None = None, wanted: set[str] | None = None
+           ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+    """(header, the ``wanted`` columns by name, each row's line) of one log: the columns no
+    channel uses are not read (a text column there is no error)."""
+    return read_columns(path, _read_text(path), delimiter, comment, wanted, missing=True)
 
 
 def _only(tables: dict, channel: Channel, path: str) -> str:
@@ -457,7 +462,7 @@ def _only(tables: dict, channel: Channel, path: str) -> str:
 
 
 def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray, str]:
-    count = len(next(iter(tables.values()))[1])
+    count = len(next(iter(tables.values()))[2])
     if "time" not in head:
         step = 1 / _number(head["rate"], path, "recording.rate") if "rate" in head else \
             _number(head["step"], path, "recording.step")
@@ -469,7 +474,7 @@ def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray
         raise InputError(f"time column {head['time']!r} found in {len(owners)} files of the run",
                          file=path, key="recording.time")
     header, table, rows = tables[owners[0]]
-    t = table[:, header.index(column)]
+    t = table[column]
     if np.isnan(t).any():                    # a missing time stamp: no sample can be placed
         raise InputError("time is not finite (an empty or NaN field)", file=str(files[owners[0]]),
                          key=f"row {rows[int(np.nonzero(np.isnan(t))[0][0])]}, column {column}")
