@@ -124,3 +124,22 @@ def test_bad_descriptions_name_the_key(tmp_path, case):
     result = CliRunner().invoke(main, ["identify", "pendulum", str(tmp_path / "r.toml"), "--solver", "dp"])
     _one_error_line(result, key, reason)
     assert (tmp_path / "d.csv").read_bytes() == before
+
+
+def test_the_first_bad_field_is_named_by_row_then_column_in_any_batch(monkeypatch):
+    """Fields are converted a batch of rows and a column at a time; the error still names the
+    first bad field in the file's order (row, then column), and a row with the wrong number of
+    fields after it comes first, as it did when every row was read before any number."""
+    from baseparams.errors import InputError
+    from baseparams.identify import data as data_module
+    text = "t,a,b\n" + "".join(f"{k},{k},{k}\n" for k in range(20))
+    rows = text.splitlines()
+    rows[9], rows[6] = "8,x,8", "5,5,y"                     # b on line 7 before a on line 10
+    for batch in (1, 4, 1000):
+        monkeypatch.setattr(data_module, "PARSE_BATCH_ROWS", batch)
+        with pytest.raises(InputError) as error:
+            data_module.read_columns("f.csv", "\n".join(rows) + "\n")
+        assert error.value.key == "row 7, column b", (batch, error.value.key)
+        with pytest.raises(InputError) as error:
+            data_module.read_columns("f.csv", "\n".join(rows + ["1,2"]) + "\n")
+        assert error.value.key == "row 22" and "2 fields" in str(error.value)

@@ -334,7 +334,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     text = _read_text(path)
     coordinates = independent_names(mechanism)
     found: list = []
-    header, values, rows = read_columns(path, text, wanted=layout_names(coordinates),
+    header, values, rows = read_columns(path, text,            # every field checked (docs/design.md)
                                         on_header=lambda header: found.extend(_columns(path, header, coordinates)))
     columns, notes = found
     t = values["t"]
@@ -499,8 +499,9 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     "\t", " " (any run of spaces and tabs: loggers that align columns) or "auto" (the
     header's first of these). A field of a wanted column that is not a finite number names
     its row and column (``missing``: an empty or NaN field is NaN, for the caller to leave
-    out); the other columns are not read. ``on_header``: checks the header before any row.
-    Why columns by name, row by row: a robot's log has many columns a description does not use
+    out); the other columns are not read. ``on_header``: checks the header once the rows'
+    structure is known (the errors come in the order: a row's field count, the header, the
+    first bad number, whichever batch holds it). Why columns by name, row by row: a robot's log has many columns a description does not use
     (a UR's RTDE log 100 and more, some of them text), and its rows kept as strings took 30
     times the file's size in memory."""
     if delimiter == "auto":
@@ -516,6 +517,7 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     used: list[int] = []
     pending: list[list[str]] = []              # the rows not yet converted, whole
     done: list[list[np.ndarray]] = []
+    bad: list[InputError] = []                 # the first bad number, raised after the header's checks
     try:
         for fields in reader:
             if not fields or (not fields[0].strip() and not "".join(fields).strip()):
@@ -525,8 +527,6 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
             if header is None:
                 header = [f.strip() for f in fields]
                 header_line = reader.line_num
-                if on_header is not None:
-                    on_header(header)
                 used = [k for k, name in enumerate(header) if wanted is None or name in wanted]
                 done = [[] for _ in used]
                 continue
@@ -536,7 +536,7 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
             lines.append(reader.line_num)
             pending.append(fields)
             if len(pending) >= PARSE_BATCH_ROWS:
-                _convert(path, header, used, pending, done, lines, missing)
+                _convert(path, header, used, pending, done, lines, missing, bad)
     except csv.Error as exc:
         raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
     if header is None:
@@ -547,7 +547,11 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
                          key=f"row {header_line}")
     if not lines:
         raise InputError("a header but no samples", file=path)
-    _convert(path, header, used, pending, done, lines, missing)
+    if on_header is not None:
+        on_header(header)
+    _convert(path, header, used, pending, done, lines, missing, bad)
+    if bad:
+        raise bad[0]
     values = {}
     for k, parts in zip(used, done):
         values.setdefault(header[k], np.concatenate(parts) if parts else np.zeros(0))
@@ -555,16 +559,17 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
 
 
 def _convert(path: str, header: list[str], used: list[int], pending: list[list[str]],
-             done: list[list[np.ndarray]], lines: list[int], missing: bool) -> None:
+             done: list[list[np.ndarray]], lines: list[int], missing: bool, bad: list[InputError]) -> None:
     """The used fields of the pending rows as numbers (appended to ``done``; ``pending``
     emptied): a column's batch is checked against NUMBER at once and converted by ``float``; a
     batch that fails is gone through field by field to name the first bad field's row and column."""
-    if not pending or not used:
+    if not pending or not used or bad:         # after a bad number only the rows' structure is read
         pending.clear()
         return
     first = len(lines) - len(pending)
     rows = map(itemgetter(*used), pending) if len(used) > 1 else ((row[used[0]],) for row in pending)
     allowed = MISSING_CHARACTERS if missing else NUMBER_CHARACTERS
+    errors: list[tuple[int, InputError]] = []
     for k, fields, parts in zip(used, zip(*rows), done):
         values = None
         try:                                       # float() takes the spaces around a field
@@ -576,14 +581,21 @@ def _convert(path: str, header: list[str], used: list[int], pending: list[list[s
         if values is not None and not np.all(np.abs(values[~np.isnan(values)]) <= MAX_MAGNITUDE):
             values = None
         if values is None:
-            values = _checked(path, header[k], [f.strip() for f in fields], lines[first:], missing)
+            checked = _checked(path, header[k], [f.strip() for f in fields], lines[first:], missing)
+            if isinstance(checked, tuple):      # the batch's first bad field by row, then column
+                errors.append(checked)
+                continue
+            values = checked
         parts.append(values)
+    if errors:
+        bad.append(min(errors, key=lambda e: e[0])[1])
     pending.clear()
 
 
-def _checked(path: str, name: str, fields: list[str], lines: list[int], missing: bool) -> np.ndarray:
-    """Stripped fields as float64, field by field; the first that is not a finite number in
-    range is an InputError naming its row and column."""
+def _checked(path: str, name: str, fields: list[str], lines: list[int], missing: bool
+             ) -> np.ndarray | tuple[int, InputError]:
+    """Stripped fields as float64, field by field; or the first that is not a finite number
+    in range: its index and the InputError naming its row and column."""
     out = np.empty(len(fields))
     match = NUMBER.fullmatch
     for i, (line, stripped) in enumerate(zip(lines, fields)):
@@ -600,7 +612,7 @@ def _checked(path: str, name: str, fields: list[str], lines: list[int], missing:
                 reason = "is not finite"
             else:
                 reason = "is not a number (ASCII digits, sign, point and exponent only)"
-            raise InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {name}")
+            return i, InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {name}")
         out[i] = value
     return out
 
@@ -628,11 +640,6 @@ class _Whitespace:
             yield line.split()
 
 
-def layout_names(coordinates: tuple[str, ...]) -> set[str]:
-    """The column names of the project's CSV layout for these coordinates."""
-    return {"t"} | {f"{kind}_{c}" for c in coordinates for kind in ("q", "qd", "qdd", "tau")}
-
-
 def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tuple[dict[str, int], list[str]]:
     """Column index by name; missing, empty and duplicate names are errors, unknown ones notes."""
     for k, name in enumerate(header):
@@ -644,7 +651,7 @@ def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tupl
             raise InputError(f"column {name!r} appears twice (columns {seen[name] + 1} and {k + 1})",
                              file=path, key="header")
         seen[name] = k
-    known = layout_names(coordinates)
+    known = {"t"} | {f"{kind}_{c}" for c in coordinates for kind in ("q", "qd", "qdd", "tau")}
     required = ["t"] + [f"{kind}_{c}" for c in coordinates for kind in ("q", "tau")]
     missing = [name for name in required if name not in seen]
     if missing:
