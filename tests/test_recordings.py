@@ -642,3 +642,40 @@ def test_a_logs_columns_no_channel_uses_are_not_read(tmp_path, monkeypatch):
     with pytest.raises(InputError) as error:
         read_recording(tmp_path / "rec.toml", mech)
     assert error.value.key == "row 1001, column y" and "not a number" in str(error.value)
+
+
+def test_files_on_their_own_clocks_are_read_on_the_positions_clock(tmp_path):
+    """A logger that writes one file per topic stamps each on arrival: the torques' file has
+    its own time column, other stamps and another row count. With ``time`` in every file, the
+    torques are interpolated onto the positions' clock (samples outside their span left out)
+    and the base parameters come back; files that share one clock read as one file."""
+    mech = parse_mechanism(_chain(12))
+    phi = random_physical_inertia(mech, np.random.default_rng(12))
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 8, 1 / RATE)
+    motion, _ = _truth(mech, t, phi)
+    grid = np.arange(0, 7.9, 1 / 700)
+    stamps = 0.013 + grid + rng.uniform(0, 2e-4, len(grid))   # 700 Hz, late by 13 ms, jittered
+    _, tau_own = _truth(mech, stamps, phi)                  # the torques at their own stamps (700 Hz)
+    _write(tmp_path / "joints.csv", ["stamp", "a", "b", "c"], [t, *motion.q.T])
+    _write(tmp_path / "effort.csv", ["stamp", "x", "y", "z", "mode"], [stamps, *tau_own.T, np.zeros(len(stamps))])
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "stamp"\n[[runs]]\n'
+                                       'files = { pos = "joints.csv", eff = "effort.csv" }\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert any("effort.csv: its columns interpolated onto the clock of joints.csv" in n and "outside its span" in n
+               for n in data.notes), data.notes
+    assert data.motion.t[0] >= stamps[0] - 1e-12 and data.motion.t[-1] <= stamps[-1] + 1e-12
+    result = identify(model, data, base=_base(mech))
+    _check_base(result, _base(mech), phi, 5e-3)
+    # the same clock in both files (a logger that stamps both alike): read as before, no note
+    _, tau = _truth(mech, t, phi)
+    _write(tmp_path / "effort.csv", ["stamp", "x", "y", "z"], [t, *tau.T])
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert not any("interpolated" in n for n in data.notes)
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    # a clock that goes back in the other file names its row there
+    stamps[100] = stamps[98]
+    _write(tmp_path / "effort.csv", ["stamp", "x", "y", "z", "mode"], [stamps, *tau_own.T, np.zeros(len(stamps))])
+    with pytest.raises(InputError) as error:
+        read_recording(tmp_path / "rec.toml", mech)
+    assert error.value.key == "row 102, column stamp" and error.value.file.endswith("effort.csv")

@@ -335,6 +335,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     if "time" in head:
         wanted.add(str(head["time"]).rpartition(":")[2])
     tables = {alias: _table(str(folder / name), *delimiter, wanted=wanted) for alias, name in files.items()}
+    tables, clock_notes = _on_one_clock(head, tables, files, description, folder)
     lengths = {alias: len(rows) for alias, (_, _, rows) in tables.items()}
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
@@ -389,8 +390,9 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     qd, qdd, forces = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
     assert forces is not None             # ... and torques
     gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
-    notes = [_drive_note(description)] if any(c.coordinate in mechanism.motor_names
-                                              for chans in description.channels.values() for c in chans) else []
+    notes = clock_notes + ([_drive_note(description)] if any(c.coordinate in mechanism.motor_names
+                                                             for chans in description.channels.values()
+                                                             for c in chans) else [])
     # samples with a missing value (an empty or NaN field) in a channel used are left out; the
     # steps around them are resampled, or the run split where GAP_STEPS or more are missing
     present = np.all([np.all(np.isfinite(a.reshape(len(t), -1)), axis=1)
@@ -461,6 +463,45 @@ def _only(tables: dict, channel: Channel, path: str) -> str:
     return owners[0]
 
 
+def _on_one_clock(head: dict, tables: dict, files: dict, description: Description, folder: Path
+                  ) -> tuple[dict, list[str]]:
+    """(tables, notes): when the time column is in every file of a run and the files' clocks
+    differ (a logger that writes one file per topic, each stamped on arrival), every other
+    file's columns interpolated linearly onto the clock of the file with the first position
+    channel, NaN where that clock leaves their span or next to a missing value (left out
+    later as missing values are); else the tables as read. Why: such files have different
+    row counts, and were refused ("the files of one run must have the same rows")."""
+    column = str(head.get("time", ""))
+    if not column or ":" in column or len(tables) < 2 or not all(column in h for h, _, _ in tables.values()):
+        return tables, []
+    first_channel = description.channels["position"][0]
+    first = first_channel.file if first_channel.file is not None else _only(tables, first_channel, description.path)
+    reference = tables[first][1][column]
+    if all(np.array_equal(table[column], reference) for _, table, _ in tables.values()):
+        return tables, []
+    out, notes = {}, []
+    for alias, (header, table, rows) in tables.items():
+        clock = table[column]
+        bad = np.nonzero(~np.isfinite(clock))[0]
+        if bad.size == 0:
+            back = np.nonzero(np.diff(clock) <= 0)[0]
+            bad = back + 1
+        if bad.size:
+            raise InputError("time is not finite or does not increase", file=str(folder / files[alias]),
+                             key=f"row {rows[int(bad[0])]}, column {column}")
+        if alias == first:
+            out[alias] = (header, table, rows)
+            continue
+        inside = (reference >= clock[0]) & (reference <= clock[-1])
+        moved = {name: np.where(inside, np.interp(reference, clock, values), np.nan) for name, values in table.items()}
+        moved[column] = reference
+        out[alias] = (header, moved, tables[first][2])
+        notes.append(f"{files[alias]}: its columns interpolated onto the clock of {files[first]} (linear in "
+                     f"their own column {column}, {len(clock)} rows onto {len(reference)}"
+                     + (f"; {int((~inside).sum())} sample(s) outside its span left out)" if not inside.all() else ")"))
+    return out, notes
+
+
 def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray, str]:
     count = len(next(iter(tables.values()))[2])
     if "time" not in head:
@@ -470,6 +511,8 @@ def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray
     alias, _, column = head["time"].rpartition(":")
     alias = alias or None
     owners = [a for a, (header, _, _) in tables.items() if column in header and (alias is None or a == alias)]
+    if len(owners) > 1 and all(np.array_equal(tables[a][1][column], tables[owners[0]][1][column]) for a in owners):
+        owners = owners[:1]                  # one clock in every file (as written, or made so: _on_one_clock)
     if len(owners) != 1:
         raise InputError(f"time column {head['time']!r} found in {len(owners)} files of the run",
                          file=path, key="recording.time")
