@@ -552,7 +552,7 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     _convert(path, header, used, pending, done, lines, missing, bad)
     if bad:
         raise bad[0]
-    values = {}
+    values: dict[str, np.ndarray] = {}
     for k, parts in zip(used, done):
         values.setdefault(header[k], np.concatenate(parts) if parts else np.zeros(0))
     return header, values, lines
