@@ -466,6 +466,21 @@ def test_unknown_current_gains_fixed_by_a_known_payload_run(tmp_path):
     np.testing.assert_allclose([result.value(g) for g in data.gain_names], gains, rtol=2e-3)
     _check_base(result, _base(mech), phi, 3e-3)
     assert [g["name"] for g in result.to_json()["gains"]] == list(data.gain_names)
+    # the fit's own prediction from its residual is predict's from the columns made again
+    from baseparams.identify.fit import fitted
+    again, own = predict(result, model, data), fitted(result, data)
+    np.testing.assert_allclose(own.predicted, again.predicted, rtol=0, atol=1e-9 * np.abs(again.measured).max())
+    assert np.array_equal(own.measured, again.measured)
+    # through the command, predicting its own data and another recording of the same currents
+    # (both were a ValueError: the prediction looked for the gains among the model's columns)
+    (tmp_path / "mech.toml").write_text(_chain(9))
+    cli = CliRunner().invoke(main, ["identify", str(tmp_path / "mech.toml"), str(tmp_path / "rec.toml"),
+                                    "--solver", "dp", "--validate", str(tmp_path / "rec.toml"), "--format", "json"])
+    assert cli.exit_code == 0, cli.output
+    report = json.loads(cli.output)
+    forces = np.concatenate([tau, tau_loaded])
+    assert max(report["rms"].values()) < 1e-2 * np.abs(forces).max()
+    assert max(report["validation"][0]["rms"].values()) < 1e-2 * np.abs(forces).max()
     (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "empty.csv"\n' + channels)
     data, model = read_recording(tmp_path / "rec.toml", mech)
     with pytest.raises(InputError, match="known payload"):

@@ -98,7 +98,7 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     several fitted together). ``validate``: recordings to predict with the identified
     model. ``physical``: also physically consistent standard parameters (needs cvxpy)."""
     from baseparams.identify.base import BaseModel
-    from baseparams.identify.fit import identify as fit, predict, split_effects
+    from baseparams.identify.fit import fitted, identify as fit, predict, split_effects
     from baseparams.identify.recording import read_data
 
     from .effects import parse_effects
@@ -129,17 +129,17 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     if physical:
         _say(progress, "physically consistent parameters (cvxpy)")
         _physical(identification, mechanism, base)
-    fitted = predict(identification, mechanism, measured)
+    on_its_data = fitted(identification, measured)
     predictions = [predict(identification, mechanism, other) for other in others]
-    identification.extras["rms"] = fitted.to_json()["rms"]
-    identification.extras["rms_overall"] = fitted.overall_rms
+    identification.extras["rms"] = on_its_data.to_json()["rms"]
+    identification.extras["rms_overall"] = on_its_data.overall_rms
     identification.extras["runs"] = list(measured.runs)
     if predictions:
         identification.extras["validation"] = [p.to_json() for p in predictions]
     identification.extras["known_effects"] = [
         {"kind": s.kind, "coordinate": s.coordinate, "values": {n: exact(v) for n, v in s.values.items()}}
         for s in identification.known]
-    return Fit(identification, fitted, predictions, warnings=list(result.warnings))
+    return Fit(identification, on_its_data, predictions, warnings=list(result.warnings))
 
 
 def exact(value: Any) -> str:

@@ -359,13 +359,22 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
     inertial, columns, y = _measured_design(mechanism, data, effects)
     X = np.concatenate([result.base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
     names = tuple(result.base.names) + tuple(columns.names[:identified_width])
-    kept = [names.index(name) for name in result.names]
-    predicted = X[:, :, kept] @ result.estimates
+    model = [k for k, name in enumerate(result.names) if name in names]     # not the current gains
+    predicted = X[:, :, [names.index(result.names[k]) for k in model]] @ result.estimates[model]
     if result.known:
         predicted = predicted + columns.matrix[:, :, identified_width:] @ effect_values(mechanism, result.known)
     predicted = predicted + (data.tau - y)          # the known payloads' forces
     return Prediction(data.path, data.coordinates, data.t, measured_forces(data, result.names, result.estimates),
                       predicted)
+
+
+def fitted(result: Identification, data: MeasuredData) -> Prediction:
+    """:func:`predict` on the data ``result`` was fitted to, from its residual (measured less
+    predicted, the same forces to rounding) instead of the model's columns made again. Why:
+    on long recordings the columns are most of the work (a Panda logged 120 s at 1 kHz: 3.2 of
+    `identify`'s 12 CPU s)."""
+    measured = measured_forces(data, result.names, result.estimates)
+    return Prediction(data.path, data.coordinates, data.t, measured, measured - result.residual)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None
