@@ -1376,7 +1376,29 @@ def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequen
         if held.base_map is not None and held.covariance is not None:
             problem.given_uncertainty = (held.base_map, held.covariance)
     problem.notes = list(data.notes) + problem.notes
-    return diagnose(problem, data.tau, alpha=alpha, holdout=holdout, folds=folds, max_steps=max_steps)
+    return diagnose(problem, _forces(data, held, problem.notes), alpha=alpha, holdout=holdout, folds=folds,
+                    max_steps=max_steps)
+
+
+def _forces(data: MeasuredData, held: Given | None, notes: list[str]) -> np.ndarray:
+    """The data's generalized forces: currents whose gains the description leaves unknown
+    converted with the gains of the identify result held as given (a note says so); without
+    them, an InputError. Why: such a channel's force is not in ``data.tau`` (zero there), and
+    a diagnosis of the rest named nothing and called the data unexplained."""
+    if not data.gain_names:
+        return data.tau
+    gains = held.gains if held is not None else {}
+    missing = [g for g in data.gain_names if g not in gains]
+    if missing:
+        raise InputError(f"the gains {', '.join(missing)} of these data are unknown: identify them first (`identify` "
+                         "on these channels with a run that carries a known payload), then diagnose with --params "
+                         "that result, or give the gains in the recording description", file=data.path,
+                         key="--params")
+    values = np.array([gains[g] for g in data.gain_names])
+    assert data.gain_columns is not None
+    notes.append("currents with unknown gains converted with the identify result's: "
+                 + ", ".join(f"{g} = {v:.6g}" for g, v in zip(data.gain_names, values)))
+    return data.tau + data.gain_columns @ values
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------

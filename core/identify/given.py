@@ -26,12 +26,14 @@ class Given:
     for an identify result the map ``base_map`` E (r, P) from standard to base parameters and
     their ``covariance`` (r, r; None when the JSON does not carry it); ``masses``: whether
     each body's mass in ``parameters`` is the body's (a file's, or completed from the
-    mechanism's own inertias), not an arbitrary member of a group."""
+    mechanism's own inertias), not an arbitrary member of a group; ``gains``: the current
+    gains an identify result estimated (``gain_COORD``: N m per unit of the channel)."""
     parameters: np.ndarray
     effects: list[EffectSpec] = field(default_factory=list)
     base_map: np.ndarray | None = None
     covariance: np.ndarray | None = None
     masses: bool = True
+    gains: dict[str, float] = field(default_factory=dict)
 
 
 def given_parameters(mechanism: Mechanism, source: str) -> Given:
@@ -86,7 +88,13 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
         except (KeyError, TypeError, AttributeError) as exc:
             raise InputError(f"an effect needs kind, coordinate and coefficients ({exc})", file=str(path),
                              key=f"effects[{k}]") from None
-    return Given(phi, effects, E, _base_covariance(report, base, path), masses=own)
+    gains = {}
+    for k, entry in enumerate(report.get("gains") or []):
+        try:
+            gains[str(entry["name"])] = float(entry["value"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"a gain needs a name and a value ({exc})", file=str(path), key=f"gains[{k}]") from None
+    return Given(phi, effects, E, _base_covariance(report, base, path), masses=own, gains=gains)
 
 
 def _base_covariance(report: dict, base: list, path: Path) -> np.ndarray | None:
