@@ -706,3 +706,28 @@ def test_files_on_their_own_clocks_are_read_on_the_positions_clock(tmp_path):
     with pytest.raises(InputError) as error:
         read_recording(tmp_path / "rec.toml", mech)
     assert error.value.key == "row 102, column stamp" and error.value.file.endswith("effort.csv")
+
+
+def test_samples_stamped_twice_are_left_out_and_a_clock_going_back_is_an_error(tmp_path):
+    """A logger that writes a sample twice, or stamps two samples alike: each sample with the
+    time of the one before is left out with a note (a zero step cannot be differentiated) and
+    the base parameters come back; a time that goes back is still an error naming its row."""
+    mech = parse_mechanism(_chain(13))
+    phi = random_physical_inertia(mech, np.random.default_rng(13))
+    t = np.arange(0, 8, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    table = np.column_stack([t, *motion.q.T, *tau.T])
+    twice = np.sort(np.random.default_rng(4).choice(np.arange(10, len(t) - 10), 25, replace=False))
+    rows = np.insert(table, twice + 1, table[twice], axis=0)          # 25 rows written twice
+    rows[twice[0] + 1, 1:] += 0.5                                      # one of them with other values
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], rows.T)
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    (note,) = [n for n in data.notes if "stamped with the time of the sample before" in n]
+    assert note.startswith("25 sample(s)") and f"first at row {twice[0] + 3}" in note, note
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    rows[500, 0] = rows[498, 0]
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], rows.T)
+    with pytest.raises(InputError, match="does not increase") as error:
+        read_recording(tmp_path / "rec.toml", mech)
+    assert error.value.key in ("row 502", "row 501"), error.value.key

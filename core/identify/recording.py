@@ -401,6 +401,15 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         lost = np.nonzero(~present)[0]
         notes.append(f"{lost.size} sample(s) with a missing value (an empty or NaN field) in a channel used "
                      f"left out (first at row {rows[int(lost[0])]})")
+    # a sample stamped with the time of the one before (a logger that wrote it twice, or a
+    # clock coarser than its rate) is left out: a step of zero cannot be differentiated
+    kept = np.flatnonzero(present)
+    repeated = kept[1:][np.diff(t[kept]) == 0]
+    if repeated.size:
+        present[repeated] = False
+        notes.append(f"{repeated.size} sample(s) stamped with the time of the sample before left out "
+                     f"(first at row {rows[int(repeated[0])]})")
+    if not present.all():
         t, rows = t[present], [line for line, keep in zip(rows, present) if keep]
         q, forces = q[present], forces[present]
         qd = None if qd is None else qd[present]
@@ -484,14 +493,16 @@ def _on_one_clock(head: dict, tables: dict, files: dict, description: Descriptio
         clock = table[column]
         bad = np.nonzero(~np.isfinite(clock))[0]
         if bad.size == 0:
-            back = np.nonzero(np.diff(clock) <= 0)[0]
+            back = np.nonzero(np.diff(clock) < 0)[0]
             bad = back + 1
         if bad.size:
-            raise InputError("time is not finite or does not increase", file=str(folder / files[alias]),
+            raise InputError("time is not finite or goes back", file=str(folder / files[alias]),
                              key=f"row {rows[int(bad[0])]}, column {column}")
         if alias == first:
             out[alias] = (header, table, rows)
             continue
+        once = np.r_[True, np.diff(clock) > 0]            # a repeated stamp: its first sample
+        clock, table = clock[once], {name: values[once] for name, values in table.items()}
         inside = (reference >= clock[0]) & (reference <= clock[-1])
         moved = {name: np.where(inside, np.interp(reference, clock, values), np.nan) for name, values in table.items()}
         moved[column] = reference
