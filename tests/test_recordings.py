@@ -731,3 +731,24 @@ def test_samples_stamped_twice_are_left_out_and_a_clock_going_back_is_an_error(t
     with pytest.raises(InputError, match="does not increase") as error:
         read_recording(tmp_path / "rec.toml", mech)
     assert error.value.key in ("row 502", "row 501"), error.value.key
+
+
+def test_an_angle_logged_modulo_a_turn_is_unwrapped(tmp_path):
+    """An encoder or a topic that logs an angle modulo 2 pi jumps by a turn where the joint
+    passes pi: the jumps are undone (a note gives their count and first row) and the base
+    parameters come back; a length is never unwrapped."""
+    mech = parse_mechanism(_chain(14))
+    phi = random_physical_inertia(mech, np.random.default_rng(14))
+    t = np.arange(0, 8, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    shift = np.pi - np.median(motion.q[:, 0])                    # the first joint swings about pi
+    wrapped = np.angle(np.exp(1j * (motion.q[:, 0] + shift)))
+    jumps = np.flatnonzero(np.abs(np.diff(wrapped)) > np.pi) + 1
+    assert jumps.size >= 2
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, wrapped, *motion.q[:, 1:].T, *tau.T])
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC
+                                       + f"[zero]\nq1 = {-float(shift)!r}\n")
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    (note,) = [n for n in data.notes if "unwrapped" in n]
+    assert note.startswith(f"q1: {jumps.size} jump(s) of a turn") and f"first at row {jumps[0] + 2}" in note, note
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)

@@ -370,6 +370,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                              f"the range |value| <= {MAX_MAGNITUDE:g}", file=path, key=channel.key)
         return out
 
+    wrap_notes: list[str] = []
+
     def mapped(quantity: str, transpose: bool = False) -> np.ndarray | None:
         chans = description.channels[quantity]
         if not chans:
@@ -377,6 +379,13 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         names = [c.coordinate for c in chans]
         matrix = _independent_rows(mechanism, names, coordinates, path, quantity)
         raw = np.stack([values(c) for c in chans], axis=1)
+        if quantity == "position":                      # an angle logged modulo a turn
+            for k, channel in enumerate(chans):
+                if mechanism.is_angle(channel.coordinate):
+                    raw[:, k], jumps = _unwrapped(raw[:, k])
+                    if jumps.size:
+                        wrap_notes.append(f"{channel.coordinate}: {jumps.size} jump(s) of a turn unwrapped (an angle "
+                                          f"logged modulo 2 pi; first at row {rows[int(jumps[0])]})")
         if transpose:                                    # tau = N^T tau_channels; with unknown gains
             known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
             forces = [(raw * known) @ matrix] + [raw[:, k:k + 1] * matrix[k] for k in np.nonzero(~known)[0]]
@@ -390,7 +399,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     qd, qdd, forces = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
     assert forces is not None             # ... and torques
     gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
-    notes = clock_notes + ([_drive_note(description)] if any(c.coordinate in mechanism.motor_names
+    notes = clock_notes + wrap_notes + ([_drive_note(description)] if any(c.coordinate in mechanism.motor_names
                                                              for chans in description.channels.values()
                                                              for c in chans) else [])
     # samples with a missing value (an empty or NaN field) in a channel used are left out; the
@@ -470,6 +479,21 @@ def _only(tables: dict, channel: Channel, path: str) -> str:
         raise InputError(f"column {channel.column!r} is in {len(owners)} of the run's files: write "
                          "FILE:COLUMN with the file's alias", file=path, key=f"{channel.key}.column")
     return owners[0]
+
+
+def _unwrapped(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the angle unwrapped, the samples where it jumped): a step larger than half a turn
+    between two samples is a wrap (an encoder or a topic that logs an angle modulo 2 pi: a
+    joint would need 300 rad/s at 100 Hz to turn that far), undone by numpy's unwrap over the
+    finite samples. Why: the jump differentiated was a spike the filter spread over seconds."""
+    finite = np.flatnonzero(np.isfinite(angle))
+    steps = np.diff(angle[finite])
+    jumps = finite[1:][np.abs(steps) > np.pi]
+    if not jumps.size:
+        return angle, jumps
+    out = angle.copy()
+    out[finite] = np.unwrap(angle[finite])
+    return out, jumps
 
 
 def _on_one_clock(head: dict, tables: dict, files: dict, description: Description, folder: Path
