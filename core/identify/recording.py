@@ -339,7 +339,9 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     lengths = {alias: len(rows) for alias, (_, _, rows) in tables.items()}
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
-        raise InputError(f"the files of one run must have the same rows ({shown})", file=path, key=key)
+        raise InputError(f"the files of one run must have the same rows ({shown}), or each its own time "
+                         "column (time = \"COLUMN\" found in every file: read on the positions' clock)",
+                         file=path, key=key)
     name = run.get("name", str(files[next(iter(files))]))
     t, t_file = _times(head, tables, files, path)
     rows = next(iter(tables.values()))[2]
