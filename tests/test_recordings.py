@@ -700,6 +700,10 @@ def test_files_on_their_own_clocks_are_read_on_the_positions_clock(tmp_path):
     data, model = read_recording(tmp_path / "rec.toml", mech)
     assert not any("interpolated" in n for n in data.notes)
     _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    # files of different lengths without a clock each: refused, saying how they would be read
+    _write(tmp_path / "effort.csv", ["x", "y", "z"], [*tau_own.T])
+    with pytest.raises(InputError, match="must have the same rows .* or each its own time column"):
+        read_recording(tmp_path / "rec.toml", mech)
     # a clock that goes back in the other file names its row there
     stamps[100] = stamps[98]
     _write(tmp_path / "effort.csv", ["stamp", "x", "y", "z", "mode"], [stamps, *tau_own.T, np.zeros(len(stamps))])
