@@ -694,6 +694,14 @@ def test_files_on_their_own_clocks_are_read_on_the_positions_clock(tmp_path):
     assert data.motion.t[0] >= stamps[0] - 1e-12 and data.motion.t[-1] <= stamps[-1] + 1e-12
     result = identify(model, data, base=_base(mech))
     _check_base(result, _base(mech), phi, 5e-3)
+    # positions split over the files: the second file's interpolated linearly too (the low-pass
+    # takes the kinks: 2e-5 of the largest base parameter, as with a cubic spline)
+    motion_own, _ = _truth(mech, stamps, phi)
+    _write(tmp_path / "joints.csv", ["stamp", "a"], [t, motion.q[:, 0]])
+    _write(tmp_path / "effort.csv", ["stamp", "b", "c", "x", "y", "z"], [stamps, *motion_own.q[:, 1:].T, *tau_own.T])
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 5e-3)
+    _write(tmp_path / "joints.csv", ["stamp", "a", "b", "c"], [t, *motion.q.T])
     # the same clock in both files (a logger that stamps both alike): read as before, no note
     _, tau = _truth(mech, t, phi)
     _write(tmp_path / "effort.csv", ["stamp", "x", "y", "z"], [t, *tau.T])
