@@ -764,3 +764,30 @@ def test_an_angle_logged_modulo_a_turn_is_unwrapped(tmp_path):
     (note,) = [n for n in data.notes if "unwrapped" in n]
     assert note.startswith(f"q1: {jumps.size} jump(s) of a turn") and f"first at row {jumps[0] + 2}" in note, note
     _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+
+
+def test_a_time_column_of_dates_and_times(tmp_path):
+    """A logger that stamps its rows with ISO 8601 dates and times (``time_unit = "iso"``):
+    read as seconds, the base parameters come back; a stamp that is not one names its row."""
+    mech = parse_mechanism(_chain(15))
+    phi = random_physical_inertia(mech, np.random.default_rng(15))
+    t = np.arange(0, 8, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    start = np.datetime64("2026-11-26T09:59:58.5", "ns")
+    stamps = [str(start + np.timedelta64(int(round(v * 1e9)), "ns")).replace("T", " ") for v in t]
+    stamps[1::2] = [s + "Z" for s in stamps[1::2]]                  # UTC marked or not
+    lines = ["stamp,a,b,c,x,y,z"] + [",".join([s] + [f"{v:.17g}" for v in row])
+                                     for s, row in zip(stamps, np.column_stack([motion.q, tau]))]
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "stamp"\ntime_unit = "iso"\n[[runs]]\nfile = "log.csv"\n'
+                                       + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    # seconds since the first stamp, exact to the nanosecond (since 1970 they would be rounded)
+    assert data.motion.t[0] == 0 and np.abs(data.motion.t - t).max() < 1e-12
+    assert not any("resampled" in n for n in data.notes), data.notes
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    lines[300] = "yesterday" + lines[300][lines[300].index(","):]
+    (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="not a date and time") as error:
+        read_recording(tmp_path / "rec.toml", mech)
+    assert error.value.key == "row 301, column stamp"

@@ -17,8 +17,9 @@ import io
 import math
 import os
 import re
+import warnings
 from operator import itemgetter
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Sequence
 from typing import Any
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -491,7 +492,7 @@ DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " 
 
 def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None = None,
                  wanted: Collection[str] | None = None, missing: bool = False,
-                 on_header: Callable[[list[str]], None] | None = None
+                 on_header: Callable[[list[str]], None] | None = None, dates: Collection[str] = ()
                  ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
     """(header, values, lines) of a delimited text: the header's names, the columns in
     ``wanted`` (None: all) that the header has as float64 by name, and each data row's line.
@@ -499,7 +500,9 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     "\t", " " (any run of spaces and tabs: loggers that align columns) or "auto" (the
     header's first of these). A field of a wanted column that is not a finite number names
     its row and column (``missing``: an empty or NaN field is NaN, for the caller to leave
-    out); the other columns are not read. ``on_header``: checks the header once the rows'
+    out); the other columns are not read; ``dates``: columns of ISO 8601 dates and times
+    (``2024-05-01 12:00:00.123``), read as int64 nanoseconds since 1970 (UTC, or the logger's
+    local time without an offset). ``on_header``: checks the header once the rows'
     structure is known (the errors come in the order: a row's field count, the header, the
     first bad number, whichever batch holds it). Why columns by name, row by row: a robot's log has many columns a description does not use
     (a UR's RTDE log 100 and more, some of them text), and its rows kept as strings took 30
@@ -536,7 +539,7 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
             lines.append(reader.line_num)
             pending.append(fields)
             if len(pending) >= PARSE_BATCH_ROWS:
-                _convert(path, header, used, pending, done, lines, missing, bad)
+                _convert(path, header, used, pending, done, lines, missing, bad, dates)
     except csv.Error as exc:
         raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
     if header is None:
@@ -549,7 +552,7 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
         raise InputError("a header but no samples", file=path)
     if on_header is not None:
         on_header(header)
-    _convert(path, header, used, pending, done, lines, missing, bad)
+    _convert(path, header, used, pending, done, lines, missing, bad, dates)
     if bad:
         raise bad[0]
     values: dict[str, np.ndarray] = {}
@@ -559,7 +562,8 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
 
 
 def _convert(path: str, header: list[str], used: list[int], pending: list[list[str]],
-             done: list[list[np.ndarray]], lines: list[int], missing: bool, bad: list[InputError]) -> None:
+             done: list[list[np.ndarray]], lines: list[int], missing: bool, bad: list[InputError],
+             dates: Collection[str] = ()) -> None:
     """The used fields of the pending rows as numbers (appended to ``done``; ``pending``
     emptied): a column's batch is checked against NUMBER at once and converted by ``float``; a
     batch that fails is gone through field by field to name the first bad field's row and column."""
@@ -572,6 +576,13 @@ def _convert(path: str, header: list[str], used: list[int], pending: list[list[s
     errors: list[tuple[int, InputError]] = []
     for k, fields, parts in zip(used, zip(*rows), done):
         values = None
+        if header[k] in dates:
+            checked = _datetimes(path, header[k], fields, lines[first:])
+            if isinstance(checked, tuple):
+                errors.append(checked)
+            else:
+                parts.append(checked)
+            continue
         try:                                       # float() takes the spaces around a field
             if not "".join(fields).encode("ascii").translate(None, allowed):
                 values = np.array(list(map(float, fields)) if not (missing and "" in fields) else
@@ -590,6 +601,34 @@ def _convert(path: str, header: list[str], used: list[int], pending: list[list[s
     if errors:
         bad.append(min(errors, key=lambda e: e[0])[1])
     pending.clear()
+
+
+def _datetimes(path: str, name: str, fields: Sequence[str], lines: list[int]
+               ) -> np.ndarray | tuple[int, InputError]:
+    """ISO 8601 dates and times as nanoseconds since 1970 (int64: exact; seconds since 1970 in
+    a float are rounded to 0.24 us), a trailing Z (UTC) allowed; or the first field that is not one: its index and the
+    InputError naming its row and column."""
+    stamps = [f.strip().removesuffix("Z") for f in fields]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")          # numpy warns on a time zone offset
+            ns = np.array(stamps, dtype="datetime64[ns]")
+        if not np.isnat(ns).any():
+            return ns.astype(np.int64)
+    except (ValueError, UserWarning, DeprecationWarning):
+        pass
+    for i, stamp in enumerate(stamps):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                bad = np.isnat(np.datetime64(stamp, "ns"))
+        except (ValueError, UserWarning, DeprecationWarning):
+            bad = True
+        if bad:
+            shown = stamp if len(stamp) <= 40 else stamp[:37] + "..."
+            return i, InputError(f"{shown!r} is not a date and time (ISO 8601, e.g. 2024-05-01 12:00:00.123, "
+                                 "UTC with Z or local without an offset)", file=path, key=f"row {lines[i]}, column {name}")
+    raise AssertionError("a batch numpy refused has a field it refuses")      # pragma: no cover
 
 
 def _checked(path: str, name: str, fields: list[str], lines: list[int], missing: bool

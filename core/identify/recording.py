@@ -59,7 +59,7 @@ UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "m": 1.0, "mm": 1e-3},
          "velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
          "acceleration": {"rad/s2": 1.0, "deg/s2": math.pi / 180, "m/s2": 1.0, "mm/s2": 1e-3},
          "torque": {"N m": 1.0, "N": 1.0, "mN m": 1e-3, "A": 1.0}}
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso: dates and times, in s from the first
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 
 CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
@@ -334,7 +334,14 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     wanted = {c.column for chans in description.channels.values() for c in chans}
     if "time" in head:
         wanted.add(str(head["time"]).rpartition(":")[2])
-    tables = {alias: _table(str(folder / name), *delimiter, wanted=wanted) for alias, name in files.items()}
+    dates = {str(head["time"]).rpartition(":")[2]} if head.get("time_unit") == "iso" else set()
+    tables = {alias: _table(str(folder / name), *delimiter, wanted=wanted, dates=dates) for alias, name in files.items()}
+    if dates:                     # nanoseconds since 1970, as seconds since the run's first stamp
+        (stamp,) = dates
+        origin = min(int(table[stamp][0]) for _, table, _ in tables.values() if stamp in table)
+        for _, table, _ in tables.values():
+            if stamp in table:
+                table[stamp] = (table[stamp] - origin) * 1e-9
     tables, clock_notes = _on_one_clock(head, tables, files, description, folder)
     lengths = {alias: len(rows) for alias, (_, _, rows) in tables.items()}
     if len(set(lengths.values())) > 1:
@@ -468,11 +475,12 @@ def log_format(description: Description) -> tuple[str, str | None]:
     return DELIMITERS.get(delimiter, delimiter), comment
 
 
-def _table(path: str, delimiter: str = "auto", comment: str | None = None, wanted: set[str] | None = None
-           ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+def _table(path: str, delimiter: str = "auto", comment: str | None = None, wanted: set[str] | None = None,
+           dates: set[str] | None = None) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
     """(header, the ``wanted`` columns by name, each row's line) of one log: the columns no
-    channel uses are not read (a text column there is no error)."""
-    return read_columns(path, _read_text(path), delimiter, comment, wanted, missing=True)
+    channel uses are not read (a text column there is no error); ``dates``: columns of ISO
+    dates and times, read in seconds."""
+    return read_columns(path, _read_text(path), delimiter, comment, wanted, missing=True, dates=dates or ())
 
 
 def _only(tables: dict, channel: Channel, path: str) -> str:
