@@ -786,6 +786,11 @@ def test_a_time_column_of_dates_and_times(tmp_path):
     assert data.motion.t[0] == 0 and np.abs(data.motion.t - t).max() < 1e-12
     assert not any("resampled" in n for n in data.notes), data.notes
     _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "stamp"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    with pytest.raises(InputError, match='a date and time: a recording reads them with time_unit = "iso"'):
+        read_recording(tmp_path / "rec.toml", mech)               # without time_unit: the way out
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "stamp"\ntime_unit = "iso"\n[[runs]]\nfile = "log.csv"\n'
+                                       + CHANNELS_ABC)
     lines[300] = "yesterday" + lines[300][lines[300].index(","):]
     (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match="not a date and time") as error:

@@ -651,6 +651,8 @@ def _checked(path: str, name: str, fields: list[str], lines: list[int], missing:
                 reason = "is not finite"
             else:
                 reason = "is not a number (ASCII digits, sign, point and exponent only)"
+                if re.match(r"\d{4}-\d\d-\d\d", stripped):
+                    reason += "; a date and time: a recording reads them with time_unit = \"iso\""
             return i, InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {name}")
         out[i] = value
     return out
