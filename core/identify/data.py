@@ -504,9 +504,9 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     (``2024-05-01 12:00:00.123``), read as int64 nanoseconds since 1970 (UTC, or the logger's
     local time without an offset). ``on_header``: checks the header once the rows'
     structure is known (the errors come in the order: a row's field count, the header, the
-    first bad number, whichever batch holds it). Why columns by name, row by row: a robot's log has many columns a description does not use
-    (a UR's RTDE log 100 and more, some of them text), and its rows kept as strings took 30
-    times the file's size in memory."""
+    first bad number, whichever batch holds it). Why columns by name, row by row: a robot's
+    log has many columns a description does not use (a UR's RTDE log 100 and more, some of
+    them text), and its rows kept as strings took 30 times the file's size in memory."""
     if delimiter == "auto":
         head = next((line for line in _lines(text)
                      if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
