@@ -43,8 +43,9 @@ from baseparams.identify.outofsample import (FOLDS, CrossValidation, blocks, cro
                                              implausible, stability)
 from baseparams.identify.data import MeasuredData, bandwidth
 from baseparams.io.atomic import atomic_write
-from baseparams.identify.model import (Design, Motion, design, effect_values, effects_design, evaluate,
+from baseparams.identify.model import (Motion, design, effect_values, effects_design, evaluate,
                                        independent_names)
+from baseparams.identify.fit import measured_design, measured_forces
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, holm, outdone,
@@ -142,12 +143,13 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     correlation = None
     if data is not None:
         correlation = data.noise_correlation() if data.reduced else None
-        inertial, fitted, known = _reduced_model(mechanism, data, fitted_specs, known_specs, sample)
+        inertial, fitted, known = measured_design(mechanism, data, fitted_specs, known_specs)   # as identify's
         reduce, t = data.reduce, data.t
         qd = qd[data.kept_rows()]
     else:
         inertial, fitted = design(mechanism, motion, fitted_specs, sample)
-        known = _known_force(mechanism, sample, motion.count, known_specs)
+        known = effects_design(mechanism, sample, motion.count, known_specs).matrix @ \
+            effect_values(mechanism, known_specs) if known_specs else np.zeros(inertial.matrix.shape[:2])
     registered = None if pairs is None else [(k, c) for k, c in pairs if k not in DERIVED_KINDS]
     candidates, notes = library(mechanism, sample, motion.count, registered, reduce) \
         if registered is None or registered else ([], [])
@@ -170,38 +172,6 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
     return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
                    None, None, wanted, correlation)
-
-
-def _known_force(mechanism: Mechanism, sample: Sample, n: int, known_specs: Sequence[EffectSpec]) -> np.ndarray:
-    """The force (n, f) of the mechanism's effects whose every value is given."""
-    if not known_specs:
-        return np.zeros((n, len(independent_names(mechanism))))
-    return effects_design(mechanism, sample, n, known_specs).matrix @ effect_values(mechanism, known_specs)
-
-
-def _reduced_model(mechanism: Mechanism, data: MeasuredData, fitted_specs: Sequence[EffectSpec],
-                   known_specs: Sequence[EffectSpec], sample: Sample) -> tuple[Design, Design, np.ndarray]:
-    """(inertial, fitted effects, known force) at the fit's rows, made as ``identify`` makes
-    them (:meth:`MeasuredData.reduced_columns`: chunk by chunk on long data). Why: the columns
-    at every model row are 10 x bodies x f numbers a sample, 0.8 GB for a Panda logged 120 s
-    at 1 kHz, which a whole-recording evaluation held at once. ``sample``: the kinematics at
-    every model row, used where the recording goes in one piece (a chunk evaluates its own)."""
-    p = len(mechanism.parameters)
-    names: list[str] = []
-
-    def build(motion: Motion, _: Sample | None, run: int) -> np.ndarray:
-        part = sample if motion.count == data.motion.count else evaluate(mechanism, motion)
-        inertial, fitted = design(mechanism, motion, fitted_specs, part)
-        names[:] = fitted.names
-        force = _known_force(mechanism, part, motion.count, known_specs)
-        payload = data.payload_of_run(run)
-        if payload is not None:
-            force = force + inertial.matrix[:, :, :len(payload)] @ payload
-        return np.concatenate([inertial.matrix, fitted.matrix, force[:, :, None]], axis=-1)
-
-    full = data.reduced_columns(build)
-    inertial, fitted, known = (np.ascontiguousarray(a) for a in (full[:, :, :p], full[:, :, p:-1], full[:, :, -1]))
-    return Design(tuple(mechanism.parameters), inertial), Design(tuple(names), fitted), known
 
 
 # ----- the result ----------------------------------------------------------------------------
@@ -1395,10 +1365,9 @@ def _forces(data: MeasuredData, held: Given | None, notes: list[str]) -> np.ndar
                          "that result, or give the gains in the recording description", file=data.path,
                          key="--params")
     values = np.array([gains[g] for g in data.gain_names])
-    assert data.gain_columns is not None
     notes.append("currents with unknown gains converted with the identify result's: "
                  + ", ".join(f"{g} = {v:.6g}" for g, v in zip(data.gain_names, values)))
-    return data.tau + data.gain_columns @ values
+    return measured_forces(data, data.gain_names, values)
 
 
 # ----- writing the fixed mechanism ---------------------------------------------------------

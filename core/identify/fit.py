@@ -25,7 +25,7 @@ from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify.model import Design, Motion, design, effect_values
+from baseparams.identify.model import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # Unit-norm columns whose pivoted-QR diagonal (the base columns) or singular value (the whole
@@ -210,7 +210,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     effects, known = tuple(effects), tuple(known)
     n, f = data.tau.shape
     identified_width = sum(len(registry.effects()[s.kind].item.coefficients) for s in effects)
-    inertial, columns, y = _measured_design(mechanism, data, effects + known)
+    inertial, columns, payload = measured_design(mechanism, data, effects + known)
+    y = data.tau - payload
     if known:
         y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
     X = np.concatenate([base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
@@ -280,26 +281,32 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                           base_model_error=outside)
 
 
-def _measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec]
-                     ) -> tuple[Design, Design, np.ndarray]:
-    """(inertial, effects, tau less the known payloads' forces) at the fit's rows: the model's
-    columns at the model rows, then filtered and decimated like the torques (parallel
-    filtering), so the model and the measurement see the same filter; chunk by chunk on long
-    data (:meth:`MeasuredData.reduced_columns`)."""
+def measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec],
+                    known: Sequence[EffectSpec] = ()) -> tuple[Design, Design, np.ndarray]:
+    """(inertial, effects, the known payloads' forces and ``known`` effects' (every value
+    given) at the model rows, reduced) at the fit's rows: the model's columns
+    at the model rows, then filtered and decimated like the torques (parallel filtering), so
+    the model and the measurement see the same filter; chunk by chunk on long data
+    (:meth:`MeasuredData.reduced_columns`: a Panda logged 120 s at 1 kHz has 0.8 GB of
+    columns). The one home of the model's columns on measured data (identify, predict,
+    diagnose)."""
     p = len(mechanism.parameters)
     names: list[str] = []
 
     def build(motion: Motion, sample: Sample | None, run: int) -> np.ndarray:
+        sample = sample if sample is not None else evaluate(mechanism, motion)
         inertial, columns = design(mechanism, motion, effects, sample)
         names[:] = columns.names
+        force = effects_design(mechanism, sample, motion.count, known).matrix @ effect_values(mechanism, known) \
+            if known else np.zeros(inertial.matrix.shape[:2])
         payload = data.payload_of_run(run)
-        force = np.zeros(inertial.matrix.shape[:2]) if payload is None else \
-            inertial.matrix[:, :, :len(payload)] @ payload
+        if payload is not None:
+            force = force + inertial.matrix[:, :, :len(payload)] @ payload
         return np.concatenate([inertial.matrix, columns.matrix, force[:, :, None]], axis=-1)
 
     full = data.reduced_columns(build)
-    y = data.tau - full[:, :, -1]
-    return (Design(tuple(mechanism.parameters), full[:, :, :p]), Design(tuple(names), full[:, :, p:-1]), y)
+    inertial, columns, payload = (np.ascontiguousarray(a) for a in (full[:, :, :p], full[:, :, p:-1], full[:, :, -1]))
+    return Design(tuple(mechanism.parameters), inertial), Design(tuple(names), columns), payload
 
 
 def measured_forces(data: MeasuredData, names: Sequence[str], estimates: np.ndarray) -> np.ndarray:
@@ -356,14 +363,14 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
     known payloads included), beside the measured ones."""
     effects = tuple(result.effects) + tuple(result.known)
     identified_width = sum(len(registry.effects()[s.kind].item.coefficients) for s in result.effects)
-    inertial, columns, y = _measured_design(mechanism, data, effects)
+    inertial, columns, payload = measured_design(mechanism, data, effects)
     X = np.concatenate([result.base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
     names = tuple(result.base.names) + tuple(columns.names[:identified_width])
     model = [k for k, name in enumerate(result.names) if name in names]     # not the current gains
     predicted = X[:, :, [names.index(result.names[k]) for k in model]] @ result.estimates[model]
     if result.known:
         predicted = predicted + columns.matrix[:, :, identified_width:] @ effect_values(mechanism, result.known)
-    predicted = predicted + (data.tau - y)          # the known payloads' forces
+    predicted = predicted + payload
     return Prediction(data.path, data.coordinates, data.t, measured_forces(data, result.names, result.estimates),
                       predicted)
 
