@@ -646,16 +646,17 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     notes = []
     steps = np.diff(t)
     step = float(np.median(steps))
+    own_times = None                      # irregular stamps: the samples' own times
     if np.any(np.abs(steps - step) > UNIFORM_TOLERANCE * step):
         grid = t[0] + step * np.arange(int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1)
-        notes.append(f"irregular time steps ({steps.min() * 1e3:.4g} to {steps.max() * 1e3:.4g} ms): resampled "
-                     f"to a uniform {step * 1e3:.4g} ms grid (cubic for positions and velocities, linear "
-                     "for torques)")
+        notes.append(f"irregular time steps ({steps.min() * 1e3:.4g} to {steps.max() * 1e3:.4g} ms): positions "
+                     f"and velocities resampled to a uniform {step * 1e3:.4g} ms grid (cubic) to be filtered and "
+                     "differentiated, then taken back to each sample's own time; the torques are not "
+                     "resampled (the model is evaluated where they were measured)")
+        own_times = t
         q = CubicSpline(t, q, axis=0)(grid)
         qd = None if qd is None else CubicSpline(t, qd, axis=0)(grid)
         qdd = None if qdd is None else CubicSpline(t, qdd, axis=0)(grid)
-        flat = tau.reshape(len(t), -1)
-        tau = np.stack([np.interp(grid, t, column) for column in flat.T], axis=1).reshape((len(grid),) + tau.shape[1:])
         t = grid
     fs = 1 / step
     order = int(settings.get("order", BUTTERWORTH_ORDER))
@@ -694,6 +695,9 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
         estimated = ("qdd",) if qdd is None else ()
         qdd = np.gradient(qd, step, axis=0) if qdd is None else sosfiltfilt(sos, qdd, axis=0)
         what = "measured velocities" + ("" if estimated else " and accelerations")
+    if own_times is not None:             # the filtered motion at the samples' own times
+        qf, qd, qdd = (CubicSpline(t, x, axis=0)(own_times) for x in (qf, qd, qdd))
+        t = own_times
     kept = len(range(edge, len(t) - edge, factor))
     notes.append(f"{what} low-passed at {cutoff:.4g} Hz ({how}; Butterworth order {order}, zero-phase)"
                  + (f", {' and '.join(estimated)} by central differences" if estimated else "")
