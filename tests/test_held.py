@@ -12,10 +12,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from baseparams import registry
 from baseparams.cli import main
 from baseparams.errors import InputError
+from baseparams.identify.base import BaseModel
 from baseparams.identify.diagnose import prepare
+from baseparams.identify.fit import identify
 from baseparams.identify.model import Motion, evaluate, standard_parameters
+from baseparams.identify.recording import read_data
 from baseparams.identify.simulate import trajectory_motion
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
@@ -166,3 +170,36 @@ def test_a_description_with_nothing_to_read_is_bad_input(tmp_path, held, message
                                         + held)
     result = CliRunner().invoke(main, ["identify", str(URDF), str(tmp_path / "none.toml"), "--quiet"])
     assert result.exit_code == 2 and message in result.stderr, result.output + result.stderr
+
+
+@pytest.mark.parametrize("held", ['"finger_*" = 0.01\nfinger_right = 0.03\n',
+                                  '"*" = 0.01\nfinger_right = 0.03\n',
+                                  'finger_right = 0.03\n"*_l?ft" = 0.01\n'])
+def test_a_pattern_holds_every_coordinate_it_matches_without_a_channel(tmp_path, held):
+    """``"finger_*" = 0.01`` or ``"*" = 0.01`` (fnmatch) holds every coordinate it matches that
+    has no channel; one named by itself keeps its own value. The fit is the one with every
+    joint listed by name (a TIAGo's log has 8 of its model's 48 joints)."""
+    _gripper_log(tmp_path)
+    (tmp_path / "pattern.toml").write_text((tmp_path / "plain.toml").read_text() + "[held]\n" + held)
+    mechanism = resolve(str(URDF))
+    by_name, model = read_data([str(tmp_path / "held.toml")], mechanism)
+    by_pattern, pattern_model = read_data([str(tmp_path / "pattern.toml")], mechanism)
+    assert pattern_model.coordinates == model.coordinates
+    base = BaseModel.from_result(registry.solvers()["dp"].item.solve(model), model)
+    np.testing.assert_array_equal(identify(pattern_model, by_pattern, base=base).estimates,
+                                  identify(model, by_name, base=base).estimates)
+
+
+@pytest.mark.parametrize("held, message", [
+    ('"wrist_*" = 0\n', "the pattern 'wrist_*' matches no coordinate without a channel"),
+    ('"turret*" = 0\n"finger_*" = 0.01\nfinger_right = 0.03\n',
+     "the pattern 'turret*' matches no coordinate without a channel"),
+    ('"finger_*" = 0.01\n"*_right" = 0.03\n', "'finger_right' is matched by 'finger_*' and '*_right' with different"),
+])
+def test_a_pattern_that_matches_nothing_or_disagrees_is_bad_input(tmp_path, held, message):
+    """A pattern matching no coordinate without a channel (a typo, or only channelled joints)
+    and two patterns giving one coordinate two values are exit 2, naming the pattern."""
+    _gripper_log(tmp_path)
+    (tmp_path / "pattern.toml").write_text((tmp_path / "plain.toml").read_text() + "[held]\n" + held)
+    result = CliRunner().invoke(main, ["identify", str(URDF), str(tmp_path / "pattern.toml"), "--quiet"])
+    assert result.exit_code == 2 and message in result.stderr, result.stderr

@@ -28,6 +28,7 @@ import os
 import tomllib
 from dataclasses import dataclass, replace
 from decimal import Decimal
+from fnmatch import fnmatchcase
 from fractions import Fraction
 from pathlib import Path
 
@@ -61,6 +62,7 @@ UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "m": 1.0, "mm": 1e-3},
          "torque": {"N m": 1.0, "N": 1.0, "mN m": 1e-3, "A": 1.0}}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso: dates and times, in s from the first
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
+PATTERN_CHARACTERS = "*?["          # a [held] key with one of these is a pattern (fnmatch)
 
 CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
                  "unit": (STRING, False), "gain": (VALUE, False)})
@@ -131,12 +133,7 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
             data[quantity] = {k: {"column": v} if isinstance(v, str) else v for k, v in table.items()}
     _Validator(path).check(SCHEMA, data, "")
     mechanism = _with_motors(mechanism, data.get("motors", []), path)
-    held = {name: _exact(value, path, f"held.{name}") for name, value in data.get("held", {}).items()}
-    for quantity in QUANTITIES:
-        for name in data.get(quantity, {}):
-            if name in held:
-                raise InputError(f"{name!r} is held ([held]): it has no {quantity} channel", file=path,
-                                 key=f"{quantity}.{name}")
+    held = _held_values(data, mechanism, path)
     mechanism = hold(mechanism, held, file=path)
     if held and not independent_names(mechanism):
         raise InputError("every coordinate is held: nothing moves in this recording to fit", file=path,
@@ -156,6 +153,47 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
                              f"({', '.join(independent_names(mechanism))})", file=path, key=f"zero.{name}")
     _check_time_source(data.get("recording", {}), path)
     return Description(path, data, channels, mechanism)
+
+
+def _held_values(data: dict, mechanism: Mechanism, path: str) -> dict[str, Fraction]:
+    """``[held]``'s coordinates and values: ``COORD = value``, or a pattern (``"hand_*" = 0``,
+    ``"*" = 0``: fnmatch's ``*``, ``?``, ``[...]``) for every independent coordinate it matches
+    that has no channel of its own or through a motor. A coordinate named by itself takes its
+    own value; two patterns giving one coordinate different values are an error. Why: a robot's
+    model can have dozens of joints its log does not have (a TIAGo's hand, head and wheels: 40
+    joints beside the 8 logged), each of which had to be listed by name."""
+    given = data.get("held", {})
+    channelled: set[str] = set()
+    for quantity in QUANTITIES:
+        for name in data.get(quantity, {}):
+            channelled.add(name)
+            channelled.update(c for m in mechanism.motors if m.name == name for c, _ in m.ratios)
+    held = {name: _exact(value, path, f"held.{name}") for name, value in given.items()
+            if not any(ch in name for ch in PATTERN_CHARACTERS)}
+    for quantity in QUANTITIES:
+        for name in data.get(quantity, {}):
+            if name in held:
+                raise InputError(f"{name!r} is held ([held]): it has no {quantity} channel", file=path,
+                                 key=f"{quantity}.{name}")
+    by_pattern: dict[str, tuple[str, Fraction]] = {}
+    for pattern, value in given.items():
+        if not any(ch in pattern for ch in PATTERN_CHARACTERS):
+            continue
+        exact = _exact(value, path, f"held.{pattern}")
+        matched = [c for c in independent_names(mechanism) if fnmatchcase(c, pattern) and c not in channelled]
+        if not matched:
+            raise InputError(f"the pattern {pattern!r} matches no coordinate without a channel "
+                             f"(coordinates: {', '.join(independent_names(mechanism))})", file=path,
+                             key=f"held.{pattern}")
+        for coordinate in matched:
+            if coordinate in held and coordinate not in by_pattern:
+                continue                                    # named by itself: its own value
+            if coordinate in by_pattern and by_pattern[coordinate][1] != exact:
+                raise InputError(f"{coordinate!r} is matched by {by_pattern[coordinate][0]!r} and {pattern!r} "
+                                 "with different values: hold it by name", file=path, key=f"held.{pattern}")
+            by_pattern[coordinate] = (pattern, exact)
+            held[coordinate] = exact
+    return held
 
 
 def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
@@ -583,7 +621,7 @@ def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple
     if len(names) != len(coordinates):
         missing = [c for c in coordinates if c not in names]
         hint = (f"; a joint that does not move in the recording ({', '.join(missing)}?) is held at its value in "
-                "[held] (COORD = value)") if missing and len(names) < len(coordinates) else ""
+                "[held] (COORD = value, or a pattern: \"*\" = 0 holds every joint without a channel)") if missing and len(names) < len(coordinates) else ""
         raise InputError(f"{len(names)} {quantity} channels for {len(coordinates)} independent coordinates "
                          f"({', '.join(coordinates)}): give one channel per coordinate{hint}", file=path,
                          key=quantity)
