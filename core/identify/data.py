@@ -175,6 +175,8 @@ class MeasuredData:
     (run, body label, ten inertial parameters) of known loads added to a run's mechanism.
     ``gain_names``/``gain_columns`` (n, f, G): currents whose gains are unknown, each as the
     force it makes per unit gain; the measured force is ``tau + gain_columns @ gains``.
+    ``quanta``: the step of the grid each force was logged on (a current in counts, a torque
+    rounded to 0.001), mapped through the drive chain; 0 where not on a grid.
     """
     motion: Motion
     tau: np.ndarray
@@ -188,6 +190,7 @@ class MeasuredData:
     payloads: tuple = ()
     gain_names: tuple[str, ...] = ()
     gain_columns: np.ndarray | None = field(default=None, repr=False, compare=False)
+    quanta: np.ndarray | None = None   # (f,) each force's quantisation step as logged (0: none), or None
 
     def __post_init__(self) -> None:
         if not self.segments:
@@ -319,10 +322,11 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
         offset += part.motion.count
     motion = Motion(*(np.concatenate([getattr(m, k) for m in motions]) for k in ("t", "q", "qd", "qdd")))
     estimated = tuple(sorted({k for p in parts for k in p.estimated}))
+    quanta = [p.quanta for p in parts if p.quanta is not None]
     return MeasuredData(motion, np.concatenate([p.tau for p in parts]), coordinates,
                         path or ", ".join(str(p.path) for p in parts), tuple(notes), estimated,
                         None, tuple(segments), tuple(runs), tuple(payloads), gain_names,
-                        np.concatenate(gains))
+                        np.concatenate(gains), np.max(quanta, axis=0) if quanta else None)
 
 
 # ----- reading ----------------------------------------------------------------------------

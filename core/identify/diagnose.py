@@ -122,6 +122,7 @@ class Problem:
     given_masses: bool = True                  # whether given's body masses are the bodies' (given.Given)
     # an identify result held as given: E (r, P) to its base parameters and their covariance (r, r)
     given_uncertainty: tuple[np.ndarray, np.ndarray] | None = None
+    quanta: np.ndarray | None = None           # (f,) the forces' quantisation steps (MeasuredData.quanta)
 
 
 def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
@@ -162,16 +163,17 @@ def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,
     if not candidates and wanted == set():
         raise InputError("no candidate effects left to test (every selected effect is already "
                          "in the mechanism)", key="--candidates")
+    quanta = data.quanta if data is not None else None
     if given is not None:
         given = np.asarray(given, dtype=float)
         known = known + inertial.matrix @ given
         notes.append("the inertial parameters are held as given (--params): bodies, payloads and "
                      "torque gains are candidates")
         return Problem(mechanism, independent_names(mechanism), t, fitted.matrix, known, candidates, notes,
-                       qd, inertial.matrix, given, wanted, correlation)
+                       qd, inertial.matrix, given, wanted, correlation, quanta=quanta)
     model = np.concatenate([inertial.matrix, fitted.matrix], axis=-1)
     return Problem(mechanism, independent_names(mechanism), t, model, known, candidates, notes, qd,
-                   None, None, wanted, correlation)
+                   None, None, wanted, correlation, quanta=quanta)
 
 
 # ----- the result ----------------------------------------------------------------------------
@@ -289,7 +291,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     after = _predict(model, [full[i] for i in in_model], y, None, train)
     # structure left beside a named effect: is the effect larger than what is left there?
     size = np.sqrt(np.mean(tau[rows] ** 2, axis=0))
-    unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
+    unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation, problem.quanta)
     dominated = _dominated(after, train, [full[i] for i in in_model], in_model, kept_named, problem.coordinates,
                            alpha, unexplained)
     if dominated:
@@ -297,7 +299,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
             unsupported.append(_held_back(candidates, i, reason))
         in_model = [i for i in in_model if i not in {i for i, _ in dominated}]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
-        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
+        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation, problem.quanta)
     # physical in the final model too: a sign judged beside effects that later checks took out
     # can turn without them (a noise-free SLA: a rotor inertia of -162 was named)
     while True:
@@ -311,7 +313,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
             unsupported.append(_held_back(candidates, i, reason))
         in_model = [i for i in in_model if i not in dict(turned)]
         after = _predict(model, [full[i] for i in in_model], y, None, train)
-        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation)
+        unexplained = _unexplained(after, train, problem.coordinates, alpha, size, problem.correlation, problem.quanta)
     floor, noise_only = holdout_floor(after.fit, after.model[train:], tau[train:]) if held else (None, None)
     gap: dict = {"before": nrms(before.residual[rows], tau[rows]),
            "after": nrms(after.residual[rows], tau[rows]),
@@ -332,7 +334,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added
                  if i in ambiguous_idx and i not in dropped]
     white = unexplained["white"]
-    closed = bool(white and not remaining and not unsupported)
+    rounding = _within_rounding(problem, model[rows], candidates, in_model, unsupported, y[rows], after.fit.weights)
+    closed = bool(white and not remaining and not [u for u in unsupported if u["index"] not in rounding])
     unexplained["significant_candidates_left"] = remaining
     unexplained["max_steps"] = max_steps
     first = chosen.steps[0]
@@ -344,6 +347,9 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     verdict = ("explained" if closed else "partly explained") if named_any else \
         ("nothing missing" if closed else "unexplained")
     notes = list(problem.notes) + replaced + _shared_bodies(candidates, regrouped)
+    for coordinate, step in unexplained["quantised"].items():
+        notes.append(f"{coordinate}: its residual is within half its force's quantisation step ({step:.4g}): "
+                     "structure that small cannot be told from the rounding and is not judged")
     if exact:
         notes.append(f"the inertial model reproduces the data to rounding (NRMS {gap['before']:.3g}): data "
                      "without noise; no effect was tested")
@@ -1197,6 +1203,31 @@ def absent(total: float, known: float | None) -> bool:
     return known is not None and abs(total) <= ABSENT * abs(known)
 
 
+def _within_rounding(problem: Problem, model: np.ndarray, candidates: list[Candidate], in_model: list[int],
+                     unsupported: list[dict], y: np.ndarray, weights: np.ndarray | None) -> set[int]:
+    """The unsupported candidates whose force, fitted beside the final model, is within half
+    the quantisation step of every coordinate it acts on (their entries say so): they do not
+    hold the verdict back. Why: rounding that coarse leaves an error that follows the signal,
+    which such a force fits significantly without it being there (exact TIAGo-like data
+    rounded to 0.2 N m on the wrist: a Stribeck friction of -0.02 N m, significant)."""
+    if problem.quanta is None:
+        return set()
+    steps = np.asarray(problem.quanta, float)
+    out = set()
+    for entry in unsupported:
+        i = entry["index"]
+        if i in in_model:
+            continue
+        value, _ = coefficients(model, candidates, [*in_model, i], y, weights)[-1]
+        rms = np.sqrt(np.mean((candidates[i].columns @ value) ** 2, axis=0))
+        acts = rms > 0
+        if acts.any() and np.all(steps[acts] > 0) and np.all(rms[acts] <= steps[acts] / 2):
+            out.add(i)
+            entry["reason"] += (f"; within the rounding of its torques (force RMS {rms[acts].max():.3g}, "
+                                f"under half the quantisation step {steps[acts].min():.3g})")
+    return out
+
+
 def _held_back(candidates: list[Candidate], index: int, reason: str) -> dict:
     """An ``unsupported`` entry for a named effect a final check took out, with its reason."""
     return {"index": index, "kind": candidates[index].kind, "coordinate": candidates[index].coordinate,
@@ -1297,11 +1328,14 @@ def _at_rounding(model: np.ndarray, y: np.ndarray, tau: np.ndarray) -> bool:
 
 
 def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str], alpha: float,
-                 size: np.ndarray, correlation: np.ndarray | None = None) -> dict:
+                 size: np.ndarray, correlation: np.ndarray | None = None, quanta: np.ndarray | None = None
+                 ) -> dict:
     """Whiteness of the final fit's residual per coordinate (Ljung-Box, its null simulated
     through the fit: :mod:`.whiteness`, with the recording's filter's ``correlation``; Holm
     over the coordinates) and the residual against the noise level; ``size``: each
-    coordinate's torque RMS (training rows)."""
+    coordinate's torque RMS (training rows). A coordinate whose residual RMS is within half
+    its force's quantisation step (``quanta``) is not judged: rounding to a coarse grid leaves
+    an error that follows the signal (structure) as large as that (``quantised``)."""
     residual, fit = prediction.residual, prediction.fit
     fit_part, hold_part = residual[:train], residual[train:]
     sigma = noise_floor(fit_part, correlation)
@@ -1310,7 +1344,9 @@ def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str]
     stats, pvalues = monte_carlo_pvalues(weighted, fit.basis, lags, alpha, correlation=correlation)
     flat = np.std(weighted, axis=0) == 0
     flat |= np.sqrt(np.mean(residual[:train] ** 2, axis=0)) <= ROUNDING * size
-    pvalues[flat] = 1.0
+    steps = np.zeros(len(coordinates)) if quanta is None else np.asarray(quanta, float)
+    quantised = (steps > 0) & (np.sqrt(np.mean(residual[:train] ** 2, axis=0)) <= steps / 2)
+    pvalues[flat | quantised] = 1.0
     count = replicates(len(coordinates), alpha)
     boxes = {c: {"stat": float(stats[j]), "pvalue": float(pvalues[j]), "lags": lags, "replicates": count}
              for j, c in enumerate(coordinates)}
@@ -1325,6 +1361,7 @@ def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str]
         "residual_rms": dict(zip(coordinates, rms.tolist())),
         "ratio": dict(zip(coordinates, _finite(rms / safe))),
         "holdout_ratio": dict(zip(coordinates, _finite(hold_rms / safe))) if hold_rms is not None else None,
+        "quantised": {c: float(steps[j]) for j, c in enumerate(coordinates) if quantised[j]},
     }
 
 
