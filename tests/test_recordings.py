@@ -828,3 +828,73 @@ def test_a_time_column_of_dates_and_times(tmp_path):
     with pytest.raises(InputError, match="not a date and time") as error:
         read_recording(tmp_path / "rec.toml", mech)
     assert error.value.key == "row 301, column stamp"
+
+
+def _array_logs(tmp_path, mech, phi):
+    """The same samples as a CSV log, a NumPy .npz (q saved channels x samples) and a MATLAB
+    .mat with a struct ``log``; a description for each."""
+    import scipy.io
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *tau.T])
+    np.savez(tmp_path / "log.npz", t=t, q=motion.q.T, tau=tau, note=np.array("a text variable"))
+    scipy.io.savemat(tmp_path / "log.mat", {"log": {"t": t, "q": motion.q, "tau": tau, "robot": "R3"}})
+    (tmp_path / "csv.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    arrays = '[position]\nq1 = "{p}q[0]"\nq2 = "{p}q[1]"\nq3 = "{p}q[2]"\n[torque]\nq1 = "{p}tau[0]"\n' \
+             'q2 = "{p}tau[1]"\nq3 = "{p}tau[2]"\n'
+    (tmp_path / "npz.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.npz"\n' + arrays.format(p=""))
+    (tmp_path / "mat.toml").write_text('[recording]\ntime = "log.t"\n[[runs]]\nfile = "log.mat"\n'
+                                       + arrays.format(p="log."))
+
+
+def test_logs_saved_as_npz_or_mat_arrays_read_as_their_csv(tmp_path):
+    """A .npz (a 2-D variable saved either way round: ``q[0]``..) and a MATLAB .mat (a struct's
+    fields: ``log.q[0]``) read as named columns: identify gives the CSV log's estimates to
+    the last bit (the CSV holds the same float64 values)."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    _array_logs(tmp_path, mech, phi)
+    results = {}
+    for kind in ("csv", "npz", "mat"):
+        data, model = read_recording(tmp_path / f"{kind}.toml", mech)
+        results[kind] = identify(model, data, base=_base(mech)).estimates
+    np.testing.assert_array_equal(results["npz"], results["csv"])
+    np.testing.assert_array_equal(results["mat"], results["csv"])
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+
+
+@pytest.mark.parametrize("change, message", [
+    ("column", "no column 'q[3]' (columns: t, q[0], q[1], q[2], tau[0], tau[1], tau[2])"),
+    ("inf", "row 5, column q[1]: inf is not a finite number"),
+    ("lengths", "the columns used have different lengths"),
+    ("text", "column q[0]: holds <U1 values, not numbers"),
+    ("corrupt", "cannot read as a NumPy .npz file"),
+    ("v73", "a MATLAB v7.3 (HDF5) file, which is not read: save it with -v7"),
+])
+def test_a_bad_array_log_is_bad_input_naming_what(tmp_path, change, message):
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    _array_logs(tmp_path, mech, phi)
+    arrays = dict(np.load(tmp_path / "log.npz"))
+    description = "npz.toml"
+    if change == "column":
+        (tmp_path / "npz.toml").write_text((tmp_path / "npz.toml").read_text().replace('"q[2]"', '"q[3]"'))
+    elif change == "inf":
+        arrays["q"][1, 4] = np.inf
+    elif change == "lengths":
+        arrays["tau"] = arrays["tau"][:-1]
+    elif change == "text":
+        arrays["q"] = np.full(arrays["q"].shape, "x")
+    if change in ("inf", "lengths", "text"):
+        np.savez(tmp_path / "log.npz", **arrays)
+    if change == "corrupt":
+        (tmp_path / "log.npz").write_bytes(b"PK\x03\x04 not a zip archive")
+    if change == "v73":
+        (tmp_path / "log.mat").write_bytes(b"MATLAB 7.3 MAT-file".ljust(128, b" ") + b"\x89HDF\r\n" + bytes(400))
+        description = "mat.toml"
+    (tmp_path / "mech.toml").write_text(_chain(2))
+    result = CliRunner().invoke(main, ["identify", str(tmp_path / "mech.toml"), str(tmp_path / description),
+                                       "--quiet"])
+    assert result.exit_code == 2, result.output + result.stderr
+    assert message in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr

@@ -37,6 +37,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
+from baseparams.identify.arrays import is_array_file, read_arrays
 from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment,
                                       _read_text, read_columns, bandwidth, concatenate, kinematics)
 from baseparams.identify.model import Motion, drive_rows, independent_names
@@ -528,6 +529,8 @@ def _table(path: str, delimiter: str = "auto", comment: str | None = None, wante
     """(header, the ``wanted`` columns by name, each row's line) of one log: the columns no
     channel uses are not read (a text column there is no error); ``dates``: columns of ISO
     dates and times, read in seconds."""
+    if is_array_file(path):                              # .npz, .mat: named arrays
+        return read_arrays(path, wanted, dates or ())
     return read_columns(path, _read_text(path), delimiter, comment, wanted, missing=True, dates=dates or ())
 
 
