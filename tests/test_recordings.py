@@ -870,6 +870,7 @@ def test_logs_saved_as_npz_or_mat_arrays_read_as_their_csv(tmp_path):
     ("text", "column q[0]: holds <U1 values, not numbers"),
     ("corrupt", "cannot read as a NumPy .npz file"),
     ("v73", "a MATLAB v7.3 (HDF5) file, which is not read: save it with -v7"),
+    ("direct", "a log saved as arrays is read through a recording description"),
 ])
 def test_a_bad_array_log_is_bad_input_naming_what(tmp_path, change, message):
     mech = parse_mechanism(_chain(2))
@@ -892,6 +893,8 @@ def test_a_bad_array_log_is_bad_input_naming_what(tmp_path, change, message):
     if change == "v73":
         (tmp_path / "log.mat").write_bytes(b"MATLAB 7.3 MAT-file".ljust(128, b" ") + b"\x89HDF\r\n" + bytes(400))
         description = "mat.toml"
+    if change == "direct":
+        description = "log.npz"
     (tmp_path / "mech.toml").write_text(_chain(2))
     result = CliRunner().invoke(main, ["identify", str(tmp_path / "mech.toml"), str(tmp_path / description),
                                        "--quiet"])

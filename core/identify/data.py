@@ -336,6 +336,10 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     file, the row and/or column and the reason otherwise). ``check_kinematics``: close the
     loops at every sample now (and keep the result in ``sample``)."""
     path = str(path)
+    if path.lower().endswith((".npz", ".mat")):
+        raise InputError("a log saved as arrays is read through a recording description (a TOML file whose "
+                         "[[runs]] file is this log and whose channels name its columns: docs/identification.md)",
+                         file=path)
     text = _read_text(path)
     coordinates = independent_names(mechanism)
     found: list = []
