@@ -901,3 +901,30 @@ def test_a_bad_array_log_is_bad_input_naming_what(tmp_path, change, message):
     assert result.exit_code == 2, result.output + result.stderr
     assert message in result.stderr, result.stderr
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("position, torque, to_position, to_torque", [
+    ("rev", '{ column = "x", unit = "mA", gain = 2.5 }', 1 / (2 * np.pi), 1000 / 2.5),
+    ("deg", '{ column = "x", unit = "Nm" }', 180 / np.pi, 1.0),
+    ("rad", '{ column = "x", unit = "N mm" }', 1.0, 1000.0),
+])
+def test_units_of_positions_and_torques_read_as_the_model_s(tmp_path, position, torque, to_position, to_torque):
+    """A log in turns and milliamperes (a drive's), in degrees and 'Nm', in N mm: read as in
+    radians and N m (q1's channels in those units, the others in the model's)."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    q, f = motion.q.copy(), tau.copy()
+    q[:, 0] *= to_position
+    f[:, 0] *= to_torque
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *q.T, *f.T])
+    (tmp_path / "units.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n'
+                                         + CHANNELS_ABC.replace('q1 = "a"', f'q1 = {{ column = "a", unit = "{position}" }}')
+                                         .replace('q1 = "x"', f"q1 = {torque}"))
+    _write(tmp_path / "plain.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *tau.T])
+    (tmp_path / "plain.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "plain.csv"\n' + CHANNELS_ABC)
+    read, _ = read_recording(tmp_path / "units.toml", mech)
+    plain, _ = read_recording(tmp_path / "plain.toml", mech)
+    np.testing.assert_allclose(read.motion.q, plain.motion.q, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(read.tau, plain.tau, rtol=1e-9, atol=1e-9 * np.abs(plain.tau).max())

@@ -57,10 +57,11 @@ DECIMATION_BAND = 0.8
 EDGE_PERIODS = 3.0
 # A time step longer than this many median steps splits a run (a gap in the log).
 GAP_STEPS = 10.0
-UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "m": 1.0, "mm": 1e-3},
-         "velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
+UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "rev": 2 * math.pi, "m": 1.0, "mm": 1e-3},
+         "velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "rpm": 2 * math.pi / 60, "m/s": 1.0, "mm/s": 1e-3},
          "acceleration": {"rad/s2": 1.0, "deg/s2": math.pi / 180, "m/s2": 1.0, "mm/s2": 1e-3},
-         "torque": {"N m": 1.0, "N": 1.0, "mN m": 1e-3, "A": 1.0}}
+         "torque": {"N m": 1.0, "Nm": 1.0, "N": 1.0, "kN": 1e3, "mN m": 1e-3, "mNm": 1e-3, "N mm": 1e-3,
+                    "A": 1.0, "mA": 1e-3}}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso: dates and times, in s from the first
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
