@@ -284,3 +284,4 @@ def test_the_grid_a_signal_was_logged_on_is_found_and_only_a_grid():
     assert quantum(x) == 0.0
     assert quantum(np.array([float(f"{v:.5g}") for v in x])) == 0.0                  # 5 digits: no one grid (TX40)
     assert quantum(np.full(10, 2.0)) == 0.0 and quantum(np.array([np.nan, 1.0])) == 0.0
+    assert quantum(np.array([0.0, 3e-6, 1e-5, 2.3e-5]) + 497.0) == pytest.approx(1e-6, rel=1e-6)   # no gap of 1e-6

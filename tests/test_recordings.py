@@ -928,3 +928,17 @@ def test_units_of_positions_and_torques_read_as_the_model_s(tmp_path, position, 
     plain, _ = read_recording(tmp_path / "plain.toml", mech)
     np.testing.assert_allclose(read.motion.q, plain.motion.q, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(read.tau, plain.tau, rtol=1e-9, atol=1e-9 * np.abs(plain.tau).max())
+
+
+def test_a_log_printed_to_six_decimals_is_not_taken_as_quantised(tmp_path):
+    """Values printed with 6 decimals lie on a grid of 1e-6, a millionth of their size or
+    less: not rounding a diagnosis must allow for, and no note says so."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    table = np.column_stack([t, motion.q, tau * 10.0])
+    np.savetxt(tmp_path / "log.csv", table, delimiter=",", header="t,a,b,c,x,y,z", comments="", fmt="%.6f")
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
+    data, _ = read_recording(tmp_path / "rec.toml", mech)
+    assert data.quanta is None and not any("quantised" in n for n in data.notes), data.notes

@@ -65,6 +65,8 @@ UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "rev": 2 * math.pi, "m":
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso: dates and times, in s from the first
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
+GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. this
+QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
 PATTERN_CHARACTERS = "*?["          # a [held] key with one of these is a pattern (fnmatch)
 
 CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
@@ -441,6 +443,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         if transpose:                                    # tau = N^T tau_channels; with unknown gains
             known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
             steps = np.array([quantum(raw[:, k]) if known[k] else 0.0 for k in range(len(chans))])
+            size = np.sqrt(np.nanmean(raw ** 2, axis=0))
+            steps[steps < QUANTUM_RELEVANT * size] = 0.0     # a value printed to many digits: not rounding
             quanta[:] = np.abs(matrix).T @ steps
             if steps.any():
                 quantised_notes.append("quantised torque channels, their values on a grid of (in the model's "
@@ -553,11 +557,13 @@ def quantum(values: np.ndarray) -> float:
     if len(levels) < 2:
         return 0.0
     gaps = np.diff(levels)
-    step = float(gaps.min())
-    ratio = gaps / step
-    if step <= 0 or np.abs(ratio - np.round(ratio)).max() > GRID_TOLERANCE:
-        return 0.0
-    return step
+    smallest = float(gaps.min())
+    for divisor in range(1, GRID_DIVISORS + 1):      # the step need not be a gap itself (1e-6 when
+        step = smallest / divisor                    # no two values lie closer than 3e-6)
+        ratio = gaps / step
+        if np.abs(ratio - np.round(ratio)).max() <= GRID_TOLERANCE:
+            return step
+    return 0.0
 
 
 def _unwrapped(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
