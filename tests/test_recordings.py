@@ -5,6 +5,7 @@ acceleration, irregular time stamps, two runs with a seam, a known payload; iden
 through the description must recover what made the data."""
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -942,3 +943,29 @@ def test_a_log_printed_to_six_decimals_is_not_taken_as_quantised(tmp_path):
     (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
     data, _ = read_recording(tmp_path / "rec.toml", mech)
     assert data.quanta is None and not any("quantised" in n for n in data.notes), data.notes
+
+
+def test_a_logged_velocity_that_lags_the_positions_is_noted(tmp_path):
+    """A controller's velocity, a first-order filter of the position difference (the TIAGo's:
+    v = 0.95 v + 0.05 dq/dt at 100 Hz, a 0.19 s time constant): the note says it differs from
+    the positions' derivative and lags by about the time constant; the exact velocity gives
+    no note."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 30, 0.01)
+    motion, tau = _truth(mech, t, phi)
+    lagged = np.zeros_like(motion.q)
+    for i in range(1, len(t)):
+        lagged[i] = 0.95 * lagged[i - 1] + 0.05 * (motion.q[i] - motion.q[i - 1]) / 0.01
+    notes = {}
+    for name, velocity in (("exact", motion.qd), ("lagged", lagged)):
+        _write(tmp_path / f"{name}.csv", ["t", "a", "b", "c", "va", "vb", "vc", "x", "y", "z"],
+               [t, *motion.q.T, *velocity.T, *tau.T])
+        (tmp_path / f"{name}.toml").write_text(f'[recording]\ntime = "t"\n[[runs]]\nfile = "{name}.csv"\n'
+                                               + CHANNELS_ABC + '[velocity]\nq1 = "va"\nq2 = "vb"\nq3 = "vc"\n')
+        data, _ = read_recording(tmp_path / f"{name}.toml", mech)
+        notes[name] = [n for n in data.notes if n.startswith("measured velocities differ")]
+    assert notes["exact"] == []
+    [note] = notes["lagged"]
+    lags = [float(m) for m in re.findall(r"lags by ([\d.]+) ms", note)]
+    assert len(lags) == 3 and all(150 <= lag <= 230 for lag in lags), note

@@ -66,6 +66,7 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso:
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
 GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. this
+VELOCITY_MISMATCH = 0.05          # measured velocity vs the positions' derivative: a note above this
 QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
 PATTERN_CHARACTERS = "*?["          # a [held] key with one of these is a pattern (fnmatch)
 
@@ -498,7 +499,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     for a, b in pieces:
         try:
             part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
-                                         None if qdd is None else qdd[a:b], forces[a:b], settings, path)
+                                         None if qdd is None else qdd[a:b], forces[a:b], settings, path,
+                                         coordinates)
         except InputError as exc:
             if len(pieces) == 1 or "too short" not in exc.reason:
                 raise
@@ -715,7 +717,7 @@ def auto_cutoff(signal: np.ndarray, step: float, what: str) -> tuple[float, str]
 
 
 def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None, tau: np.ndarray,
-              settings: dict, path: str) -> tuple[MeasuredData, list[str]]:
+              settings: dict, path: str, coordinates: tuple[str, ...] = ()) -> tuple[MeasuredData, list[str]]:
     """One uniform piece: resampled if irregular, positions filtered and differentiated, the
     parallel filter and decimation planned (:class:`Segment`)."""
     notes = []
@@ -770,6 +772,7 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
         estimated = ("qdd",) if qdd is None else ()
         qdd = np.gradient(qd, step, axis=0) if qdd is None else sosfiltfilt(sos, qdd, axis=0)
         what = "measured velocities" + ("" if estimated else " and accelerations")
+        notes += _velocity_check(qf, qd, step, edge, coordinates)
     if own_times is not None:             # the filtered motion at the samples' own times
         qf, qd, qdd = (CubicSpline(t, x, axis=0)(own_times) for x in (qf, qd, qdd))
         t = own_times
@@ -782,6 +785,36 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     data = MeasuredData(Motion(t, qf, qd, qdd), segment.reduce(tau), (), None, (), estimated,
                         segments=(segment,))
     return data, notes
+
+
+def _velocity_check(q: np.ndarray, qd: np.ndarray, step: float, edge: int, names: tuple[str, ...]) -> list[str]:
+    """A note when measured velocities are not the positions' derivative (both filtered alike;
+    the filter's transients at the ends left out): their RMS difference over VELOCITY_MISMATCH
+    of the derivative's on a coordinate, with the lag (up to 1 s) that aligns them best.
+    Why: a controller often logs a filtered velocity (the TIAGo's lags its positions by 0.2 s),
+    which then stood in the model's velocity terms without a word."""
+    inside = slice(edge, len(q) - edge) if len(q) > 2 * edge + 2 else slice(None)
+    derivative, measured = np.gradient(q, step, axis=0)[inside], qd[inside]
+    found = []
+    for j in range(q.shape[1]):
+        size = float(np.sqrt(np.mean(derivative[:, j] ** 2)))
+        miss = float(np.sqrt(np.mean((measured[:, j] - derivative[:, j]) ** 2))) / size if size > 0 else 0.0
+        if miss <= VELOCITY_MISMATCH:
+            continue
+        longest = min(len(measured) // 4, int(round(1.0 / step)))
+        errors = {k: float(np.sqrt(np.mean((measured[max(k, 0):len(measured) + min(k, 0), j]
+                                            - derivative[max(-k, 0):len(measured) - max(k, 0), j]) ** 2))) / size
+                  for k in range(-longest, longest + 1)}
+        lag = min(errors, key=errors.__getitem__)
+        name = names[j] if j < len(names) else f"coordinate {j + 1}"
+        found.append(f"{name} {100 * miss:.0f} %" + (f" ({'lags' if lag > 0 else 'leads'} by "
+                                                    f"{abs(lag) * step * 1e3:.4g} ms: {100 * errors[lag]:.0f} % "
+                                                    "once aligned)" if lag else ""))
+    if not found:
+        return []
+    return ["measured velocities differ from the positions' derivative (RMS, of the derivative's): "
+            + ", ".join(found) + ": filtered or delayed velocities? Without [velocity] the velocities are derived "
+            "from the positions"]
 
 
 def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads: list,
