@@ -285,3 +285,16 @@ def test_the_grid_a_signal_was_logged_on_is_found_and_only_a_grid():
     assert quantum(np.array([float(f"{v:.5g}") for v in x])) == 0.0                  # 5 digits: no one grid (TX40)
     assert quantum(np.full(10, 2.0)) == 0.0 and quantum(np.array([np.nan, 1.0])) == 0.0
     assert quantum(np.array([0.0, 3e-6, 1e-5, 2.3e-5]) + 497.0) == pytest.approx(1e-6, rel=1e-6)   # no gap of 1e-6
+
+
+def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
+    """A named effect whose rival correlates with it at 0.999 beyond the model and which it
+    outdoes at p 0.031 only gets a note naming the rival; a rival it outdoes at p 1e-6, or a
+    less correlated one, does not."""
+    from baseparams.identify.diagnose import _near_twins
+    effects = [{"kind": "body", "coordinate": "arm_6_link", "rivals": [
+        {"candidate": "body:arm_7_link", "correlation": 0.9993, "pvalue_named_over_rival": 0.031},
+        {"candidate": "mass:arm_7_link", "correlation": 0.9995, "pvalue_named_over_rival": 1e-6},
+        {"candidate": "body:arm_5_link", "correlation": 0.857, "pvalue_named_over_rival": 0.2}]}]
+    [note] = _near_twins(effects)
+    assert note.startswith("body:arm_6_link: body:arm_7_link explains it nearly as well") and "p = 0.031" in note
