@@ -969,3 +969,31 @@ def test_a_logged_velocity_that_lags_the_positions_is_noted(tmp_path):
     [note] = notes["lagged"]
     lags = [float(m) for m in re.findall(r"lags by ([\d.]+) ms", note)]
     assert len(lags) == 3 and all(150 <= lag <= 230 for lag in lags), note
+
+
+def test_a_log_of_merged_topics_is_read_on_the_torques_rows(tmp_path):
+    """A logger that merges topics into one table fills each row from one topic: positions on
+    even rows, torques on odd ones, the rest empty. Every row missed a channel and all were
+    left out ("0 samples"); now the torques' rows are the samples and the positions are
+    interpolated onto their times (cubic): the base parameters come back as from a full log.
+    A column missing on a few rows (a dropped packet) still leaves those samples out."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    q, f = motion.q.copy(), tau.copy()
+    q[1::2], f[0::2] = np.nan, np.nan
+    _write(tmp_path / "merged.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *q.T, *f.T])
+    text = (tmp_path / "merged.csv").read_text().replace("nan", "")
+    (tmp_path / "merged.csv").write_text(text)
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "merged.csv"\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "rec.toml", mech)
+    assert any("topics merged into one table" in n and "read on the 5000 rows of x, y, z" in n for n in data.notes)
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)
+    sporadic = tau.copy()
+    sporadic[100:103] = np.nan                         # three dropped packets: left out, not filled
+    _write(tmp_path / "merged.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *sporadic.T])
+    (tmp_path / "merged.csv").write_text((tmp_path / "merged.csv").read_text().replace("nan", ""))
+    data, _ = read_recording(tmp_path / "rec.toml", mech)
+    assert not any("topics merged" in n for n in data.notes)
+    assert any("3 sample(s) with a missing value" in n for n in data.notes), data.notes

@@ -66,6 +66,7 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso:
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
 GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. this
+MERGED_SHARE = 0.5                 # a column missing on more of the reference rows: topics merged
 VELOCITY_MISMATCH = 0.05          # measured velocity vs the positions' derivative: a note above this
 QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
 PATTERN_CHARACTERS = "*?["          # a [held] key with one of these is a pattern (fnmatch)
@@ -386,7 +387,9 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         for _, table, _ in tables.values():
             if stamp in table:
                 table[stamp] = (table[stamp] - origin) * 1e-9
+    tables, merged_notes = _merged_rows(head, tables, files, description)
     tables, clock_notes = _on_one_clock(head, tables, files, description, folder)
+    clock_notes = merged_notes + clock_notes
     lengths = {alias: len(rows) for alias, (_, _, rows) in tables.items()}
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
@@ -581,6 +584,53 @@ def _unwrapped(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     out = angle.copy()
     out[finite] = np.unwrap(angle[finite])
     return out, jumps
+
+
+def _merged_rows(head: dict, tables: dict, files: dict, description: Description) -> tuple[dict, list[str]]:
+    """(tables, notes): a file holding the time column whose used columns are present on
+    different rows (a logger that merges topics into one table, each row filled by one topic)
+    is read on the rows of its torque channels (else its position channels): a used column
+    missing on more than MERGED_SHARE of those rows is interpolated from its own rows onto
+    their times (cubic for positions and velocities, linear otherwise; NaN outside its span,
+    left out later as missing values are), and the file is cut to those rows. Why: every row
+    missed some channel, and all were left out ("0 samples"). A column missing on fewer rows
+    (a dropped packet) is not touched: those samples are left out as before."""
+    column = str(head.get("time", "")).rpartition(":")[2]
+    if not column:
+        return tables, []
+    smooth = {(c.file, c.column) for q in ("position", "velocity", "acceleration") for c in description.channels[q]}
+    torques = {(c.file, c.column) for c in description.channels["torque"]}
+    out, notes = dict(tables), []
+    for alias, (header, table, rows) in tables.items():
+        if column not in table:
+            continue
+        used = [name for name in table if name != column]
+        mine = [name for name in used if (alias, name) in torques or (None, name) in torques] or \
+            [name for name in used if (alias, name) in smooth or (None, name) in smooth]
+        if not mine:
+            continue
+        keep = np.all([np.isfinite(table[name]) for name in mine], axis=0)
+        others = [name for name in used if name not in mine and keep.any()
+                  and np.mean(~np.isfinite(table[name][keep])) > MERGED_SHARE]
+        if not others:
+            continue
+        clock = table[column]
+        moved = {name: values[keep] for name, values in table.items()}
+        for name in others:
+            own = np.isfinite(table[name]) & np.isfinite(clock)
+            x, y = clock[own], table[name][own]
+            inside = (clock[keep] >= x[0]) & (clock[keep] <= x[-1]) if len(x) > 1 else np.zeros(int(keep.sum()), bool)
+            if len(x) < 4:
+                moved[name] = np.full(int(keep.sum()), np.nan)
+                continue
+            cubic = (alias, name) in smooth or (None, name) in smooth
+            at = CubicSpline(x, y)(clock[keep]) if cubic and np.all(np.diff(x) > 0) else np.interp(clock[keep], x, y)
+            moved[name] = np.where(inside, at, np.nan)
+        out[alias] = (header, moved, [line for line, k in zip(rows, keep) if k])
+        notes.append(f"{files[alias]}: its columns are filled on different rows (topics merged into one table): "
+                     f"read on the {int(keep.sum())} rows of {', '.join(mine)}, with "
+                     f"{', '.join(others)} interpolated onto their times from their own rows")
+    return out, notes
 
 
 def _on_one_clock(head: dict, tables: dict, files: dict, description: Description, folder: Path
