@@ -637,14 +637,16 @@ def _on_one_clock(head: dict, tables: dict, files: dict, description: Descriptio
                   ) -> tuple[dict, list[str]]:
     """(tables, notes): when the time column is in every file of a run and the files' clocks
     differ (a logger that writes one file per topic, each stamped on arrival), every other
-    file's columns interpolated linearly onto the clock of the file with the first position
-    channel, NaN where that clock leaves their span or next to a missing value (left out
-    later as missing values are); else the tables as read. Why: such files have different
-    row counts, and were refused ("the files of one run must have the same rows")."""
+    file's columns interpolated onto the clock of the file with the first torque channel
+    (cubic for positions and velocities, linear otherwise), NaN where that clock leaves their
+    span or next to a missing value (left out later as missing values are); else the tables
+    as read. Why: such files have different row counts, and were refused ("the files of one
+    run must have the same rows"); the torques' clock, since the fourteenth session, because a
+    torque interpolated across a Coulomb friction's jump takes a value the model does not."""
     column = str(head.get("time", ""))
     if not column or ":" in column or len(tables) < 2 or not all(column in h for h, _, _ in tables.values()):
         return tables, []
-    first_channel = description.channels["position"][0]
+    first_channel = description.channels["torque"][0]
     first = first_channel.file if first_channel.file is not None else _only(tables, first_channel, description.path)
     reference = tables[first][1][column]
     if all(np.array_equal(table[column], reference) for _, table, _ in tables.values()):
@@ -665,11 +667,20 @@ def _on_one_clock(head: dict, tables: dict, files: dict, description: Descriptio
         once = np.r_[True, np.diff(clock) > 0]            # a repeated stamp: its first sample
         clock, table = clock[once], {name: values[once] for name, values in table.items()}
         inside = (reference >= clock[0]) & (reference <= clock[-1])
-        moved = {name: np.where(inside, np.interp(reference, clock, values), np.nan) for name, values in table.items()}
+        smooth = {c.column for q in ("position", "velocity", "acceleration") for c in description.channels[q]
+                  if c.file in (None, alias)}
+        moved = {}
+        for name, values in table.items():
+            at = np.interp(reference, clock, values)           # NaN next to a missing value
+            finite = np.isfinite(values)
+            if name in smooth and finite.sum() >= 4:
+                at = np.where(np.isfinite(at), CubicSpline(clock[finite], values[finite])(reference), np.nan)
+            moved[name] = np.where(inside, at, np.nan)
         moved[column] = reference
         out[alias] = (header, moved, tables[first][2])
-        notes.append(f"{files[alias]}: its columns interpolated onto the clock of {files[first]} (linear in "
-                     f"their own column {column}, {len(clock)} rows onto {len(reference)}"
+        notes.append(f"{files[alias]}: its columns interpolated onto the clock of {files[first]} (cubic for "
+                     f"positions and velocities, linear otherwise, in their own column {column}; {len(clock)} rows "
+                     f"onto {len(reference)}"
                      + (f"; {int((~inside).sum())} sample(s) outside its span left out)" if not inside.all() else ")"))
     return out, notes
 
