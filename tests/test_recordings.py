@@ -1031,3 +1031,28 @@ def test_torques_on_their_own_clock_are_not_interpolated_across_friction_jumps(t
     one, one_model = read_recording(tmp_path / "one.toml", mech)
     reference = identify(one_model, one, base=_base(mech), effects=effects).nrms.max()
     assert result.nrms.max() < 3 * reference + 1e-4, (result.nrms.max(), reference)
+
+
+def test_a_robot_mounted_tilted_is_read_with_the_descriptions_gravity(tmp_path):
+    """A robot mounted on a wall or at an angle: its model (a URDF) has gravity along -z of
+    its base, the recording does not. ``[recording] gravity`` (the base's axes) gives the
+    mounting: the base parameters of the tilted mechanism come back; without it the fit
+    misses by far."""
+    text = _chain(2)
+    upright = parse_mechanism(text)
+    assert 'gravity = ["0", "0", "-9.81"]' in text
+    tilted = parse_mechanism(text.replace('gravity = ["0", "0", "-9.81"]', 'gravity = ["0", "-6.9367", "-6.9367"]'))
+    phi = random_physical_inertia(upright, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(tilted, t, phi)
+    _write(tmp_path / "log.csv", ["t", "a", "b", "c", "x", "y", "z"], [t, *motion.q.T, *tau.T])
+    plain = '[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC
+    (tmp_path / "plain.toml").write_text(plain)
+    (tmp_path / "tilted.toml").write_text(plain.replace('time = "t"\n', 'time = "t"\ngravity = [0, -6.9367, "-6.9367"]\n'))
+    data, model = read_recording(tmp_path / "tilted.toml", upright)
+    assert model.gravity == tilted.gravity
+    _check_base(identify(model, data, base=_base(model)), _base(tilted), phi, 2e-3)
+    data, model = read_recording(tmp_path / "plain.toml", upright)
+    assert identify(model, data, base=_base(model)).nrms.max() > 0.05
+    with pytest.raises(InputError, match="another gravity than the descriptions before it"):
+        read_data([str(tmp_path / "tilted.toml"), str(tmp_path / "plain.toml")], upright)

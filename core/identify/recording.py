@@ -25,6 +25,7 @@ or the row and column, and the reason.
 
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass, replace
 from decimal import Decimal
@@ -33,6 +34,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+import sympy
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
@@ -69,14 +71,17 @@ GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. 
 MERGED_SHARE = 0.5                 # a column missing on more of the reference rows: topics merged
 VELOCITY_MISMATCH = 0.05          # measured velocity vs the positions' derivative: a note above this
 QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
-PATTERN_CHARACTERS = "*?["          # a [held] key with one of these is a pattern (fnmatch)
+PATTERN_CHARACTERS = "*?["
+DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")   # read exactly, never through a float          # a [held] key with one of these is a pattern (fnmatch)
 
 CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
                  "unit": (STRING, False), "gain": (VALUE, False)})
 SCHEMA = Table({
     "recording": (Table({"name": (STRING, False), "time": (STRING, False), "time_unit": (STRING, False),
                          "rate": (VALUE, False), "step": (VALUE, False), "delimiter": (STRING, False),
-                         "comment": (STRING, False)}), False),
+                         "comment": (STRING, False),
+                         "gravity": (Array(VALUE, 3, what="[gx, gy, gz] in the base's axes, m/s^2"), False)}),
+                  False),
     "runs": (ArrayOfTables(Table({
         "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
         "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
@@ -142,6 +147,10 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
     mechanism = _with_motors(mechanism, data.get("motors", []), path)
     held = _held_values(data, mechanism, path)
     mechanism = hold(mechanism, held, file=path)
+    if "gravity" in data.get("recording", {}):          # the robot mounted otherwise than its model
+        mechanism = replace(mechanism, gravity=tuple(
+            sympy.Rational(g.numerator, g.denominator) for g in
+            (_exact(v, path, f"recording.gravity[{k}]") for k, v in enumerate(data["recording"]["gravity"]))))
     if held and not independent_names(mechanism):
         raise InputError("every coordinate is held: nothing moves in this recording to fit", file=path,
                          key="held")
@@ -231,9 +240,12 @@ def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
 
 
 def _exact(value: object, path: str, key: str) -> Fraction:
-    """A decimal as its exact fraction; an expression such as ``pi/4`` to double precision."""
+    """A decimal (a number, or a string such as "-6.9367") as its exact fraction; an expression
+    such as ``pi/4`` to double precision."""
     if isinstance(value, (int, Decimal)):
         return Fraction(str(value))
+    if isinstance(value, str) and DECIMAL.fullmatch(value.strip()):
+        return Fraction(value.strip())
     return Fraction(_number(value, path, key))
 
 
@@ -334,12 +346,19 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
             if model is not None and with_motors.motors != model.motors:
                 raise InputError("declares other motors than the descriptions before it", file=path,
                                  key="motors")
+            if model is not None and with_motors.gravity != model.gravity:
+                raise InputError("states another gravity than the descriptions before it: fit recordings of "
+                                 "one mounting together", file=path, key="recording.gravity")
             if model is not None and with_motors.coordinates != model.coordinates:
                 raise InputError("holds other coordinates than the descriptions before it", file=path, key="held")
             model = with_motors
         else:
             part = read_measured(path, mechanism, check_kinematics=check_kinematics)
         parts.append(part)
+    if model is not None and model.gravity != mechanism.gravity and any(not is_description(p) for p in paths):
+        raise InputError("a CSV log cannot be fitted beside a recording with its own gravity ([recording] "
+                         "gravity): describe it with a recording description stating the same",
+                         file=next(p for p in paths if not is_description(p)))
     if model is not None and model.coordinates != mechanism.coordinates and any(not is_description(p) for p in paths):
         raise InputError("a CSV log cannot be fitted beside a recording that holds joints ([held]): describe it "
                          "with a recording description holding the same ones", file=next(
