@@ -1056,3 +1056,26 @@ def test_a_robot_mounted_tilted_is_read_with_the_descriptions_gravity(tmp_path):
     assert identify(model, data, base=_base(model)).nrms.max() > 0.05
     with pytest.raises(InputError, match="another gravity than the descriptions before it"):
         read_data([str(tmp_path / "tilted.toml"), str(tmp_path / "plain.toml")], upright)
+
+
+def test_runs_by_rows_split_a_log_whose_clock_was_reset(tmp_path):
+    """Two experiments logged end to end, the clock restarting at 0 for the second: the file
+    is refused (time goes back) with the way out, and two runs of rows ``[first, last]`` read
+    it, each filtered on its own: the base parameters come back."""
+    mech = parse_mechanism(_chain(2))
+    phi = random_physical_inertia(mech, np.random.default_rng(2))
+    t = np.arange(0, 10, 1 / RATE)
+    motion, tau = _truth(mech, t, phi)
+    a, b = slice(0, 4000), slice(5000, 10000)
+    clock = np.concatenate([t[a], t[b] - t[b][0]])        # the second part's clock starts again at 0
+    q, f = np.vstack([motion.q[a], motion.q[b]]), np.vstack([tau[a], tau[b]])
+    _write(tmp_path / "joined.csv", ["t", "a", "b", "c", "x", "y", "z"], [clock, *q.T, *f.T])
+    (tmp_path / "one.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "joined.csv"\n' + CHANNELS_ABC)
+    with pytest.raises(InputError, match=r"does not increase .*rows = \[first, last\]") as error:
+        read_recording(tmp_path / "one.toml", mech)
+    assert error.value.key == "row 4002"
+    (tmp_path / "two.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "joined.csv"\nrows = [2, 4001]\n'
+                                       '[[runs]]\nfile = "joined.csv"\nrows = [4002, 9001]\n' + CHANNELS_ABC)
+    data, model = read_recording(tmp_path / "two.toml", mech)
+    assert len(data.runs) == 2
+    _check_base(identify(model, data, base=_base(mech)), _base(mech), phi, 2e-3)

@@ -85,6 +85,7 @@ SCHEMA = Table({
     "runs": (ArrayOfTables(Table({
         "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
         "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
+        "rows": (Array(INTEGER, 2, what="[first, last] rows of the log, the header being row 1"), False),
         "payload": (Table({"body": (VALUE, True), "mass": (VALUE, True), "com": (Array(VALUE, 3), False),
                            "inertia": (Array(VALUE, 6, what="a list of 6 numbers (Ixx, Ixy, Ixz, Iyy, "
                                                               "Iyz, Izz) about the centre of mass"), False)}),
@@ -418,6 +419,14 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     name = run.get("name", str(files[next(iter(files))]))
     t, t_file = _times(head, tables, files, path)
     rows = next(iter(tables.values()))[2]
+    if "rows" in run:                      # a part of the log (FIGAROH's protocols give rows; a clock reset)
+        first, last = run["rows"]
+        inside = np.array([first <= line <= last for line in rows], dtype=bool)
+        if inside.sum() < MIN_SAMPLES:
+            raise InputError(f"{int(inside.sum())} samples in rows {first} to {last}", file=path, key=f"{key}.rows")
+        t, rows = t[inside], [line for line, keep in zip(rows, inside) if keep]
+        tables = {alias: (header, {c: v[inside] for c, v in table.items()}, rows)
+                  for alias, (header, table, _) in tables.items()}
     if "window" in run:
         start, end = (_number(v, path, f"{key}.window") for v in run["window"])
         inside = (t >= start) & (t <= end)
@@ -768,7 +777,8 @@ def _uniform_pieces(t: np.ndarray, t_file: str, rows: list[int], path: str
     bad = np.nonzero(steps <= 0)[0]
     if bad.size:
         k = int(bad[0]) + 1
-        raise InputError(f"time {t[k]:.17g} s does not increase (previous row: {t[k - 1]:.17g} s)",
+        raise InputError(f"time {t[k]:.17g} s does not increase (previous row: {t[k - 1]:.17g} s; a clock reset "
+                         "or logs joined end to end: give each part its own run, rows = [first, last])",
                          file=t_file, key=f"row {rows[k]}")
     if len(t) < MIN_SAMPLES:
         raise InputError(f"{len(t)} samples; at least {MIN_SAMPLES} are needed", file=t_file)
