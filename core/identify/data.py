@@ -336,7 +336,8 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     file, the row and/or column and the reason otherwise). ``check_kinematics``: close the
     loops at every sample now (and keep the result in ``sample``)."""
     path = str(path)
-    if path.lower().endswith((".npz", ".mat")):
+    from baseparams.identify.arrays import is_array_file
+    if is_array_file(path):
         raise InputError("a log saved as arrays is read through a recording description (a TOML file whose "
                          "[[runs]] file is this log and whose channels name its columns: docs/identification.md)",
                          file=path)

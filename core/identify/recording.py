@@ -475,7 +475,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         if transpose:                                    # tau = N^T tau_channels; with unknown gains
             known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
             steps = np.array([quantum(raw[:, k]) if known[k] else 0.0 for k in range(len(chans))])
-            size = np.sqrt(np.nanmean(raw ** 2, axis=0))
+            size = np.array([np.sqrt(np.mean(c[np.isfinite(c)] ** 2)) if np.isfinite(c).any() else 0.0
+                             for c in raw.T])
             steps[steps < QUANTUM_RELEVANT * size] = 0.0     # a value printed to many digits: not rounding
             quanta[:] = np.abs(matrix).T @ steps
             if steps.any():
