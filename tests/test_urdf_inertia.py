@@ -82,6 +82,25 @@ def test_verbs_that_use_the_values_refuse_them(bad_arm, tmp_path):
         require_physical(read_urdf(bad_arm).mechanism, "diagnose --params")
 
 
+def test_a_body_welded_to_the_ground_need_not_be_physical_for_given_parameters(tmp_path):
+    """A link fixed to the base with a non-physical inertia (the TIAGo's antennas) moves never
+    and no force depends on its values: diagnose --params holds the file as given; a moving
+    link's bad inertia is still refused."""
+    from baseparams.identify.given import given_parameters
+    fixed = BAD_ARM.replace('<link name="base"/>', '<link name="base"/>' + link(
+        "antenna", "0.01", "0 0 0.1", ("1e-8", "2e-8", "0", "1e-8", "0", "1e-8"))
+        + '<joint name="antenna_mount" type="fixed"><parent link="base"/><child link="antenna"/></joint>')
+    good_arm = fixed.replace('ixy="0.02"', 'ixy="0"').replace('izz="0.01"/></inertial></link><joint name="shoulder"',
+                                                                'izz="0.0015"/></inertial></link><joint name="shoulder"')
+    (tmp_path / "a.urdf").write_text(fixed)
+    (tmp_path / "b.urdf").write_text(good_arm)
+    arm = read_urdf(tmp_path / "b.urdf").mechanism
+    assert [key for key, _ in arm.nonphysical] == ["link[name=antenna].inertia"]
+    assert len(given_parameters(arm, str(tmp_path / "b.urdf")).parameters) == len(arm.parameters)
+    with pytest.raises(InputError, match=r"link\[name=upper\]\.inertia.*diagnose --params"):
+        given_parameters(read_urdf(tmp_path / "a.urdf").mechanism, str(tmp_path / "a.urdf"))
+
+
 def test_rounding_is_not_physics():
     """iCub's head: ixx = izz = 0 and ixz = 2.4e-35 at the centre of mass, mass 1.34 at 0.11 m:
     a violation 1e-33 of the inertia's scale is rounding; 1e-12 of it is not."""

@@ -43,8 +43,9 @@ def given_parameters(mechanism: Mechanism, source: str) -> Given:
         return _from_identify(mechanism, path)
     from baseparams.io.loader import resolve
     from baseparams.model.consistency import require_physical
+    from baseparams.identify.derived import welded
     other = resolve(source)
-    require_physical(other, "diagnose --params")
+    require_physical(other, "diagnose --params", still={b for b, root in welded(other).items() if root == 0})
     if list(other.parameters) != list(mechanism.parameters):
         raise InputError(f"its bodies do not match {mechanism.name}'s ({len(other.parameters)} standard "
                          f"parameters against {len(mechanism.parameters)}): give the same robot's file",

@@ -102,6 +102,7 @@ class MechanismBuilder:
         self._couplings: list[tuple[Coupling, str]] = []
         self._warnings: list[str] = []
         self._nonphysical: list[tuple[str, str]] = []
+        self._nonphysical_labels: list[int] = []
 
     # ----- errors and values ---------------------------------------------------------
     def error(self, key: str | None, reason: str) -> InputError:
@@ -212,6 +213,7 @@ class MechanismBuilder:
                 self.warn(where, f"{who}: {verdict.error}: not a physical body (accepted: base parameters "
                                  "do not depend on inertia values; simulate and identification refuse it)")
                 self._nonphysical.append((where, f"{who}: {verdict.error}"))
+                self._nonphysical_labels.append(label)
             elif verdict.error:
                 raise self.error(where, f"{who}: {verdict.error}: not a physical body")
             if verdict.warning:
@@ -506,7 +508,8 @@ class MechanismBuilder:
             title=self.title, description=self.description, source=self.source, path=self.path,
             gruebler=gruebler, effects=tuple(spec for spec, _ in self._effects),
             warnings=tuple(self._warnings), motors=tuple(m for m, _ in self._motors),
-            couplings=couplings, nonphysical=tuple(self._nonphysical))
+            couplings=couplings, nonphysical=tuple(self._nonphysical),
+            nonphysical_labels=tuple(self._nonphysical_labels))
 
     def _spanning_tree(self, bodies: Sequence[Body]) -> tuple[list[TreeEdge], list[Joint]]:
         """Joints in declaration order; one joining two placed bodies closes a loop."""

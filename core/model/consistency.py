@@ -26,7 +26,7 @@ one check that verbs whose answer uses the values (simulate, identification prio
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from itertools import combinations
@@ -74,15 +74,19 @@ def check_body(params: Sequence[Fraction]) -> Verdict:
     return Verdict(_tensor_problem(at_com, "the inertia at the centre of mass", slack))
 
 
-def require_physical(mechanism: Mechanism, use: str) -> None:
+def require_physical(mechanism: Mechanism, use: str, still: Collection[int] = ()) -> None:
     """Raise the ``error:`` for the first body of ``mechanism`` whose inertia is not
     physical (``Mechanism.nonphysical``), saying that ``use`` needs the values: for verbs
     whose answer depends on inertia values (simulate, identification priors and
-    ``--physical``, diagnose ``--params``). Base parameters do not, so solvers never call it."""
-    if not mechanism.nonphysical:
+    ``--physical``, diagnose ``--params``). Base parameters do not, so solvers never call it.
+    ``still``: labels of bodies that never move (welded to the ground), whose values no force
+    depends on: not checked."""
+    found = [entry for entry, label in zip(mechanism.nonphysical, mechanism.nonphysical_labels or
+                                           (None,) * len(mechanism.nonphysical)) if label not in still]
+    if not found:
         return
-    key, reason = mechanism.nonphysical[0]
-    more = len(mechanism.nonphysical) - 1
+    key, reason = found[0]
+    more = len(found) - 1
     raise InputError(f"{reason}: {use} uses the inertia values, which must be physical"
                      + (f" ({more} more bod{'y' if more == 1 else 'ies'} too)" if more else "")
                      + "; fix the file's inertia (base parameters do not need it)",

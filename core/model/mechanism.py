@@ -139,6 +139,7 @@ class Mechanism:
     motors: tuple[Motor, ...] = ()            # file order: the drive chain (may be empty)
     couplings: tuple[Coupling, ...] = ()      # file order: coordinates following another
     nonphysical: tuple[tuple[str, str], ...] = ()   # (key, reason) of bodies accepted with a non-physical inertia
+    nonphysical_labels: tuple[int, ...] = ()         # those bodies' labels, in the same order
 
     # ----- names and counts -------------------------------------------------
     @property
