@@ -136,19 +136,11 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
 
 def shape_grid(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str) -> list[dict]:
     """The shape parameters diagnosis tries for an effect on a coordinate: one empty dict for
-    an effect without shapes; the known effect's own shape when the model has that effect
-    there (a correction of its value keeps its law); else each grid value (times the
-    coordinate's RMS speed where the shape is a speed). Why the known shape: a correction of a
-    sign-law Coulomb friction in a tanh law made a total that is the model's 1.0 at rest and
-    0.6 in motion, which a negative Stribeck friction then had to undo (a simulated TIAGo whose
-    friction was 0.6 of its URDF's: "partly explained")."""
+    an effect without shapes; else each grid value (times the coordinate's RMS speed where
+    the shape is a speed)."""
     effect = registry.effects()[kind].item
     if not effect.shapes:
         return [{}]
-    known = next((spec for spec in mechanism.effects if spec.kind == kind and spec.coordinate == coordinate
-                  and known_effect(spec)), None)
-    if known is not None:
-        return [{shape.name: float(known.values.get(shape.name, shape.default)) for shape in effect.shapes}]
     speed = coordinate_speed_rms(mechanism, sample, n, coordinate)
     grids = []
     for shape in effect.shapes:
