@@ -1026,3 +1026,22 @@ def test_a_correction_whose_total_is_not_physical_is_held_back():
         assert (reason == "") == physical, reason
         if known is not None and not physical:
             assert reason.startswith("with the model's own fv = 1 the total is not physical")
+
+
+def test_an_effects_test_added_to_a_model_is_the_selections_own(puma):
+    """``selection.added_test`` (an unsupported effect judged beside the final model) makes the
+    selection's own test: added to the model of the first step, with that step's filter and
+    weights, it gives the chosen candidate's statistic and p value there."""
+    P = puma.problem
+    place = puma.coordinates[3]
+    cands = _offset_cogging_spring(P, place)
+    rng = np.random.default_rng(16)
+    phi, clean, sd = C.base(puma, rng)
+    tau = clean + C.scaled(C.on(clean.shape[1], 3, np.ones(len(clean))), sd, 5.0) + C.noise(rng, clean.shape, sd, 0.9)
+    chosen = S.select_whitened(P.inertial, tau, cands)
+    first = chosen.steps[0]
+    i = first.chosen
+    test = S.added_test(P.inertial, tau, chosen.candidates, [], i, first.whiten, first.fit.weights)
+    assert test is not None and test.tested
+    np.testing.assert_allclose(test.stat, first.tests[i].stat, rtol=1e-6)
+    assert abs(test.pvalue - first.tests[i].pvalue) <= 1e-6 + 1e-6 * first.tests[i].pvalue
