@@ -298,3 +298,20 @@ def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
         {"candidate": "body:arm_5_link", "correlation": 0.857, "pvalue_named_over_rival": 0.2}]}]
     [note] = _near_twins(effects)
     assert note.startswith("body:arm_6_link: body:arm_7_link explains it nearly as well") and "p = 0.031" in note
+
+
+def test_a_negative_stribeck_friction_beside_a_sign_law_coulomb_says_what_it_may_be():
+    """A Stribeck friction with fs < 0 is not physical alone; where the model has a sign-law
+    Coulomb friction, its reason says what it may stand for: a smoother Coulomb law."""
+    from baseparams.identify.diagnose import Problem, _unphysical
+    from baseparams.identify.selection import Candidate
+    from baseparams.io.loader import parse_mechanism
+    from baseparams.model import generate
+    text = generate.serial_chain(1, bodies=2, types="R")
+    plain = parse_mechanism(text)
+    known = parse_mechanism(text + '\n[[effects]]\nkind = "coulomb_friction"\ncoordinate = "q1"\nvalues = { fc = "1.0" }\n')
+    cand = Candidate("stribeck_friction", "q1", ("fs",), np.zeros((4, 2, 1)))
+    reasons = [_unphysical(Problem(m, ("q1", "q2"), np.zeros(4), np.zeros((4, 2, 1)), np.zeros((4, 2)), []), cand,
+                           {"fs": -0.9}) for m in (plain, known)]
+    assert reasons[0] == "fs = -0.9 <= 0 (must be positive)"
+    assert reasons[1].startswith(reasons[0]) and "may be smooth, tanh(qd/vs), where the model's 1 is sign(qd)" in reasons[1]

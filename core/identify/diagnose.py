@@ -897,6 +897,10 @@ def _unphysical(problem: Problem, cand: Candidate, values: dict) -> str:
                     + f" the total is not physical: {reason}")
     else:
         reason = implausible(cand.kind, values)
+        coulomb = known_values(problem.mechanism, "coulomb_friction", cand.coordinate).get("fc")
+        if reason and cand.kind == "stribeck_friction" and coulomb and values.get("fs", 0.0) < 0:
+            reason += (f" (the friction is lower near rest than in motion: the robot's Coulomb friction may "
+                       f"be smooth, tanh(qd/vs), where the model's {coulomb:.3g} is sign(qd))")
     return reason or _drives(problem, cand, values) or _body_implausible(problem, cand, values)
 
 
