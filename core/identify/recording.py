@@ -647,19 +647,26 @@ def _merged_rows(head: dict, tables: dict, files: dict, description: Description
         moved = {name: values[keep] for name, values in table.items()}
         for name in others:
             own = np.isfinite(table[name]) & np.isfinite(clock)
-            x, y = clock[own], table[name][own]
-            inside = (clock[keep] >= x[0]) & (clock[keep] <= x[-1]) if len(x) > 1 else np.zeros(int(keep.sum()), bool)
-            if len(x) < 4:
-                moved[name] = np.full(int(keep.sum()), np.nan)
-                continue
-            cubic = (alias, name) in smooth or (None, name) in smooth
-            at = CubicSpline(x, y)(clock[keep]) if cubic and np.all(np.diff(x) > 0) else np.interp(clock[keep], x, y)
-            moved[name] = np.where(inside, at, np.nan)
+            moved[name] = _onto(clock[own], table[name][own], clock[keep],
+                                (alias, name) in smooth or (None, name) in smooth) if own.sum() >= 4 else \
+                np.full(int(keep.sum()), np.nan)
         out[alias] = (header, moved, [line for line, k in zip(rows, keep) if k])
         notes.append(f"{files[alias]}: its columns are filled on different rows (topics merged into one table): "
                      f"read on the {int(keep.sum())} rows of {', '.join(mine)}, with "
                      f"{', '.join(others)} interpolated onto their times from their own rows")
     return out, notes
+
+
+def _onto(x: np.ndarray, y: np.ndarray, at: np.ndarray, cubic: bool) -> np.ndarray:
+    """``y`` sampled at ``x`` (increasing; NaN where missing) at the times ``at``: a cubic
+    spline through the finite samples (positions and velocities, ``cubic``) or linear, NaN
+    outside ``x``'s span and next to a missing value (left out later as missing values are).
+    One home for reading a column on another clock (:func:`_merged_rows`, :func:`_on_one_clock`)."""
+    out = np.interp(at, x, y)                                  # NaN next to a missing value
+    finite = np.isfinite(y)
+    if cubic and finite.sum() >= 4 and np.all(np.diff(x[finite]) > 0):
+        out = np.where(np.isfinite(out), CubicSpline(x[finite], y[finite])(at), np.nan)
+    return np.where((at >= x[0]) & (at <= x[-1]), out, np.nan)
 
 
 def _on_one_clock(head: dict, tables: dict, files: dict, description: Description, folder: Path
@@ -698,13 +705,7 @@ def _on_one_clock(head: dict, tables: dict, files: dict, description: Descriptio
         inside = (reference >= clock[0]) & (reference <= clock[-1])
         smooth = {c.column for q in ("position", "velocity", "acceleration") for c in description.channels[q]
                   if c.file in (None, alias)}
-        moved = {}
-        for name, values in table.items():
-            at = np.interp(reference, clock, values)           # NaN next to a missing value
-            finite = np.isfinite(values)
-            if name in smooth and finite.sum() >= 4:
-                at = np.where(np.isfinite(at), CubicSpline(clock[finite], values[finite])(reference), np.nan)
-            moved[name] = np.where(inside, at, np.nan)
+        moved = {name: _onto(clock, values, reference, name in smooth) for name, values in table.items()}
         moved[column] = reference
         out[alias] = (header, moved, tables[first][2])
         notes.append(f"{files[alias]}: its columns interpolated onto the clock of {files[first]} (cubic for "
