@@ -1,0 +1,394 @@
+"""What changed between recordings: ``diagnose MECH CHANGED... --baseline BASE...``.
+
+Two sets of runs of one robot, the second after something changed (a payload, a drive's
+gain, its friction, a delay), are fitted with one model. The model (the inertial
+parameters and the mechanism's effects, plus viscous and Coulomb friction and an offset on
+every coordinate; with ``--params`` the given simulation and those effects) is fitted to
+the baseline runs. Its residual on both sides then holds what the model always lacked,
+and on the changed side the change as well.
+
+What the model lacks in both cancels by pairing: each changed sample is paired with the
+baseline sample in the nearest state (positions, speeds, accelerations, each scaled by its
+spread), and the change is tested on the difference of their residuals. A force that
+depends on the state alone (a friction law of another shape, a missing spring, an
+unmodelled inertia) is the same in both and drops out; so does a delay common to both
+runs, to the extent the state pairs match. Why not a joint fit with the change's columns
+alone: the common lack leaks into whatever the change candidates can imitate (a 2.8 kg
+payload was named with elbow and shoulder gain changes that never happened, and a model
+error became a body on the wrong link). When the runs do not share their states (other
+motions), pairing is not possible, a note says so, and the change is tested on the
+changed runs' residual: what both lack is then only as absent as the shared effects make it.
+
+The candidates act on the changed runs only: a payload or changed body at each moving body
+(``body``: ten parameters; ``mass``: a point mass at the frame origin), a torque-gain
+scale (``gain``), viscous and Coulomb friction and an offset per coordinate, one delay.
+They are selected by :func:`~baseparams.identify.selection.select_whitened` (Wald tests,
+coloured noise whitened, Holm over the candidates): "nothing changed" means no candidate
+is significant at the family-wise level ``alpha``, which bounds that verdict's false
+alarms. After the named changes, the rest of the difference is tested against every
+candidate's columns at once; a difference that still holds structure is "partly
+explained" (or "unexplained" with nothing named, at a stricter bar ``alpha / 10`` so
+that the two tests together keep the false alarms near ``alpha``).
+"""
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter
+from scipy.spatial import cKDTree
+from scipy.special import fdtrc
+
+from baseparams.errors import InputError
+from baseparams.identify import derived
+from baseparams.identify.candidates import known_effect, library
+from baseparams.identify.data import MeasuredData
+from baseparams.identify.diagnose import _coefficient_map, coefficients, nrms
+from baseparams.identify.fit import measured_design
+from baseparams.identify.given import Given
+from baseparams.identify.identifiable import regroup
+from baseparams.identify.linear import LinearFit, WeightedLinearModel
+from baseparams.identify.model import evaluate, independent_names
+from baseparams.identify.selection import (Candidate, Selection, Whitening, orthonormal_basis, project_out,
+                                           select_whitened)
+from baseparams.model.mechanism import EffectSpec, Mechanism
+
+# The effects shared by both sides (fitted on the baseline) besides the mechanism's own.
+SHARED_KINDS = ("viscous_friction", "coulomb_friction", "offset")
+# The registered effects that may change between the runs, per coordinate.
+CHANGE_KINDS = ("viscous_friction", "coulomb_friction", "offset")
+# A changed sample is paired with a baseline sample when their states (each coordinate's
+# position, speed and acceleration divided by its spread over both sides) differ by at most
+# this RMS per component: 5 % of the spread. Replays of one trajectory pair at 0.1-1 %.
+PAIR_DISTANCE = 0.05
+# Pairing is used when at least this share of the changed samples finds a partner; the
+# others are left out of the tests (a note says how many).
+PAIRED_SHARE = 0.5
+# With nothing named, the rest of the difference must be significant at alpha / UNEXPLAINED_BAR
+# to call it unexplained (the first step's Holm test already spent alpha on "nothing changed").
+UNEXPLAINED_BAR = 10.0
+VERDICTS = ("nothing changed", "changed", "partly explained", "unexplained")
+
+
+@dataclass
+class _Side:
+    """One side's runs at the fit's rows: the shared columns (n, f, s), the known force (n, f),
+    the standard inertial columns (n, f, P), the forces (n, f) and the states (n, 3 f)."""
+    data: MeasuredData
+    shared: np.ndarray
+    known: np.ndarray
+    standard: np.ndarray
+    tau: np.ndarray
+    state: np.ndarray
+
+
+@dataclass
+class ChangeDiagnosis:
+    """What :func:`diagnose_change` found; :meth:`to_json` is the documented JSON object."""
+    mechanism: str
+    coordinates: tuple[str, ...]
+    verdict: str
+    alpha: float
+    changes: list[dict]
+    ambiguous: list[dict]
+    gap: dict
+    common: dict
+    pairing: dict
+    rest: dict
+    steps: list[dict]
+    notes: list[str]
+    t: np.ndarray = field(repr=False)
+    difference_before: np.ndarray = field(repr=False)     # (m, f) at the tested rows
+    difference_after: np.ndarray = field(repr=False)
+
+    @property
+    def closed(self) -> bool:
+        return self.verdict in ("nothing changed", "changed")
+
+    def to_json(self) -> dict:
+        return {"mechanism": self.mechanism, "mode": "change", "verdict": self.verdict,
+                "coordinates": list(self.coordinates), "effects": self.changes, "changes": self.changes,
+                "ambiguous": self.ambiguous, "gap": self.gap, "common": self.common, "pairing": self.pairing,
+                "rest": self.rest, "closed": self.closed, "alpha": self.alpha, "steps": self.steps,
+                "notes": self.notes}
+
+
+def shared_effects(mechanism: Mechanism) -> list[EffectSpec]:
+    """The effects fitted on both sides: the mechanism's own with unknown coefficients, then
+    :data:`SHARED_KINDS` on every independent coordinate it does not already have."""
+    own = [e for e in mechanism.effects if not known_effect(e)]
+    present = {(e.kind, e.coordinate) for e in mechanism.effects}
+    extra = [EffectSpec(kind, c) for c in independent_names(mechanism) for kind in SHARED_KINDS
+             if (kind, c) not in present]
+    return own + extra
+
+
+def _side(mechanism: Mechanism, data: MeasuredData, given: Given | None, gains: dict[str, float]) -> _Side:
+    known_specs = [e for e in mechanism.effects if known_effect(e)]
+    inertial, fitted, known = measured_design(mechanism, data, shared_effects(mechanism), known_specs)
+    shared = [fitted.matrix]
+    if given is None:
+        shared.insert(0, inertial.matrix)
+    else:
+        known = known + inertial.matrix @ given.parameters
+    tau = data.tau
+    if data.gain_names:
+        if all(g in gains for g in data.gain_names):
+            tau = tau + data.gain_columns @ np.array([gains[g] for g in data.gain_names])
+        else:                         # shared unknown gains: the measured force is tau + G g
+            shared.append(-data.gain_columns)
+    rows = data.kept_rows()
+    m = data.motion
+    state = np.concatenate([m.q[rows], m.qd[rows], m.qdd[rows]], axis=1)
+    return _Side(data, np.concatenate(shared, axis=-1), known, inertial.matrix, np.asarray(tau, float), state)
+
+
+def pair(baseline: np.ndarray, changed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(partner, distance): each changed state's nearest baseline state (index into the
+    baseline rows) and their RMS difference per component, every component divided by its
+    spread over both sides (a component that does not move is left out)."""
+    both = np.concatenate([baseline, changed], axis=0)
+    spread = np.std(both, axis=0)
+    moving = spread > 1e-12 * max(float(np.max(np.abs(both), initial=0.0)), 1e-300)
+    if not np.any(moving):
+        return np.zeros(len(changed), int), np.zeros(len(changed))
+    scale = spread[moving]
+    tree = cKDTree(baseline[:, moving] / scale)
+    distance, partner = tree.query(changed[:, moving] / scale, k=1)
+    return np.asarray(partner, int), np.asarray(distance, float) / np.sqrt(int(np.sum(moving)))
+
+
+def _change_candidates(mechanism: Mechanism, side: _Side, predicted: np.ndarray,
+                       coordinates: tuple[str, ...]) -> tuple[list[Candidate], list[str]]:
+    """The candidates for a change, on every fit row of the changed side."""
+    data = side.data
+    sample = data.sample if data.sample is not None else evaluate(mechanism, data.motion)
+    pairs = [(kind, c) for c in coordinates for kind in CHANGE_KINDS]
+    reduce = data.reduce if data.reduced else None
+    plain = dataclasses.replace(mechanism, effects=())   # the library skips the mechanism's own effects:
+    registered, notes = library(plain, sample, data.motion.count, pairs, reduce)
+    given = derived.given_candidates(mechanism, coordinates, predicted, side.standard)
+    t = data.t
+    delay = derived.torque_candidates(coordinates, t, np.zeros_like(predicted), predicted, {("delay", "all")})
+    return given + registered + delay, notes
+
+
+# The longest autoregression fitted to a residual to whiten it for the test of what is left.
+AR_ORDER = 20
+
+
+def ar_whitening(residual: np.ndarray, order: int = AR_ORDER) -> list[np.ndarray]:
+    """Per coordinate, the prediction-error filter [1, -a_1, ..., -a_p] of an autoregression
+    fitted to ``residual`` (n, f) by least squares, its order p <= ``order`` chosen by BIC.
+    Why not AR(1), nor Yule-Walker: low-pass-filtered noise (a drive's or the logger's
+    filter) is an ARMA process whose spectrum falls by decades; an AR(1) filter leaves it
+    coloured and Yule-Walker's estimate is biased there, and a test of many directions on
+    either was liberal (p < 1e-30 on pure noise)."""
+    n, f = residual.shape
+    filters = []
+    for j in range(f):
+        x = residual[:, j] - residual[:, j].mean()
+        top = min(order, max(n // 20, 0))
+        if top == 0 or not np.any(x):
+            filters.append(np.array([1.0]))
+            continue
+        lagged = np.stack([x[top - k:n - k] for k in range(1, top + 1)], axis=1)
+        target = x[top:]
+        m = len(target)
+        best, best_bic = np.array([1.0]), m * np.log(max(target @ target / m, 1e-300))
+        for p in range(1, top + 1):
+            a, *_ = np.linalg.lstsq(lagged[:, :p], target, rcond=None)
+            error = target - lagged[:, :p] @ a
+            bic = m * np.log(max(error @ error / m, 1e-300)) + p * np.log(m)
+            if bic < best_bic:
+                best, best_bic = np.concatenate([[1.0], -a]), bic
+        filters.append(best)
+    return filters
+
+
+def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
+    """x (n, f) or (n, f, c) through each coordinate's filter (its first rows dropped)."""
+    start = max(len(a) for a in filters) - 1
+    out = np.stack([lfilter(a, [1.0], x[:, j], axis=0) for j, a in enumerate(filters)], axis=1)
+    return out[start:]
+
+
+def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weights: np.ndarray) -> dict:
+    """Whether what is left (n, f) is predictable from ``columns`` (n, f, k), all at once,
+    beyond ``model`` (n, f, p): an F test after each coordinate's residual and columns pass
+    its autoregressive whitening (:func:`ar_whitening`), rows weighted by ``weights``."""
+    filters = ar_whitening(residual * weights[None, :])
+    r = _filtered(filters, residual * weights[None, :])
+    X = _filtered(filters, columns * weights[None, :, None])
+    m, f = r.shape
+    b = r.reshape(-1)
+    A = X.reshape(m * f, -1)
+    used = 0
+    if model.shape[-1]:
+        M = orthonormal_basis(_filtered(filters, model * weights[None, :, None]).reshape(m * f, -1), 1e-9)
+        used = M.shape[1]
+        A = project_out(A, M)
+        b = project_out(b[:, None], M)[:, 0]
+    basis = orthonormal_basis(A, 1e-7)
+    k = basis.shape[1]
+    dof = m * f - k - used
+    if k == 0 or dof <= 0:
+        return {"stat": 0.0, "df": 0, "pvalue": 1.0}
+    explained = basis.T @ b
+    rest = float(b @ b - explained @ explained)
+    stat = float(explained @ explained) / k / max(rest / dof, 1e-300)
+    return {"stat": stat, "df": int(k), "pvalue": float(fdtrc(k, dof, stat)),
+            "ar_order": [len(a) - 1 for a in filters]}
+
+
+def _physical_text(entry: dict) -> None:
+    """A payload's centre of mass (m) where the mass and first moments are identified."""
+    if entry["kind"] != "body":
+        return
+    c = entry["coefficients"]
+    m = c.get("m", {}).get("value")
+    firsts = [c.get(k, {}).get("value") for k in ("mx", "my", "mz")]
+    if m is not None and abs(m) > 0 and all(v is not None for v in firsts):
+        entry["centre_of_mass"] = [float(v) / float(m) for v in firsts]
+
+
+def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, *,
+                    given: Given | None = None, alpha: float = 0.05) -> ChangeDiagnosis:
+    """What changed between the ``baseline`` runs and the ``changed`` runs (module docstring)."""
+    if not 0.0 < alpha < 1.0:
+        raise InputError(f"alpha must be in (0, 1), not {alpha}", key="--alpha")
+    coordinates = independent_names(mechanism)
+    if baseline.coordinates != changed.coordinates:
+        raise InputError("the baseline and the changed runs hold other coordinates", key="--baseline")
+    gains = dict(given.gains) if given is not None else {}
+    if set(baseline.gain_names) != set(changed.gain_names) and not all(
+            g in gains for g in baseline.gain_names + changed.gain_names):
+        raise InputError("the baseline and the changed runs read currents of other unknown gains: describe both "
+                         "alike, or give the gains (--params an identify result)", key="--baseline")
+    notes: list[str] = []
+    base = _side(mechanism, baseline, given, gains)
+    other = _side(mechanism, changed, given, gains)
+    if base.shared.shape[-1] != other.shared.shape[-1]:
+        raise InputError("the baseline and the changed runs give the model other columns", key="--baseline")
+    y_base, y_other = base.tau - base.known, other.tau - other.known
+    f = len(coordinates)
+    if len(y_base) * f < base.shared.shape[-1] + 20:
+        raise InputError(f"{len(y_base)} baseline samples cannot fit the shared model's {base.shared.shape[-1]} "
+                         "columns: give longer baseline runs", key="--baseline")
+    fit = WeightedLinearModel(base.shared, y_base).fit()
+    theta = fit.coefficients
+    residual_base = y_base - base.shared @ theta
+    residual_other = y_other - other.shared @ theta
+    predicted = other.known + other.shared @ theta
+
+    partner, distance = pair(base.state, other.state)
+    matched = distance <= PAIR_DISTANCE
+    share = float(np.mean(matched))
+    paired = share >= PAIRED_SHARE
+    if paired:
+        rows = np.flatnonzero(matched)
+        difference = residual_other[rows] - residual_base[partner[rows]]
+        if share < 1.0:
+            notes.append(f"{100 * (1 - share):.0f} % of the changed samples have no baseline sample in the same state "
+                         f"(within {100 * PAIR_DISTANCE:.0f} % of each spread): left out of the tests")
+    else:
+        rows = np.arange(len(residual_other))
+        difference = residual_other
+        notes.append(f"the runs do not share their motion ({100 * share:.0f} % of the changed samples have a baseline "
+                     "sample in the same state): what the model lacks in both does not cancel, and a change is "
+                     "tested on the changed runs' residual against the baseline's model; record both sides "
+                     "along the same trajectory to cancel it")
+    if len(rows) * f < 40:
+        raise InputError(f"{len(rows)} changed samples can be compared with the baseline: too few to test a "
+                         "change", key="DATA")
+
+    candidates, more = _change_candidates(mechanism, other, predicted, coordinates)
+    notes += more
+    candidates = [c.rows(rows) for c in candidates]
+    empty = np.zeros((len(rows), f, 0))
+    chosen = select_whitened(empty, difference, candidates, alpha)
+    changes, ambiguous, in_model = _entries(chosen, difference, empty)
+    last = chosen.steps[-1].fit
+    final = [chosen.candidates[i].columns for i in chosen.in_model]
+    model_after = np.concatenate([empty] + final, axis=-1)
+    after = difference - (model_after @ _plain_fit(model_after, difference, last.weights).coefficients
+                          if model_after.shape[-1] else 0.0)
+    left = [c.columns for i, c in enumerate(chosen.candidates) if i not in set(chosen.in_model)]
+    rest = rest_test(after, np.concatenate(left, axis=-1), model_after, last.weights) if left else \
+        {"stat": 0.0, "df": 0, "pvalue": 1.0}
+    named = bool(changes or ambiguous)
+    structure = rest["pvalue"] <= (alpha if named else alpha / UNEXPLAINED_BAR)
+    verdict = ("partly explained" if structure else "changed") if named else \
+        ("unexplained" if structure else "nothing changed")
+    if not named and not structure and rest["pvalue"] <= alpha:
+        notes.append(f"the difference leans on the candidates together (p = {rest['pvalue']:.2g}) but below the bar "
+                     f"for a change with nothing named ({alpha / UNEXPLAINED_BAR:.2g})")
+    whiten = Whitening.of(after)
+    if whiten is not None and np.max(whiten.rho) > 0.5:
+        notes.append("the difference's noise is coloured (lag-1 autocorrelation up to "
+                     f"{float(np.max(whiten.rho)):.2f}); the tests whiten it")
+
+    tau_rows = other.tau[rows]
+    gap = {"before": nrms(difference, tau_rows), "after": nrms(after, tau_rows),
+           "changed_before": nrms(residual_other, other.tau),
+           "changed_after": nrms(residual_other[rows] - (difference - after), tau_rows),
+           "per_coordinate": {c: {"before": nrms(difference[:, j:j + 1], tau_rows[:, j:j + 1]),
+                                  "after": nrms(after[:, j:j + 1], tau_rows[:, j:j + 1])}
+                              for j, c in enumerate(coordinates)}}
+    common = {"nrms": nrms(residual_base, base.tau),
+              "per_coordinate": {c: nrms(residual_base[:, j:j + 1], base.tau[:, j:j + 1])
+                                 for j, c in enumerate(coordinates)},
+              "cancelled": paired}
+    pairing = {"paired": paired, "share": share, "median_distance": float(np.median(distance)),
+               "samples": int(len(rows)), "baseline_samples": int(len(y_base)), "changed_samples": int(len(y_other))}
+    steps = [{"tests": sorted(({"candidate": chosen.candidates[i].label, "pvalue": float(t.pvalue),
+                                "pvalue_holm": float(s.adjusted[i]), "z": float(t.z)}
+                               for i, t in enumerate(s.tests) if t.tested), key=lambda d: -d["z"])[:10],
+              "chosen": None if s.chosen is None else chosen.candidates[s.chosen].label} for s in chosen.steps]
+    t = other.data.t[rows]
+    return ChangeDiagnosis(mechanism.name, coordinates, verdict, alpha, changes, ambiguous, gap, common, pairing,
+                           rest, steps, notes, t, difference, after)
+
+
+def _plain_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray) -> LinearFit:
+    return WeightedLinearModel(model, y).fit(weights)
+
+
+def _entries(chosen: Selection, y: np.ndarray, empty: np.ndarray) -> tuple[list[dict], list[dict], list[int]]:
+    """The named changes (coefficients with HAC standard deviations, a body's identifiable
+    combinations) and the ambiguous groups."""
+    in_model = chosen.in_model
+    candidates = chosen.candidates
+    weights = chosen.steps[-1].fit.weights
+    estimates = dict(zip(in_model, coefficients(empty, candidates, in_model, y, weights)))
+    ambiguous_heads = set(chosen.ambiguous)
+    changes, groups = [], []
+    for i in chosen.added:
+        cand = candidates[i]
+        values, stds = estimates[i]
+        if i in ambiguous_heads:
+            members = [cand] + [candidates[r.index] for r in chosen.ambiguous[i]]
+            groups.append({"candidates": [{"kind": c.kind, "coordinate": c.coordinate} for c in members]})
+            continue
+        regrouped = None
+        if cand.kind == "body":
+            others = [candidates[j].columns for j in in_model if j != i]
+            X = np.concatenate([empty] + others, axis=-1) * weights[None, :, None]
+            columns = cand.columns * weights[None, :, None]
+            full = WeightedLinearModel(np.concatenate([empty] + others + [cand.columns], axis=-1), y).fit(
+                weights, cov_type="hac")
+            width = cand.columns.shape[-1]
+            cov = full.covariance[-width:, -width:]
+            regrouped = regroup(X.reshape(len(y) * y.shape[1], X.shape[-1]), columns.reshape(-1, width), values, cov)
+        coefficient_map = _coefficient_map(cand, values, stds, regrouped)
+        single = len(coefficient_map) == 1
+        step = next(s for s in chosen.steps if s.chosen == i)
+        entry = {"kind": cand.kind, "coordinate": cand.coordinate,
+                 "value": float(values[0]) if single else {k: v["value"] for k, v in coefficient_map.items()},
+                 "std": float(stds[0]) if single else {k: v["std"] for k, v in coefficient_map.items()},
+                 "coefficients": coefficient_map,
+                 "test": {"pvalue": float(step.tests[i].pvalue), "pvalue_holm": float(step.adjusted[i])},
+                 **({"shape": {k: float(v) for k, v in cand.shape.items()}} if cand.shape else {})}
+        _physical_text(entry)
+        changes.append(entry)
+    return changes, groups, in_model
