@@ -139,7 +139,10 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     identification.extras["known_effects"] = [
         {"kind": s.kind, "coordinate": s.coordinate, "values": {n: exact(v) for n, v in s.values.items()}}
         for s in identification.known]
-    return Fit(identification, on_its_data, predictions, warnings=list(result.warnings))
+    impossible = [f.name for f in identification.impossible if f.impossible]
+    said = [f"{len(impossible)} estimate{'s' if len(impossible) > 1 else ''} no robot has: {', '.join(impossible)} "
+            "(the report's IMPOSSIBLE estimates; JSON: impossible)"] if impossible else []
+    return Fit(identification, on_its_data, predictions, warnings=list(result.warnings) + said)
 
 
 def exact(value: Any) -> str:

@@ -174,7 +174,7 @@ class Fit(Result):
     fitted: "Prediction"
     predictions: list["Prediction"] = field(default_factory=list)
     written: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)       # the solver's (stderr in the CLI)
+    warnings: list[str] = field(default_factory=list)       # the solver's, impossible estimates (stderr in the CLI)
 
     def to_json(self) -> dict[str, Any]:
         return self.identification.to_json()

@@ -1427,7 +1427,8 @@ def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequen
         problem.given_masses = held.masses
         if held.base_map is not None and held.covariance is not None:
             problem.given_uncertainty = (held.base_map, held.covariance)
-    problem.notes = list(data.notes) + problem.notes
+    # held values no robot has first: said before the diagnosis that holds them (.given)
+    problem.notes = (list(held.notes) if held is not None else []) + list(data.notes) + problem.notes
     return diagnose(problem, _forces(data, held, problem.notes), alpha=alpha, holdout=holdout, folds=folds,
                     max_steps=max_steps)
 

@@ -24,6 +24,7 @@ from baseparams.errors import InputError
 from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
+from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, judge, split
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.model import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -72,6 +73,8 @@ class Identification:
     base_model_error: float = 0.0
     physical: dict | None = None              # set by the caller (identify --physical)
     extras: dict = field(default_factory=dict)
+    # estimates no robot has, and negative ones within their noise (.impossible.judge)
+    impossible: tuple[Flag, ...] = ()
 
     @property
     def std(self) -> np.ndarray:
@@ -148,6 +151,9 @@ class Identification:
         covariance: dict[str, Any] = {"names": list(self.names), "matrix": [
             [_finite(v) for v in row] for row in np.asarray(self.covariance, float)]}
         out["covariance"] = covariance
+        impossible, near_zero = split(self.impossible)
+        out["impossible"] = [f.to_json() for f in impossible]
+        out["consistent_with_zero"] = [f.to_json() for f in near_zero]
         out.update(self.extras)
         if self.physical is not None:
             out["physical"] = dict(self.physical)
@@ -171,7 +177,22 @@ class Identification:
         for c, sd, nrms in zip(self.coordinates, self.noise_sd, self.nrms):
             lines.append(f"    {c}: {sd:.4g} / {nrms:.4g}")
         lines += [f"  note: {n}" for n in self.notes]
+        lines += impossible_lines(self.impossible, "  ")
         return "\n".join(lines)
+
+
+def impossible_lines(flags: Sequence[Flag], indent: str = "") -> list[str]:
+    """The estimates no robot has, then the negative ones within their noise, as text."""
+    impossible, near_zero = split(flags)
+    lines = []
+    if impossible:
+        lines.append(f"{indent}IMPOSSIBLE estimates (no robot has these; more than {IMPOSSIBLE_STD:g} std below 0):")
+        lines += [f"{indent}  {f.text()}" for f in impossible]
+        lines += [f"{indent}  what to do: {text}" for text in advice(impossible)]
+    if near_zero:
+        lines.append(f"{indent}negative but consistent with zero (within {IMPOSSIBLE_STD:g} std of 0):")
+        lines += [f"{indent}  {f.text()}" for f in near_zero]
+    return lines
 
 
 def _finite(x: float) -> float | None:
@@ -273,12 +294,18 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     measured_rms = np.sqrt(np.mean(measured_forces(data, names, estimates) ** 2, axis=0))
     with np.errstate(divide="ignore", invalid="ignore"):
         nrms = np.where(measured_rms > 0, np.sqrt(np.mean(final ** 2, axis=0)) / measured_rms, 0.0)
+    coefficients = {name: (spec.kind, c) for spec in effects for c, name in zip(
+        registry.effects()[spec.kind].item.coefficients,
+        registry.effects()[spec.kind].item.coefficient_names(spec.coordinate))}
+    flags = judge(parameters=base.parameters, base_map=base.B, names=names, values=estimates,
+                  std=np.sqrt(np.clip(np.diag(covariance), 0, None)), covariance=covariance, effects=coefficients,
+                  absorbed=absorbed, bodies={b.label: b.name for b in mechanism.bodies})
     return Identification(mechanism=mechanism.name, data=data.path, coordinates=data.coordinates,
                           base=base, effects=effects, known=known, names=names, kinds=kinds,
                           estimates=estimates, covariance=covariance, noise_sd=sigma, nrms=nrms,
                           residual=final, condition_number=condition, samples=n, dof=n * f - p,
                           residual_variance=variance, notes=tuple(notes), absorbed=absorbed,
-                          base_model_error=outside)
+                          base_model_error=outside, impossible=tuple(flags))
 
 
 def measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec],

@@ -6,6 +6,15 @@ parameters (any standard parameters that reproduce them give the same torques: t
 nearest the mechanism's own inertias when it has them, so that each body's mass means
 something, else the least-norm ones), its identified effects (known effects now), and the
 base parameters' covariance, within which a change is the fit's own error, not a change.
+
+Held values no robot has are held as they are, with a note (``Given.notes``, the report's
+first notes): an identify result's estimates more than 3 std below zero where they must be
+positive (:mod:`.impossible`: a negative friction or rotor inertia, a negative mass), and a
+file's bodies whose inertia is not physical (a CAD URDF's that breaks the triangle
+inequality). Why not refuse: the user's simulation is what it is, the forces it predicts are
+defined all the same, and it is that simulation the user wants diagnosed (issue 48: the
+Kinova Gen3's and the TIAGo's own URDFs were refused); but a correction named on such a
+value may only undo it, which the note says.
 """
 
 import json
@@ -34,6 +43,7 @@ class Given:
     covariance: np.ndarray | None = None
     masses: bool = True
     gains: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)      # held values no robot has (before the run)
 
 
 def given_parameters(mechanism: Mechanism, source: str) -> Given:
@@ -42,15 +52,22 @@ def given_parameters(mechanism: Mechanism, source: str) -> Given:
     if path.suffix.lower() == ".json":
         return _from_identify(mechanism, path)
     from baseparams.io.loader import resolve
-    from baseparams.model.consistency import require_physical
     from baseparams.identify.derived import welded
     other = resolve(source)
-    require_physical(other, "diagnose --params", still={b for b, root in welded(other).items() if root == 0})
     if list(other.parameters) != list(mechanism.parameters):
         raise InputError(f"its bodies do not match {mechanism.name}'s ({len(other.parameters)} standard "
                          f"parameters against {len(mechanism.parameters)}): give the same robot's file",
                          file=source, key="--params")
-    return Given(standard_parameters(other))
+    # a body welded to the ground moves never: no force depends on its values
+    still = {b for b, root in welded(other).items() if root == 0}
+    bad = [reason for reason, label in zip((r for _, r in other.nonphysical), other.nonphysical_labels
+                                           or (None,) * len(other.nonphysical)) if label not in still]
+    notes = []
+    if bad:
+        notes.append(f"--params {source}: {len(bad)} bod{'y is' if len(bad) == 1 else 'ies are'} not physical, "
+                     f"held as given all the same (the forces the file predicts are defined; a change named "
+                     f"on such a body may only correct it): {'; '.join(bad)}")
+    return Given(standard_parameters(other), notes=notes)
 
 
 def _from_identify(mechanism: Mechanism, path: Path) -> Given:
@@ -95,7 +112,61 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
             gains[str(entry["name"])] = float(entry["value"])
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"a gain needs a name and a value ({exc})", file=str(path), key=f"gains[{k}]") from None
-    return Given(phi, effects, E, _base_covariance(report, base, path), masses=own, gains=gains)
+    covariance = _base_covariance(report, base, path)
+    return Given(phi, effects, E, covariance, masses=own, gains=gains,
+                 notes=_impossible_notes(mechanism, path, E, base, report.get("effects") or [], covariance))
+
+
+def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: list, effects: list,
+                      covariance: np.ndarray | None) -> list[str]:
+    """Notes naming the identify result's estimates no robot has, judged from its values and
+    std as identify judges them (:func:`.impossible.judge`; a result of an older version has
+    no "impossible" key, and the values are what is held)."""
+    from baseparams import registry
+    from baseparams.identify.impossible import judge, split
+    names = [str(entry.get("name", f"base[{k}]")) for k, entry in enumerate(base)]
+    values = [float(entry["value"]) for entry in base]
+    stds = [_number(entry.get("std")) for entry in base]
+    coefficients: dict[str, tuple[str, str]] = {}
+    absorbed: dict[str, dict[str, float]] = {}
+    known = registry.effects()
+    for entry in effects:
+        kind, coordinate = entry.get("kind"), entry.get("coordinate")
+        if kind not in known or not isinstance(coordinate, str):
+            continue
+        for c in entry.get("coefficients") or []:
+            name = str(c.get("name"))
+            coefficient = name.rsplit("_" + coordinate, 1)[0]
+            coefficients[name] = (kind, coefficient)
+            if c.get("value") is None:
+                into = c.get("absorbed_into")
+                if isinstance(into, dict):
+                    absorbed[name] = {str(k): float(v) for k, v in into.items()}
+                continue
+            names.append(name)
+            values.append(float(c["value"]))
+            stds.append(_number(c.get("std")))
+    flags = judge(parameters=list(mechanism.parameters), base_map=E, names=names, values=np.array(values),
+                  std=np.array(stds), covariance=covariance, effects=coefficients, absorbed=absorbed,
+                  bodies={b.label: b.name for b in mechanism.bodies})
+    impossible, near_zero = split(flags)
+    notes = []
+    if impossible:
+        notes.append(f"--params {path}: {len(impossible)} held value{'s' if len(impossible) > 1 else ''} no robot "
+                     f"has, held as given all the same (a correction named there may only undo it): "
+                     + "; ".join(f.text() for f in impossible))
+    if near_zero:
+        notes.append(f"--params {path}: negative but consistent with zero (within their noise): "
+                     + "; ".join(f.text() for f in near_zero))
+    return notes
+
+
+def _number(value: object) -> float:
+    """A JSON number, NaN when absent (an exact value then: judged without noise)."""
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return float("nan")
 
 
 def _base_covariance(report: dict, base: list, path: Path) -> np.ndarray | None:

@@ -1,0 +1,246 @@
+"""Estimates no robot has: a negative friction or rotor inertia, a base parameter that is a
+mass or a moment of inertia and comes out negative, a body whose identified parameters are
+not a mass distribution. ``identify`` lists them; ``diagnose --params`` says which held
+values are such before it runs (docs/identification.md, "Impossible estimates").
+
+What is claimed, and why it is sound:
+
+- **Effect coefficients.** An effect kind's coefficients that must be positive are those of
+  diagnosis's physical rule (:data:`baseparams.identify.outofsample.POSITIVE`, judged by
+  :func:`~baseparams.identify.outofsample.implausible`: friction, rotor inertia, stiffness):
+  one home for the rule.
+- **Base parameters.** A base parameter is a linear combination ``c . phi`` of the standard
+  parameters, so its sign is not that of any one body's value. A body's ten parameters are a
+  mass distribution exactly when its pseudo-inertia ``J(phi_b)`` is positive semidefinite
+  (Wensing, Kim and Slotine 2017, :mod:`.physical`); ``J`` is a linear bijection onto the
+  symmetric 4 x 4 matrices, so ``c_b . phi_b = <D_b, J(phi_b)>`` for one symmetric ``D_b``,
+  and ``c . phi >= 0`` for every physically consistent set of bodies exactly when every
+  ``D_b`` is positive semidefinite (the cone is self-dual). Only such base parameters are
+  judged: a lone mass (``m3 + m4``), a lone moment of inertia about an axis, ``Izz1 + 0.1
+  m2``; never ``Ixx - Iyy`` or a first moment, which may have either sign.
+- **Bodies.** Where the base parameters that involve one body alone determine all ten of its
+  parameters, its pseudo-inertia's smallest eigenvalue is judged (with its standard deviation
+  to first order). Where they determine fewer, nothing is claimed about the body: the rest
+  of its mass distribution is free.
+- An effect coefficient absorbed into an estimate (its column a combination of the others)
+  changes what the estimate stands for; the estimate is judged only when every coefficient
+  absorbed into it must be positive and enters with a positive factor (the sum of positives
+  is positive), else not at all.
+
+Each is judged with its standard deviation: a value more than :data:`IMPOSSIBLE_STD` std below
+zero is impossible; a negative value within that is consistent with zero (listed apart).
+"""
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from baseparams.identify.outofsample import POSITIVE, implausible
+
+IMPOSSIBLE_STD = 3.0            # std below zero beyond which a value is impossible, not noise
+_PSD_TOLERANCE = 1e-9           # relative: D's eigenvalues this far below 0 are rounding
+_KIND_NAMES = {"m": "a mass", "Ixx": "a moment of inertia", "Iyy": "a moment of inertia",
+               "Izz": "a moment of inertia"}
+
+
+@dataclass(frozen=True)
+class Flag:
+    """One estimate no robot has (``impossible``) or negative within its noise (not)."""
+    name: str
+    value: float
+    std: float
+    reason: str
+    impossible: bool
+    inertial: bool = True            # a base parameter or a body (else an effect's coefficient)
+
+    @property
+    def below(self) -> float:
+        """How many std below zero (inf for an exact value)."""
+        return -self.value / self.std if self.std > 0 else float("inf")
+
+    def to_json(self) -> dict:
+        below = self.below
+        return {"name": self.name, "value": float(self.value), "std": float(self.std), "reason": self.reason,
+                "std_below_zero": float(below) if np.isfinite(below) else None}
+
+    def text(self) -> str:
+        below = self.below
+        where = f"{below:.3g} std below 0" if np.isfinite(below) else "an exact value"
+        return f"{self.name} = {self.value:.4g} +- {self.std:.2g} ({where}): {self.reason}"
+
+
+def _flag(name: str, value: float, std: float, reason: str, inertial: bool = True) -> Flag | None:
+    if not (np.isfinite(value) and value < 0):
+        return None
+    std = float(std) if np.isfinite(std) else 0.0
+    return Flag(name, float(value), std, reason, impossible=std == 0 or -value > IMPOSSIBLE_STD * std,
+                inertial=inertial)
+
+
+def must_be_positive(kind: str, coefficient: str) -> bool:
+    """Whether an effect of ``kind`` has no physical meaning with ``coefficient`` < 0."""
+    return coefficient in POSITIVE.get(kind, ()) and bool(implausible(kind, {coefficient: -1.0}))
+
+
+# ----- the pseudo-inertia's dual ----------------------------------------------------------------
+def pseudo_inertia(phi: np.ndarray) -> np.ndarray:
+    """:func:`baseparams.identify.physical.pseudo_inertia` (the same formula; that module
+    imports cvxpy, which every identify would then pay for)."""
+    m, mx, my, mz, ixx, ixy, ixz, iyy, iyz, izz = (float(v) for v in phi)
+    inertia = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    sigma = np.trace(inertia) / 2 * np.eye(3) - inertia
+    h = np.array([mx, my, mz])
+    return np.block([[sigma, h[:, None]], [h[None, :], np.array([[m]])]])
+
+
+def _pseudo_inertia_basis() -> np.ndarray:
+    """(10, 4, 4): J(e_i) for each of a body's ten parameters (m mx my mz Ixx Ixy Ixz Iyy Iyz Izz)."""
+    return np.array([pseudo_inertia(np.eye(10)[i]) for i in range(10)])
+
+
+_UPPER = [(i, j) for i in range(4) for j in range(i, 4)]
+
+
+def dual(coefficients: np.ndarray) -> np.ndarray:
+    """The symmetric D with <D, J(phi_b)> = coefficients . phi_b for every phi_b."""
+    basis = _pseudo_inertia_basis()
+    L = np.array([[a[i, j] * (1.0 if i == j else 2.0) for i, j in _UPPER] for a in basis])
+    d = np.linalg.solve(L, np.asarray(coefficients, float))
+    D = np.zeros((4, 4))
+    for (i, j), v in zip(_UPPER, d):
+        D[i, j] = D[j, i] = v
+    return D
+
+
+def nonnegative_on_bodies(row: np.ndarray) -> bool:
+    """Whether ``row . phi >= 0`` for every physically consistent ``phi`` (ten per body)."""
+    row = np.asarray(row, float)
+    if not np.any(row) or row.size % 10:
+        return False
+    for b in range(row.size // 10):
+        c = row[10 * b: 10 * b + 10]
+        if not np.any(c):
+            continue
+        eigenvalues = np.linalg.eigvalsh(dual(c))
+        if eigenvalues[0] < -_PSD_TOLERANCE * max(np.abs(eigenvalues).max(), 1e-300):
+            return False
+    return True
+
+
+def _what(row: np.ndarray, parameters: Sequence[str]) -> str:
+    nonzero = np.flatnonzero(row)
+    if len(nonzero) == 1:
+        from baseparams.model.params import split_name
+        kind = split_name(parameters[nonzero[0]])[0]
+        if kind in _KIND_NAMES:
+            return f"{_KIND_NAMES[kind]} ({parameters[nonzero[0]]})"
+    terms = [f"{'-' if row[i] < 0 else '+'} {'' if row[i] in (1, -1) else f'{abs(row[i]):.4g} '}{parameters[i]}"
+             for i in nonzero[:4]]
+    text = " ".join(terms).lstrip("+ ") + (" + ..." if len(nonzero) > 4 else "")
+    return f"{text} (>= 0 for every physical body)"
+
+
+# ----- the judgement ----------------------------------------------------------------------------
+def judge(*, parameters: Sequence[str], base_map: np.ndarray, names: Sequence[str], values: np.ndarray,
+          std: np.ndarray, covariance: np.ndarray | None, effects: Mapping[str, tuple[str, str]],
+          absorbed: Mapping[str, Mapping[str, float]], bodies: Mapping[int, str] | None = None) -> list[Flag]:
+    """Every estimate no robot has or that is negative within its noise, in ``names``' order
+    then the bodies. ``parameters``: the standard parameters (ten per body); ``base_map``
+    (r, P): each of the first r ``names``' expression over them; ``effects``: effect
+    coefficient name -> (kind, coefficient); ``absorbed``: coefficient name -> {kept name:
+    factor} (what each kept estimate also stands for); ``bodies``: label -> name for text."""
+    values, std = np.asarray(values, float), np.asarray(std, float)
+    r = base_map.shape[0]
+    into: dict[str, list[tuple[str, float]]] = {}
+    for name, kept in absorbed.items():
+        for k, factor in kept.items():
+            into.setdefault(k, []).append((name, float(factor)))
+
+    def absorbed_positive(name: str) -> tuple[bool, str]:
+        extra = into.get(name, [])
+        ok = all(a in effects and must_be_positive(*effects[a]) and f > 0 for a, f in extra)
+        return ok, (f" (with {', '.join(a for a, _ in extra)} absorbed, also positive)" if extra else "")
+
+    flags: list[Flag] = []
+    for k, name in enumerate(names):
+        if k < r:
+            row = base_map[k]
+            if not nonnegative_on_bodies(row):
+                continue
+            reason = f"{_what(row, parameters)} cannot be negative"
+        elif name in effects:
+            kind, coefficient = effects[name]
+            if not must_be_positive(kind, coefficient):
+                continue
+            reason = f"{kind.replace('_', ' ')} must be positive"
+            if kind == "stribeck_friction" and "fc" + name[len(coefficient):] in effects:
+                reason += " (lower near rest than in motion: the Coulomb friction may be smooth, tanh(qd/vs))"
+        else:
+            continue
+        ok, also = absorbed_positive(name)
+        if not ok:
+            continue
+        flag = _flag(name, values[k], std[k], reason + also, inertial=k < r)
+        if flag is not None:
+            flags.append(flag)
+    if covariance is not None:
+        flags += _bodies(parameters, base_map, values[:r], covariance[:r, :r], [n for n in names[:r]
+                                                                                 if n not in into], names, bodies)
+    return flags
+
+
+def _bodies(parameters: Sequence[str], base_map: np.ndarray, values: np.ndarray, covariance: np.ndarray,
+            clean: Sequence[str], names: Sequence[str], labels: Mapping[int, str] | None) -> list[Flag]:
+    """Bodies whose ten parameters the base parameters on that body alone determine."""
+    from baseparams.model.params import split_name
+    out = []
+    basis = _pseudo_inertia_basis()
+    P = base_map.shape[1]
+    for b in range(P // 10):
+        columns = slice(10 * b, 10 * b + 10)
+        others = np.delete(base_map, np.s_[10 * b: 10 * b + 10], axis=1)
+        rows = [k for k in range(base_map.shape[0]) if names[k] in clean and not np.any(others[k])
+                and np.any(base_map[k, columns])]
+        if len(rows) < 10:
+            continue
+        E = base_map[np.ix_(rows, range(10 * b, 10 * b + 10))]
+        if np.linalg.matrix_rank(E) < 10:
+            continue
+        G = np.linalg.pinv(E)
+        phi = G @ values[rows]
+        C = G @ covariance[np.ix_(rows, rows)] @ G.T
+        if not np.all(np.isfinite(C)):
+            continue
+        eigenvalues, vectors = np.linalg.eigh(pseudo_inertia(phi))
+        v = vectors[:, 0]
+        gradient = np.array([v @ a @ v for a in basis])
+        sd = float(np.sqrt(max(gradient @ C @ gradient, 0.0)))
+        label = split_name(parameters[10 * b])[1]
+        who = f"body {label}" + (f" ({labels[label]})" if labels and labels.get(label) else "")
+        flag = _flag(who, float(eigenvalues[0]), sd,
+                     "its ten identified parameters are not a mass distribution (the pseudo-inertia's "
+                     "smallest eigenvalue is negative: a negative mass, or an inertia that is not positive "
+                     "definite or breaks the triangle inequality)")
+        if flag is not None:
+            out.append(flag)
+    return out
+
+
+def split(flags: Sequence[Flag]) -> tuple[list[Flag], list[Flag]]:
+    """(impossible, negative within the noise: consistent with zero)."""
+    return [f for f in flags if f.impossible], [f for f in flags if not f.impossible]
+
+
+def advice(flags: Sequence[Flag]) -> list[str]:
+    """What to do about the impossible ones among ``flags``."""
+    impossible = [f for f in flags if f.impossible]
+    out = []
+    if any(f.inertial for f in impossible):
+        out.append("`identify --physical` fits standard parameters whose bodies are mass distributions (needs "
+                   "cvxpy), as near the base estimates as they allow")
+    if any(not f.inertial for f in impossible):
+        out.append("--physical does not constrain effect coefficients: a negative friction or rotor inertia "
+                   "stands for something the model lacks or shapes otherwise (`diagnose` names it: a delay, a "
+                   "smooth Coulomb law), or for a coefficient the motion barely excites")
+    return out
