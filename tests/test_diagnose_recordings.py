@@ -212,7 +212,7 @@ def test_a_rigid_payload_beyond_the_tool_frames_is_named_once_with_its_mass_and_
     centre = np.array([c["mx"], c["my"], c["mz"]]) / c["m"]
     assert np.allclose(centre, [0.06, 0.1623, 0.0], atol=0.005), centre
     text = CliRunner().invoke(main, ["diagnose", str(urdf), str(tmp_path / "rec.toml"), "--params", str(urdf),
-                                     "--quiet"])
+                                     "--quiet", "--verbose"])
     assert "in wrist_3_link's axes" in text.stdout
 
 

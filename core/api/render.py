@@ -3,10 +3,14 @@ return (one home for each)."""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from baseparams.identify.change import ChangeDiagnosis
     from baseparams.identify.diagnose import Diagnosis
+    from baseparams.model.mechanism import Mechanism
 
 
 def _value_text(entry: dict[str, Any]) -> str:
@@ -35,8 +39,20 @@ VERDICTS = {
 }
 
 
-def diagnosis_text(result: "Diagnosis", written: str | None = None) -> str:
-    """The diagnosis for a reader: the verdict and the gap first."""
+def diagnosis_text(result: "Diagnosis", written: str | None = None, verbose: bool = False,
+                   kinds: Mapping[str, str] | None = None) -> str:
+    """The diagnosis for a reader, the verdict and the gap first. By default a report read in a
+    minute (:func:`short_text`: at most ``MAX_LINES`` lines, whatever the data); ``verbose``:
+    everything (every candidate not named with its reason, the residual's statistics, every
+    note). ``kinds``: what each coordinate measures ('angle' or 'length', :func:`coordinate_kinds`),
+    for the units of the short report (without it, numbers only where a unit needs it)."""
+    if not verbose:
+        return short_text(result, written, kinds)
+    return _full_text(result, written)
+
+
+def _full_text(result: "Diagnosis", written: str | None = None) -> str:
+    """The whole report (``--verbose``)."""
     gap = result.gap
     lines = [f"verdict: {result.verdict.upper()}: {VERDICTS.get(result.verdict, '')}",
              f"gap (NRMS, blocks predicted from the others, {gap['cv_folds']} blocks): {gap['cv_before']:.4g} -> "
@@ -109,6 +125,11 @@ def _payload_text(effect: dict) -> str:
 def _where_text(result: "Diagnosis") -> str:
     """Coordinates with the largest residual against their noise level, and the regimes where
     the residual concentrates."""
+    return "; ".join(_where_parts(result)) or "-"
+
+
+def _where_parts(result: "Diagnosis") -> list[str]:
+    """:func:`_where_text`'s parts: the loudest coordinates, the regimes, the loudest block."""
     ratios = {c: r for c, r in result.unexplained["ratio"].items() if r is not None}
     worst = sorted(ratios, key=lambda c: -ratios[c])[:3]
     parts = ["coordinates " + ", ".join(f"{c} ({ratios[c]:.3g} x noise)" for c in worst)] if worst else []
@@ -120,4 +141,290 @@ def _where_text(result: "Diagnosis") -> str:
     if blocks:
         loudest = max(blocks, key=lambda b: max(b["ratio"].values()))
         parts.append(f"largest in t = {loudest['t'][0]:.3g}..{loudest['t'][1]:.3g} s")
-    return "; ".join(parts) or "-"
+    return parts
+
+
+# ----- the short diagnosis report ------------------------------------------------------------
+MAX_LINES = 25      # the default text fits one screen, whatever the data
+NOTES = 3           # notes it shows at most, the most important first
+
+# Notes the short report shows first (matched on their start): what the verdict rests on and
+# what the user asked for. Why: the data's reading notes come first in the list, and on a real
+# recording they filled the room before the verdict's own reason.
+NOTES_FIRST = ("the cross-validated gap grew", "structure remains", "the residual is coloured",
+               "the inertial model reproduces", "the inertial model predicts held-out", "--write", "--params")
+# Notes it leaves to --verbose (matched anywhere in the note): how the search went and how the
+# data were read, which change no name and no number of the short report.
+NOTES_VERBOSE = ("was named, then taken out", "and its rivals were ambiguous when they entered",
+                 "not testable on this data:", "was held back (", "known effects subtracted:",
+                 "effects fitted with the inertial model:", "the inertial parameters are held as given",
+                 "low-passed at", "motor-side channels mapped", "estimated by Savitzky-Golay",
+                 "columns ignored", "its identified values replace the model's own")
+# Notes the short report says in its own line instead.
+NOTES_SAID = ("the search stopped at --max-steps",)
+
+# Units of the registered effects' coefficients and shapes, on an angle and on a length (SI:
+# the data's forces in N m and N, positions in rad and m).
+_FORCE = ("N m", "N")
+UNITS: dict[str, dict[str, tuple[str, str]]] = {
+    "viscous_friction": {"fv": ("N m s/rad", "N s/m")},
+    "coulomb_friction": {"fc": _FORCE, "vs": ("rad/s", "m/s")},
+    "stribeck_friction": {"fs": _FORCE, "vs": ("rad/s", "m/s")},
+    "offset": {"off": _FORCE},
+    "spring": {"k": ("N m/rad", "N/m"), "kq0": _FORCE},
+    "rotor_inertia": {"Ia": ("kg m^2", "kg")},
+    "position_friction": {"fcc": _FORCE, "fcs": _FORCE},
+    "cogging": {"c1": _FORCE, "d1": _FORCE, "c2": _FORCE, "d2": _FORCE},
+}
+
+
+def coordinate_kinds(mechanism: "Mechanism") -> dict[str, str]:
+    """What each joint coordinate and motor of ``mechanism`` measures, 'angle' or 'length' (a
+    motor turning angles and lengths alike is left out): the units of the short report."""
+    out = {c: kind for joint in mechanism.joints for c, kind in zip(joint.coordinates, joint.type.coordinate_kinds)}
+    for motor in mechanism.motors:
+        moved = {out.get(c, "") for c, _ in motor.ratios}
+        if len(moved) == 1 and "" not in moved:
+            out[motor.name] = moved.pop()
+    return out
+
+
+def short_text(result: "Diagnosis", written: str | None = None, kinds: Mapping[str, str] | None = None) -> str:
+    """The report read in a minute, at most ``MAX_LINES`` lines: the verdict, the gap before
+    -> after, each named effect on one line in physical terms (the largest when they do not
+    all fit, with how many more), the ambiguous groups one line each, where the gap remains, a
+    count of what was not named, and the most important notes (``NOTES`` at most). The rest
+    is in ``--verbose`` (:func:`diagnosis_text`) and the JSON."""
+    kinds = kinds or {}
+    gap = result.gap
+    head = [f"verdict: {result.verdict.upper()}: {VERDICTS.get(result.verdict, '')}",
+            f"gap (NRMS, blocks predicted from the others, {gap['cv_folds']} blocks): {gap['cv_before']:.4g} -> "
+            f"{gap['cv_after']:.4g}; fitted: {gap['before']:.4g} -> {gap['after']:.4g}"]
+    if gap["holdout_before"] is not None:
+        head.append(f"last block kept out: {gap['holdout_before']:.4g} -> {gap['holdout_after']:.4g} "
+                    f"(prediction floor {gap['holdout_floor']:.4g}, noise alone {gap['holdout_noise_floor']:.4g})")
+    un = result.unexplained
+    tail = []
+    if result.verdict in ("partly explained", "unexplained"):
+        parts = _where_parts(result)
+        regimes = [p for p in parts if p.startswith("concentrated at ")]
+        rest = [p for p in parts if p not in regimes]
+        tail.append("where the gap remains: " + ("; ".join(rest) or "-"))
+        tail += [f"  {p}" for p in regimes]
+    if un.get("significant_candidates_left"):
+        tail.append(f"the search stopped at --max-steps {un['max_steps']} with candidates still "
+                    "significant: the named effects are incomplete; raise --max-steps to go on")
+    notes, hidden_notes = _ranked_notes(result.notes)
+    end = [f"written: {written}"] if written else []
+    # what is left for the effects, the ambiguous groups and the notes: the named effects'
+    # heading and the count line of what was not named take one line each
+    room = MAX_LINES - len(head) - len(tail) - len(end) - 2
+    effects, ambiguous = result.effects, result.ambiguous
+    shown_notes = min(len(notes), NOTES)
+    if len(effects) + len(ambiguous) + shown_notes > room:
+        shown_notes = min(len(notes), 1)
+    e, a = _fit_lists(len(effects), len(ambiguous), room - shown_notes)
+    lines = list(head)
+    if effects:
+        lines.append("named effects:")
+        largest = sorted(range(len(effects)), key=lambda i: _size(effects[i]), reverse=True)[:e]
+        lines += [f"  {_effect_line(effects[i], kinds)}" for i in sorted(largest)]
+        if e < len(effects):
+            lines.append(f"  and {len(effects) - e} more, smaller (--verbose lists every named effect)")
+    else:
+        lines.append("named effects: none")
+    for group in ambiguous[:a]:
+        lines.append(_ambiguous_line(group))
+    if a < len(ambiguous):
+        lines.append(f"and {len(ambiguous) - a} more ambiguous groups (--verbose lists them)")
+    lines += tail
+    count = _not_named_count(result, hidden_notes + len(notes) - shown_notes)
+    if count:
+        lines.append(count)
+    lines += [f"note: {n}" for n in notes[:shown_notes]]
+    lines += end
+    return "\n".join(lines)
+
+
+def _fit_lists(effects: int, ambiguous: int, room: int) -> tuple[int, int]:
+    """How many named effects and ambiguous groups to show in ``room`` lines, a list cut short
+    taking one more line to say how many it leaves out; the effects first, the groups at
+    least one and about a quarter of the room."""
+    e, a = effects, ambiguous
+
+    def lines() -> int:
+        return e + a + (e < effects) + (a < ambiguous)
+    while lines() > room and (e > 1 or a > 1):
+        if a > max(1, (e + a) // 4) or e <= 1:
+            a -= 1
+        else:
+            e -= 1
+    return e, a
+
+
+def _size(effect: dict) -> tuple[float, float]:
+    """How large a named effect is: how much better it predicts a typical held-out block
+    (``checks.cv_gain``), then its test statistic per degree of freedom."""
+    gain = effect.get("checks", {}).get("cv_gain")
+    test = effect.get("test", {})
+    stat = test.get("stat") or 0.0
+    return (gain if gain is not None and math.isfinite(gain) else -math.inf,
+            stat / max(test.get("df") or 1, 1) if math.isfinite(stat) else math.inf)
+
+
+def _ranked_notes(notes: list[str]) -> tuple[list[str], int]:
+    """The notes the short report may show, the most important first (``NOTES_FIRST``, then
+    the others in their order), and how many it leaves to --verbose alone."""
+    shown = [n for n in notes if not n.startswith(NOTES_SAID) and not any(k in n for k in NOTES_VERBOSE)]
+    first = [n for n in shown if n.startswith(NOTES_FIRST)]
+    left = len([n for n in notes if not n.startswith(NOTES_SAID)]) - len(shown)
+    return first + [n for n in shown if n not in first], left
+
+
+def _not_named_count(result: "Diagnosis", notes: int) -> str:
+    """One line counting what --verbose lists and the short report does not."""
+    weak = len(result.unexplained.get("confusable_with_model", []))
+    parts = [f"{len(result.unsupported)} candidate{'s' if len(result.unsupported) != 1 else ''} not named "
+             "(unsupported)" if result.unsupported else "",
+             f"{weak} nearly collinear with the inertial model" if weak else "",
+             f"{len(result.untestable)} not testable on this data" if result.untestable else ""]
+    said = ", ".join(p for p in parts if p)
+    more = f"{notes} more note{'s' if notes != 1 else ''}" if notes else ""
+    if said and more:
+        return f"{said}; --verbose lists them and {more}"
+    if said:
+        return f"{said}; --verbose lists them"
+    return f"{more}: --verbose lists them" if more else ""
+
+
+def _ambiguous_line(group: dict) -> str:
+    names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in group["candidates"])
+    corr = max((abs(ev["correlation"]) for ev in group["evidence"]), default=float("nan"))
+    return f"ambiguous: {names} (|corr| up to {corr:.3f}); to separate them: {group['separate_by']}"
+
+
+def _effect_line(effect: dict, kinds: Mapping[str, str]) -> str:
+    """One named effect in physical terms: its value with its std and unit."""
+    kind, coordinate = effect["kind"], effect["coordinate"]
+    c = effect["coefficients"]
+    if kind == "body":
+        return f"body on {coordinate}: {_body_text(c)}"
+    if kind == "mass" and c["m"]["value"] is not None:
+        return f"mass on {coordinate}: {_pm(c['m']['value'], c['m']['std'])} kg at its frame's origin"
+    if kind == "gain" and c["g"]["value"] is not None:
+        g, std = c["g"]["value"], c["g"]["std"]
+        return f"gain on {coordinate}: {_pm(100 * g, None if std is None else 100 * std)} % of the torque"
+    if kind == "delay" and c["d"]["value"] is not None:
+        d, std = c["d"]["value"], c["d"]["std"]
+        where = "all drives" if coordinate == "all" else coordinate
+        return f"delay on {where}: {_pm(1e3 * d, None if std is None else 1e3 * std)} ms"
+    if kind == "load_friction" and c["mu"]["value"] is not None:
+        return f"load_friction on {coordinate}: {_pm(c['mu']['value'], c['mu']['std'])} x |tau|"
+    if any(v["value"] is None for v in c.values()):
+        return f"{kind} on {coordinate}: {_value_text(effect)}{_known_text(effect)}"
+    units = _units(kind, coordinate, kinds)
+    if len(c) == 1:
+        ((name, v),) = c.items()
+        text = _pm(v["value"], v["std"]) + _unit(units.get(name, ""))
+    else:
+        text = ", ".join(f"{name} = {_pm(v['value'], v['std'])}{_unit(units.get(name, ''))}" for name, v in c.items())
+    shapes = "".join(f", {name} = {value:.3g}{_unit(units.get(name, ''))}"
+                     for name, value in effect.get("shape", {}).items()
+                     if name != "low_pass_hz" and not (name == "vs" and value == 0))   # vs 0: the sign law
+    return f"{kind} on {coordinate}: {text}{shapes}{_known_text(effect)}"
+
+
+def _body_text(c: dict) -> str:
+    """A changed body: its added mass with its std, where it sits (the first moments over the
+    mass, in the body's axes) when both are determined, and what the data do not determine."""
+    absorbed = [name for name, v in c.items() if v["value"] is None]
+    m = c["m"]
+    parts = []
+    if m["value"] is not None:
+        text = f"{_pm(m['value'], m['std'])} kg"
+        determined = m["value"] > 0 and (m["std"] is None or m["value"] > 2 * m["std"])
+        if determined and all(c[k]["value"] is not None for k in ("mx", "my", "mz")):
+            centre = [c[k]["value"] / m["value"] for k in ("mx", "my", "mz")]
+            largest = max(abs(x) for x in centre)
+            places = max(3, 1 - math.floor(math.log10(largest))) if 0 < largest < math.inf else 3   # mm
+            text += " at (" + ", ".join(f"{x:.{places}f}" for x in centre) + ") m in its axes"
+        parts.append(text)
+    if absorbed:
+        parts.append(f"not identifiable on their own here: {', '.join(absorbed)} (--verbose: what the data "
+                     "determine)")
+    return "; ".join(parts)
+
+
+def _units(kind: str, coordinate: str, kinds: Mapping[str, str]) -> dict[str, str]:
+    """The units of a registered effect's coefficients and shapes on ``coordinate`` (none
+    where the coordinate's kind or the effect's units are unknown)."""
+    measures = kinds.get(coordinate)
+    if measures not in ("angle", "length"):
+        return {}
+    return {name: pair[0 if measures == "angle" else 1] for name, pair in UNITS.get(kind, {}).items()}
+
+
+def _unit(unit: str) -> str:
+    return f" {unit}" if unit else ""
+
+
+def _pm(value: float, std: float | None) -> str:
+    """``value +- std`` to the std's precision: the std to one significant digit (two when
+    it starts with a 1), the value to the same decimal place."""
+    if std is None or not math.isfinite(std) or std <= 0 or not math.isfinite(value):
+        return f"{value:.4g}" + (f" +- {std:.2g}" if std is not None else "")
+    digits = 2 if f"{std:.0e}"[0] == "1" else 1       # 0.097 rounds to 0.1: two digits, 0.097
+    shown = float(f"{std:.{digits}g}")
+    last = math.floor(math.log10(shown)) - digits + 1  # the decimal place of the std's last digit
+    if -6 <= last and abs(value) < 1e6:               # fixed point: 5.750 +- 0.097, 1503.4 +- 1.4
+        places = max(0, -last)
+        return f"{round(value, -last) if last > 0 else value:.{places}f} +- {shown:.{places}f}"
+    significant = math.floor(math.log10(abs(value))) - last + 1 if value else 1
+    return f"{value:.{min(max(significant, 1), 8)}g} +- {std:.{digits}g}"
+
+
+CHANGE_VERDICTS = {
+    "nothing changed": "the changed runs agree with the baseline within their noise",
+    "changed": "the named changes explain the difference from the baseline",
+    "partly explained": "the named changes explain part of the difference; structure remains",
+    "unexplained": "the runs differ, and no candidate change explains it",
+}
+
+
+def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping[str, str] | None = None) -> str:
+    """What changed between recordings, for a reader: the verdict, the gap between the two
+    sides before and after, each change on one line, what both lack; at most MAX_LINES lines
+    unless ``verbose``."""
+    kinds = kinds or {}
+    gap, common, pairing = result.gap, result.common, result.pairing
+    lines = [f"verdict: {result.verdict.upper()}: {CHANGE_VERDICTS.get(result.verdict, '')}",
+             f"difference from the baseline (NRMS, {pairing['samples']} "
+             f"{'paired samples' if pairing['paired'] else 'changed samples, not paired'}): "
+             f"{gap['before']:.3g} -> {gap['after']:.3g}"]
+    lines.append("changes:" if result.changes else "changes: none named")
+    room = MAX_LINES - 6 - len(result.ambiguous)
+    shown = result.changes if verbose else result.changes[:max(room, 1)]
+    for entry in shown:
+        lines.append(f"  {_effect_line(entry, kinds)}  (p = {entry['test']['pvalue_holm']:.2g}, Holm)")
+    if len(shown) < len(result.changes):
+        lines.append(f"  ... and {len(result.changes) - len(shown)} more (--verbose)")
+    for group in result.ambiguous:
+        names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in group["candidates"])
+        lines.append(f"ambiguous: {names} (one changed; the data cannot tell which)")
+    worst = max(common["per_coordinate"].items(), key=lambda kv: kv[1], default=("", 0.0))
+    lines.append(f"what the model lacks in both: NRMS {common['nrms']:.3g} (largest {worst[0]} {worst[1]:.3g}); "
+                 + ("it cancels between paired samples" if common["cancelled"] else "not cancelled (other motions)")
+                 + (f"; shared delay {1e3 * common['delay']:.3g} ms" if common.get("delay") else ""))
+    if result.verdict in ("partly explained", "unexplained"):
+        per = gap["per_coordinate"]
+        where = sorted(per, key=lambda c: -per[c]["after"])[:3]
+        lines.append("the difference remains on " + ", ".join(f"{c} ({per[c]['after']:.3g})" for c in where)
+                     + f"; predictable from the candidates together: p = {result.rest['pvalue']:.2g}")
+    notes = result.notes if verbose else result.notes[:max(0, MAX_LINES - len(lines) - 1)]
+    lines += [f"note: {n}" for n in notes]
+    if len(notes) < len(result.notes):
+        lines.append(f"{len(result.notes) - len(notes)} more notes (--verbose)")
+    if verbose and result.steps:
+        lines.append("first step's strongest candidates (Holm p):")
+        lines += [f"  {d['candidate']}: {d['pvalue_holm']:.3g}" for d in result.steps[0]["tests"]]
+    return "\n".join(lines)

@@ -216,9 +216,11 @@ class Fit(Result):
 @dataclass
 class Diagnosed(Result):
     """A diagnosis (``baseparams diagnose``): the verdict, the named effects, the gap before
-    and after. ``closed`` is the verb's exit status (0 when true)."""
+    and after. ``closed`` is the verb's exit status (0 when true). ``kinds``: what each
+    coordinate and motor measures ('angle' or 'length'), for the units of the text report."""
     diagnosis: "Diagnosis"
     written: str | None = None
+    kinds: dict[str, str] = field(default_factory=dict)
 
     @property
     def closed(self) -> bool:
@@ -229,9 +231,13 @@ class Diagnosed(Result):
         out["written"] = self.written
         return out
 
-    def to_text(self) -> str:
+    def to_text(self, verbose: bool = False) -> str:
+        """The report read in a minute (at most 25 lines: the verdict, the gap, each named
+        effect on one line with its unit, where the gap remains, counts of the rest);
+        ``verbose``: the whole report (every candidate not named with its reason, the
+        residual's statistics, every note)."""
         from baseparams.api.render import diagnosis_text
-        return diagnosis_text(self.diagnosis, self.written)
+        return diagnosis_text(self.diagnosis, self.written, verbose=verbose, kinds=self.kinds)
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per named effect's coefficient: kind, coordinate, coefficient, value, std."""

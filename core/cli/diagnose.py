@@ -46,12 +46,17 @@ if TYPE_CHECKING:
               help="Residuals before/after per coordinate and the candidates' statistics (png, pdf, svg).")
 @click.option("--write", "write_path", type=click.Path(dir_okay=False), default=None, metavar="FILE.toml",
               help="Save the mechanism (a TOML file) with the named effects added as [[effects]] tables.")
+@click.option("--verbose", is_flag=True, default=False,
+              help="The whole text report: every candidate not named with its reason, the residual's "
+                   "statistics and every note (default: at most 25 lines, the verdict, the gap, each named "
+                   "effect on one line with its unit, where the gap remains and counts of the rest). "
+                   "JSON holds everything either way.")
 @output_option(help="Write the report (text, or JSON with --format json) to FILE instead of standard output.")
 @format_option
 @quiet_option()
 def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, selection: tuple[str, ...],
              alpha: float, folds: int, holdout: float, max_steps: int | None, plot_path: str | None,
-             write_path: str | None, output: str | None, fmt: str, quiet: bool) -> None:
+             write_path: str | None, verbose: bool, output: str | None, fmt: str, quiet: bool) -> None:
     """Find where MECH's model and measured DATA disagree and name the missing effect.
 
     DATA: CSV files or recording descriptions (.toml), as for identify.
@@ -79,7 +84,7 @@ def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, 
         if plot_path:
             progress("plotting")
             plot_diagnosis(result.diagnosis, plot_path)
-    emit(fmt, result.to_json(), result.to_text, output)
+    emit(fmt, result.to_json(), lambda: result.to_text(verbose=verbose), output)
     sys.exit(0 if result.closed else 1)
 
 
