@@ -91,8 +91,9 @@ def _crowded(d, effects, ambiguous=8, unsupported=40, notes=20, holdout=True, st
              "reason": f"too small to name: a held-out block improves by {k} % (case {k})"} for k in range(unsupported)]
     said = [f"/data/rec.toml: run{k}: positions low-passed at 36.67 Hz (10 x the positions' bandwidth)"
             for k in range(notes - 3)]
-    said += ["an unusual remark on the data", "spring:q2 was named, then taken out: once the effects named after "
-             "it are in, it adds nothing significant", "structure remains: the residual follows the motion on q1"]
+    said += ["an unusual remark on the data,\nover two lines",
+             "spring:q2 was named, then taken out: once the effects named after it are in, it adds nothing "
+             "significant", "structure remains: the residual follows the motion on q1"]
     unexplained = {**d.unexplained, "significant_candidates_left": stopped, "max_steps": 3 if stopped else None,
                    "confusable_with_model": [{"candidate": f"spring:q{k}", "separate_by": "change the pose"}
                                              for k in range(5)]}
@@ -127,7 +128,8 @@ def test_the_default_text_fits_a_screen_with_many_candidates_not_named_and_many_
                   "body on wrist_3_link: 2.62 +- 0.04 kg at (0.010, -0.020, 0.050) m in its axes",
                   "body on link2: not identifiable on their own here: m, mx",
                   "load_friction on q2: 0.050 +- 0.010 x |tau|",
-                  "viscous_friction on q1: 0.10 +- 0.02 N m s/rad correcting the model's own fv = 0.5 (total fv = 0.6)"):
+                  "viscous_friction on q1: 0.10 +- 0.02 N m s/rad correcting the model's own fv = 0.5 "
+                  "(total fv = 0.6)"):
         assert words in text, (words, text)
     assert "low_pass_hz" not in text and "(p = " not in text          # the method's details: --verbose
     assert sum(line.startswith("ambiguous: ") for line in lines) == 2
@@ -140,6 +142,7 @@ def test_the_default_text_fits_a_screen_with_many_candidates_not_named_and_many_
     assert next(line for line in lines if line.startswith("note: ")) == \
         "note: structure remains: the residual follows the motion on q1"
     assert "low-passed" not in text
+    assert lines[-1] == "note: an unusual remark on the data, over two lines"
     assert sum(line.startswith("where the gap remains: ") for line in lines) == 1
 
 

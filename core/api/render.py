@@ -241,7 +241,7 @@ def short_text(result: "Diagnosis", written: str | None = None, kinds: Mapping[s
     count = _not_named_count(result, hidden_notes + len(notes) - shown_notes)
     if count:
         lines.append(count)
-    lines += [f"note: {n}" for n in notes[:shown_notes]]
+    lines += [f"note: {' '.join(n.splitlines())}" for n in notes[:shown_notes]]      # one line each
     lines += end
     return "\n".join(lines)
 
