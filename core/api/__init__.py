@@ -12,10 +12,10 @@ docs/api.md. Heavy modules (sympy, flint, scipy, cvxpy) are imported when a func
 
 from .data import diagnose, identify, simulate
 from .files import convert, excite, export, validate
-from .results import (Conversion, Diagnosed, Excitation, Export, Fit, Result, Simulation, Solution,
+from .results import (ChangeDiagnosed, Conversion, Diagnosed, Excitation, Export, Fit, Result, Simulation, Solution,
                       Validation)
 from .solving import DEFAULT_SOLVER, get_solver, load, run_solver, solve
 
 __all__ = ["DEFAULT_SOLVER", "load", "solve", "validate", "simulate", "identify", "diagnose", "export",
            "convert", "excite", "get_solver", "run_solver", "Result", "Solution", "Simulation", "Fit",
-           "Diagnosed", "Validation", "Excitation", "Export", "Conversion"]
+           "Diagnosed", "ChangeDiagnosed", "Validation", "Excitation", "Export", "Conversion"]

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from baseparams.identify.data import MeasuredData
     from baseparams.model.mechanism import EffectSpec, Mechanism
 
-    from .results import Diagnosed, Fit, Simulation
+    from .results import ChangeDiagnosed, Diagnosed, Fit, Simulation
 
 PathText = Union[str, "PathLike[str]"]
 DataPaths = Union[PathText, Sequence[PathText]]
@@ -181,12 +181,23 @@ def _physical(identification: Any, mechanism: "Mechanism", base: Any) -> None:
 def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = None,
              candidates: Sequence[str] | None = None, alpha: float = 0.05, folds: int = 5,
              holdout: float = 0.0, max_steps: int | None = None, write: PathText | None = None,
-             progress: Progress | None = None) -> "Diagnosed":
+             baseline: DataPaths | None = None,
+             progress: Progress | None = None) -> "Diagnosed | ChangeDiagnosed":
     """Name the effects ``mech``'s model misses on measured ``data``: the model is fitted
     (or held as given: ``params``, a mechanism file with the robot's inertias or an
     identify JSON), every candidate effect (``candidates``: ``KIND[:PLACE]``; default all)
     is tested, the most significant added, until none is. ``write``: a TOML file of the
-    mechanism with the named effects. ``result.closed`` says whether the gap closed."""
+    mechanism with the named effects. ``result.closed`` says whether the gap closed.
+
+    ``baseline``: runs of the same robot before a change; then what changed between them
+    and ``data`` is named instead (:func:`diagnose_change`)."""
+    if baseline is not None:
+        refused = [name for name, value in (("candidates", candidates), ("holdout", holdout),
+                                            ("max_steps", max_steps), ("write", write)) if value]
+        if refused or folds != 5:
+            raise InputError("between recordings the change candidates are fixed and nothing is written: "
+                             f"{', '.join(refused or ['folds'])} cannot be used with a baseline", key="--baseline")
+        return diagnose_change(mech, data, baseline, params=params, alpha=alpha, progress=progress)
     from dataclasses import replace
 
     from baseparams.identify.diagnose import check_writable, diagnose_data, write_fixed
@@ -244,3 +255,43 @@ def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
     """Measured data (CSV files or recording descriptions) as the fit reads it."""
     from baseparams.identify.recording import read_data
     return read_data(_paths(data), load(mech))[0]
+
+
+def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths, *, params: PathText | None = None,
+                    alpha: float = 0.05, progress: Progress | None = None) -> "ChangeDiagnosed":
+    """What changed between the ``baseline`` runs and the ``changed`` runs of one robot (a
+    payload, a gain, a friction, a delay): one model shared by both (fitted on the baseline,
+    or ``params`` held as given), what both lack cancelled between samples in the same
+    state, the change's candidates tested on the changed runs only
+    (:mod:`baseparams.identify.change`). ``result.closed``: nothing changed, or the named
+    changes explain the difference."""
+    from dataclasses import replace
+
+    from baseparams.identify.change import diagnose_change as run
+    from baseparams.identify.given import given_parameters
+    from baseparams.identify.recording import read_data
+
+    from .render import coordinate_kinds
+    from .results import ChangeDiagnosed
+    changed_paths, baseline_paths = _paths(changed), _paths(baseline)
+    if not baseline_paths:
+        raise InputError("give at least one baseline run", key="--baseline")
+    mechanism = load(mech)
+    given = None
+    if params:
+        given = given_parameters(mechanism, str(params))
+        if given.effects:         # an identify result's effects: its totals, as identify overrode the model's
+            keys = {(e.kind, e.coordinate) for e in given.effects}
+            mechanism = replace(mechanism, effects=tuple(e for e in mechanism.effects
+                                                         if (e.kind, e.coordinate) not in keys) + tuple(given.effects))
+    _say(progress, "reading the baseline")
+    before, mechanism_before = read_data(baseline_paths, mechanism)
+    _say(progress, "reading the changed runs")
+    after, mechanism_after = read_data(changed_paths, mechanism)
+    if mechanism_before.motors != mechanism_after.motors or mechanism_before.gravity != mechanism_after.gravity:
+        raise InputError("the baseline's descriptions declare other motors or another gravity than the changed "
+                         "runs': describe both alike", key="--baseline")
+    _say(progress, f"testing changes on {after.count} samples against {before.count}")
+    result = run(mechanism_after, before, after, given=given, alpha=alpha)
+    result.notes = [f"baseline: {n}" for n in before.notes] + [f"changed: {n}" for n in after.notes] + result.notes
+    return ChangeDiagnosed(result, coordinate_kinds(mechanism_after))

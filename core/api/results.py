@@ -19,6 +19,7 @@ if TYPE_CHECKING:       # the heavy modules load when a verb runs, not on `impor
 
     from baseparams.excite.plan import Plan
     from baseparams.identify.data import MeasuredData
+    from baseparams.identify.change import ChangeDiagnosis
     from baseparams.identify.diagnose import Diagnosis
     from baseparams.identify.fit import Identification, Prediction
     from baseparams.model.mechanism import Mechanism
@@ -341,3 +342,31 @@ class Conversion(Result):
         m = self.mechanism
         return (f"wrote {self.output} ({self.writer}): {len(m.bodies)} bodies, {len(m.joints)} joints, "
                 f"{len(m.coordinates)} coordinates")
+
+
+@dataclass
+class ChangeDiagnosed(Result):
+    """What changed between a baseline and changed runs (``baseparams diagnose CHANGED...
+    --baseline BASE...``): the verdict, each change in physical terms, the gap between the
+    two sides before and after. ``closed`` is the verb's exit status (0 when true: nothing
+    changed, or the named changes explain the difference)."""
+    diagnosis: "ChangeDiagnosis"
+    kinds: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def closed(self) -> bool:
+        return self.diagnosis.closed
+
+    def to_json(self) -> dict[str, Any]:
+        return self.diagnosis.to_json()
+
+    def to_text(self, verbose: bool = False) -> str:
+        """At most 25 lines (``verbose``: every note and the first step's candidates too)."""
+        from baseparams.api.render import change_text
+        return change_text(self.diagnosis, verbose=verbose, kinds=self.kinds)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per named change's coefficient: kind, place, coefficient, value, std."""
+        return [{"kind": e["kind"], "coordinate": e["coordinate"], "coefficient": name, "value": c["value"],
+                 "std": c["std"], "pvalue_holm": e["test"]["pvalue_holm"]}
+                for e in self.diagnosis.changes for name, c in e["coefficients"].items()]

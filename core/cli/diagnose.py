@@ -16,12 +16,18 @@ from baseparams.cli.plots import _figure, _save
 # The statistics (scipy.signal, scipy.stats, statsmodels: slow imports) are imported by
 # the verb when it runs, as in identify.py: every other command starts without them.
 if TYPE_CHECKING:
+    from baseparams.identify.change import ChangeDiagnosis
     from baseparams.identify.diagnose import Diagnosis
 
 
 @main.command()
 @click.argument("mech", metavar="MECH")
 @click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
+@click.option("--baseline", "baseline", multiple=True, metavar="BASE",
+              help="Runs of the same robot before a change (CSV or recording description; repeatable): "
+                   "name what changed between them and DATA (a payload on a body, a torque gain, a friction, "
+                   "an offset, a delay) instead. One model is shared by both; what both lack cancels between "
+                   "samples in the same state. Exit 0 for 'nothing changed' or 'changed' (explained).")
 @click.option("--params", "params_source", default=None, metavar="SOURCE",
               help="Hold the inertial parameters as given instead of refitting them: a mechanism file "
                    "(TOML, URDF) of the same robot with its inertias, or the JSON of an earlier "
@@ -54,7 +60,8 @@ if TYPE_CHECKING:
 @output_option(help="Write the report (text, or JSON with --format json) to FILE instead of standard output.")
 @format_option
 @quiet_option()
-def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, selection: tuple[str, ...],
+def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], params_source: str | None,
+             selection: tuple[str, ...],
              alpha: float, folds: int, holdout: float, max_steps: int | None, plot_path: str | None,
              write_path: str | None, verbose: bool, output: str | None, fmt: str, quiet: bool) -> None:
     """Find where MECH's model and measured DATA disagree and name the missing effect.
@@ -74,9 +81,25 @@ def diagnose(mech: str, data_paths: tuple[str, ...], params_source: str | None, 
     [{"kind", "coordinate", "value", "std", "shape", "checks"}], "ambiguous", "unsupported",
     "gap": {"before", "after", "cv_before", "cv_after", "cv_blocks", ...}, "where",
     "unexplained"} (`python -m pydoc baseparams.identify.diagnose`).
+
+    With --baseline BASE: what changed between the BASE runs and DATA (the changed runs).
+    JSON: {"mode": "change", "verdict" ("nothing changed", "changed", "partly explained",
+    "unexplained"), "effects" (each change: "kind", "coordinate" (a body or a coordinate),
+    "value", "std"), "ambiguous", "gap", "common", "pairing", "rest", "notes"}
+    (`python -m pydoc baseparams.identify.change`).
     """
     from baseparams.api import diagnose as run
     mechanism = load(mech)
+    if baseline:
+        with Progress("diagnose", steps=3 + bool(plot_path), quiet=quiet) as progress:
+            changes = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
+                          alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
+                          baseline=list(baseline), progress=progress)
+            if plot_path:
+                progress("plotting")
+                plot_change(changes.diagnosis, plot_path)
+        emit(fmt, changes.to_json(), lambda: changes.to_text(verbose=verbose), output)
+        sys.exit(0 if changes.closed else 1)
     with Progress("diagnose", steps=2 + bool(plot_path), quiet=quiet) as progress:
         result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
                      alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
@@ -123,4 +146,25 @@ def plot_diagnosis(result: "Diagnosis", path: str, fmt: str | None = None) -> Pa
     return _save(fig, path, fmt)
 
 
-__all__ = ["diagnose", "render_text", "plot_diagnosis"]
+def plot_change(result: "ChangeDiagnosis", path: str, fmt: str | None = None) -> Path:
+    """The difference between the changed runs and the baseline at paired samples, per
+    coordinate, before the named changes (dashed) and after them."""
+    f = len(result.coordinates)
+    fig = _figure(figsize=(10, 2.2 * f + 1.0))
+    named = ", ".join(f"{e['kind']}:{e['coordinate']}" for e in result.changes[:4]) or "none"
+    gap = result.gap
+    fig.suptitle(f"{result.mechanism}: {result.verdict}; difference from the baseline (NRMS) {gap['before']:.3g} -> "
+                 f"{gap['after']:.3g}\nchanges: {named}", fontsize=9)
+    x = result.t if len(result.t) == len(result.difference_before) else range(len(result.difference_before))
+    for j, c in enumerate(result.coordinates):
+        ax = fig.add_subplot(f, 1, j + 1)
+        ax.plot(x, result.difference_after[:, j], lw=0.7, color="tab:blue", label="after the changes")
+        ax.plot(x, result.difference_before[:, j], lw=0.7, color="tab:red", ls="--", alpha=0.8, label="before")
+        ax.set_ylabel(f"changed - baseline\n{c}", fontsize=8)
+        ax.legend(loc="upper right", fontsize=7, ncol=2)
+    fig.axes[-1].set_xlabel("t (s) of the changed runs" if x is result.t else "paired sample")
+    fig.tight_layout()
+    return _save(fig, path, fmt)
+
+
+__all__ = ["diagnose", "render_text", "plot_diagnosis", "plot_change"]

@@ -137,3 +137,87 @@ def simulate(mechanism: Mechanism, *, samples: int | None = None, noise_sd: floa
 
 def _rms(values: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(np.asarray(values) ** 2, axis=0))
+
+
+# The model errors common to both sides of :func:`simulate_change`: Coulomb friction of a
+# smooth law (tanh, transition at this fraction of the coordinate's RMS speed) and viscous
+# friction, each this fraction of the coordinate's largest torque, and a delay in samples.
+COMMON_COULOMB, COMMON_VISCOUS, COMMON_TRANSITION, COMMON_DELAY = 0.05, 0.02, 0.1, 2
+NOISE_KINDS = ("white", "ar1", "lowpass")
+
+
+def coloured_noise(rng: np.random.Generator, shape: tuple[int, int], kind: str) -> np.ndarray:
+    """Unit-SD noise (n, f): white, AR(1) at 0.9, or white noise through a 4th-order
+    Butterworth low-pass at 5 % of the Nyquist frequency (a drive's or a logger's filter)."""
+    from scipy.signal import butter, lfilter
+    if kind not in NOISE_KINDS:
+        raise InputError(f"noise kind {kind!r} is not one of {', '.join(NOISE_KINDS)}", key="noise")
+    burn = 1000
+    e = rng.standard_normal((shape[0] + burn, shape[1]))
+    if kind == "ar1":
+        e = lfilter([1.0], [1.0, -0.9], e, axis=0)
+    elif kind == "lowpass":
+        b, a = butter(4, 0.05)
+        e = lfilter(b, a, e, axis=0)
+    e = e[burn:]
+    return e / np.std(e, axis=0)
+
+
+def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: int = 0, noise: str = "ar1",
+                    noise_level: float = 0.01, payload: float = 0.0, friction_drift: float = 0.0,
+                    drift_coordinate: int = 0, common_errors: bool = True, random_inertia: bool = False
+                    ) -> tuple[MeasuredData, MeasuredData, dict]:
+    """(baseline, changed, truth): two recordings of the default trajectory, the second after
+    a change, for the proof of ``diagnose --baseline``. ``payload``: a rigid point load of this
+    fraction of the last body's mass, at a random point within 5 cm of its frame's origin;
+    ``friction_drift``: viscous friction added on coordinate ``drift_coordinate``, its force
+    at the largest speed this fraction of that coordinate's largest torque. Both sides share
+    the model errors a real robot's model has (``common_errors``: a smooth Coulomb law,
+    viscous friction, a delay; none of them in the mechanism), and carry independent noise
+    of one ``noise`` kind (:func:`coloured_noise`) at ``noise_level`` times each coordinate's
+    RMS torque."""
+    rng = np.random.default_rng(seed)
+    coordinates = independent_names(mechanism)
+    motion = trajectory_motion(mechanism, samples)
+    sample = evaluate(mechanism, motion)
+    phi = random_physical_inertia(mechanism, rng) if random_inertia else standard_parameters(mechanism)
+    inertial, _ = design(mechanism, motion, [], sample)
+    K = inertial.matrix
+    clean = K @ phi
+    peak = np.max(np.abs(clean), axis=0)
+    qd = motion.qd
+    speed = np.sqrt(np.mean(qd ** 2, axis=0))
+    speed = np.where(speed > 0, speed, 1.0)
+    common = np.zeros_like(clean)
+    if common_errors:
+        common = COMMON_COULOMB * peak * np.tanh(qd / (COMMON_TRANSITION * speed)) + \
+            COMMON_VISCOUS * peak * qd / np.max(np.abs(qd), axis=0, initial=1e-300)
+
+    def late(x: np.ndarray) -> np.ndarray:
+        k = COMMON_DELAY if common_errors else 0
+        return np.concatenate([np.repeat(x[:1], k, axis=0), x[:len(x) - k]]) if k else x
+
+    change = np.zeros_like(phi)
+    last = len(mechanism.bodies) - 1
+    mass = payload * phi[10 * last]
+    direction = rng.standard_normal(3)
+    centre = direction / np.linalg.norm(direction) * 0.05 * rng.uniform() ** (1 / 3)
+    if payload:
+        x, y, z = centre
+        change[10 * last:10 * last + 10] = mass * np.array([1.0, x, y, z, y * y + z * z, -x * y, -x * z,
+                                                            x * x + z * z, -y * z, x * x + y * y])
+    drift = np.zeros_like(clean)
+    fv = 0.0
+    if friction_drift:
+        j = drift_coordinate
+        fv = friction_drift * peak[j] / max(float(np.max(np.abs(qd[:, j]))), 1e-300)
+        drift[:, j] = fv * qd[:, j]
+    sd = noise_level * np.sqrt(np.mean(clean ** 2, axis=0))
+    before = late(clean + common) + coloured_noise(rng, clean.shape, noise) * sd
+    after = late(clean + K @ change + common + drift) + coloured_noise(rng, clean.shape, noise) * sd
+    truth = {"payload": {"body": last, "mass": mass, "centre": centre.tolist()} if payload else None,
+             "friction_drift": {"coordinate": coordinates[drift_coordinate], "fv": fv} if friction_drift else None,
+             "noise": noise, "noise_sd": sd.tolist(), "delay": COMMON_DELAY * float(np.median(np.diff(motion.t)))
+             if common_errors else 0.0, "seed": seed}
+    return (MeasuredData(motion, before, coordinates, None, (), (), sample),
+            MeasuredData(motion, after, coordinates, None, (), (), sample), truth)
