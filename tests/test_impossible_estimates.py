@@ -96,6 +96,8 @@ def test_diagnose_names_the_impossible_values_it_holds(tmp_path):
     first = report["notes"][0]
     assert "--params" in first and "no robot has" in first and "fv_q1 = -0.2" in first and "+-" in first
     assert "viscous friction must be positive" in first
+    text = run("diagnose", "planar_2r", data, "--params", fit).stdout        # the short report says it too
+    assert any(line.startswith("note: --params") and "fv_q1 = -0.2" in line for line in text.splitlines()), text
     # a result of an older version (no "impossible" key) is judged from its values alike
     older = json.loads(fit.read_text())
     del older["impossible"], older["consistent_with_zero"]

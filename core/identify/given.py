@@ -156,7 +156,8 @@ def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: lis
                      f"has, held as given all the same (a correction named there may only undo it): "
                      + "; ".join(f.text() for f in impossible))
     if near_zero:
-        notes.append(f"--params {path}: negative but consistent with zero (within their noise): "
+        # not "--params ..." first: the short report ranks those notes first, and these are not urgent
+        notes.append(f"held values negative but consistent with zero (within their noise; --params {path}): "
                      + "; ".join(f.text() for f in near_zero))
     return notes
 
