@@ -47,6 +47,21 @@ BANDWIDTH_POWER = 0.9999
 # A coordinate with half its power above this fraction of the Nyquist frequency does not move
 # beyond its noise (white noise has half its power above 0.5): its bandwidth is the noise's.
 STILL_BAND = 0.25
+# The noise floor of a spectrum: the median power above half the Nyquist frequency; a bin
+# counts as motion when its power exceeds this many times the floor (a bin of white noise
+# does with probability exp(-NOISE_MARGIN ln 2), 1e-9). Why: an encoder's noise (1e-6 rad)
+# under a trapezoid or a ramp holds more than 1e-4 of the power, so the bandwidth was the
+# noise's (150-500 Hz on a real Kinova log) and nothing was filtered.
+NOISE_MARGIN = 30.0
+# A coordinate whose range is below this fraction of the largest range of the coordinates
+# given (a joint held by its brake that deflects, a locked joint's encoder ticks) does not move.
+STILL_RANGE = 1e-3
+# The bandwidth is at most these multiples of the frequencies below which 90 % and 99 % of
+# the power above the noise lies. A smooth motion meets its 99.99 % well inside them (a
+# sinusoid: at once; a trapezoid, power falling as f^-6: at 1.6 and 2.5 times its
+# fundamental for 90 and 99 %, 6.3 for 99.99 %); a real arm's last 1 % is its vibration and
+# the loop's jitter, up to 100 Hz on a Kinova's trapezoid (bandwidth 51 Hz, 2.9 with them).
+BULK_90, BULK_99 = 10.0, 4.0
 MAX_FILE_BYTES = 2_000_000_000
 # Reading a CSV takes at most about this many bytes of memory per byte of text (the bytes and
 # the text, a batch of the used fields' strings, the used columns as floats: measured 2.9 on a
@@ -127,6 +142,7 @@ class Segment:
     sos: np.ndarray | None = field(default=None, repr=False, compare=False)
     factor: int = 1
     edge: int = 0
+    skip: tuple[int, ...] = ()    # coordinates (indices) without a measured force here: zero rows
 
     def kept(self) -> np.ndarray:
         """The model rows (absolute) this segment keeps."""
@@ -136,9 +152,19 @@ class Segment:
         """``x`` (the segment's rows, ...) filtered and decimated to its kept rows; ``live``:
         as :func:`zero_phase` takes it."""
         rows = slice(self.edge, len(x) - self.edge, self.factor)
-        if self.sos is not None:
-            return zero_phase(self.sos, x, rows, live)
-        return x[rows]
+        out = zero_phase(self.sos, x, rows, live) if self.sos is not None else x[rows]
+        return self.masked(out)
+
+    def masked(self, x: np.ndarray) -> np.ndarray:
+        """``x`` (rows, f, ...) with the coordinates in ``skip`` zero: a force channel left
+        out of this run (a dead sensor, ``skip`` in its [[runs]], ``"none"`` in [torque])
+        is left out of the fit, its model columns and its torque alike, while its motion
+        still drives the other coordinates. Why: one dead sensor refused a whole run."""
+        if not self.skip or x.ndim < 2:
+            return x
+        out = np.array(x, copy=True)
+        out[:, list(self.skip)] = 0.0
+        return out
 
     def noise_correlation(self) -> np.ndarray:
         """The autocorrelation r[0], r[1], ... (r[0] = 1) at the kept rows' lags of white noise
@@ -216,12 +242,28 @@ class MeasuredData:
         return out / out[0]
 
     @property
+    def masked(self) -> bool:
+        """Some run has a coordinate without a measured force (:meth:`Segment.masked`)."""
+        return any(s.skip for s in self.segments)
+
+    def measured(self) -> np.ndarray:
+        """(n, f) bool: which forces at the fit's rows were measured (False where a run's
+        channel was left out)."""
+        out = np.ones(self.tau.shape[:2], dtype=bool)
+        first = 0
+        for s in self.segments:
+            count = len(s.kept())
+            out[first:first + count, list(s.skip)] = False
+            first += count
+        return out
+
+    @property
     def reduced(self) -> bool:
         return any(s.sos is not None or s.factor != 1 or s.edge for s in self.segments)
 
     def reduce(self, x: np.ndarray) -> np.ndarray:
         """Model-row quantities (N, ...) at the fit's rows (n, ...), segment by segment."""
-        if not self.reduced:
+        if not self.reduced and not self.masked:
             return x
         live = live_columns(x.reshape(len(x), -1))          # once for all segments
         return np.concatenate([s.reduce(x[s.start:s.stop], live) for s in self.segments], axis=0)
@@ -256,6 +298,9 @@ class MeasuredData:
         rows and a margin of CHUNK_PAD times the segment's edge), so memory stays bounded."""
         if self.motion.count <= CHUNK_ROWS and len({s.run for s in self.segments}) == 1:
             return self.reduce(build(self.motion, self.sample, self.segments[0].run))
+        return self._reduced_chunks(build)
+
+    def _reduced_chunks(self, build: Callable[[Motion, Sample | None, int], np.ndarray]) -> np.ndarray:
         out = []
         for s in self.segments:
             kept = s.kept()
@@ -269,7 +314,7 @@ class MeasuredData:
                 if s.stop - hi < s.edge:
                     hi = s.stop
                 block = build(self.motion.take(slice(lo, hi)), None, s.run)
-                out.append(zero_phase(s.sos, block, rows - lo) if s.sos is not None else block[rows - lo])
+                out.append(s.masked(zero_phase(s.sos, block, rows - lo) if s.sos is not None else block[rows - lo]))
         return np.concatenate(out, axis=0)
 
     def payload_force(self, inertial: np.ndarray) -> np.ndarray:
@@ -285,7 +330,7 @@ class MeasuredData:
     def take(self, rows: np.ndarray | slice) -> "MeasuredData":
         """The samples ``rows`` (a training part, a holdout block) of unreduced data; the
         kinematics are dropped."""
-        if self.reduced or self.payloads or len(self.segments) > 1:
+        if self.reduced or self.masked or self.payloads or len(self.segments) > 1:
             raise ValueError("take() needs unreduced data of one segment")
         return MeasuredData(self.motion.take(rows), self.tau[rows], self.coordinates, self.path,
                             self.notes, self.estimated)
@@ -315,7 +360,7 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
         motions.append(part.motion)
         for s in part.segments:
             segments.append(Segment(s.start + offset, s.stop + offset, s.run + len(runs), s.sos,
-                                    s.factor, s.edge))
+                                    s.factor, s.edge, s.skip))
         payloads += [(run + len(runs), label, phi) for run, label, phi in part.payloads]
         runs += list(part.runs)
         notes += [f"{part.path}: {n}" if len(parts) > 1 and part.path else n for n in part.notes]
@@ -745,16 +790,30 @@ def bandwidth(q: np.ndarray, step: float) -> float:
     their power lies (detrended, Blackman-tapered so the ends leak no power to high
     frequencies; the largest over the coordinates that move); 0 for constant positions.
 
-    A coordinate that does not move (constant) or not beyond its noise (a locked joint's
-    encoder jitter: a flat spectrum, half its power above STILL_BAND times the Nyquist
-    frequency) is left out, unless no coordinate moves. Why: one still Panda finger made the bandwidth 12 Hz instead of 0.5, the filter
-    kept 121 Hz and the decimation 3 instead of 70: every other joint's residual was 3.5 times
-    its noise level, and diagnose took 28 s instead of 5."""
+    Only the spectrum above the noise is counted: the bins whose power exceeds NOISE_MARGIN
+    times the noise floor (the median power above half the Nyquist frequency); and the
+    bandwidth is at most BULK_90 and BULK_99 times the frequencies below which 90 and 99 %
+    of that power lies (a smooth motion's 99.99 % lies well within them). Why: on a
+    ramp, a trapezoid or a single-joint motion the encoder's noise holds more than 1e-4 of
+    the power, and the bandwidth came out at 60-500 Hz on a real Kinova log (nothing was
+    filtered; a prediction's RMS was 46 N m). On clean data the floor is rounding and the
+    bandwidth is as before.
+
+    A coordinate that does not move (constant; a range below STILL_RANGE times the largest
+    range of the coordinates; no bin above the noise) or not beyond its noise (a locked
+    joint's encoder jitter: a flat spectrum, half its power above STILL_BAND times the
+    Nyquist frequency) is left out, unless no coordinate moves. Why: one still Panda finger
+    made the bandwidth 12 Hz instead of 0.5, the filter kept 121 Hz and the decimation 3
+    instead of 70: every other joint's residual was 3.5 times its noise level, and diagnose
+    took 28 s instead of 5."""
     n = q.shape[0]
     moving, still = 0.0, 0.0
     frequencies = np.fft.rfftfreq(n, step)
-    for column in np.atleast_2d(np.asarray(q).T):
-        if np.ptp(column) == 0:
+    columns = np.atleast_2d(np.asarray(q, float).T)
+    ranges = np.array([np.ptp(c) if np.isfinite(c).all() else 0.0 for c in columns])
+    largest = float(ranges.max(initial=0.0))
+    for column, size in zip(columns, ranges):
+        if size == 0:
             continue
         detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
         power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
@@ -763,11 +822,29 @@ def bandwidth(q: np.ndarray, step: float) -> float:
         cumulative = np.cumsum(power) / power.sum()
         band = float(frequencies[min(int(np.searchsorted(cumulative, BANDWIDTH_POWER)), len(power) - 1)])
         half = float(frequencies[min(int(np.searchsorted(cumulative, 0.5)), len(power) - 1)])
-        if half > STILL_BAND * frequencies[-1]:
+        signal = _above_noise(power)
+        if half > STILL_BAND * frequencies[-1] or not signal.any() or size < STILL_RANGE * largest:
             still = max(still, band)
-        else:
-            moving = max(moving, band)
+            continue
+        above = np.cumsum(np.where(signal, power, 0.0))
+        above /= above[-1]
+
+        def at(share: float) -> float:
+            return float(frequencies[min(int(np.searchsorted(above, share)), len(power) - 1)])
+        band = min(band, at(BANDWIDTH_POWER), BULK_90 * at(0.9), BULK_99 * at(0.99))
+        moving = max(moving, band)
     return moving if moving > 0 else still
+
+
+def _above_noise(power: np.ndarray) -> np.ndarray:
+    """Which bins of a power spectrum (DC first) rise above its noise: power over NOISE_MARGIN
+    times the median of the bins above half the Nyquist frequency (all True below 16 bins)."""
+    if len(power) < 16:
+        return np.ones(len(power), dtype=bool)
+    floor = float(np.median(power[len(power) // 2:]))
+    signal = power > NOISE_MARGIN * floor
+    signal[0] = False                         # the mean (detrended away): not motion
+    return signal
 
 
 def savgol_window(q: np.ndarray, step: float) -> int:

@@ -40,7 +40,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
 from baseparams.identify.arrays import is_array_file, read_arrays
-from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, UNIFORM_TOLERANCE, MeasuredData, Segment,
+from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, Segment,
                                       _read_text, read_columns, bandwidth, concatenate, kinematics)
 from baseparams.identify.model import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
@@ -64,13 +64,26 @@ UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "rev": 2 * math.pi, "m":
          "acceleration": {"rad/s2": 1.0, "deg/s2": math.pi / 180, "m/s2": 1.0, "mm/s2": 1e-3},
          "torque": {"N m": 1.0, "Nm": 1.0, "N": 1.0, "kN": 1e3, "mN m": 1e-3, "mNm": 1e-3, "N mm": 1e-3,
                     "A": 1.0, "mA": 1e-3}}
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0}   # iso: dates and times, in s from the first
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "iso": 1.0,   # iso: dates and times, in s from the first
+              "samples": 1.0}                              # a sample index, times rate's step (rate or step given)
 QUANTITIES = ("position", "velocity", "acceleration", "torque")
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
 GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. this
 MERGED_SHARE = 0.5                 # a column missing on more of the reference rows: topics merged
 VELOCITY_MISMATCH = 0.05          # measured velocity vs the positions' derivative: a note above this
 QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
+# A torque channel exactly 0 in at least this share of a run's rows, or one value in all of
+# them, carries no signal (a dead sensor, a channel the logger did not fill): refused, or left
+# out of the run (skip, dead = "skip"). Why: a column of zeros was fitted as measured: "noise
+# SD 1e-100", NRMS 0, and a TIAGo's three wrists at 0 in 85-87 % of rows named "gains" of -0.99.
+DEAD_SHARE = 0.8
+NO_CHANNEL = ("none", "")          # [torque] COORD = "none": the coordinate has no torque channel
+DEAD_POLICIES = ("refuse", "skip")
+# A time column of whole numbers in steps of 1 read as seconds is a sample index (a Kinova's
+# Time: 0, 1, 2, ...): refused unless time_unit says so. Why: read as seconds, viscous friction
+# came out 1000 times too large, exit 0.
+SAMPLE_INDEX_SHARE = 0.99
+SLOW_BAND = 0.1                    # Hz: a motion slower than this over a whole log: a time unit wrong?
 PATTERN_CHARACTERS = "*?["
 DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")   # read exactly, never through a float          # a [held] key with one of these is a pattern (fnmatch)
 
@@ -79,13 +92,14 @@ CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (V
 SCHEMA = Table({
     "recording": (Table({"name": (STRING, False), "time": (STRING, False), "time_unit": (STRING, False),
                          "rate": (VALUE, False), "step": (VALUE, False), "delimiter": (STRING, False),
-                         "comment": (STRING, False),
+                         "comment": (STRING, False), "dead": (STRING, False),
                          "gravity": (Array(VALUE, 3, what="[gx, gy, gz] in the base's axes, m/s^2"), False)}),
                   False),
     "runs": (ArrayOfTables(Table({
         "name": (STRING, False), "file": (STRING, False), "files": (Map(STRING), False),
         "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
         "rows": (Array(INTEGER, 2, what="[first, last] rows of the log, the header being row 1"), False),
+        "skip": (Array(STRING, what="a list of torque channels ([torque] keys) left out of this run"), False),
         "payload": (Table({"body": (VALUE, True), "mass": (VALUE, True), "com": (Array(VALUE, 3), False),
                            "inertia": (Array(VALUE, 6, what="a list of 6 numbers (Ixx, Ixy, Ixz, Iyy, "
                                                               "Iyz, Izz) about the centre of mass"), False)}),
@@ -115,6 +129,7 @@ class Channel:
     offset: float
     key: str
     unknown_gain: bool = False   # a current whose gain the fit identifies (a payload run fixes it)
+    absent: bool = False         # [torque] COORD = "none": no channel; the coordinate's force is not fitted
 
 
 @dataclass(frozen=True)
@@ -271,6 +286,11 @@ def _channel(quantity: str, name: str, spec: dict, mechanism: Mechanism, path: s
             "; declare motors in [[motors]] for motor-side channels"
         raise InputError(f"{name!r} is not a joint coordinate or a motor of {mechanism.name} "
                          f"(coordinates: {', '.join(mechanism.coordinates)}{motors})", file=path, key=key)
+    if spec["column"].strip().lower() in NO_CHANNEL:
+        if quantity != "torque" or set(spec) != {"column"}:
+            raise InputError(f"{spec['column']!r}: only a torque channel may be absent (its coordinate's force is "
+                             "then left out of the fit while its motion drives the others)", file=path, key=key)
+        return Channel(quantity, name, None, "", 1.0, 0.0, key, absent=True)
     scale = _number(spec.get("scale", 1), path, f"{key}.scale")
     if "unit" in spec:
         units = UNITS[quantity]
@@ -296,15 +316,26 @@ def _channel(quantity: str, name: str, spec: dict, mechanism: Mechanism, path: s
 
 def _check_time_source(head: dict, path: str) -> None:
     given = [k for k in ("time", "rate", "step") if k in head]
+    if head.get("time_unit") == "samples":
+        if "time" not in head or len(given) != 2:
+            raise InputError("time_unit = \"samples\" (a time column counting samples) needs the time column and "
+                             "one of rate (Hz) or step (s)" + (f"; found {', '.join(given)}" if given else ""),
+                             file=path, key="recording.time_unit")
+        given = ["time"]
     if len(given) != 1:
         raise InputError("give exactly one of time (a column), rate (Hz) or step (s)"
-                         + (f"; found {', '.join(given)}" if given else ""), file=path, key="recording")
+                         + (f"; found {', '.join(given)}" if given else "")
+                         + ("; a time column that counts samples: time_unit = \"samples\" with the rate"
+                            if "time" in given else ""), file=path, key="recording")
     if "time_unit" in head and head["time_unit"] not in TIME_UNITS:
         raise InputError(f"unknown time unit {head['time_unit']!r}; known: {', '.join(TIME_UNITS)}",
                          file=path, key="recording.time_unit")
     for k in ("rate", "step"):
         if k in head and not _number(head[k], path, f"recording.{k}") > 0:
             raise InputError("must be positive", file=path, key=f"recording.{k}")
+    if head.get("dead", "refuse") not in DEAD_POLICIES:
+        raise InputError(f"{head['dead']!r}: one of {', '.join(DEAD_POLICIES)} (a torque channel without signal "
+                         "is refused, or left out of its run with a note)", file=path, key="recording.dead")
 
 
 # ----- reading a description ---------------------------------------------------------------
@@ -396,7 +427,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     files = {None: run["file"]} if "file" in run else dict(run["files"])
     delimiter = log_format(description)
     head = description.data.get("recording", {})
-    wanted = {c.column for chans in description.channels.values() for c in chans}
+    wanted = {c.column for chans in description.channels.values() for c in chans if not c.absent}
+    skipped = _skipped(description, run, key)
     if "time" in head:
         wanted.add(str(head["time"]).rpartition(":")[2])
     dates = {str(head["time"]).rpartition(":")[2]} if head.get("time_unit") == "iso" else set()
@@ -438,6 +470,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                   for alias, (header, table, _) in tables.items()}
 
     def values(channel: Channel) -> np.ndarray:
+        if channel.absent or channel.coordinate in skipped:
+            return np.zeros(len(t))                    # left out: zero, its coordinates masked
         alias = channel.file if channel.file is not None else (None if None in tables else
                                                                _only(tables, channel, path))
         if alias not in tables:
@@ -456,6 +490,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
 
     wrap_notes: list[str] = []
     quantised_notes: list[str] = []
+    torque_channels: list = []            # (raw, map) of the torque channels, for the dead-channel check
     quanta = np.zeros(len(coordinates))
 
     def mapped(quantity: str, transpose: bool = False) -> np.ndarray | None:
@@ -473,6 +508,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                         wrap_notes.append(f"{channel.coordinate}: {jumps.size} jump(s) of a turn unwrapped (an angle "
                                           f"logged modulo 2 pi; first at row {rows[int(jumps[0])]})")
         if transpose:                                    # tau = N^T tau_channels; with unknown gains
+            torque_channels.append((raw, matrix))
             known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
             steps = np.array([quantum(raw[:, k]) if known[k] else 0.0 for k in range(len(chans))])
             size = np.array([np.sqrt(np.mean(c[np.isfinite(c)] ** 2)) if np.isfinite(c).any() else 0.0
@@ -520,10 +556,22 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         qdd = None if qdd is None else qdd[present]
     pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
     notes += split_notes
+    (raw_torques, torque_map), = torque_channels       # channels without signal: refused, or left out
+    chans = description.channels["torque"]
+    notes += _dead_channels(raw_torques, chans, skipped, description, name, key)
+    out = [k for k, c in enumerate(chans) if c.absent or c.coordinate in skipped]
+    unmeasured = np.any(torque_map[out] != 0, axis=0) if out else np.zeros(len(coordinates), dtype=bool)
+    if unmeasured.all():
+        raise InputError(f"no torque is measured in run {name!r}: every channel is left out "
+                         f"({', '.join(c.coordinate for c in chans)})", file=path, key=key)
+    if unmeasured.any():
+        forces[:, unmeasured, :] = 0.0
+    still, still_note = _still(q, mechanism, coordinates, name)
+    notes += still_note
     settings = dict(description.data.get("filter", {}))
     if "cutoff" not in settings and len(pieces) > 1:     # one filter for the run: the longest piece's
         a, b = max(pieces, key=lambda piece: piece[1] - piece[0])
-        signal = q[a:b] if qd is None else qd[a:b]
+        signal = (q[a:b] if qd is None else qd[a:b])[:, ~still if not still.all() else slice(None)]
         settings["cutoff"], how = auto_cutoff(signal, float(np.median(np.diff(t[a:b]))),
                                               "positions" if qd is None else "velocities")
         settings["how"] = how + " on the run's longest piece"
@@ -532,7 +580,7 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         try:
             part, part_notes = _filtered(t[a:b], q[a:b], None if qd is None else qd[a:b],
                                          None if qdd is None else qdd[a:b], forces[a:b], settings, path,
-                                         coordinates)
+                                         coordinates, still)
         except InputError as exc:
             if len(pieces) == 1 or "too short" not in exc.reason:
                 raise
@@ -545,10 +593,65 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
         raise InputError(f"every piece of run {name!r} between gaps is too short for its filter", file=path,
                          key=key)
     payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
+    if unmeasured.any():
+        left = [c for c, u in zip(coordinates, unmeasured) if u]
+        notes.append(f"no measured force on {', '.join(left)} in run {name!r} (a channel left out): those rows are "
+                     "not fitted, and the motion still drives the other coordinates")
+        parts = [replace(p, segments=tuple(replace(s, skip=tuple(int(j) for j in np.flatnonzero(unmeasured)))
+                                           for s in p.segments)) for p in parts]
     data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads, gain_names)
     data.runs = (name,)
     data.quanta = quanta if quanta.any() else None
     return data
+
+
+def _skipped(description: Description, run: dict, key: str) -> set[str]:
+    """The torque channels (their [torque] keys) ``skip`` leaves out of this run."""
+    names = [c.coordinate for c in description.channels["torque"]]
+    out = set()
+    for k, name in enumerate(run.get("skip", [])):
+        if name not in names:
+            raise InputError(f"{name!r} is not a torque channel of this description ({', '.join(names)})",
+                             file=description.path, key=f"{key}.skip[{k}]")
+        out.add(name)
+    return out
+
+
+def _dead_channels(raw: np.ndarray, chans: list[Channel], skipped: set[str], description: Description,
+                   name: str, key: str) -> list[str]:
+    """Torque channels of this run without signal: exactly 0 in at least DEAD_SHARE of the
+    rows, or one value in all of them. Refused (InputError naming the run, every such channel,
+    its column and the share), or with ``[recording] dead = "skip"`` left out of the run
+    (added to ``skipped``) with a note. A channel already left out is not looked at."""
+    policy = description.data.get("recording", {}).get("dead", "refuse")
+    dead = []
+    for k, channel in enumerate(chans):
+        if channel.absent or channel.coordinate in skipped:
+            continue
+        column = raw[:, k][np.isfinite(raw[:, k])]
+        if len(column) < 2:
+            continue
+        zeros = float(np.mean(column == 0))
+        if zeros >= DEAD_SHARE:
+            dead.append((channel, f"0 in {100 * zeros:.3g} % of its {len(column)} rows"))
+        elif np.ptp(column) == 0:
+            dead.append((channel, f"{column[0]:g} in all of its {len(column)} rows"))
+    if not dead:
+        return []
+    shown = "; ".join(f"{c.coordinate} (column {c.column!r}) is {what}" for c, what in dead)
+    if policy == "skip":
+        skipped.update(c.coordinate for c, _ in dead)
+        return [f"torque channels without signal left out of run {name!r} (dead = \"skip\"): {shown}; the run's "
+                "other channels are fitted"]
+    names = [c.coordinate for c, _ in dead]
+    raise InputError(f"run {name!r}: {shown}: a channel without signal (a dead sensor, a channel not logged) is "
+                     f"never fitted; leave it out of this run with skip = {_toml_list(names)} in its [[runs]] ({key}), "
+                     f"of every run with {names[0]} = \"none\" in [torque], or every dead channel with dead = "
+                     "\"skip\" in [recording]", file=description.path, key=dead[0][0].key)
+
+
+def _toml_list(names: list[str]) -> str:
+    return "[" + ", ".join(f'"{n}"' for n in names) + "]"
 
 
 def log_format(description: Description) -> tuple[str, str | None]:
@@ -682,7 +785,8 @@ def _on_one_clock(head: dict, tables: dict, files: dict, description: Descriptio
     column = str(head.get("time", ""))
     if not column or ":" in column or len(tables) < 2 or not all(column in h for h, _, _ in tables.values()):
         return tables, []
-    first_channel = description.channels["torque"][0]
+    first_channel = next((c for c in description.channels["torque"] if not c.absent),
+                         description.channels["torque"][0])
     first = first_channel.file if first_channel.file is not None else _only(tables, first_channel, description.path)
     reference = tables[first][1][column]
     if all(np.array_equal(table[column], reference) for _, table, _ in tables.values()):
@@ -734,7 +838,26 @@ def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray
     if np.isnan(t).any():                    # a missing time stamp: no sample can be placed
         raise InputError("time is not finite (an empty or NaN field)", file=str(files[owners[0]]),
                          key=f"row {rows[int(np.nonzero(np.isnan(t))[0][0])]}, column {column}")
-    return t * TIME_UNITS[head.get("time_unit", "s")], str(files[owners[0]])
+    unit = head.get("time_unit")
+    if unit == "samples":
+        step = 1 / _number(head["rate"], path, "recording.rate") if "rate" in head else \
+            _number(head["step"], path, "recording.step")
+        return t * step, str(files[owners[0]])
+    if unit is None and _counts_samples(t):
+        raise InputError(f"the time column {column!r} counts samples ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}, ... in steps "
+                         "of 1), not seconds: read as seconds the rate would be 1 Hz and every time constant "
+                         "1000 times too long at 1 kHz; give the rate: time_unit = \"samples\" and rate = HZ in "
+                         "[recording] (or rate = HZ without time), or time_unit = \"s\" if it is in seconds",
+                         file=path, key="recording.time")
+    return t * TIME_UNITS[unit or "s"], str(files[owners[0]])
+
+
+def _counts_samples(t: np.ndarray) -> bool:
+    """A time column of whole numbers that steps by exactly 1 in almost every row (at least
+    SAMPLE_INDEX_SHARE; a gap is a dropped sample): a sample index, not seconds."""
+    if len(t) < 3 or not np.all(t == np.round(t)):
+        return False
+    return bool(np.mean(np.diff(t) == 1) >= SAMPLE_INDEX_SHARE)
 
 
 def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple, path: str,
@@ -798,20 +921,52 @@ def _uniform_pieces(t: np.ndarray, t_file: str, rows: list[int], path: str
 
 def auto_cutoff(signal: np.ndarray, step: float, what: str) -> tuple[float, str]:
     """The default cut-off (Hz) for ``signal`` sampled every ``step`` s, and how it was chosen:
-    CUTOFF_PER_BANDWIDTH times its bandwidth, at most DECIMATION_BAND times Nyquist."""
+    CUTOFF_PER_BANDWIDTH times its bandwidth (:func:`.data.bandwidth`: the spectrum above the
+    noise), at most DECIMATION_BAND times Nyquist. A motion slower than SLOW_BAND over the
+    whole log is said: a time column in the wrong unit (a sample index read as seconds)?"""
     fs = 1 / step
     band = bandwidth(signal, step)
     cutoff = min(CUTOFF_PER_BANDWIDTH * band if band > 0 else fs, DECIMATION_BAND * fs / 2)
     how = f"{CUTOFF_PER_BANDWIDTH:g} x the {what}' bandwidth {band:.3g} Hz"
     if cutoff < CUTOFF_PER_BANDWIDTH * band:
         how += f", capped at {DECIMATION_BAND:g} x the Nyquist frequency"
+    if 0 < band < SLOW_BAND:
+        how += (f"; a motion slower than {SLOW_BAND:g} Hz over the whole log, sampled at {fs:.4g} Hz: is the time "
+                "in the right unit (a sample index read as seconds: time_unit = \"samples\" with the rate)?")
     return cutoff, how
 
 
+def _still(q: np.ndarray, mechanism: Mechanism, coordinates: tuple[str, ...], run: str
+           ) -> tuple[np.ndarray, list[str]]:
+    """(which coordinates do not move in this run, a note): a range of 0, or below STILL_RANGE
+    times the largest range of the coordinates of its kind (angles, lengths), unless none
+    moves. Their velocity and acceleration are then exactly 0 (:func:`_filtered`), so an
+    effect of theirs has no column in this run. Why: a joint the log holds still (a Kinova's
+    single-joint trapezoid) had a velocity of rounding noise, 1e-17 rad/s after the filter,
+    and its viscous friction came out at -1.4e18 +- 1.4e17 with exit 0; a joint deflecting
+    0.2 mrad under its brake got -109 +- 50."""
+    finite = np.where(np.isfinite(q), q, np.nan)
+    ranges = np.nan_to_num(np.nanmax(finite, axis=0) - np.nanmin(finite, axis=0)) if len(q) else np.zeros(q.shape[1])
+    angle = np.array([mechanism.is_angle(c) for c in coordinates], dtype=bool)
+    still = np.zeros(len(coordinates), dtype=bool)
+    for kind in (angle, ~angle):
+        if kind.any() and ranges[kind].max() > 0:
+            still |= kind & (ranges < STILL_RANGE * ranges[kind].max())
+    if not still.any():
+        return still, []
+    unit = {True: "rad", False: "m"}
+    shown = ", ".join(f"{c} ({ranges[j]:.3g} {unit[bool(angle[j])]})" for j, c in enumerate(coordinates) if still[j])
+    return still, [f"held still in run {run!r} (a range below {STILL_RANGE:g} of the largest): {shown}; their "
+                   "velocities and accelerations taken as 0, so no effect of theirs (friction) is fitted from "
+                   "this run"]
+
+
 def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None, tau: np.ndarray,
-              settings: dict, path: str, coordinates: tuple[str, ...] = ()) -> tuple[MeasuredData, list[str]]:
+              settings: dict, path: str, coordinates: tuple[str, ...] = (), still: np.ndarray | None = None
+              ) -> tuple[MeasuredData, list[str]]:
     """One uniform piece: resampled if irregular, positions filtered and differentiated, the
-    parallel filter and decimation planned (:class:`Segment`)."""
+    parallel filter and decimation planned (:class:`Segment`); the ``still`` coordinates
+    (:func:`_still`) with velocity and acceleration exactly 0."""
     notes = []
     steps = np.diff(t)
     step = float(np.median(steps))
@@ -835,7 +990,9 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
         cutoff = _number(settings["cutoff"], path, "filter.cutoff")
         how = settings.get("how", "as set")
     else:
-        cutoff, how = auto_cutoff(q if qd is None else qd, step, "velocities" if qd is not None else "positions")
+        moving = slice(None) if still is None or still.all() else ~still
+        cutoff, how = auto_cutoff((q if qd is None else qd)[:, moving], step,
+                                  "velocities" if qd is not None else "positions")
     if not 0 < cutoff < 0.5 * fs:
         raise InputError(f"cut-off {cutoff:.4g} Hz: must lie between 0 and the Nyquist frequency "
                          f"{0.5 * fs:.4g} Hz", file=path, key="filter.cutoff")
@@ -868,6 +1025,10 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     if own_times is not None:             # the filtered motion at the samples' own times
         qf, qd, qdd = (CubicSpline(t, x, axis=0)(own_times) for x in (qf, qd, qdd))
         t = own_times
+    if still is not None and still.any():
+        qd, qdd = qd.copy(), qdd.copy()
+        qd[:, still] = 0.0
+        qdd[:, still] = 0.0
     kept = len(range(edge, len(t) - edge, factor))
     notes.append(f"{what} low-passed at {cutoff:.4g} Hz ({how}; Butterworth order {order}, zero-phase)"
                  + (f", {' and '.join(estimated)} by central differences" if estimated else "")
