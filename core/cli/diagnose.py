@@ -88,13 +88,14 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     "value", "std"), "ambiguous", "gap", "common", "pairing", "rest", "notes"}
     (`python -m pydoc baseparams.identify.change`).
     """
-    from baseparams.api import diagnose as run
+    from baseparams.api import ChangeDiagnosed, Diagnosed, diagnose as run
     mechanism = load(mech)
     if baseline:
         with Progress("diagnose", steps=3 + bool(plot_path), quiet=quiet) as progress:
             changes = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
                           alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
                           baseline=list(baseline), progress=progress)
+            assert isinstance(changes, ChangeDiagnosed)
             if plot_path:
                 progress("plotting")
                 plot_change(changes.diagnosis, plot_path)
@@ -104,6 +105,7 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
         result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
                      alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
                      progress=progress)
+        assert isinstance(result, Diagnosed)
         if plot_path:
             progress("plotting")
             plot_diagnosis(result.diagnosis, plot_path)

@@ -1,34 +1,40 @@
 """What changed between recordings: ``diagnose MECH CHANGED... --baseline BASE...``.
 
 Two sets of runs of one robot, the second after something changed (a payload, a drive's
-gain, its friction, a delay), are fitted with one model. The model (the inertial
-parameters and the mechanism's effects, plus viscous and Coulomb friction and an offset on
-every coordinate; with ``--params`` the given simulation and those effects) is fitted to
-the baseline runs. Its residual on both sides then holds what the model always lacked,
-and on the changed side the change as well.
+gain, its friction, an offset, a delay), are fitted with one model: the inertial
+parameters (with ``--params`` the given simulation), the mechanism's own effects, viscous
+and Coulomb friction and an offset on every coordinate, and one delay between positions
+and torques, fitted to the baseline runs. Its residual on both sides holds what the model
+always lacked, and on the changed side the change as well.
 
 What the model lacks in both cancels by pairing: each changed sample is paired with the
 baseline sample in the nearest state (positions and speeds, each scaled by its
 spread), and the change is tested on the difference of their residuals. A force that
 depends on the state alone (a friction law of another shape, a missing spring, an
-unmodelled inertia) is the same in both and drops out; so does a delay common to both
-runs, to the extent the state pairs match. Why not a joint fit with the change's columns
-alone: the common lack leaks into whatever the change candidates can imitate (a 2.8 kg
-payload was named with elbow and shoulder gain changes that never happened, and a model
-error became a body on the wrong link). When the runs do not share their states (other
-motions), pairing is not possible, a note says so, and the change is tested on the
-changed runs' residual: what both lack is then only as absent as the shared effects make it.
+unmodelled inertia) is the same in both and drops out. Why not a joint fit with the
+change's columns alone: the common lack leaks into whatever the change candidates can
+imitate (a 2.8 kg payload was named with elbow and shoulder gain changes that never
+happened, and a model error became a body on the wrong link). When the runs do not share
+their states (other motions), a note says so, the change is tested on the changed runs'
+residual, and a change is named only when its force outgrows what the shared model misses
+on baseline motions it was not fitted to.
 
-The candidates act on the changed runs only: a payload or changed body at each moving body
-(``body``: ten parameters; ``mass``: a point mass at the frame origin), a torque-gain
-scale (``gain``), viscous and Coulomb friction and an offset per coordinate, one delay.
-They are selected by :func:`~baseparams.identify.selection.select_whitened` (Wald tests,
-coloured noise whitened, Holm over the candidates): "nothing changed" means no candidate
-is significant at the family-wise level ``alpha``, which bounds that verdict's false
-alarms. After the named changes, the rest of the difference is tested against every
-candidate's columns at once; a difference that still holds structure is "partly
-explained" (or "unexplained" with nothing named, at a stricter bar ``alpha / 10`` so
-that the two tests together keep the false alarms near ``alpha``).
+The candidates act on the changed runs only, late by the shared delay: a payload or
+changed body at each moving body (``body``: ten parameters; ``mass``: a point mass at the
+frame origin), a torque-gain scale (``gain``), viscous and Coulomb friction and an offset
+per coordinate, one delay. Each of these steps must hold for a change to be named:
+
+1. the gate (closed testing): every candidate together explains the difference (an F test
+   after each coordinate's autoregressive whitening, :func:`rest_test`), or one candidate
+   does at ``alpha / 10`` (the search's first step);
+2. the search, :func:`~baseparams.identify.selection.select_whitened` (Wald tests,
+   coloured noise whitened, Holm over the candidates);
+3. each named group adds to the others by the whitened F test (Bonferroni);
+4. each predicts held-out blocks of the difference (:func:`held_out_gain`).
+
+"Nothing changed" is the verdict when no change survives. What is left after the named
+changes is "structure" (verdict "partly explained", or "unexplained" with nothing named)
+when the candidates together explain it at ``alpha / 10`` and predict held-out blocks.
 """
 
 import dataclasses
@@ -59,7 +65,7 @@ SHARED_KINDS = ("viscous_friction", "coulomb_friction", "offset")
 # The registered effects that may change between the runs, per coordinate.
 CHANGE_KINDS = ("viscous_friction", "coulomb_friction", "offset")
 # A changed sample is paired with a baseline sample when their states (each coordinate's
-# position, speed and acceleration divided by its spread over both sides) differ by at most
+# position and speed divided by its spread over both sides) differ by at most
 # this RMS per component: 5 % of the spread. Replays of one trajectory pair at 0.1-1 %.
 PAIR_DISTANCE = 0.05
 # Pairing is used when at least this share of the changed samples finds a partner; the
@@ -144,7 +150,7 @@ def _side(mechanism: Mechanism, data: MeasuredData, given: Given | None, gains: 
         if all(g in gains for g in data.gain_names):
             tau = tau + data.gain_columns @ np.array([gains[g] for g in data.gain_names])
         else:                         # shared unknown gains: the measured force is tau + G g
-            shared.append(-data.gain_columns)
+            shared.append(-np.asarray(data.gain_columns))
     rows = data.kept_rows()
     m = data.motion
     state = np.concatenate([m.q[rows], m.qd[rows]], axis=1)
@@ -299,6 +305,48 @@ def _physical_text(entry: dict) -> None:
         entry["centre_of_mass"] = [float(v) / float(m) for v in firsts]
 
 
+def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[float, np.ndarray]:
+    """(delay, coefficients): the shared model fitted to the baseline, a delay between the
+    positions and the torques included (a filter's or a bus's lag is the robot's, on both
+    sides): Gauss-Newton on the delay, the model's columns shifted exactly (cubic) at each
+    step and the rigid bodies' torque's derivative the step's column (a friction's jumps made
+    spikes of its derivative that pulled the delay to half its value)."""
+    rigid = slice(0, 0 if given is not None else parameters)
+    delay = 0.0
+    step_size = max(float(np.median(np.diff(base.data.t))), 1e-12) if len(base.data.t) > 1 else 1.0
+    for _ in range(DELAY_ITERATIONS):
+        shared, known = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
+        y = base.tau - known
+        first = WeightedLinearModel(shared, y).fit().coefficients
+        lag = -time_derivative(shifted(base.rigid, base.data, delay) + shared[:, :, rigid] @ first[rigid], base.data)
+        step = float(WeightedLinearModel(np.concatenate([shared, lag[:, :, None]], axis=-1), y).fit().coefficients[-1])
+        delay += step
+        if abs(step) <= DELAY_TOLERANCE * step_size:
+            break
+    shared, known = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
+    return delay, WeightedLinearModel(shared, base.tau - known).fit().coefficients
+
+
+def _named(candidates: list[Candidate], difference: np.ndarray, alpha: float, notes: list[str]
+           ) -> tuple[Selection, set, dict]:
+    """The search and what survives its checks (the module docstring's steps 1-4): the
+    selection, the kept candidates' indices, and the gate's test."""
+    f = difference.shape[1]
+    empty = np.zeros((len(difference), f, 0))
+    spread = np.sqrt(np.mean(difference ** 2, axis=0))
+    # closed testing: the search's own Wald tests alone called 4 of 20 AR(1) nulls changed
+    gate = rest_test(difference, np.concatenate([c.columns for c in candidates], axis=-1), empty,
+                     1.0 / np.where(spread > 0, spread, 1.0))
+    chosen = select_whitened(empty, difference, candidates, alpha)
+    first = chosen.steps[0].adjusted
+    if gate["pvalue"] > alpha and (not len(first) or float(np.min(first)) > alpha / UNEXPLAINED_BAR):
+        # neither every candidate together nor one of them at a tenth of the level
+        chosen = select_whitened(empty, difference, [], alpha)
+    weights = chosen.steps[-1].fit.weights
+    kept = _confirmed(chosen, difference, weights, alpha, notes)
+    return chosen, _predictive(chosen, difference, weights, kept, notes), gate
+
+
 def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, *,
                     given: Given | None = None, alpha: float = 0.05) -> ChangeDiagnosis:
     """What changed between the ``baseline`` runs and the ``changed`` runs (module docstring)."""
@@ -318,30 +366,11 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     if base.shared.shape[-1] != other.shared.shape[-1]:
         raise InputError("the baseline and the changed runs give the model other columns", key="--baseline")
     f = len(coordinates)
-    y_base = base.tau
-    if len(y_base) * f < base.shared.shape[-1] + 20:
-        raise InputError(f"{len(y_base)} baseline samples cannot fit the shared model's {base.shared.shape[-1]} "
+    if len(base.tau) * f < base.shared.shape[-1] + 20:
+        raise InputError(f"{len(base.tau)} baseline samples cannot fit the shared model's {base.shared.shape[-1]} "
                          "columns: give longer baseline runs", key="--baseline")
-    # the shared model, a delay between the positions and the torques included (a filter's or a
-    # bus's lag is the robot's, on both sides): Gauss-Newton on the delay, the model's columns
-    # shifted exactly (cubic) at each step and the rigid bodies' torque's derivative the step's
-    # column (a friction's jumps made spikes of its derivative that pulled the delay to half)
-    rigid = slice(0, 0 if given is not None else len(mechanism.parameters))
-    delay = 0.0
-    for _ in range(DELAY_ITERATIONS):
-        shared_base, known_base = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
-        rigid_base = shifted(base.rigid, base.data, delay)
-        first = WeightedLinearModel(shared_base, base.tau - known_base).fit().coefficients
-        lag = -time_derivative(rigid_base + shared_base[:, :, rigid] @ first[rigid], base.data)
-        fit = WeightedLinearModel(np.concatenate([shared_base, lag[:, :, None]], axis=-1),
-                                  base.tau - known_base).fit()
-        step = float(fit.coefficients[-1])
-        delay += step
-        if abs(step) <= DELAY_TOLERANCE * max(float(np.median(np.diff(base.data.t))), 1e-12):
-            break
+    delay, theta = _shared_fit(base, given, len(mechanism.parameters))
     shared_base, known_base = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
-    fit = WeightedLinearModel(shared_base, base.tau - known_base).fit()
-    theta = fit.coefficients
     shared_other, known_other = shifted(other.shared, other.data, delay), shifted(other.known, other.data, delay)
     y_base, y_other = base.tau - known_base, other.tau - known_other
     residual_base = y_base - shared_base @ theta
@@ -374,21 +403,8 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     # a change's force reaches the torques through the same lag
     candidates = [_delayed(c, delay, other.data).rows(rows) for c in candidates]
     empty = np.zeros((len(rows), f, 0))
-    # closed testing: the candidates are searched only when all of them together explain the
-    # difference (one F test after autoregressive whitening, whose size holds under coloured
-    # noise); the search's own Wald tests alone called 4 of 20 AR(1) nulls changed
-    spread = np.sqrt(np.mean(difference ** 2, axis=0))
-    gate = rest_test(difference, np.concatenate([c.columns for c in candidates], axis=-1), empty,
-                     1.0 / np.where(spread > 0, spread, 1.0))
-    chosen = select_whitened(empty, difference, candidates, alpha)
-    first = chosen.steps[0].adjusted
-    if gate["pvalue"] > alpha and (not len(first) or float(np.min(first)) > alpha / UNEXPLAINED_BAR):
-        # neither all the candidates together nor one of them at a tenth of the level: nothing
-        # changed (the F test whitens better; a single candidate's Wald test has more power)
-        chosen = select_whitened(empty, difference, [], alpha)
+    chosen, kept, gate = _named(candidates, difference, alpha, notes)
     last = chosen.steps[-1].fit
-    kept = _confirmed(chosen, difference, last.weights, alpha, notes)
-    kept = _predictive(chosen, difference, last.weights, kept, notes)
     below: list[dict] = []
     if not paired:            # what both lack does not cancel: a change must outgrow the model's own error
         floor = _transfer_error(base, given, delay, theta.shape[0])

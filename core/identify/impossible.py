@@ -154,8 +154,8 @@ def judge(*, parameters: Sequence[str], base_map: np.ndarray, names: Sequence[st
     r = base_map.shape[0]
     into: dict[str, list[tuple[str, float]]] = {}
     for name, kept in absorbed.items():
-        for k, factor in kept.items():
-            into.setdefault(k, []).append((name, float(factor)))
+        for kept_name, factor in kept.items():
+            into.setdefault(kept_name, []).append((name, float(factor)))
 
     def absorbed_positive(name: str) -> tuple[bool, str]:
         extra = into.get(name, [])
@@ -181,7 +181,7 @@ def judge(*, parameters: Sequence[str], base_map: np.ndarray, names: Sequence[st
         ok, also = absorbed_positive(name)
         if not ok:
             continue
-        flag = _flag(name, values[k], std[k], reason + also, inertial=k < r)
+        flag = _flag(name, float(values[k]), float(std[k]), reason + also, inertial=k < r)
         if flag is not None:
             flags.append(flag)
     if covariance is not None:
