@@ -358,30 +358,49 @@ class Prediction:
     t: np.ndarray
     measured: np.ndarray
     predicted: np.ndarray
+    rows: np.ndarray | None = None     # (n, f) bool: the forces measured (a run's channel left out: False)
+
+    def _mean(self, x: np.ndarray) -> np.ndarray:
+        """Per coordinate, the mean of ``x`` (n, f) over its measured rows (0 where none)."""
+        if self.rows is None:
+            return np.mean(x, axis=0)
+        count = self.rows.sum(axis=0)
+        return np.where(count > 0, (x * self.rows).sum(axis=0) / np.maximum(count, 1), 0.0)
+
+    @property
+    def unmeasured(self) -> tuple[str, ...]:
+        """The coordinates without a measured force in these data (every channel left out)."""
+        if self.rows is None:
+            return ()
+        return tuple(c for c, any_row in zip(self.coordinates, self.rows.any(axis=0)) if not any_row)
 
     @property
     def rms(self) -> np.ndarray:
-        return np.sqrt(np.mean((self.measured - self.predicted) ** 2, axis=0))
+        return np.sqrt(self._mean((self.measured - self.predicted) ** 2))
 
     @property
     def nrms(self) -> np.ndarray:
-        size = np.sqrt(np.mean(self.measured ** 2, axis=0))
+        size = np.sqrt(self._mean(self.measured ** 2))
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(size > 0, self.rms / size, 0.0)
 
     @property
     def overall_rms(self) -> float:
-        return float(np.sqrt(np.mean((self.measured - self.predicted) ** 2)))
+        error = (self.measured - self.predicted) ** 2
+        if self.rows is not None and self.rows.any():
+            return float(np.sqrt(error[self.rows].mean()))
+        return float(np.sqrt(np.mean(error)))
 
     def to_json(self) -> dict:
         return {"data": self.data, "samples": int(len(self.t)),
                 "rms": dict(zip(self.coordinates, map(float, self.rms))),
                 "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
-                "rms_overall": self.overall_rms}
+                "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {})
 
     def to_text(self) -> str:
         lines = [f"  prediction on {self.data} ({len(self.t)} samples): RMS error overall {self.overall_rms:.4g}"]
-        lines += [f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" for c, r, q in zip(self.coordinates, self.rms, self.nrms)]
+        lines += [f"    {c}: not measured (its torque channel left out)" if c in self.unmeasured else
+                  f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" for c, r, q in zip(self.coordinates, self.rms, self.nrms)]
         return "\n".join(lines)
 
 
@@ -399,7 +418,7 @@ def predict(result: Identification, mechanism: Mechanism, data: MeasuredData) ->
         predicted = predicted + columns.matrix[:, :, identified_width:] @ effect_values(mechanism, result.known)
     predicted = predicted + payload
     return Prediction(data.path, data.coordinates, data.t, measured_forces(data, result.names, result.estimates),
-                      predicted)
+                      predicted, data.measured() if data.masked else None)
 
 
 def fitted(result: Identification, data: MeasuredData) -> Prediction:
@@ -408,7 +427,8 @@ def fitted(result: Identification, data: MeasuredData) -> Prediction:
     on long recordings the columns are most of the work (a Panda logged 120 s at 1 kHz: 3.2 of
     `identify`'s 12 CPU s)."""
     measured = measured_forces(data, result.names, result.estimates)
-    return Prediction(data.path, data.coordinates, data.t, measured, measured - result.residual)
+    return Prediction(data.path, data.coordinates, data.t, measured, measured - result.residual,
+                      data.measured() if data.masked else None)
 
 
 def _independent(matrix: np.ndarray, rank: int, names: tuple[str, ...], path: str | None

@@ -470,8 +470,8 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
                   for alias, (header, table, _) in tables.items()}
 
     def values(channel: Channel) -> np.ndarray:
-        if channel.absent or channel.coordinate in skipped:
-            return np.zeros(len(t))                    # left out: zero, its coordinates masked
+        if channel.absent or (channel.quantity == "torque" and channel.coordinate in skipped):
+            return np.zeros(len(t))                    # a torque left out: zero, its coordinates masked
         alias = channel.file if channel.file is not None else (None if None in tables else
                                                                _only(tables, channel, path))
         if alias not in tables:
@@ -843,21 +843,25 @@ def _times(head: dict, tables: dict, files: dict, path: str) -> tuple[np.ndarray
         step = 1 / _number(head["rate"], path, "recording.rate") if "rate" in head else \
             _number(head["step"], path, "recording.step")
         return t * step, str(files[owners[0]])
-    if unit is None and _counts_samples(t):
+    counted = _counts_samples(t) if unit is None else 0.0
+    if counted:
         raise InputError(f"the time column {column!r} counts samples ({t[0]:.0f}, {t[1]:.0f}, {t[2]:.0f}, ... in steps "
-                         "of 1), not seconds: read as seconds the rate would be 1 Hz and every time constant "
-                         "1000 times too long at 1 kHz; give the rate: time_unit = \"samples\" and rate = HZ in "
-                         "[recording] (or rate = HZ without time), or time_unit = \"s\" if it is in seconds",
-                         file=path, key="recording.time")
+                         f"of {counted:.0f}), not seconds: read as seconds the rate would be {1 / counted:.3g} Hz, "
+                         "and every time constant (viscous friction, inertia) 1000 times off at 1 kHz; give the "
+                         "rate: time_unit = \"samples\" and rate = HZ in [recording] (or rate = HZ without time), "
+                         "or time_unit = \"s\" if it is in seconds", file=path, key="recording.time")
     return t * TIME_UNITS[unit or "s"], str(files[owners[0]])
 
 
-def _counts_samples(t: np.ndarray) -> bool:
-    """A time column of whole numbers that steps by exactly 1 in almost every row (at least
-    SAMPLE_INDEX_SHARE; a gap is a dropped sample): a sample index, not seconds."""
+def _counts_samples(t: np.ndarray) -> float:
+    """The step of a time column of whole numbers that steps by one whole number (1, or 2 in
+    a log keeping every second sample) in almost every row (at least SAMPLE_INDEX_SHARE; a
+    gap is a dropped sample): a sample index, not seconds; else 0."""
     if len(t) < 3 or not np.all(t == np.round(t)):
-        return False
-    return bool(np.mean(np.diff(t) == 1) >= SAMPLE_INDEX_SHARE)
+        return 0.0
+    steps = np.diff(t)
+    step = float(np.median(steps))
+    return step if step >= 1 and np.mean(steps == step) >= SAMPLE_INDEX_SHARE else 0.0
 
 
 def _independent_rows(mechanism: Mechanism, names: list[str], coordinates: tuple, path: str,
