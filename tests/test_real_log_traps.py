@@ -5,6 +5,7 @@ decimated subset of a real Kinova Gen3 recording (tests/data/kinova_gen3, README
 every trap is refused with one line naming the file, the key and the reason (exit 2), or
 read right with a note."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -198,6 +199,12 @@ def test_a_channel_zero_in_most_rows_is_dead_and_a_channel_none_is_never_read(tm
     data, _ = read_recording(tmp_path / "rec.toml", mech)
     assert not data.measured()[:, 0].any() and data.measured()[:, 1:].all()
     assert all(s.skip == (0,) for s in data.segments)
+    (tmp_path / "m.toml").write_text(_chain(4))               # KIND:* leaves the unmeasured q1 out
+    result = CliRunner().invoke(main, ["identify", str(tmp_path / "m.toml"), str(tmp_path / "rec.toml"), "--solver",
+                                       "dp", "--effect", "viscous_friction:*", "--format", "json", "--quiet"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert {c["name"] for e in out["effects"] for c in e["coefficients"]} == {"fv_q2", "fv_q3"}
     (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n' + runs + 'skip = ["q9"]\n' + CHANNELS)
     with pytest.raises(InputError, match="'q9' is not a torque channel") as error:
         read_recording(tmp_path / "rec.toml", mech)
@@ -244,7 +251,6 @@ def test_kinova_joints_that_never_move_get_no_friction(tmp_path, gen3, gen3_base
                                        "--effect", "coulomb_friction:*", "--effect", "viscous_friction:*",
                                        "--format", "json", "--quiet"])
     assert result.exit_code == 0, result.output
-    import json
     out = json.loads(result.stdout)
     coefficients = {c["name"]: c["value"] for e in out["effects"] for c in e["coefficients"]}
     assert set(coefficients) == {"fc_joint_2", "fv_joint_2"}, coefficients
@@ -272,7 +278,6 @@ def test_a_joint_held_still_in_a_simulated_log_has_velocity_zero(tmp_path):
     result = CliRunner().invoke(main, ["identify", str(mech_path), str(tmp_path / "rec.toml"), "--solver", "dp",
                                        "--effect", "viscous_friction:*", "--format", "json", "--quiet"])
     assert result.exit_code == 0, result.output
-    import json
     out = json.loads(result.stdout)
     fv = {c["name"]: c["value"] for e in out["effects"] for c in e["coefficients"]}
     assert set(fv) == {"fv_q1", "fv_q2"}
@@ -320,7 +325,6 @@ def test_sample_index_time_read_with_its_rate_gives_the_true_friction(tmp_path):
                                        + runs + CHANNELS)
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
-    import json
     fv = {c["name"]: c["value"] for e in json.loads(result.stdout)["effects"] for c in e["coefficients"]}
     assert fv == pytest.approx({"fv_q1": 0.3, "fv_q2": 0.2, "fv_q3": 0.1}, rel=1e-2)
 

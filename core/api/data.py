@@ -115,7 +115,9 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     texts = [e for e in effects if isinstance(e, str)]
     import numpy as np
     qd = np.asarray(measured.motion.qd, float)
-    still = [c for j, c in enumerate(measured.coordinates) if not np.any(qd[:, j])]
+    unmeasured = np.asarray(~measured.measured().any(axis=0) if measured.masked else
+                            np.zeros(len(measured.coordinates), bool), dtype=bool)
+    still = [c for j, c in enumerate(measured.coordinates) if not np.any(qd[:, j]) or unmeasured[j]]
     named = parse_effects(texts, mechanism, still) + [e for e in effects if not isinstance(e, str)]
     to_identify, known = split_effects(mechanism, named)
     _say(progress, f"base parameters ({solver})")
@@ -124,8 +126,8 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     _say(progress, f"fitting {measured.count} samples")
     identification = fit(mechanism, measured, effects=to_identify, base=base, known=known)
     if still and any(":" in t and t.partition(":")[2].strip() == "*" for t in texts):
-        identification.notes += (f"KIND:* left out {', '.join(still)}: held still in the data (no effect to "
-                                 "identify there)",)
+        identification.notes += (f"KIND:* left out {', '.join(still)}: held still in the data, or without a "
+                                 "measured force (no effect to identify there)",)
     if physical:
         _say(progress, "physically consistent parameters (cvxpy)")
         _physical(identification, mechanism, base)

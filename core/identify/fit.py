@@ -372,7 +372,8 @@ class Prediction:
         """The coordinates without a measured force in these data (every channel left out)."""
         if self.rows is None:
             return ()
-        return tuple(c for c, any_row in zip(self.coordinates, self.rows.any(axis=0)) if not any_row)
+        measured = np.asarray(self.rows.any(axis=0), dtype=bool)
+        return tuple(c for c, any_row in zip(self.coordinates, measured) if not any_row)
 
     @property
     def rms(self) -> np.ndarray:

@@ -1025,7 +1025,7 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
         estimated = ("qdd",) if qdd is None else ()
         qdd = np.gradient(qd, step, axis=0) if qdd is None else sosfiltfilt(sos, qdd, axis=0)
         what = "measured velocities" + ("" if estimated else " and accelerations")
-        notes += _velocity_check(qf, qd, step, edge, coordinates)
+        notes += _velocity_check(qf, qd, step, edge, coordinates, still)
     if own_times is not None:             # the filtered motion at the samples' own times
         qf, qd, qdd = (CubicSpline(t, x, axis=0)(own_times) for x in (qf, qd, qdd))
         t = own_times
@@ -1044,7 +1044,8 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     return data, notes
 
 
-def _velocity_check(q: np.ndarray, qd: np.ndarray, step: float, edge: int, names: tuple[str, ...]) -> list[str]:
+def _velocity_check(q: np.ndarray, qd: np.ndarray, step: float, edge: int, names: tuple[str, ...],
+                    still: np.ndarray | None = None) -> list[str]:
     """A note when measured velocities are not the positions' derivative (both filtered alike;
     the filter's transients at the ends left out): their RMS difference over VELOCITY_MISMATCH
     of the derivative's on a coordinate, with the lag (up to 1 s) that aligns them best.
@@ -1054,6 +1055,8 @@ def _velocity_check(q: np.ndarray, qd: np.ndarray, step: float, edge: int, names
     derivative, measured = np.gradient(q, step, axis=0)[inside], qd[inside]
     found = []
     for j in range(q.shape[1]):
+        if still is not None and still[j]:              # a joint held still: noise against noise
+            continue
         size = float(np.sqrt(np.mean(derivative[:, j] ** 2)))
         miss = float(np.sqrt(np.mean((measured[:, j] - derivative[:, j]) ** 2))) / size if size > 0 else 0.0
         if miss <= VELOCITY_MISMATCH:
