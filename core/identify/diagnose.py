@@ -47,6 +47,7 @@ from baseparams.identify.model import (Motion, design, effect_values, effects_de
                                        independent_names)
 from baseparams.identify.fit import measured_design, measured_forces
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
+from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
 from baseparams.identify.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, added_test, holm, outdone,
                                           select_whitened, simpler_in_place, weakest_over)
@@ -407,7 +408,7 @@ def reduced_model(columns: np.ndarray, train: int) -> np.ndarray:
     A = columns[:train].reshape(train * f, p)
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
-    _, sv, vt = np.linalg.svd(A / scale, full_matrices=False)
+    _, sv, vt = svd(A / scale, full_matrices=False)
     rank = numerical_rank(tol=RANK_TOL, singular_values=sv)
     return np.ascontiguousarray(columns @ (vt[:rank].T / scale[:, None]))
 
@@ -1345,7 +1346,7 @@ def _weak(inertial: np.ndarray, candidates: list[Candidate], first: Step) -> lis
         Z = (first.whiten(cand.columns) * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1.0
-        kept = float(np.linalg.svd(fit.orthogonal(Z / norms), compute_uv=False).min())
+        kept = float(svd(fit.orthogonal(Z / norms), compute_uv=False).min())
         if kept < WEAK:
             out.append({"candidate": cand.label, "kept": kept, "separate_by": MODEL_HINT})
     return out

@@ -23,6 +23,9 @@ Why these choices:
 - The SVD of the unit-norm columns decides the rank (:func:`baseparams.numeric.rank.numerical_rank`
   at :data:`RANK_TOL` of the largest singular value by default): structural zeros of a regressor sit near 1e-15 in float64, and a
   direction kept at that level would put noise into the coefficients.
+- Every SVD here is :func:`baseparams.numeric.linalg.svd`: numpy's (LAPACK gesdd), and the QR
+  iteration (gesvd) where gesdd fails to converge, as it does for particular bits of such
+  rank-deficient matrices (a real Kinova Gen3 recording's cross-validation fit).
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from scipy.linalg import solve_triangular
 
 from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
+from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
@@ -179,7 +183,7 @@ class LinearFit:
         core = np.zeros((p + k, p + k))
         core[:p, :p] = self._in_basis()
         core[:p, p:], core[p:, p:] = inside, R
-        um, s, vt = np.linalg.svd(core / scale, full_matrices=False)
+        um, s, vt = svd(core / scale, full_matrices=False)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         target = np.concatenate([self.projection, Q.T @ self.residual])   # [U Q]^T b
         proj = um[:, :rank].T @ target
@@ -199,7 +203,7 @@ class LinearFit:
             return None
         columns = self._in_basis()[:, keep]
         scale = self.scale[keep]
-        um, s, vt = np.linalg.svd(columns / scale, full_matrices=False)
+        um, s, vt = svd(columns / scale, full_matrices=False)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = um[:, :rank].T @ self.projection                        # U^T b = projection
         basis = self.basis @ um[:, :rank]
@@ -230,7 +234,7 @@ class LinearFit:
         core = T @ columns
         scale = np.linalg.norm(core, axis=0)                          # column norms of R A (Q orthonormal)
         scale[scale == 0] = 1.0
-        um, s, vt = np.linalg.svd(core / scale)
+        um, s, vt = svd(core / scale)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         target = rows[:, 0] * self.weighted_target()
         basis = RU @ solve_triangular(T, um[:, :rank])                # Q um with Q = R U T^-1
@@ -311,7 +315,7 @@ class WeightedLinearModel:
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
-        u, s, vt = np.linalg.svd(A / scale, full_matrices=False)
+        u, s, vt = svd(A / scale, full_matrices=False)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale

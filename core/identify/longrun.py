@@ -6,6 +6,8 @@ stability test (:mod:`.outofsample`) share."""
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from baseparams.numeric.linalg import svd
+
 
 def newey_west_lags(n: int) -> int:
     return int(np.floor(4 * (n / 100.0) ** (2.0 / 9.0)))
@@ -104,7 +106,7 @@ def long_run_each(scores: np.ndarray, lags: np.ndarray, prewhiten: bool = True) 
         A = np.clip(np.where(energy > 0, a, 0.0), -PREWHITEN_LIMIT, PREWHITEN_LIMIT)[:, None, None]
     else:
         At = np.stack([np.linalg.lstsq(b, c, rcond=None)[0] for b, c in zip(before, after)])
-        u, sv, vt = np.linalg.svd(np.swapaxes(At, 1, 2))
+        u, sv, vt = svd(np.swapaxes(At, 1, 2))
         A = np.einsum("mab,mb,mbc->mac", u, np.minimum(sv, PREWHITEN_LIMIT), vt)
     e = after - before @ np.swapaxes(A, 1, 2)
     S = bartlett_each(e, hac_lags_each(np.moveaxis(e, 0, 2)))

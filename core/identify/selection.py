@@ -44,6 +44,7 @@ from scipy.optimize import minimize_scalar
 from baseparams.identify.longrun import hac_lags, hac_lags_each, local_power, long_run_each, stationary_variance
 from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
 from baseparams.identify.weighting import TOLERANCE
+from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
 
 # A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
@@ -192,12 +193,12 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
         scale = np.linalg.norm(reference, axis=0)
         scale[scale == 0] = 1.0
         scaled = matrix / scale
-        u, s, _ = np.linalg.svd(scaled, full_matrices=False)
+        u, s, _ = svd(scaled, full_matrices=False)
         keep = s > tol
     else:
         scale = np.linalg.norm(matrix, axis=0)
         scale[scale == 0] = 1.0
-        u, s, _ = np.linalg.svd(matrix / scale, full_matrices=False)
+        u, s, _ = svd(matrix / scale, full_matrices=False)
         keep = np.arange(s.size) < numerical_rank(tol=tol, singular_values=s)
     return u[:, keep]
 

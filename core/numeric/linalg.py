@@ -1,5 +1,6 @@
 """Float64 linear-algebra helpers shared by the numeric solvers and the certified analysis:
-the exact power-of-two column scaling rule and a greedy column choice."""
+the exact power-of-two column scaling rule, a greedy column choice and an SVD that does not
+stop where LAPACK's divide and conquer fails to converge."""
 
 import math
 from collections.abc import Sequence
@@ -47,3 +48,42 @@ def pivoted_qr_columns(a: np.ndarray, count: int) -> list[int]:
             a[k:, k:] -= 2.0 * np.outer(v, v @ a[k:, k:])
         norms[k + 1:] = np.sum(a[k + 1:, k + 1:] ** 2, axis=0)
     return perm[:count]
+
+
+def svd(a: np.ndarray, full_matrices: bool = True, compute_uv: bool = True):
+    """``np.linalg.svd`` (LAPACK's divide and conquer, gesdd) with the QR iteration (gesvd)
+    where gesdd fails to converge: same arguments, same results, stacked matrices too.
+
+    Why: gesdd's bidiagonal divide and conquer (dbdsdc) can fail on a finite matrix whose
+    singular values reach rounding level, the case of every rank-deficient regressor
+    (structural zeros, columns that are exactly zero). It happens for particular bits of
+    the input, not for a family of them: the Kinova Gen3 cross-validation matrix (2541 x
+    119, 7 zero columns, condition number 1e20) fails, and converges after a relative
+    change of 1e-16 in its entries, so whether a run meets it depends on the last bits of
+    what came before it (an unrelated SVD run first made the failure go away). gesvd is
+    slower and converges on it. When gesdd converges the result is numpy's, bit for bit; a non-finite matrix, or
+    one gesvd cannot factor either, raises numpy's LinAlgError."""
+    try:
+        return np.linalg.svd(a, full_matrices=full_matrices, compute_uv=compute_uv)
+    except np.linalg.LinAlgError as error:
+        a = np.asarray(a, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise
+        failure = error
+    import scipy.linalg    # only here: a process that never meets the failure never imports it
+
+    def one(m: np.ndarray):
+        return scipy.linalg.svd(m, full_matrices=full_matrices, compute_uv=compute_uv,
+                                check_finite=False, lapack_driver="gesvd")
+
+    try:
+        if a.ndim == 2:
+            return one(a)
+        parts = [one(m) for m in a.reshape(-1, *a.shape[-2:])]
+    except (np.linalg.LinAlgError, ValueError):
+        raise failure from None
+    if not compute_uv:
+        return np.stack(parts).reshape(*a.shape[:-2], -1)
+    u, s, vt = (np.stack(x) for x in zip(*parts))
+    lead = a.shape[:-2]
+    return u.reshape(*lead, *u.shape[1:]), s.reshape(*lead, -1), vt.reshape(*lead, *vt.shape[1:])
