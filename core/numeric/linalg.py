@@ -4,6 +4,7 @@ stop where LAPACK's divide and conquer fails to converge."""
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,8 @@ def pivoted_qr_columns(a: np.ndarray, count: int) -> list[int]:
     return perm[:count]
 
 
-def svd(a: np.ndarray, full_matrices: bool = True, compute_uv: bool = True):
+def svd(a: np.ndarray, full_matrices: bool = True,
+        compute_uv: bool = True) -> Any:
     """``np.linalg.svd`` (LAPACK's divide and conquer, gesdd) with the QR iteration (gesvd)
     where gesdd fails to converge: same arguments, same results, stacked matrices too.
 
@@ -61,10 +63,12 @@ def svd(a: np.ndarray, full_matrices: bool = True, compute_uv: bool = True):
     119, 7 zero columns, condition number 1e20) fails, and converges after a relative
     change of 1e-16 in its entries, so whether a run meets it depends on the last bits of
     what came before it (an unrelated SVD run first made the failure go away). gesvd is
-    slower and converges on it. When gesdd converges the result is numpy's, bit for bit; a non-finite matrix, or
-    one gesvd cannot factor either, raises numpy's LinAlgError."""
+    slower and converges on it. When gesdd converges the result is numpy's, bit for bit; a
+    non-finite matrix, or one gesvd cannot factor either, raises numpy's LinAlgError."""
     try:
-        return np.linalg.svd(a, full_matrices=full_matrices, compute_uv=compute_uv)
+        if compute_uv:
+            return np.linalg.svd(a, full_matrices=full_matrices)
+        return np.linalg.svd(a, full_matrices=full_matrices, compute_uv=False)
     except np.linalg.LinAlgError as error:
         a = np.asarray(a, dtype=float)
         if not np.all(np.isfinite(a)):
@@ -72,7 +76,7 @@ def svd(a: np.ndarray, full_matrices: bool = True, compute_uv: bool = True):
         failure = error
     import scipy.linalg    # only here: a process that never meets the failure never imports it
 
-    def one(m: np.ndarray):
+    def one(m: np.ndarray) -> Any:
         return scipy.linalg.svd(m, full_matrices=full_matrices, compute_uv=compute_uv,
                                 check_finite=False, lapack_driver="gesvd")
 
