@@ -4,6 +4,7 @@ of runs with a known change, coloured noise and model errors common to both side
 coordinate with its value, and nothing is named when nothing changed."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,3 +141,43 @@ def test_cli_refuses_options_that_do_not_apply(tmp_path, puma):
     missing = CliRunner().invoke(main, ["diagnose", PUMA, str(tmp_path / "changed.csv"), "--baseline",
                                         str(tmp_path / "nope.csv")])
     assert missing.exit_code == 2 and "nope.csv" in missing.stderr
+
+
+KINOVA = Path(__file__).parent / "data" / "kinova_gen3"
+
+
+@pytest.fixture(scope="module")
+def kinova_repeat():
+    """A real pair: one commanded motion recorded twice by a Kinova Gen3 (motor currents)."""
+    from baseparams.identify.recording import read_data
+    mechanism = resolve(str(KINOVA / "gen3.urdf"))
+    before, mechanism = read_data([str(KINOVA / "repeat_RunTrajectory1.toml")], mechanism)
+    after, _ = read_data([str(KINOVA / "repeat_Trajectory1.toml")], mechanism)
+    return mechanism, before, after
+
+
+def test_real_repeat_nothing_changed(kinova_repeat):
+    mechanism, before, after = kinova_repeat
+    result = diagnose_change(mechanism, before, after)
+    assert result.verdict == "nothing changed", (_names(result), result.notes)
+    assert result.pairing["paired"]
+
+
+@pytest.mark.parametrize("mass", [0.5, 2.0])
+def test_real_repeat_with_a_payload_hidden_in_the_second_run(kinova_repeat, mass):
+    """Real noise and real model errors, a known truth: the torque of a payload on the last
+    link (6 cm down its axis) added to the second run's currents."""
+    import dataclasses
+    from baseparams.identify.derived import body_columns
+    from baseparams.identify.fit import measured_design
+    mechanism, before, after = kinova_repeat
+    inertial, _, _ = measured_design(mechanism, after, [], [])
+    z = -0.06
+    phi = np.zeros(len(mechanism.parameters))
+    phi[body_columns(mechanism, "bracelet_link")] = mass * np.array([1, 0, 0, z, z * z, 0, 0, z * z, 0, 0])
+    loaded = dataclasses.replace(after, tau=after.tau + inertial.matrix @ phi)
+    result = diagnose_change(mechanism, before, loaded)
+    assert _names(result) == ["body:bracelet_link"], (_names(result), result.notes)
+    entry = result.changes[0]
+    assert abs(entry["value"]["m"] - mass) <= 3 * entry["std"]["m"]
+    assert abs(entry["centre_of_mass"][2] - z) < 0.02

@@ -673,8 +673,11 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     verdict = ("partly explained" if structure else "changed") if named else \
         ("unexplained" if structure else "nothing changed")
     if not named and not structure and rest["pvalue"] <= alpha:
-        notes.append(f"the difference leans on the candidates together (p = {rest['pvalue']:.2g}) but below the bar "
-                     f"for a change with nothing named ({alpha / UNEXPLAINED_BAR:.2g})")
+        why = (f"below the bar for a change with nothing named ({alpha / UNEXPLAINED_BAR:.2g})"
+               if rest["pvalue"] > alpha / UNEXPLAINED_BAR else
+               "that does not predict held-out blocks of the difference" if paired else
+               "the runs are of other motions")
+        notes.append(f"the difference leans on the candidates together (p = {rest['pvalue']:.2g}), but {why}")
     whiten = Whitening.of(after)
     if whiten is not None and np.max(whiten.rho) > 0.5:
         notes.append("the difference's noise is coloured (lag-1 autocorrelation up to "
