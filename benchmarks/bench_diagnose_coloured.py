@@ -163,7 +163,7 @@ def tx40():
         p, k, lb = un["predictable"][c], un["colour"][c], un["ljung_box"][c]
         print(f"  {c}: Ljung-Box p {lb['pvalue']:.2g}; lag-1 {k['lag1']:.2f}, AR({k['ar_order']}), half power below "
               f"{k['half_power_hz']:.3g} Hz; residual / noise level {un['ratio'][c]:.2f}; motion predicts it: p "
-              f"{p['pvalue']:.2g} (Holm {p['pvalue_holm']:.2g}, F({p['df']}, {p['lags']}))")
+              f"{p['pvalue']:.2g} (Holm {p['pvalue_holm']:.2g}, F({p['df']}, {p['effective_samples']}))")
     for note in d["notes"]:
         if note.startswith(("structure remains", "the residual is coloured")):
             print(f"  note: {note}")
