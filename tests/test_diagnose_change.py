@@ -11,7 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify.change import ar_whitening, diagnose_change, pair, rest_test
+from baseparams.identify.change import diagnose_change, pair
+from baseparams.identify.changesearch import ar_whitening, rest_test
 from baseparams.identify.data import write_measured
 from baseparams.identify.simulate import coloured_noise, simulate_change
 from baseparams.io.loader import parse_mechanism, resolve

@@ -44,9 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.signal import lfilter
 from scipy.spatial import cKDTree
-from scipy.special import fdtrc
 
 from baseparams.errors import InputError
 from baseparams.identify import derived
@@ -58,8 +56,9 @@ from baseparams.identify.given import Given
 from baseparams.identify.identifiable import regroup
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
 from baseparams.identify.model import evaluate, independent_names
-from baseparams.identify.selection import (Candidate, Whitening, holm, orthonormal_basis, project_out,
-                                           wilson_hilferty)
+from baseparams.identify.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, held_out_gain, named_changes, predicts,
+                                             rest_test)
+from baseparams.identify.selection import Candidate, Whitening
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # The effects shared by both sides (fitted on the baseline) besides the mechanism's own.
@@ -73,9 +72,6 @@ PAIR_DISTANCE = 0.05
 # Pairing is used when at least this share of the changed samples finds a partner; the
 # others are left out of the tests (a note says how many).
 PAIRED_SHARE = 0.5
-# With nothing named, the rest of the difference must be significant at alpha / UNEXPLAINED_BAR
-# to call it unexplained (the first step's Holm test already spent alpha on "nothing changed").
-UNEXPLAINED_BAR = 10.0
 # Gauss-Newton steps on the shared delay, and the step (in samples) below which it stops.
 DELAY_ITERATIONS = 4
 DELAY_TOLERANCE = 0.05
@@ -259,78 +255,6 @@ def _change_candidates(mechanism: Mechanism, side: _Side, predicted: np.ndarray,
     return given + registered + delay, notes
 
 
-# The longest autoregression fitted to a residual to whiten it for the test of what is left.
-AR_ORDER = 20
-
-
-def ar_whitening(residual: np.ndarray, order: int = AR_ORDER) -> list[np.ndarray]:
-    """Per coordinate, the prediction-error filter [1, -a_1, ..., -a_p] of an autoregression
-    fitted to ``residual`` (n, f) by least squares, its order p <= ``order`` chosen by BIC.
-    Why not AR(1), nor Yule-Walker: low-pass-filtered noise (a drive's or the logger's
-    filter) is an ARMA process whose spectrum falls by decades; an AR(1) filter leaves it
-    coloured and Yule-Walker's estimate is biased there, and a test of many directions on
-    either was liberal (p < 1e-30 on pure noise)."""
-    n, f = residual.shape
-    filters = []
-    for j in range(f):
-        x = residual[:, j] - residual[:, j].mean()
-        top = min(order, max(n // 20, 0))
-        if top == 0 or not np.any(x):
-            filters.append(np.array([1.0]))
-            continue
-        lagged = np.stack([x[top - k:n - k] for k in range(1, top + 1)], axis=1)
-        target = x[top:]
-        m = len(target)
-        best, best_bic = np.array([1.0]), m * np.log(max(target @ target / m, 1e-300))
-        for p in range(1, top + 1):
-            a, *_ = np.linalg.lstsq(lagged[:, :p], target, rcond=None)
-            error = target - lagged[:, :p] @ a
-            bic = m * np.log(max(error @ error / m, 1e-300)) + p * np.log(m)
-            if bic < best_bic:
-                best, best_bic = np.concatenate([[1.0], -a]), bic
-        filters.append(best)
-    return filters
-
-
-def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
-    """x (n, f) or (n, f, c) through each coordinate's filter (its first rows dropped)."""
-    start = max(len(a) for a in filters) - 1
-    out = np.stack([lfilter(a, [1.0], x[:, j], axis=0) for j, a in enumerate(filters)], axis=1)
-    return out[start:]
-
-
-def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weights: np.ndarray,
-              noise: np.ndarray | None = None) -> dict:
-    """Whether what is left (n, f) is predictable from ``columns`` (n, f, k), all at once,
-    beyond ``model`` (n, f, p): an F test after each coordinate's residual and columns pass
-    its autoregressive whitening (:func:`ar_whitening`, fitted to ``noise``, default the
-    residual itself), rows weighted by ``weights``. Give ``noise`` when the residual holds
-    the structure under test: an autoregression fitted to it learns that structure as noise
-    (a payload tested beside another body: p = 0.46)."""
-    filters = ar_whitening((residual if noise is None else noise) * weights[None, :])
-    r = _filtered(filters, residual * weights[None, :])
-    X = _filtered(filters, columns * weights[None, :, None])
-    m, f = r.shape
-    b = r.reshape(-1)
-    A = X.reshape(m * f, -1)
-    used = 0
-    if model.shape[-1]:
-        M = orthonormal_basis(_filtered(filters, model * weights[None, :, None]).reshape(m * f, -1), 1e-9)
-        used = M.shape[1]
-        A = project_out(A, M)
-        b = project_out(b[:, None], M)[:, 0]
-    basis = orthonormal_basis(A, 1e-7)
-    k = basis.shape[1]
-    dof = m * f - k - used
-    if k == 0 or dof <= 0:
-        return {"stat": 0.0, "df": 0, "pvalue": 1.0}
-    explained = basis.T @ b
-    rest = float(b @ b - explained @ explained)
-    stat = float(explained @ explained) / k / max(rest / dof, 1e-300)
-    return {"stat": stat, "df": int(k), "pvalue": float(fdtrc(k, dof, stat)),
-            "ar_order": [len(a) - 1 for a in filters]}
-
-
 def _physical_text(entry: dict) -> None:
     """A payload's centre of mass (m) where the mass and first moments are identified."""
     if entry["kind"] != "body":
@@ -364,146 +288,6 @@ def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[floa
     return delay, WeightedLinearModel(shared, base.tau - known).fit().coefficients
 
 
-@dataclass
-class Search:
-    """The forward search's outcome: ``added`` candidate indices in the order they entered,
-    ``ambiguous`` head -> the rivals entered with it (none adds over the other), each
-    entered index's test at its step (``tests``: {"pvalue", "pvalue_holm", "z"}), the
-    first step's Holm-adjusted p values, each step's strongest candidates, and the noise
-    ``weights`` (f,) the tests used."""
-    candidates: list[Candidate]
-    added: list[int]
-    ambiguous: dict[int, list[int]]
-    tests: dict[int, dict]
-    first: np.ndarray
-    steps: list[dict]
-    weights: np.ndarray
-
-    @property
-    def in_model(self) -> list[int]:
-        return self.added + [j for rivals in self.ambiguous.values() for j in rivals]
-
-    def group(self, head: int) -> list[int]:
-        return [head] + self.ambiguous.get(head, [])
-
-
-def _f_test(residual: np.ndarray, basis: np.ndarray, rest: float, dof: int) -> tuple[float, int, float]:
-    """(F, directions, p): the orthonormal ``basis`` (rows, k), orthogonal to the model,
-    against the model's ``residual`` (rows,) whose sum of squares is ``rest``."""
-    k = basis.shape[1]
-    if k == 0:
-        return 0.0, 0, 1.0
-    explained = basis.T @ residual
-    ss = float(explained @ explained)
-    left = max(rest - ss, 1e-300)
-    df = dof - k
-    if df <= 0:
-        return 0.0, 0, 1.0
-    stat = (ss / k) / (left / df)
-    return stat, k, float(fdtrc(k, df, stat))
-
-
-def search(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int = 12, rounds: int = 3) -> Search:
-    """:func:`search_once`, its noise model (weights and autoregressions) estimated again from
-    the residual of the model it chose, until the choice repeats (Cochrane-Orcutt). Why: the
-    first noise model comes from the residual of every candidate at once, which the smooth
-    columns have stripped of low frequencies; on low-passed noise that autoregression
-    under-whitened, and five changes followed a true payload into the search."""
-    n, f = y.shape
-    everything = np.concatenate([c.columns for c in candidates], axis=-1) if candidates else np.zeros((n, f, 0))
-    found = search_once(candidates, y, alpha, max_steps, everything)
-    for _ in range(rounds - 1):
-        chosen = [candidates[j].columns for j in found.in_model]
-        again = search_once(candidates, y, alpha, max_steps, np.concatenate([np.zeros((n, f, 0))] + chosen, axis=-1))
-        if again.added == found.added and again.ambiguous == found.ambiguous:
-            return again
-        found = again
-    return found
-
-
-def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int, noise_model: np.ndarray,
-                first: np.ndarray | None = None) -> Search:
-    """Forward selection of the change's candidates by F tests on data whitened by each
-    coordinate's autoregression (:func:`ar_whitening`, fitted to the residual of every
-    candidate at once: the residual of none would hold the change, which an autoregression
-    learns as noise), rows weighted by each coordinate's noise level. Each step tests every
-    candidate beyond the model, Holm-corrects, adds the most significant (normal
-    equivalent z) and, with it, the rivals neither of which adds over the other at ``alpha``
-    (an ambiguous group). Why not the diagnosis' own search (HAC Wald tests, AR(1)
-    whitening): on low-passed noise its size was not held, and its tests of sparse
-    directions took four fifths of the time."""
-    n, f = y.shape
-    complete = WeightedLinearModel(noise_model, y).fit() if noise_model.shape[-1] else None
-    residual = y if complete is None else y - noise_model @ complete.coefficients
-    noise = np.sqrt(np.mean(residual ** 2, axis=0))
-    weights = 1.0 / np.where(noise > 0, noise, 1.0)
-    filters = ar_whitening(residual * weights[None, :])
-    wy = _filtered(filters, y * weights[None, :]).reshape(-1)
-    columns = [_filtered(filters, c.columns * weights[None, :, None]).reshape(len(wy), -1) for c in candidates]
-    rows = len(wy)
-    model = np.zeros((rows, 0))
-    added: list[int] = []
-    ambiguous: dict[int, list[int]] = {}
-    tests: dict[int, dict] = {}
-    steps: list[dict] = []
-    gate = first
-    first = np.ones(len(candidates))
-    bases = [orthonormal_basis(c, 1e-7) for c in columns]
-    while len(added) < max_steps:
-        r = wy - model @ (model.T @ wy)
-        rest = float(r @ r)
-        dof = rows - model.shape[1]
-        inside = set(added) | {j for rivals in ambiguous.values() for j in rivals}
-        outcome = {}
-        for i, basis in enumerate(bases):
-            if i in inside:
-                continue
-            beyond = orthonormal_basis(project_out(basis, model), 1e-7) if model.shape[1] else basis
-            stat, k, pvalue = _f_test(r, beyond, rest, dof)
-            if k:
-                outcome[i] = (pvalue, wilson_hilferty(stat * k, k), beyond)
-        if not outcome:
-            break
-        order = list(outcome)
-        adjusted = dict(zip(order, holm([outcome[i][0] for i in order])))
-        if not steps:
-            for i, value in adjusted.items():
-                first[i] = value
-        strongest = sorted(order, key=lambda i: -outcome[i][1])
-        steps.append({"tests": [{"candidate": candidates[i].label, "pvalue": outcome[i][0],
-                                 "pvalue_holm": float(adjusted[i]), "z": outcome[i][1]} for i in strongest[:10]],
-                      "chosen": None})
-        significant = [i for i in strongest if adjusted[i] <= alpha]
-        if not significant:
-            break
-        winner = significant[0]
-        steps[-1]["chosen"] = candidates[winner].label
-        rivals = []
-        for j in significant[1:]:
-            with_winner = np.concatenate([model, outcome[winner][2]], axis=1)
-            with_rival = np.concatenate([model, outcome[j][2]], axis=1)
-            if not _adds(wy, with_winner, outcome[j][2], alpha) and not _adds(wy, with_rival, outcome[winner][2], alpha):
-                rivals.append(j)
-        added.append(winner)
-        tests[winner] = {"pvalue": outcome[winner][0], "pvalue_holm": float(adjusted[winner]), "z": outcome[winner][1]}
-        if rivals:
-            ambiguous[winner] = rivals
-        model = orthonormal_basis(np.concatenate([model, outcome[winner][2]] + [outcome[j][2] for j in rivals],
-                                                 axis=1), 1e-9)
-    # the first step's p values under the first noise model: the gate's, which the later rounds
-    # do not move (they are about the named changes, not about whether anything changed)
-    return Search(candidates, added, ambiguous, tests, first if gate is None else gate, steps, weights)
-
-
-def _adds(wy: np.ndarray, model: np.ndarray, extra: np.ndarray, alpha: float) -> bool:
-    """Whether ``extra``'s directions add to ``model``'s at ``alpha`` (whitened rows)."""
-    basis = orthonormal_basis(model, 1e-9)
-    r = wy - basis @ (basis.T @ wy)
-    beyond = orthonormal_basis(project_out(extra, basis), 1e-7)
-    _, k, pvalue = _f_test(r, beyond, float(r @ r), len(wy) - basis.shape[1])
-    return k > 0 and pvalue <= alpha
-
-
 def _change_lag(chosen: Search, kept: set, y: np.ndarray, data: MeasuredData, rows: np.ndarray) -> float:
     """The delay (s) by which the named changes' force in ``y`` (the paired ``rows`` of
     ``data``'s fit rows) is later than their columns: one Gauss-Newton step, the force's
@@ -518,62 +302,6 @@ def _change_lag(chosen: Search, kept: set, y: np.ndarray, data: MeasuredData, ro
     derivative = -time_derivative(full, data)[rows]
     fit = WeightedLinearModel(np.concatenate([X, derivative[:, :, None]], axis=-1), y).fit(chosen.weights)
     return float(fit.coefficients[-1])
-
-
-def _named(candidates: list[Candidate], difference: np.ndarray, alpha: float, notes: list[str]
-           ) -> tuple[Search, set, dict]:
-    """The search and what survives its checks (the module docstring's steps 1-5): the
-    search, the kept candidates' indices, and the gate's test."""
-    f = difference.shape[1]
-    empty = np.zeros((len(difference), f, 0))
-    spread = np.sqrt(np.mean(difference ** 2, axis=0))
-    # closed testing: without the gate, the diagnosis' own Wald tests called 4 of 20 AR(1) nulls changed
-    gate = rest_test(difference, np.concatenate([c.columns for c in candidates], axis=-1), empty,
-                     1.0 / np.where(spread > 0, spread, 1.0))
-    # ... or each candidate alone, its noise model the residual of the model the search chose
-    # (Cochrane-Orcutt: from the residual of every candidate, the single tests called 1 in 20
-    # low-passed nulls of 800 samples changed; from the difference itself, a change is taken
-    # for noise and a 30 % friction drift went unseen)
-    found = search(candidates, difference, alpha)
-    if gate["pvalue"] > alpha / 2 and float(np.min(found.first, initial=1.0)) > alpha / 2:
-        found = Search(candidates, [], {}, {}, found.first, found.steps[:1], found.weights)
-    kept = _confirmed(found, difference, alpha, notes)
-    kept = _predictive(found, difference, kept, notes)
-    return found, _large_enough(found, difference, kept, notes), gate
-
-
-# A named change's force must reach this fraction of one run's noise SD (the difference's
-# residual SD over sqrt 2) on some coordinate: "nothing changed" says the runs agree within
-# their noise, and a change far below it is of no consequence to a model of the robot.
-MIN_CHANGE_TO_NOISE = 0.5
-
-
-def _large_enough(chosen: Search, y: np.ndarray, kept: set, notes: list[str]) -> set:
-    """The kept groups whose force (fitted with the others) reaches MIN_CHANGE_TO_NOISE of
-    one run's noise on some coordinate, the smallest taken out first. Why: on a real repeat
-    of one motion (a Kinova Gen3's currents) a friction change on joint_6 that predicted
-    held-out blocks took the difference from 0.261 to 0.259."""
-    weights = chosen.weights
-    groups = {i: chosen.group(i) for i in chosen.added if i in kept}
-    while groups:
-        members = [j for m in groups.values() for j in m]
-        X = np.concatenate([chosen.candidates[j].columns for j in members], axis=-1)
-        values = WeightedLinearModel(X, y).fit(weights).coefficients
-        noise = np.sqrt(np.mean((y - X @ values) ** 2, axis=0) / 2.0)
-        size, start = {}, 0
-        for j in members:
-            width = chosen.candidates[j].columns.shape[-1]
-            size[j] = np.sqrt(np.mean((chosen.candidates[j].columns @ values[start:start + width]) ** 2, axis=0))
-            start += width
-        ratio = {h: float(np.max(np.max([size[j] for j in m], axis=0) / np.where(noise > 0, noise, np.inf)))
-                 for h, m in groups.items()}
-        smallest = min(ratio, key=lambda h: ratio[h])
-        if ratio[smallest] >= MIN_CHANGE_TO_NOISE:
-            break
-        notes.append(f"{chosen.candidates[smallest].label} passed the tests but its force is {ratio[smallest]:.2g} of "
-                     f"one run's noise (below {MIN_CHANGE_TO_NOISE:g}): too small to matter, not named")
-        del groups[smallest]
-    return {j for m in groups.values() for j in m}
 
 
 def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, *,
@@ -632,7 +360,7 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     # a change's force reaches the torques through the same lag
     candidates = [_delayed(c, delay, other.data).rows(rows) for c in raw]
     empty = np.zeros((len(rows), f, 0))
-    chosen, kept, gate = _named(candidates, difference, alpha, notes)
+    chosen, kept, gate = named_changes(candidates, difference, alpha, notes)
     lag = _change_lag(chosen, kept, difference, other.data, rows)
     if abs(lag) > DELAY_TOLERANCE * float(np.median(np.diff(other.data.t))):
         # the lag that the changed force shows, when the shared model's delay misses it: a
@@ -643,7 +371,7 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
                      f"{1e3 * lag:+.3g} ms); the candidates were searched again at that lag")
         candidates = [_delayed(c, delay, other.data).rows(rows) for c in raw]
         retry: list[str] = []
-        chosen, kept, gate = _named(candidates, difference, alpha, retry)
+        chosen, kept, gate = named_changes(candidates, difference, alpha, retry)
         notes += retry
     weights = chosen.weights
     below: list[dict] = []
@@ -669,7 +397,7 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     if left and rest["pvalue"] <= alpha / UNEXPLAINED_BAR:
         rest["held_out_gain"] = held_out_gain(after, np.concatenate(left, axis=-1), weights).tolist()
     structure = paired and rest["pvalue"] <= alpha / UNEXPLAINED_BAR and \
-        _predicts(np.asarray(rest.get("held_out_gain", [0.0])))
+        predicts(np.asarray(rest.get("held_out_gain", [0.0])))
     verdict = ("partly explained" if structure else "changed") if named else \
         ("unexplained" if structure else "nothing changed")
     if not named and not structure and rest["pvalue"] <= alpha:
@@ -732,100 +460,6 @@ def _transfer_error(base: _Side, given: Given | None, delay: float, width: int) 
 # A change between runs of other motions is named only when its force is this many times what
 # the shared model misses on other motions of the baseline, on some coordinate.
 DOMINANCE = 2.0
-
-
-def _confirmed(chosen: Search, y: np.ndarray, alpha: float, notes: list[str]) -> set:
-    """The final model's groups (a named change with its ambiguous companions) that each add
-    significantly to the others by the whitened F test of :func:`rest_test` at alpha over
-    the number of groups (Bonferroni), the weakest taken out first until all do. Why: the
-    search's Wald tests, on few effective samples of strongly coloured noise, named a second
-    body and a Coulomb friction beside a true payload (the PUMA, 800 samples, AR(1) 0.9)."""
-    weights = chosen.weights
-    groups = {i: chosen.group(i) for i in chosen.added}
-    while len(groups) > 1:
-        everything = np.concatenate([chosen.candidates[j].columns for m in groups.values() for j in m], axis=-1)
-        noise = y - everything @ WeightedLinearModel(everything, y).fit(weights).coefficients
-        pvalues = {}
-        for head, members in groups.items():
-            others = [j for h, m in groups.items() if h != head for j in m]
-            model = np.concatenate([chosen.candidates[j].columns for j in others], axis=-1)
-            fit = WeightedLinearModel(model, y).fit(weights)
-            residual = y - model @ fit.coefficients
-            columns = np.concatenate([chosen.candidates[j].columns for j in members], axis=-1)
-            pvalues[head] = rest_test(residual, columns, model, weights, noise)["pvalue"]
-        weakest = max(pvalues, key=lambda h: pvalues[h])
-        if pvalues[weakest] <= alpha / len(groups):
-            break
-        notes.append(f"{chosen.candidates[weakest].label} entered the search but does not add to the other changes "
-                     f"once the noise's colour is whitened (p = {pvalues[weakest]:.2g} > {alpha / len(groups):.2g}): "
-                     "not named")
-        del groups[weakest]
-    return {j for members in groups.values() for j in members}
-
-
-# Contiguous blocks of the paired rows for the out-of-sample check of each named change.
-BLOCKS = 5
-
-
-def held_out_gain(y: np.ndarray, X: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Per contiguous block (BLOCKS), how much ``X`` (n, f, k), fitted on the other blocks,
-    lowers the block's weighted sum of squares of ``y`` (n, f) (negative: it predicts worse
-    than nothing)."""
-    n = len(y)
-    edges = np.linspace(0, n, BLOCKS + 1).astype(int)
-    out = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        train = np.r_[0:a, b:n]
-        fit = WeightedLinearModel(X[train], y[train]).fit(weights)
-        before = float(np.sum((y[a:b] * weights) ** 2))
-        out.append(before - float(np.sum(((y[a:b] - X[a:b] @ fit.coefficients) * weights) ** 2)))
-    return np.array(out)
-
-
-def _predicts(gain: np.ndarray) -> bool:
-    """Whether held-out gains per block say the columns predict: in total and in a majority."""
-    return bool(np.sum(gain) > 0 and np.sum(gain > 0) > len(gain) // 2)
-
-
-def _predictive(chosen: Search, y: np.ndarray, kept: set, notes: list[str]) -> set:
-    """The kept groups that predict held-out blocks: each contiguous block of the difference
-    predicted from the others with and without the group; a group is kept when it lowers the
-    weighted held-out error in total and in a majority of the blocks, the worst taken out
-    first until all do. Why: on a real pair of runs of one motion (a Kinova Gen3's currents,
-    1 kHz, the difference 0.37 NRMS), twelve changes passed the whitened tests and together
-    took the difference to 0.365: structure of the current's ripple, not a change."""
-    weights = chosen.weights
-    groups = {i: chosen.group(i) for i in chosen.added
-              if i in kept}
-    n = len(y)
-    edges = np.linspace(0, n, BLOCKS + 1).astype(int)
-
-    def held_out(members: list[int]) -> np.ndarray:
-        if not members:
-            return np.array([float(np.sum((y[a:b] * weights) ** 2)) for a, b in zip(edges[:-1], edges[1:])])
-        X = np.concatenate([chosen.candidates[j].columns for j in members], axis=-1)
-        out = []
-        for a, b in zip(edges[:-1], edges[1:]):
-            train = np.r_[0:a, b:n]
-            fit = WeightedLinearModel(X[train], y[train]).fit(weights)
-            out.append(float(np.sum(((y[a:b] - X[a:b] @ fit.coefficients) * weights) ** 2)))
-        return np.array(out)
-
-    while groups:
-        every = [j for m in groups.values() for j in m]
-        full = held_out(every)
-        gains = {}
-        for head, members in groups.items():
-            without = held_out([j for j in every if j not in members])
-            gains[head] = without - full
-        worst = min(groups, key=lambda h: (np.sum(gains[h] > 0), np.sum(gains[h])))
-        gain = gains[worst]
-        if _predicts(gain):
-            break
-        notes.append(f"{chosen.candidates[worst].label} passed the tests but does not predict held-out blocks of the "
-                     f"difference (better in {int(np.sum(gain > 0))} of {BLOCKS}): not named")
-        del groups[worst]
-    return {j for m in groups.values() for j in m}
 
 
 def _above_floor(chosen: Search, y: np.ndarray, floor: np.ndarray,
