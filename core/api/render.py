@@ -82,7 +82,12 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     ratios = ", ".join(f"{c} {r:.3g}" if r is not None else f"{c} -" for c, r in un["ratio"].items())
     boxes = ", ".join(f"{c} p = {b['pvalue']:.2g}" for c, b in un["ljung_box"].items())
     lines.append(f"residual / noise level (second differences): {ratios}")
-    lines.append(f"whiteness (Ljung-Box, {next(iter(un['ljung_box'].values()))['lags']} lags): {boxes}")
+    lines.append(f"whiteness (Ljung-Box, {next(iter(un['ljung_box'].values()))['lags']} lags; reported, the verdict "
+                 f"does not ask it): {boxes}")
+    predictable = un.get("predictable") or {}
+    if predictable:
+        lines.append("predictable from the motion (the verdict's test, Holm p): " + ", ".join(
+            f"{c} {t['pvalue_holm']:.2g}" for c, t in predictable.items() if t.get("pvalue_holm") is not None))
     if un.get("significant_candidates_left"):
         lines.append(f"the search stopped at --max-steps {un['max_steps']} with candidates still "
                      "significant: the named effects are incomplete")

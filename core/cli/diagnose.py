@@ -76,8 +76,9 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     others are reported as unsupported, never named. Candidates the data cannot tell apart
     are reported under "ambiguous" with the excitation that would separate them.
 
-    Exit code 0 when the gap closed to the noise level (white residual, nothing
-    unsupported), 1 when structure remains, 2 for bad input. JSON: {"verdict", "effects":
+    Exit code 0 when the gap closed to the noise level (the motion predicts nothing of the
+    residual, whatever its colour; nothing unsupported), 1 when structure remains, 2 for
+    bad input. JSON: {"verdict", "effects":
     [{"kind", "coordinate", "value", "std", "shape", "checks"}], "ambiguous", "unsupported",
     "gap": {"before", "after", "cv_before", "cv_after", "cv_blocks", ...}, "where",
     "unexplained"} (`python -m pydoc baseparams.identify.diagnose`).
