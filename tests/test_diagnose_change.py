@@ -182,3 +182,23 @@ def test_real_repeat_with_a_payload_hidden_in_the_second_run(kinova_repeat, mass
     entry = result.changes[0]
     assert abs(entry["value"]["m"] - mass) <= 3 * entry["std"]["m"]
     assert abs(entry["centre_of_mass"][2] - z) < 0.02
+
+
+def test_report_fits_one_screen_whatever_the_counts(puma):
+    """Many changes, ambiguous groups and notes: the default text stays within 25 lines and
+    says how many more --verbose shows; the change's own notes come before the reading's."""
+    from baseparams.api.render import change_text
+    before, after, _ = simulate_change(puma, samples=300, seed=1, payload=0.5)
+    result = diagnose_change(puma, before, after)
+    entry = result.changes[0]
+    result.changes = [dict(entry, coordinate=f"body{k}") for k in range(30)]
+    result.ambiguous = [{"candidates": [{"kind": "gain", "coordinate": "q1"}, {"kind": "offset", "coordinate": "q1"}]}
+                        for _ in range(10)]
+    result.notes = [f"baseline: reading note {k}\nover two lines" for k in range(20)] + ["the change's own note"]
+    text = change_text(result)
+    lines = text.splitlines()
+    assert len(lines) <= 25
+    assert "more (--verbose)" in text and "more ambiguous groups (--verbose)" in text
+    assert "note: the change's own note" in lines
+    full = change_text(result, verbose=True).splitlines()
+    assert sum(line.startswith("  body on body") for line in full) == 30

@@ -407,15 +407,18 @@ def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping
              f"{'paired samples' if pairing['paired'] else 'changed samples, not paired'}): "
              f"{gap['before']:.3g} -> {gap['after']:.3g}"]
     lines.append("changes:" if result.changes else "changes: none named")
-    room = MAX_LINES - 6 - len(result.ambiguous)
+    groups = result.ambiguous if verbose else result.ambiguous[:3]
+    room = MAX_LINES - 8 - len(groups)
     shown = result.changes if verbose else result.changes[:max(room, 1)]
     for entry in shown:
         lines.append(f"  {_effect_line(entry, kinds)}  (p = {entry['test']['pvalue_holm']:.2g}, Holm)")
     if len(shown) < len(result.changes):
         lines.append(f"  ... and {len(result.changes) - len(shown)} more (--verbose)")
-    for group in result.ambiguous:
+    for group in groups:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in group["candidates"])
         lines.append(f"ambiguous: {names} (one changed; the data cannot tell which)")
+    if len(groups) < len(result.ambiguous):
+        lines.append(f"... and {len(result.ambiguous) - len(groups)} more ambiguous groups (--verbose)")
     worst = max(common["per_coordinate"].items(), key=lambda kv: kv[1], default=("", 0.0))
     lines.append(f"what the model lacks in both: NRMS {common['nrms']:.3g} (largest {worst[0]} {worst[1]:.3g}); "
                  + ("it cancels between paired samples" if common["cancelled"] else "not cancelled (other motions)")
@@ -425,8 +428,10 @@ def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping
         where = sorted(per, key=lambda c: -per[c]["after"])[:3]
         lines.append("the difference remains on " + ", ".join(f"{c} ({per[c]['after']:.3g})" for c in where)
                      + f"; predictable from the candidates together: p = {result.rest['pvalue']:.2g}")
-    notes = result.notes if verbose else result.notes[:max(0, MAX_LINES - len(lines) - 1)]
-    lines += [f"note: {n}" for n in notes]
+    # the change's own notes before how each side was read ("baseline: ...", "changed: ...")
+    ranked = sorted(result.notes, key=lambda n: n.startswith(("baseline: ", "changed: ")))
+    notes = result.notes if verbose else ranked[:max(0, min(NOTES, MAX_LINES - len(lines) - 1))]
+    lines += [f"note: {' '.join(n.splitlines())}" for n in notes]
     if len(notes) < len(result.notes):
         lines.append(f"{len(result.notes) - len(notes)} more notes (--verbose)")
     if verbose and result.steps:
