@@ -101,6 +101,7 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
     effects; an effect whose columns are not finite on this data (a plugin's bug) is left
     out with a note rather than stopping the diagnosis."""
     pairs = all_pairs(mechanism) if pairs is None else pairs
+    still: dict[str, int] = {}
     # an effect fitted with the model has its columns in it; a known one (every value given,
     # subtracted) leaves the candidate of its kind free to correct its value
     present = {(e.kind, e.coordinate) for e in mechanism.effects if not known_effect(e)}
@@ -112,6 +113,9 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
         shapes = shape_grid(mechanism, sample, n, kind, coordinate)
         if coordinate not in motions:
             motions[coordinate] = coordinate_motion(mechanism, sample, n, coordinate)
+        if _still(motions[coordinate]):
+            still[coordinate] = still.get(coordinate, 0) + 1
+            continue
         variants = []
         for shape in shapes:
             names, columns = effect_columns(mechanism, sample, n, kind, coordinate, shape=shape,
@@ -131,7 +135,29 @@ def library(mechanism: Mechanism, sample: Sample, n: int, pairs: Sequence[tuple[
             out.append(Candidate(kind, coordinate, tuple(names), variants[0], tuple(variants), tuple(shapes),
                                  dict(shapes[0]), general,
                                  _maker(mechanism, sample, n, kind, coordinate, reduce, motions[coordinate])))
+    for coordinate, count in still.items():
+        notes.append(f"{coordinate} does not move with the independent coordinates on this data (its speed per "
+                     f"unit of theirs is at rounding, under {STILL:g}): a force there never reaches the measured "
+                     f"ones; its {count} candidate{'s' if count != 1 else ''} left out")
     return out, notes
+
+
+# A coordinate whose reach (its speed per unit of the independent coordinates' speeds, R; an
+# independent coordinate's own is 1) stays under this over the data does not move with them:
+# any effect's columns on it are rounding (the SLA's passive hub_b: 1e-15 to 1e-30), which
+# selection scales to unit directions of rounding noise. They were named: viscous friction on
+# hub_b, fv = 2.5e34 +- 8.9e33, the cross-validated gap 0.549 -> 1.259 (docs/diagnosis.md,
+# "Issue 42's campaign faults").
+STILL = 1e-9
+
+
+def _still(motion: CoordinateMotion) -> bool:
+    """Whether a coordinate's effects cannot reach the independent coordinates: the RMS over
+    the samples of its reach's norm (``motion``'s R row, :func:`coordinate_motion`) under STILL."""
+    reach = np.asarray(motion[3], dtype=float)
+    if reach.size == 0:
+        return False
+    return bool(np.sqrt(np.mean(np.sum(reach.reshape(reach.shape[0], -1) ** 2, axis=1))) < STILL)
 
 
 def shape_grid(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: str) -> list[dict]:
