@@ -34,6 +34,24 @@ def _paths(data: DataPaths) -> list[str]:
     return [str(data)] if isinstance(data, (str, PathLike)) else [str(p) for p in data]
 
 
+def _validation(path: str, loaded: Any, fitted: Any) -> Any:
+    """A ``--validate`` recording's data. One that holds joints (``[held]``, as the fit's
+    description does) is read against the mechanism as loaded, where its names and patterns
+    refer, and must hold the same ones; any other against the fitted (held) mechanism. Why:
+    read against the held mechanism, the fit's own description failed: its held joints were
+    no longer coordinates ("the pattern '*' matches no coordinate without a channel")."""
+    from baseparams.identify.recording import holds, read_data
+    if not holds(path):
+        return read_data([path], fitted)[0]
+    measured, model = read_data([path], loaded)
+    if model.coordinates != fitted.coordinates:
+        raise InputError("holds other coordinates than the fitted data's description ("
+                         f"{', '.join(c for c in loaded.coordinates if c not in model.coordinates) or 'none'} "
+                         f"against {', '.join(c for c in loaded.coordinates if c not in fitted.coordinates) or 'none'})",
+                         file=path, key="held")
+    return measured
+
+
 def _say(progress: Progress | None, message: str) -> None:
     if progress is not None:
         progress(message)
@@ -110,8 +128,9 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     check_solver_options(chosen, solver_options or {})
     mechanism = load(mech)
     _say(progress, "reading the data")
+    loaded = mechanism
     measured, mechanism = read_data(_paths(data), mechanism)
-    others = [read_data([str(path)], mechanism)[0] for path in validate]
+    others = [_validation(str(path), loaded, mechanism) for path in validate]
     texts = [e for e in effects if isinstance(e, str)]
     import numpy as np
     qd = np.asarray(measured.motion.qd, float)
@@ -144,6 +163,9 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     impossible = [f.name for f in identification.impossible if f.impossible]
     said = [f"{len(impossible)} estimate{'s' if len(impossible) > 1 else ''} no robot has: {', '.join(impossible)} "
             "(the report's IMPOSSIBLE estimates; JSON: impossible)"] if impossible else []
+    far = [f"{f.name} = {f.value:.3g} +- {f.std:.2g}" for f in identification.impossible if f.beyond is not None]
+    said += [f"{len(far)} estimate{'s' if len(far) > 1 else ''} beyond any physical scale: {', '.join(far)} (the "
+             "data do not determine them, or are read wrong; JSON: beyond_physical_scale)"] if far else []
     return Fit(identification, on_its_data, predictions, warnings=list(result.warnings) + said)
 
 

@@ -64,7 +64,7 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     for e in result.effects:
         shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
         lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}{_payload_text(e)}  "
-                     f"(p = {e['test']['pvalue_holm']:.2g}, Holm)")
+                     f"(p = {e['test']['pvalue_holm']:.2g}, Holm{_opened_by(e['test'])})")
     for a in result.ambiguous:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in a["candidates"])
         corr = max((abs(ev["correlation"]) for ev in a["evidence"]), default=float("nan"))
@@ -306,6 +306,14 @@ def _ambiguous_line(group: dict) -> str:
     names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in group["candidates"])
     corr = max((abs(ev["correlation"]) for ev in group["evidence"]), default=float("nan"))
     return f"ambiguous: {names} (|corr| up to {corr:.3f}); to separate them: {group['separate_by']}"
+
+
+def _opened_by(test: dict) -> str:
+    """For an effect named in the place of its step's most significant candidate: whose Holm
+    p it is (what the effect adds over that one is in the JSON, ``pvalue_over_strongest``)."""
+    if "holm_of" not in test:
+        return ""
+    return f", of {test['holm_of']}, whose signal it explains"
 
 
 def _effect_line(effect: dict, kinds: Mapping[str, str]) -> str:

@@ -24,7 +24,7 @@ from baseparams.errors import InputError
 from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
 from baseparams.identify.data import MeasuredData
-from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, judge, split
+from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, beyond, beyond_scale, judge, split
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.model import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -154,6 +154,7 @@ class Identification:
         impossible, near_zero = split(self.impossible)
         out["impossible"] = [f.to_json() for f in impossible]
         out["consistent_with_zero"] = [f.to_json() for f in near_zero]
+        out["beyond_physical_scale"] = [f.to_json() for f in beyond(self.impossible)]
         out.update(self.extras)
         if self.physical is not None:
             out["physical"] = dict(self.physical)
@@ -192,6 +193,10 @@ def impossible_lines(flags: Sequence[Flag], indent: str = "") -> list[str]:
     if near_zero:
         lines.append(f"{indent}negative but consistent with zero (within {IMPOSSIBLE_STD:g} std of 0):")
         lines += [f"{indent}  {f.text()}" for f in near_zero]
+    far = beyond(flags)
+    if far:
+        lines.append(f"{indent}BEYOND ANY PHYSICAL SCALE (not estimates of the effect):")
+        lines += [f"{indent}  {f.text()}" for f in far]
     return lines
 
 
@@ -300,6 +305,7 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     flags = judge(parameters=base.parameters, base_map=base.B, names=names, values=estimates,
                   std=np.sqrt(np.clip(np.diag(covariance), 0, None)), covariance=covariance, effects=coefficients,
                   absorbed=absorbed, bodies={b.label: b.name for b in mechanism.bodies})
+    flags += beyond_scale(names, estimates, np.sqrt(np.clip(np.diag(covariance), 0, None)), coefficients)
     return Identification(mechanism=mechanism.name, data=data.path, coordinates=data.coordinates,
                           base=base, effects=effects, known=known, names=names, kinds=kinds,
                           estimates=estimates, covariance=covariance, noise_sd=sigma, nrms=nrms,

@@ -29,6 +29,14 @@ What is claimed, and why it is sound:
 
 Each is judged with its standard deviation: a value more than :data:`IMPOSSIBLE_STD` std below
 zero is impossible; a negative value within that is consistent with zero (listed apart).
+
+- **Beyond any physical scale** (:func:`beyond_scale`): an effect coefficient whose value or
+  standard deviation exceeds :data:`PHYSICAL_SCALE` in SI units (a viscous friction of 1e6 N m
+  s/rad, a Coulomb friction or offset of 1e6 N m) is no estimate of the effect: the motion
+  does not determine it (a joint that never moves: fv = -8.5e18 +- 1.0e18 on a Kinova file),
+  or the data are read wrong (a time column of sample indices). Its sign is not judged, its
+  size is. A standard deviation far above the value alone is not flagged: a coefficient whose
+  effect is absent is zero within its noise, whatever the ratio.
 """
 
 from collections.abc import Mapping, Sequence
@@ -39,6 +47,10 @@ import numpy as np
 from baseparams.identify.outofsample import POSITIVE, implausible
 
 IMPOSSIBLE_STD = 3.0            # std below zero beyond which a value is impossible, not noise
+# SI magnitude of an effect coefficient (value or std) beyond which no joint has it; a kind's own
+# where its coefficients can be larger (a prismatic spring's stiffness in N/m)
+PHYSICAL_SCALE = 1e6
+PHYSICAL_SCALES = {"spring": 1e9}
 _PSD_TOLERANCE = 1e-9           # relative: D's eigenvalues this far below 0 are rounding
 _KIND_NAMES = {"m": "a mass", "Ixx": "a moment of inertia", "Iyy": "a moment of inertia",
                "Izz": "a moment of inertia"}
@@ -53,6 +65,7 @@ class Flag:
     reason: str
     impossible: bool
     inertial: bool = True            # a base parameter or a body (else an effect's coefficient)
+    beyond: float | None = None      # beyond any physical scale: the scale it exceeds (:func:`beyond_scale`)
 
     @property
     def below(self) -> float:
@@ -65,6 +78,8 @@ class Flag:
                 "std_below_zero": float(below) if np.isfinite(below) else None}
 
     def text(self) -> str:
+        if self.beyond is not None:
+            return f"{self.name} = {self.value:.4g} +- {self.std:.2g}: {self.reason}"
         below = self.below
         where = f"{below:.3g} std below 0" if np.isfinite(below) else "an exact value"
         return f"{self.name} = {self.value:.4g} +- {self.std:.2g} ({where}): {self.reason}"
@@ -228,8 +243,36 @@ def _bodies(parameters: Sequence[str], base_map: np.ndarray, values: np.ndarray,
 
 
 def split(flags: Sequence[Flag]) -> tuple[list[Flag], list[Flag]]:
-    """(impossible, negative within the noise: consistent with zero)."""
-    return [f for f in flags if f.impossible], [f for f in flags if not f.impossible]
+    """(impossible, negative within the noise: consistent with zero); flags beyond any
+    physical scale are in neither (:func:`beyond`)."""
+    return ([f for f in flags if f.impossible and f.beyond is None],
+            [f for f in flags if not f.impossible and f.beyond is None])
+
+
+def beyond(flags: Sequence[Flag]) -> list[Flag]:
+    """The flags of estimates beyond any physical scale."""
+    return [f for f in flags if f.beyond is not None]
+
+
+def beyond_scale(names: Sequence[str], values: np.ndarray, std: np.ndarray,
+                 effects: Mapping[str, tuple[str, str]]) -> list[Flag]:
+    """Effect coefficients (``effects``: name -> (kind, coefficient)) whose value or standard
+    deviation is above their kind's physical scale (:data:`PHYSICAL_SCALE`), or not finite."""
+    out = []
+    for k, name in enumerate(names):
+        if name not in effects:
+            continue
+        kind, _ = effects[name]
+        scale = PHYSICAL_SCALES.get(kind, PHYSICAL_SCALE)
+        value, sd = float(values[k]), float(std[k])
+        if np.isfinite(value) and np.isfinite(sd) and abs(value) <= scale and sd <= scale:
+            continue
+        what = "its value" if not np.isfinite(value) or abs(value) > scale else "its standard deviation"
+        out.append(Flag(name, value, sd, f"beyond any physical scale ({what} above {scale:.0e} in SI units): the "
+                        "data do not determine it (a joint that barely moves, an unfiltered ramp) or are read "
+                        "wrong (a time column of sample indices read as seconds)", impossible=False,
+                        inertial=False, beyond=scale))
+    return out
 
 
 def advice(flags: Sequence[Flag]) -> list[str]:

@@ -147,6 +147,18 @@ def is_description(path: str | os.PathLike) -> bool:
     return Path(str(path).partition("#")[0]).suffix.lower() == ".toml"
 
 
+def holds(path: str | os.PathLike) -> bool:
+    """Whether the recording description at ``path`` has a ``[held]`` table with entries
+    (False for a CSV log, or a description that cannot be read: reading it says why)."""
+    if not is_description(path):
+        return False
+    try:
+        data = tomllib.loads(_read_text(str(path).partition("#")[0]), parse_float=Decimal)
+    except (InputError, tomllib.TOMLDecodeError):
+        return False
+    return isinstance(data.get("held"), dict) and bool(data["held"])
+
+
 def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Description:
     """The description at ``path``, checked against ``mechanism`` (its motors added)."""
     path = str(path)
@@ -213,6 +225,8 @@ def _held_values(data: dict, mechanism: Mechanism, path: str) -> dict[str, Fract
             continue
         exact = _exact(value, path, f"held.{pattern}")
         matched = [c for c in independent_names(mechanism) if fnmatchcase(c, pattern) and c not in channelled]
+        if not matched and pattern.strip("*") == "":
+            continue        # "*": every coordinate without a channel, which may be none (a run that logs them all)
         if not matched:
             raise InputError(f"the pattern {pattern!r} matches no coordinate without a channel "
                              f"(coordinates: {', '.join(independent_names(mechanism))})", file=path,

@@ -150,6 +150,11 @@ class Step:
     chosen: int | None = None
     confusable: list[Rival] = field(default_factory=list)
     beaten: list[Rival] = field(default_factory=list)
+    # the most significant candidate, which cleared Holm and opened the step, when a comparison
+    # named another in its place (a rival that explains its signal, or a group resolved again),
+    # and the test of what the chosen one adds over it (None: nested in it, nothing to test)
+    strongest: int | None = None
+    over: Test | None = None
 
 
 @dataclass
@@ -587,7 +592,10 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
                 bars[winner] = bars[old]
                 regrouped.add(winner)
                 entered = next(s for s in steps if s.chosen == old)
+                opened = old if entered.strongest is None else entered.strongest
                 entered.chosen, entered.confusable, entered.beaten = winner, confusable, beaten
+                entered.strongest, entered.over = (None, None) if winner == opened else (
+                    opened, next((r.winner_over_rival for r in beaten if r.index == opened), None))
                 if confusable:
                     ambiguous[winner] = confusable
                     companions.extend(r.index for r in confusable)
@@ -600,12 +608,15 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             added.remove(out[0])
             touched.add(candidates[out[0]].coordinate)
             continue
-        winner = max(significant, key=lambda i: tests[i].z)
-        rivals = [i for i in tested if tests[i].pvalue <= alpha and i != winner]
-        winner, confusable, beaten = resolve(winner, rivals, bases, fit, (n, f), dof, alpha,
+        strongest = max(significant, key=lambda i: tests[i].z)
+        rivals = [i for i in tested if tests[i].pvalue <= alpha and i != strongest]
+        winner, confusable, beaten = resolve(strongest, rivals, bases, fit, (n, f), dof, alpha,
                                              nested_level=alpha / len(tested),
                                              generalises=_generalises(candidates), sparse_if_coloured=coloured)
         step.chosen, step.confusable, step.beaten = winner, confusable, beaten
+        if winner != strongest:                   # a rival named for the signal the strongest cleared Holm on
+            step.strongest = strongest
+            step.over = encompassing(bases[winner], bases[strongest], fit.residual, (n, f), dof, coloured)[0]
         for i in [winner] + [r.index for r in confusable]:
             if candidates[i].variants:            # its shape is chosen again at each step (refine_shapes)
                 shaped[i] = candidates[i]
@@ -674,7 +685,9 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
                                        fit.rank, alpha, nested_level=bar, generalises=relation)
     if confusable:
         return None
-    return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten), variant[best]
+    over = None if best == strongest else next((r.winner_over_rival for r in beaten if r.index == strongest), None)
+    return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten,
+                strongest=None if best == strongest else strongest, over=over), variant[best]
 
 
 # A fit of the model and some effects' columns (the arrays, in their order), for _complete to extend.
