@@ -13,6 +13,7 @@ from baseparams.api.render import diagnosis_text
 from baseparams.cli import main
 from baseparams.identify import diagnose as D
 from baseparams.identify.impossible import PHYSICAL_SCALE, beyond_scale
+from baseparams.identify.recording import read_data
 from baseparams.identify.selection import Candidate, Step, Test as WaldTest
 from baseparams.io.loader import resolve
 
@@ -183,6 +184,11 @@ def test_validate_reads_a_description_that_holds_joints_as_the_fit_does(tmp_path
     to its noise (NRMS about the 1 % of noise, after the recording's filter), and one holding
     other joints is refused, naming them."""
     _still_fingers_log(tmp_path)
+    # '"*" = 0' where every coordinate has its channels (here: read against the held mechanism,
+    # as --validate did) holds nothing, and is no error
+    measured, held = read_data([str(tmp_path / "star.toml")], resolve(str(URDF)))
+    again, same = read_data([str(tmp_path / "star.toml")], held)
+    assert same.coordinates == held.coordinates and again.coordinates == measured.coordinates
     runner = CliRunner()
     for other in ("star", "byname", "fingers"):
         result = runner.invoke(main, ["identify", str(URDF), str(tmp_path / "star.toml"), "--validate",
