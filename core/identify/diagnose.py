@@ -1253,7 +1253,7 @@ def _named_test(candidates: list[Candidate], step: Step, index: int) -> dict:
     named by comparison can be above alpha (a Kinova run showed "p = 0.2, Holm" for a named
     effect), which no name may show."""
     test = step.tests[index]
-    out = {"stat": test.stat, "df": test.df, "pvalue": test.pvalue, "pvalue_holm": float(step.adjusted[index])}
+    out: dict = {"stat": test.stat, "df": test.df, "pvalue": test.pvalue, "pvalue_holm": float(step.adjusted[index])}
     if step.strongest is not None and step.strongest != index:
         out.update(pvalue_holm=float(step.adjusted[step.strongest]), holm_of=candidates[step.strongest].label,
                    pvalue_holm_own=float(step.adjusted[index]))
@@ -1457,7 +1457,7 @@ def _unexplained(prediction: _Prediction, train: int, coordinates: Sequence[str]
 
 def _predictable(after: _Prediction, train: int, problem: Problem, alpha: float, size: np.ndarray, un: dict,
                  notes: list[str], candidates: Sequence[Candidate] = (), unsupported: Sequence[dict] = (),
-                 excused: set[int] = frozenset()) -> tuple[bool, set[int]]:
+                 excused: set[int] | frozenset[int] = frozenset()) -> tuple[bool, set[int]]:
     """Whether structure remains: the final residual is predicted by a generic basis of the
     motion on some coordinate (:func:`.whiteness.predictable`: position, speed, direction,
     reversals, acceleration, blocks of the recording; GLS with the residual's AR filter;
@@ -1493,9 +1493,9 @@ def _predictable(after: _Prediction, train: int, problem: Problem, alpha: float,
         for j in range(f):
             if np.any(columns[:, j]):
                 basis[j] = np.concatenate([basis[j], columns[:, j]], axis=1)
-    if skip.all():
-        tests, colours = [None] * f, [None] * f
-    else:
+    tests: list = [None] * f
+    colours: list = [None] * f
+    if not skip.all():
         tests, colours, _ = predictable(after.model[:train], y, after.fit.weights, basis, t, skip.tolist())
     pvalues = np.array([1.0 if test is None or not test.tested else test.pvalue for test in tests])
     adjusted = holm(pvalues.tolist())

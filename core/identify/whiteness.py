@@ -15,8 +15,12 @@ product each.
 """
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:            # selection imports this module: its Test only for the types
+    from baseparams.identify.selection import Test
 
 # Replicates per test: enough that Holm over the coordinates can reach alpha (p >= 1/(B+1)).
 MIN_REPLICATES = 200
@@ -298,7 +302,7 @@ def _stable(a: np.ndarray) -> np.ndarray:
     return np.zeros_like(a)
 
 
-def _wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int):
+def _wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int) -> "Test":
     """Wald statistic of the orthonormal directions ``basis`` (rows, k) against ``residual``
     (rows,; rows sample-major, f coordinates a sample), with the larger (in the matrix order)
     of two variances: White's (per-sample scores summed over the coordinates: a noise level
