@@ -827,18 +827,20 @@ def weakest_over(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidat
 
 
 def added_test(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
-               i: int, whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray) -> Test | None:
+               i: int, whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray,
+               sparse: bool = False) -> Test | None:
     """The Wald test of candidate ``i`` added to the model and the effects ``in_model`` (i not
     among them), filtered by ``whiten`` at ``weights``; None when i has no direction of its
     own there or the fit needs a refit. Why: an effect found significant at its step, then
-    held back, may explain nothing the final model leaves (it stood in for one named later)."""
+    held back, may explain nothing the final model leaves (it stood in for one named later).
+    ``sparse``: directions acting on few samples are tested too (:func:`_sparse_test`)."""
     n, f, _ = model.shape
     found = _left_out(*_complete(model, y, candidates, [*in_model, i], whiten, weights), candidates,
                       [*in_model, i], i, whiten)
     if found is None:
         return None
     fit, own = found
-    return wald(fit.residual, own, (n, f), fit.rank)
+    return wald(fit.residual, own, (n, f), fit.rank, sparse_if_white=sparse, sparse_if_coloured=sparse)
 
 
 # A selection is repeated when the complete model's residual asks for a filter differing from
