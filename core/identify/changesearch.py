@@ -129,6 +129,34 @@ def _f_test(residual: np.ndarray, basis: np.ndarray, rest: float, dof: int) -> t
     return stat, k, float(fdtrc(k, df, stat))
 
 
+def _f_test_beyond(residual: np.ndarray, basis: np.ndarray, model: np.ndarray, rest: float, dof: int
+                   ) -> tuple[float, int, float]:
+    """:func:`_f_test` of the orthonormal ``basis``'s directions beyond the orthonormal
+    ``model`` (``residual`` orthogonal to it), from k x k products: the directions beyond are
+    B (I - M M^T), whose Gram matrix is I - (B^T M)(B^T M)^T; what they explain of the
+    residual is g^T G^+ g with g = B^T r (no tall matrix factorised: a step tests every
+    candidate, and their SVDs were most of the search's time)."""
+    k = basis.shape[1]
+    if k == 0:
+        return 0.0, 0, 1.0
+    g = basis.T @ residual
+    if model.shape[1]:
+        overlap = basis.T @ model
+        gram = np.eye(k) - overlap @ overlap.T
+    else:
+        gram = np.eye(k)
+    values, vectors = np.linalg.eigh(gram)
+    keep = values > 1e-14 * max(float(values.max(initial=0.0)), 1e-300)   # singular values 1e-7 of the largest
+    kept = int(np.sum(keep))
+    df = dof - kept
+    if kept == 0 or df <= 0:
+        return 0.0, 0, 1.0
+    projected = vectors[:, keep].T @ g
+    ss = float(np.sum(projected ** 2 / values[keep]))
+    stat = (ss / kept) / (max(rest - ss, 1e-300) / df)
+    return stat, kept, float(fdtrc(kept, df, stat))
+
+
 def search(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int = 12, rounds: int = 3) -> Search:
     """:func:`search_once`, its noise model (weights and autoregressions) estimated again from
     the residual of the model it chose, until the choice repeats (Cochrane-Orcutt). Why: the
@@ -184,10 +212,9 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
         for i, basis in enumerate(bases):
             if i in inside:
                 continue
-            beyond = orthonormal_basis(project_out(basis, model), 1e-7) if model.shape[1] else basis
-            stat, k, pvalue = _f_test(r, beyond, rest, dof)
+            stat, k, pvalue = _f_test_beyond(r, basis, model, rest, dof)
             if k:
-                outcome[i] = (pvalue, wilson_hilferty(stat * k, k), beyond)
+                outcome[i] = (pvalue, wilson_hilferty(stat * k, k))
         if not outcome:
             break
         order = list(outcome)
@@ -204,18 +231,23 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
             break
         winner = significant[0]
         steps[-1]["chosen"] = candidates[winner].label
+
+        def beyond(i: int) -> np.ndarray:
+            return orthonormal_basis(project_out(bases[i], model), 1e-7) if model.shape[1] else bases[i]
+
         rivals = []
+        won = beyond(winner)
         for j in significant[1:]:
-            with_winner = np.concatenate([model, outcome[winner][2]], axis=1)
-            with_rival = np.concatenate([model, outcome[j][2]], axis=1)
-            if not _adds(wy, with_winner, outcome[j][2], alpha) and not _adds(wy, with_rival, outcome[winner][2], alpha):
+            other = beyond(j)
+            with_winner = np.concatenate([model, won], axis=1)
+            with_rival = np.concatenate([model, other], axis=1)
+            if not _adds(wy, with_winner, other, alpha) and not _adds(wy, with_rival, won, alpha):
                 rivals.append(j)
         added.append(winner)
         tests[winner] = {"pvalue": outcome[winner][0], "pvalue_holm": float(adjusted[winner]), "z": outcome[winner][1]}
         if rivals:
             ambiguous[winner] = rivals
-        model = orthonormal_basis(np.concatenate([model, outcome[winner][2]] + [outcome[j][2] for j in rivals],
-                                                 axis=1), 1e-9)
+        model = orthonormal_basis(np.concatenate([model, won] + [beyond(j) for j in rivals], axis=1), 1e-9)
     # the first step's p values under the first noise model: the gate's, which the later rounds
     # do not move (they are about the named changes, not about whether anything changed)
     return Search(candidates, added, ambiguous, tests, first if gate is None else gate, steps, weights)
