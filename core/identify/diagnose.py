@@ -49,8 +49,8 @@ from baseparams.identify.fit import measured_design, measured_forces
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
-from baseparams.identify.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, added_test, holm, outdone,
-                                          select_whitened, simpler_in_place, weakest_over)
+from baseparams.identify.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, Test, added_test, holm,
+                                          outdone, select_whitened, simpler_in_place, weakest_over)
 from baseparams.identify.whiteness import (MOTION_BASIS_NAMES, MOTION_BLOCKS, monte_carlo_pvalues, motion_basis,
                                             predictable, replicates)
 from baseparams.dynamics.evaluator import Sample
@@ -1329,8 +1329,8 @@ def _sparse_left(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], 
     back. Why: on the SLA the rotor inertia of theta2, beyond the inertial model, acts near the
     arms' toggle only; refused on support at every step, it left "nothing missing" (exit 0)."""
     refused = [i for i, t in enumerate(last.tests) if t.reason == "support" and i not in in_model]
-    tests = [(i, added_test(model, y, candidates, in_model, i, last.whiten, weights, sparse=True)) for i in refused]
-    tests = [(i, t) for i, t in tests if t is not None and t.tested]
+    found = [(i, added_test(model, y, candidates, in_model, i, last.whiten, weights, sparse=True)) for i in refused]
+    tests: list[tuple[int, Test]] = [(i, t) for i, t in found if t is not None and t.tested]
     if not tests:
         return []
     adjusted = holm([t.pvalue for _, t in tests])
