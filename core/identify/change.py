@@ -199,8 +199,8 @@ def shifted(x: np.ndarray, data: MeasuredData, delay: float) -> np.ndarray:
 
 
 def delayed_all(candidates: list[Candidate], delay: float, data: MeasuredData) -> list[Candidate]:
-    """:func:`_delayed` of every candidate, their columns (and every shaped one's variants)
-    shifted in one spline (one per candidate cost a fifth of the diagnosis)."""
+    """Every candidate's columns (and every shaped one's variants) late by ``delay`` (s)
+    (:func:`shifted`), all in one spline (one per candidate cost a fifth of the diagnosis)."""
     if delay == 0.0:
         return list(candidates)
     blocks = [c.columns for c in candidates] + [v for c in candidates for v in c.variants]
@@ -216,17 +216,6 @@ def delayed_all(candidates: list[Candidate], delay: float, data: MeasuredData) -
         out.append(Candidate(c.kind, c.coordinate, c.names, np.ascontiguousarray(parts[i]),
                              tuple(np.ascontiguousarray(v) for v in variants), c.shapes, c.shape, c.generalises, make))
     return out
-
-
-def _delayed(cand: Candidate, delay: float, data: MeasuredData) -> Candidate:
-    """The candidate's columns late by ``delay`` (s) (:func:`shifted`)."""
-    if delay == 0.0:
-        return cand
-    shift = (lambda x: shifted(x, data, delay))
-    maker = cand.make
-    return Candidate(cand.kind, cand.coordinate, cand.names, shift(cand.columns),
-                     tuple(shift(v) for v in cand.variants), cand.shapes, cand.shape, cand.generalises,
-                     None if maker is None else (lambda shape: shift(maker(shape))))
 
 
 # A pair belongs to a replay of one motion when its time offset (baseline time less changed
