@@ -51,8 +51,8 @@ def diagnosis_text(result: "Diagnosis", written: str | None = None, verbose: boo
     return _full_text(result, written)
 
 
-def _full_text(result: "Diagnosis", written: str | None = None) -> str:
-    """The whole report (``--verbose``)."""
+def _head(result: "Diagnosis") -> list[str]:
+    """The verdict and the gap (and the kept-out block's), both reports' first lines."""
     gap = result.gap
     lines = [f"verdict: {result.verdict.upper()}: {VERDICTS.get(result.verdict, '')}",
              f"gap (NRMS, blocks predicted from the others, {gap['cv_folds']} blocks): {gap['cv_before']:.4g} -> "
@@ -60,6 +60,12 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     if gap["holdout_before"] is not None:
         lines.append(f"last block kept out: {gap['holdout_before']:.4g} -> {gap['holdout_after']:.4g} "
                      f"(prediction floor {gap['holdout_floor']:.4g}, noise alone {gap['holdout_noise_floor']:.4g})")
+    return lines
+
+
+def _full_text(result: "Diagnosis", written: str | None = None) -> str:
+    """The whole report (``--verbose``)."""
+    lines = _head(result)
     lines.append("named effects:" if result.effects else "named effects: none")
     for e in result.effects:
         shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
@@ -201,13 +207,7 @@ def short_text(result: "Diagnosis", written: str | None = None, kinds: Mapping[s
     count of what was not named, and the most important notes (``NOTES`` at most). The rest
     is in ``--verbose`` (:func:`diagnosis_text`) and the JSON."""
     kinds = kinds or {}
-    gap = result.gap
-    head = [f"verdict: {result.verdict.upper()}: {VERDICTS.get(result.verdict, '')}",
-            f"gap (NRMS, blocks predicted from the others, {gap['cv_folds']} blocks): {gap['cv_before']:.4g} -> "
-            f"{gap['cv_after']:.4g}; fitted: {gap['before']:.4g} -> {gap['after']:.4g}"]
-    if gap["holdout_before"] is not None:
-        head.append(f"last block kept out: {gap['holdout_before']:.4g} -> {gap['holdout_after']:.4g} "
-                    f"(prediction floor {gap['holdout_floor']:.4g}, noise alone {gap['holdout_noise_floor']:.4g})")
+    head = _head(result)
     un = result.unexplained
     tail = []
     if result.verdict in ("partly explained", "unexplained"):

@@ -91,25 +91,17 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     """
     from baseparams.api import ChangeDiagnosed, Diagnosed, diagnose as run
     mechanism = load(mech)
-    if baseline:
-        with Progress("diagnose", steps=3 + bool(plot_path), quiet=quiet) as progress:
-            changes = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
-                          alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
-                          baseline=list(baseline), progress=progress)
-            assert isinstance(changes, ChangeDiagnosed)
-            if plot_path:
-                progress("plotting")
-                plot_change(changes.diagnosis, plot_path)
-        emit(fmt, changes.to_json(), lambda: changes.to_text(verbose=verbose), output)
-        sys.exit(0 if changes.closed else 1)
-    with Progress("diagnose", steps=2 + bool(plot_path), quiet=quiet) as progress:
+    with Progress("diagnose", steps=2 + bool(baseline) + bool(plot_path), quiet=quiet) as progress:
         result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
                      alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
-                     progress=progress)
-        assert isinstance(result, Diagnosed)
+                     baseline=list(baseline) or None, progress=progress)
         if plot_path:
             progress("plotting")
-            plot_diagnosis(result.diagnosis, plot_path)
+            if isinstance(result, ChangeDiagnosed):
+                plot_change(result.diagnosis, plot_path)
+            else:
+                assert isinstance(result, Diagnosed)
+                plot_diagnosis(result.diagnosis, plot_path)
     emit(fmt, result.to_json(), lambda: result.to_text(verbose=verbose), output)
     sys.exit(0 if result.closed else 1)
 
