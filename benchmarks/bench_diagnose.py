@@ -1,7 +1,7 @@
 """The proof of ``diagnose`` on data with hidden effects (issue 10): a seeded campaign.
 
 For each mechanism the model's columns along its default trajectory are computed once
-(:func:`baseparams.identify.diagnose.prepare`, the same columns ``simulate`` uses), and
+(:func:`baseparams.diagnose.workflow.prepare`, the same columns ``simulate`` uses), and
 each dataset is tau = K phi + hidden effects + Gaussian noise, with phi random physically
 consistent inertias (a new draw per dataset) and the noise SD on each coordinate 2 % of
 that coordinate's RMS inertial torque. Effect-to-noise ratio: the largest, over the
@@ -52,11 +52,11 @@ from collections import Counter, defaultdict  # noqa: E402
 import numpy as np  # noqa: E402
 
 from baseparams import registry  # noqa: E402
-from baseparams.identify import selection as S  # noqa: E402
+from baseparams.diagnose import selection as S  # noqa: E402
 from baseparams.identify.linear import RANK_TOL, WeightedLinearModel  # noqa: E402
-from baseparams.identify.diagnose import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
-from baseparams.identify.model import evaluate  # noqa: E402
-from baseparams.identify.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
+from baseparams.diagnose.workflow import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
+from baseparams.dynamics.forces import evaluate  # noqa: E402
+from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
 from baseparams.io.loader import resolve  # noqa: E402
 
 MECHANISMS = ["pendulum", "planar_2r", "puma560", "four_bar", "slider_crank", "sla_suspension",

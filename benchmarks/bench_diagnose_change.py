@@ -1,5 +1,5 @@
 """What changed between recordings (``diagnose CHANGED --baseline BASE``), measured on
-simulated pairs of runs with a known truth (core/identify/simulate.py, simulate_change):
+simulated pairs of runs with a known truth (core/recordings/simulate.py, simulate_change):
 the same trajectory recorded twice, model errors common to both sides (a smooth Coulomb law,
 viscous friction, a 2-sample delay: none of them in the model), independent white, AR(1)
 0.9 or low-passed noise at 1 % of each coordinate's RMS torque, and between the runs a
@@ -23,8 +23,8 @@ import warnings
 import numpy as np
 
 from baseparams.api.render import change_text
-from baseparams.identify.change import diagnose_change, shared_effects
-from baseparams.identify.simulate import simulate_change
+from baseparams.diagnose.change import diagnose_change, shared_effects
+from baseparams.recordings.simulate import simulate_change
 from baseparams.io.loader import resolve
 
 
@@ -54,7 +54,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     mechanism = resolve(args.mechanism)
-    from baseparams.identify.derived import body_name
+    from baseparams.diagnose.derived import body_name
     last = body_name(mechanism, mechanism.bodies[-1].label)
     scenarios = [("nothing", {})] + [(f"payload {p:g}", {"payload": p}) for p in args.payloads] + \
         [("friction", {"friction_drift": 0.1, "drift_coordinate": 1})]
@@ -86,7 +86,7 @@ def speed(mechanism, samples: int, repeats: int = 3) -> None:
     """diagnose --baseline against one identify of the changed runs (with the shared effects),
     both from CSV files through the Python API, CPU s in this process, three times each."""
     import baseparams as bp
-    from baseparams.identify.data import write_measured
+    from baseparams.recordings.data import write_measured
     with tempfile.TemporaryDirectory() as folder:
         before, after, _ = simulate_change(mechanism, samples=samples, seed=0, payload=0.25)
         base, changed = Path(folder) / "base.csv", Path(folder) / "changed.csv"

@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).parent))
 import diagnose_campaign as C  # noqa: E402
 
-from baseparams.identify.diagnose import diagnose  # noqa: E402
+from baseparams.diagnose.workflow import diagnose  # noqa: E402
 
 MECHANISMS = ("planar_2r", "puma560", "stewart_platform", "chain4", "tree1", "four_bar2")
 NOISES = ("white", "ar", "lowpass")

@@ -15,7 +15,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 import diagnose_campaign as C  # noqa: E402
 
-from baseparams.identify.diagnose import diagnose  # noqa: E402
+from baseparams.diagnose.workflow import diagnose  # noqa: E402
 
 MECHANISMS = ("puma560",)
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tx40"
@@ -149,9 +149,9 @@ def tx40_timing():
     if not urdf.exists():
         print("  TX40: ../shared/data/tx40 not found, skipped")
         return
-    from baseparams.identify.diagnose import diagnose_data
+    from baseparams.diagnose.workflow import diagnose_data
     from baseparams.identify.fit import identify
-    from baseparams.identify.recording import read_data
+    from baseparams.recordings.recording import read_data
     from baseparams.io.loader import resolve
     mechanism = resolve(str(urdf))
     started = time.process_time()

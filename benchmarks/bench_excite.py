@@ -36,11 +36,11 @@ from baseparams.excite import design  # noqa: E402
 from baseparams.excite.limits import limits_of  # noqa: E402
 from baseparams.excite.plan import Settings, plan  # noqa: E402
 from baseparams.identify.base import BaseModel  # noqa: E402
-from baseparams.identify.diagnose import diagnose, prepare  # noqa: E402
+from baseparams.diagnose.workflow import diagnose, prepare  # noqa: E402
 from baseparams.identify.fit import identify  # noqa: E402
-from baseparams.identify.model import Motion, design as model_design, evaluate  # noqa: E402
-from baseparams.identify.recording import read_data  # noqa: E402
-from baseparams.identify.simulate import random_physical_inertia  # noqa: E402
+from baseparams.dynamics.forces import Motion, design as model_design, evaluate  # noqa: E402
+from baseparams.recordings.recording import read_data  # noqa: E402
+from baseparams.recordings.simulate import random_physical_inertia  # noqa: E402
 from baseparams.io.loader import load_mechanism, resolve  # noqa: E402
 from baseparams.model.mechanism import EffectSpec  # noqa: E402
 from baseparams.numeric.backends import Float64  # noqa: E402
@@ -97,7 +97,7 @@ def limits_hold(text: str, suffix: str, limits, factor: int = 10) -> float:
 
 def identify_condition(text: str, suffix=".toml") -> float:
     """identify's condition number on noisy data simulated along the file's trajectory."""
-    from baseparams.identify.simulate import simulate
+    from baseparams.recordings.simulate import simulate
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / f"m{suffix}"
         path.write_text(text)

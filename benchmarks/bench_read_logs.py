@@ -29,7 +29,7 @@ CHAIN = "from baseparams.model import generate; MECH = generate.serial_chain(3, 
 READ = CHAIN + """
 import sys
 from baseparams.io.loader import parse_mechanism
-from baseparams.identify.recording import read_recording
+from baseparams.recordings.recording import read_recording
 data, _ = read_recording(sys.argv[1], parse_mechanism(MECH))
 print(data.motion.count, data.count)
 """
@@ -86,7 +86,7 @@ def main() -> None:
             size = log.stat().st_size / 1e6
             cpu, peak, out = measure([READ, str(folder / "rec.toml")])
             base_cpu, base_peak, _ = measure([YARDSTICK, str(log), ",".join(map(str, used))])
-            start_cpu, start_peak, _ = measure([CHAIN + "\nimport baseparams.identify.recording\nprint(0)"])
+            start_cpu, start_peak, _ = measure([CHAIN + "\nimport baseparams.recordings.recording\nprint(0)"])
             print(f"{label}, {minutes:g} min, {size:.0f} MB: read_recording {cpu:.1f} CPU s, peak {peak:.0f} MB "
                   f"(rows, fit rows: {out}); numpy.loadtxt of the used columns {base_cpu:.1f} CPU s, peak "
                   f"{base_peak:.0f} MB; importing alone {start_cpu:.1f} s, {start_peak:.0f} MB; beyond the import "

@@ -17,7 +17,8 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.stats import chi2
 
-from baseparams.identify import longrun, selection as S
+from baseparams.identify import longrun
+from baseparams.diagnose import selection as S
 
 
 def main() -> None:

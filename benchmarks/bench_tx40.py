@@ -18,7 +18,7 @@ import numpy as np
 from baseparams import registry
 from baseparams.identify.base import BaseModel
 from baseparams.identify.fit import identify, predict
-from baseparams.identify.recording import read_data
+from baseparams.recordings.recording import read_data
 from baseparams.io.loader import load_mechanism
 from baseparams.model.mechanism import EffectSpec
 

@@ -2,7 +2,7 @@
 shapes and mismatches outside the catalogue, a payload the model lacks), with known truth.
 
 Each scenario draws a dataset on a fixed motion (a mechanism's default trajectory, or the
-TX40's recorded motion), runs :func:`baseparams.identify.diagnose.diagnose` and scores the
+TX40's recorded motion), runs :func:`baseparams.diagnose.workflow.diagnose` and scores the
 answer. A "confident wrong name" is an effect under ``effects`` (named, not ambiguous, not
 held back as unsupported) that is not the truth (or, for a mismatch outside the catalogue,
 not in its short list of acceptable names: friction kinds on the joint whose friction has
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baseparams.identify.diagnose import Problem, diagnose, prepare
-from baseparams.identify.model import evaluate
-from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
+from baseparams.diagnose.workflow import Problem, diagnose, prepare
+from baseparams.dynamics.forces import evaluate
+from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import resolve
 
 NOISE = 0.02
@@ -305,7 +305,7 @@ def payload(s: Setting, rng, rho=0.0, mass_fraction=None):
     true[10 * k:10 * k + 10] += extra
     clean = s.problem.inertial @ true
     sd = NOISE * np.sqrt(np.mean(clean ** 2, axis=0))
-    from baseparams.identify.derived import body_name
+    from baseparams.diagnose.derived import body_name
     name = body_name(s.mechanism, s.mechanism.bodies[k].label)
     return clean + noise(rng, clean.shape, sd, rho), name, m, phi
 
@@ -353,7 +353,7 @@ def motor_side_recording(folder, seed: int, hidden=(), *, delay: float = 0.0, rh
     from pathlib import Path
 
     from baseparams.dynamics.trajectory import Trajectory
-    from baseparams.identify.model import Motion, design, effect_values
+    from baseparams.dynamics.forces import Motion, design, effect_values
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
     from baseparams.model.mechanism import EffectSpec

@@ -14,8 +14,8 @@ from baseparams.cli import main
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.fit import identify
-from baseparams.identify.model import evaluate
-from baseparams.identify.simulate import simulate
+from baseparams.dynamics.forces import evaluate
+from baseparams.recordings.simulate import simulate
 from baseparams.io.loader import parse_mechanism
 from baseparams.io.toml_writer import mechanism_toml
 from baseparams.model import generate

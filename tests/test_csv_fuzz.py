@@ -13,8 +13,8 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify.data import write_measured
-from baseparams.identify.simulate import simulate
+from baseparams.recordings.data import write_measured
+from baseparams.recordings.simulate import simulate
 from baseparams.io.loader import resolve
 
 MECH = "planar_2r"

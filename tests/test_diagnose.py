@@ -15,12 +15,13 @@ from baseparams.cli import main
 from baseparams.dynamics.effects import Effect
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
-from baseparams.identify import longrun, selection as S
+from baseparams.identify import longrun
+from baseparams.diagnose import selection as S
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify import whiteness
-from baseparams.identify.diagnose import decimal_text, diagnose, prepare, write_fixed
-from baseparams.identify.model import evaluate
-from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
+from baseparams.diagnose import whiteness
+from baseparams.diagnose.workflow import decimal_text, diagnose, prepare, write_fixed
+from baseparams.dynamics.forces import evaluate
+from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec

@@ -40,8 +40,8 @@ def test_a_delay_on_the_sla_names_no_absurd_effect_on_a_passive_hub(sla):
 def _sparse_case(size: float, seed: int):
     """planar_2r with a force acting on about 20 of 1,200 samples (under MIN_SUPPORT) hidden at
     ``size`` noise SDs on q1, white noise; selection (unwhitened) cannot test it for support."""
-    from baseparams.identify.diagnose import reduced_model
-    from baseparams.identify.selection import Candidate, select
+    from baseparams.diagnose.workflow import reduced_model
+    from baseparams.diagnose.selection import Candidate, select
     s = C.setting("planar_2r", 1200)
     n, f, _ = s.problem.inertial.shape
     t = s.motion.t
@@ -64,7 +64,7 @@ def test_a_candidate_refused_for_its_support_is_tested_beside_the_final_model(si
     model with the residual's own variance; significant, it is an unsupported entry, which
     holds the verdict back (before: nothing was said, and the verdict could be "nothing
     missing", exit 0). Nothing hidden: nothing is entered."""
-    from baseparams.identify.diagnose import _sparse_left
+    from baseparams.diagnose.workflow import _sparse_left
     model, y, candidates, chosen = _sparse_case(size, 3)
     last = chosen.steps[-1]
     index = len(candidates) - 1

@@ -1,6 +1,6 @@
 """What changed between recordings (``diagnose CHANGED --baseline BASE``): on simulated pairs
 of runs with a known change, coloured noise and model errors common to both sides
-(core/identify/simulate.py, simulate_change), the change is named on the right body or
+(core/recordings/simulate.py, simulate_change), the change is named on the right body or
 coordinate with its value, and nothing is named when nothing changed."""
 
 import json
@@ -11,10 +11,10 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify.change import diagnose_change, pair
-from baseparams.identify.changesearch import ar_whitening, rest_test
-from baseparams.identify.data import write_measured
-from baseparams.identify.simulate import coloured_noise, simulate_change
+from baseparams.diagnose.change import diagnose_change, pair
+from baseparams.diagnose.changesearch import ar_whitening, rest_test
+from baseparams.recordings.data import write_measured
+from baseparams.recordings.simulate import coloured_noise, simulate_change
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 
@@ -74,7 +74,7 @@ def test_payload_on_a_generated_chain():
     result = diagnose_change(mechanism, before, after)
     last = f"body:{result.changes[0]['coordinate']}" if result.changes else None
     assert last is not None and result.changes[0]["kind"] in ("body", "mass")
-    from baseparams.identify.derived import body_name
+    from baseparams.diagnose.derived import body_name
     assert result.changes[0]["coordinate"] == body_name(mechanism, mechanism.bodies[-1].label)
     m = result.changes[0]["coefficients"]["m"]
     if m["value"] is not None:                  # identifiable on this chain
@@ -150,7 +150,7 @@ KINOVA = Path(__file__).parent / "data" / "kinova_gen3"
 @pytest.fixture(scope="module")
 def kinova_repeat():
     """A real pair: one commanded motion recorded twice by a Kinova Gen3 (motor currents)."""
-    from baseparams.identify.recording import read_data
+    from baseparams.recordings.recording import read_data
     mechanism = resolve(str(KINOVA / "gen3.urdf"))
     before, mechanism = read_data([str(KINOVA / "repeat_RunTrajectory1.toml")], mechanism)
     after, _ = read_data([str(KINOVA / "repeat_Trajectory1.toml")], mechanism)
@@ -169,7 +169,7 @@ def test_real_repeat_with_a_payload_hidden_in_the_second_run(kinova_repeat, mass
     """Real noise and real model errors, a known truth: the torque of a payload on the last
     link (6 cm down its axis) added to the second run's currents."""
     import dataclasses
-    from baseparams.identify.derived import body_columns
+    from baseparams.diagnose.derived import body_columns
     from baseparams.identify.fit import measured_design
     mechanism, before, after = kinova_repeat
     inertial, _, _ = measured_design(mechanism, after, [], [])

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from baseparams.identify import whiteness
-from baseparams.identify.diagnose import diagnose
+from baseparams.diagnose import whiteness
+from baseparams.diagnose.workflow import diagnose
 from baseparams.identify.linear import WeightedLinearModel
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))

@@ -77,8 +77,8 @@ def test_a_named_effect_is_physical_in_the_final_model():
     SLA simulated without noise, at a version of this check's session, a rotor inertia judged
     positive beside effects held back later was -162 without them, and was named); an
     ambiguous group's member (not named) and a physical effect are left alone."""
-    from baseparams.identify import diagnose as D
-    from baseparams.identify.selection import Candidate
+    from baseparams.diagnose import workflow as D
+    from baseparams.diagnose.selection import Candidate
     n = 10
     cands = [Candidate("rotor_inertia", "q1", ("Ia",), np.zeros((n, 1, 1))),
              Candidate("viscous_friction", "q1", ("fv",), np.zeros((n, 1, 1))),

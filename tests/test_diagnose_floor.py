@@ -10,9 +10,9 @@ import pytest
 import statsmodels.api as sm
 
 from baseparams.cli.diagnose import render_text
-from baseparams.identify import selection as S
+from baseparams.diagnose import selection as S
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify.diagnose import Problem, diagnose, holdout_floor, nrms
+from baseparams.diagnose.workflow import Problem, diagnose, holdout_floor, nrms
 from baseparams.io.loader import resolve
 
 N, TRAIN, P = 100, 70, 4

@@ -12,12 +12,14 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify import longrun, selection as S
+from baseparams.identify import longrun
+from baseparams.diagnose import selection as S
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify.diagnose import diagnose, prepare
-from baseparams.identify.model import evaluate
-from baseparams.identify.outofsample import cross_validate, implausible, stability
-from baseparams.identify.simulate import trajectory_motion
+from baseparams.diagnose.workflow import diagnose, prepare
+from baseparams.dynamics.forces import evaluate
+from baseparams.diagnose.outofsample import cross_validate, stability
+from baseparams.identify.impossible import implausible
+from baseparams.recordings.simulate import trajectory_motion
 from baseparams.io.loader import resolve
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
@@ -175,7 +177,7 @@ def test_one_drives_delay_is_a_candidate_only_when_named(puma, planar):
     """``delay`` alone is the recording's delay; ``delay:COORD`` one drive's own, on a
     mechanism with several coordinates."""
     from baseparams.errors import InputError
-    from baseparams.identify.candidates import parse_selection
+    from baseparams.diagnose.candidates import parse_selection
     assert parse_selection(puma.mechanism, ["delay"]) == [("delay", "all")]
     assert parse_selection(puma.mechanism, ["delay:q2"]) == [("delay", "q2")]
     one = C.generated_setting("four_bar2", 100)
@@ -365,7 +367,7 @@ def test_verb_params_payload_and_verdict_first(tmp_path):
     motion = trajectory_motion(mech, 400)
     sample = evaluate(mech, motion)
     problem = prepare(mech, motion, sample)
-    from baseparams.identify.model import standard_parameters
+    from baseparams.dynamics.forces import standard_parameters
     phi = standard_parameters(resolve(str(phi_file)))
     true = phi.copy()
     true[10 * (len(mech.bodies) - 1)] += 0.5   # half a kilogram at the last link's frame origin
@@ -411,7 +413,7 @@ def test_max_steps_when_hit_is_reported(puma):
 def test_smooth_coulomb_and_delay_on_generated_mechanisms(text):
     """Not only the built-ins: a generated chain and tree, a smooth Coulomb law on the first
     coordinate and a 1.5-sample delay, each named (the four-bar: the next test)."""
-    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.recordings.simulate import random_physical_inertia
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
     m = parse_mechanism(generate.serial_chain(4) if text == "chain4" else generate.tree(1))
@@ -439,7 +441,7 @@ def test_delay_on_a_generated_four_bar_is_not_taken_for_friction():
     or none). Before the delay's column was fitted with the model and low-passed, viscous
     friction on a dependent joint was named for it in half the datasets at effect/noise 5 and
     in 8 of 30 below."""
-    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.recordings.simulate import random_physical_inertia
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
     m = parse_mechanism(generate.four_bar(2))
@@ -466,10 +468,10 @@ def test_delay_column_is_the_true_torque_rate():
     2-sample delay, 2 % noise): within 10 % (3-8 % measured; 12-43 % without the low-pass),
     where the model fitted alone and differentiated as it is gives 24-51 % (its fitted noise
     in fast directions of the model's span)."""
-    from baseparams.identify import derived
-    from baseparams.identify.data import bandwidth
-    from baseparams.identify.diagnose import reduced_model
-    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.diagnose import derived
+    from baseparams.recordings.data import bandwidth
+    from baseparams.diagnose.workflow import reduced_model
+    from baseparams.recordings.simulate import random_physical_inertia
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
     m = parse_mechanism(generate.four_bar(2))
@@ -589,7 +591,7 @@ def test_what_stands_in_for_another_joints_elastic_lag_is_not_named(monkeypatch)
     the lag of every joint's torque outdoes them, so nothing is named. (Judged on the typical
     held-out block, the offset on q4 is already too small to name: 5.7 %. With that size gate
     off, the lag's check still holds back the first dataset's offset.)"""
-    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.diagnose import workflow as diagnose_module
     s = C.generated_setting("chain4", 1200)
     outdone = 0
     for state in CHAIN_ELASTIC:
@@ -656,7 +658,7 @@ def test_one_elastic_joints_lag_is_not_named_the_recordings_delay(monkeypatch):
     chain agree on every joint and stay named. (In the first dataset, once two ambiguous
     groups that predicted no held-out block left the model, the delay is too small to name
     before that check; with that size gate off, the per-joint check holds it back on both.)"""
-    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.diagnose import workflow as diagnose_module
     s = C.generated_setting("chain4", 1200)
     for state in CHAIN_ELASTIC_DELAY:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
@@ -687,7 +689,7 @@ def test_an_ambiguous_group_that_predicts_no_held_out_block_leaves_the_model():
     hidden effect's column are kept. (On the TX40, a group of position and Stribeck friction
     on joint 2 improved the held-out blocks by 0.15 %; beside it Coulomb friction on that
     joint was too small to name, and both left.)"""
-    from baseparams.identify.diagnose import _gate
+    from baseparams.diagnose.workflow import _gate
     rng = np.random.default_rng(3)
     n = 600
     t = np.linspace(0.0, 10.0, n)
@@ -712,8 +714,8 @@ def test_the_delays_low_pass_is_chosen_by_the_data(monkeypatch):
     joint was named instead (the fast part of the derivative, which tells them apart after
     whitening, filtered away); with the low-pass a shape chosen from 10, 20 and 40 times, the
     delay is named, at a wider low-pass, and within 5 % of the truth."""
-    from baseparams.identify import derived
-    from baseparams.identify.data import bandwidth
+    from baseparams.diagnose import derived
+    from baseparams.recordings.data import bandwidth
     s = C.generated_setting("four_bar2", 1200)
     data = C.delay(s, _at(FOUR_BAR_AR_DELAY), rho=0.9)
     d = diagnose(s.problem, data.tau)
@@ -731,7 +733,7 @@ def test_held_out_gain_is_the_typical_blocks_improvement():
     """The geometric mean over blocks of SSE without / SSE with, minus 1: a block both models
     extrapolate badly (its SSE scaled by the same factor in both) does not move it, where it
     decided the ratio of the totals; a block both predict exactly counts as no change."""
-    from baseparams.identify.outofsample import CrossValidation, held_out_gain
+    from baseparams.diagnose.outofsample import CrossValidation, held_out_gain
     residual = np.zeros((5, 1))
     whole = CrossValidation(residual, np.array([1.0, 2.0, 1.0, 4.0, 2.0]))
     ratios = np.array([4.0, 9.0, 2.0, 1.0, 0.5])
@@ -753,7 +755,7 @@ def test_a_block_that_cannot_determine_an_effect_does_not_count_against_it():
     variances computed directly. Such a block does not count against the effect (it counts
     for it when the effect predicts it better anyway), unless fewer than half the blocks
     determine it."""
-    from baseparams.identify.outofsample import CrossValidation, blocks, held_out_gain
+    from baseparams.diagnose.outofsample import CrossValidation, blocks, held_out_gain
     rng = np.random.default_rng(4)
     n = 500
     t = np.linspace(0, 10, n)
@@ -795,9 +797,9 @@ def test_a_block_that_cannot_determine_an_effect_does_not_hold_it_back():
     that block does not count against it, in 7, and in the eighth cogging (harmonics of q,
     correlation 0.995 with the spring beyond the model, adding over it at p 0.014) is named
     with the spring as its rival."""
-    from baseparams.identify import diagnose as diagnose_module
-    from baseparams.identify import outofsample
-    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import outofsample
+    from baseparams.recordings.simulate import random_physical_inertia
     s = C.setting("pendulum", 1000)
     spring = next(c for c in s.problem.candidates if c.kind == "spring")
     q = np.asarray(s.motion.q, float).reshape(s.motion.count, -1)[:, 0]
@@ -833,7 +835,7 @@ def test_effects_that_cancel_each_other_are_not_named(puma_1200, monkeypatch):
     cogging on q3 fitted it together with forces ~240 times the joint's torque, cancelling to a
     few N m, each significant and steady over the blocks. No such force acts in a mechanism:
     both are held back (without the check, both are named)."""
-    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.diagnose import workflow as diagnose_module
     data = C.OUTSIDE["ripple"](puma_1200, _at(PUMA_RIPPLE_AR), rho=0.9)
     d = diagnose(puma_1200.problem, data.tau)
     assert _named(d) == set()
@@ -847,7 +849,7 @@ def test_an_effect_that_dominates_the_torque_is_not_taken_for_cancelling():
     """The cancelling check compares a force with the measured torque, which holds a real
     effect: a spring on a generated chain's q2 with 20 times the inertial torque's RMS is
     named, with its stiffness, and not held back."""
-    from baseparams.identify.simulate import random_physical_inertia
+    from baseparams.recordings.simulate import random_physical_inertia
     s = C.generated_setting("chain4", 1200)
     spring = next(c for c in s.problem.candidates if c.kind == "spring" and c.coordinate == "q2")
     q2 = np.asarray(s.motion.q, float).reshape(s.motion.count, -1)[:, 1]
@@ -873,7 +875,7 @@ def test_one_badly_extrapolated_block_does_not_hold_back_a_true_effect(monkeypat
     last held-out block is extrapolated badly with or without it; judged on the totals it
     'did not predict held-out blocks better' (-4 %) while the other four blocks improved 6 to
     33 times. Judged on the typical block (:func:`held_out_gain`) it is named."""
-    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.diagnose import workflow as diagnose_module
     s = C.generated_setting("four_bar2", 1200)
     data = C.INSIDE["viscous"](s, _at(FOUR_BAR_AR_VISCOUS), rho=0.9)
     d = diagnose(s.problem, data.tau)
@@ -896,7 +898,7 @@ def test_viscous_friction_standing_in_for_an_elastic_lag_is_held_back(monkeypatc
     viscous force, and viscous friction was named (it predicts four of five held-out blocks
     better). It must add over every resonant lag of the grid, as the delay must: it does not,
     and is held back with that reason; without the check it is named."""
-    from baseparams.identify import diagnose as diagnose_module
+    from baseparams.diagnose import workflow as diagnose_module
     s = C.generated_setting("four_bar2", 1200)
     data = C.compliance(s, _at(FOUR_BAR_AR_ELASTIC), rho=0.9)
     d = diagnose(s.problem, data.tau)
@@ -930,7 +932,7 @@ def test_harmonics_of_q_are_default_candidates_on_angles_only():
     Coulomb friction plus a slope: the Stewart platform's legs had Coulomb friction named for
     position friction and the reverse in 9 of 40 pairs. By default they are tried on angles
     only; named explicitly (KIND:COORD) they are still tried on a length."""
-    from baseparams.identify.candidates import all_pairs, parse_selection
+    from baseparams.diagnose.candidates import all_pairs, parse_selection
     m = resolve("stewart_platform")
     angles = [c for c in m.coordinates if m.is_angle(c)]
     lengths = [c for c in m.coordinates if not m.is_angle(c)]
@@ -964,8 +966,8 @@ def test_friction_the_model_has_but_the_data_lack_is_corrected_not_stood_in_for(
 def test_position_friction_that_drives_the_motion_is_not_friction():
     """Position friction fcc -3 about the PUMA's q2 travel resists nowhere (a negative
     Coulomb friction in its clothes): held back with the reason; +3 resists and passes."""
-    from baseparams.identify.diagnose import _unphysical
-    from baseparams.identify.simulate import trajectory_motion as motion_of
+    from baseparams.diagnose.workflow import _unphysical
+    from baseparams.recordings.simulate import trajectory_motion as motion_of
     m = resolve("puma560")
     problem = prepare(m, motion_of(m, 300))
     cand = next(c for c in problem.candidates if (c.kind, c.coordinate) == ("position_friction", "q2"))
@@ -974,7 +976,7 @@ def test_position_friction_that_drives_the_motion_is_not_friction():
 
 
 def _puma_with(tmp_path, effects) -> Path:
-    from baseparams.identify.diagnose import effects_toml
+    from baseparams.diagnose.workflow import effects_toml
     from baseparams.model.mechanism import EffectSpec
     mech = tmp_path / "puma_known.toml"
     mech.write_text(Path(resolve("puma560").path).read_text() + "\n"
@@ -1012,9 +1014,9 @@ def test_an_effect_the_model_knows_is_corrected_to_the_datas_value(tmp_path, kno
 def test_a_correction_whose_total_is_not_physical_is_held_back():
     """A correction is judged on the total: -1.5 beside a known fv = 1 is a negative viscous
     friction (not named), -0.5 is fine; without a known value -0.5 is not."""
-    from baseparams.identify.diagnose import _unphysical, effects_toml
+    from baseparams.diagnose.workflow import _unphysical, effects_toml
     from baseparams.io.loader import parse_mechanism
-    from baseparams.identify.simulate import trajectory_motion as motion_of
+    from baseparams.recordings.simulate import trajectory_motion as motion_of
     from baseparams.model.mechanism import EffectSpec
     text = Path(resolve("puma560").path).read_text()
     for known, correction, physical in ((1.0, -1.5, False), (1.0, -0.5, True), (None, -0.5, False)):

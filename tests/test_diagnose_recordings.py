@@ -16,8 +16,8 @@ from click.testing import CliRunner
 from scipy.signal import butter
 
 from baseparams.cli import main
-from baseparams.identify.data import Segment
-from baseparams.identify.whiteness import coloured_noise
+from baseparams.recordings.data import Segment
+from baseparams.diagnose.whiteness import coloured_noise
 from baseparams.io.loader import resolve
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
@@ -174,7 +174,7 @@ def test_frames_fixed_to_a_link_are_one_rigid_body_among_the_candidates(tmp_path
     (on the link the moving joint carries), and a point mass is one candidate per distinct
     point, found through the fixed joints' offsets and rotations (``back`` returns to
     wrist_3_link's origin through ee_link's quarter turn; tool0 shares ee_link's origin)."""
-    from baseparams.identify import derived
+    from baseparams.diagnose import derived
     urdf = tmp_path / "ur5.urdf"
     urdf.write_text(_ur5_with_frames())
     mechanism = resolve(str(urdf))
@@ -221,10 +221,10 @@ def test_diagnose_builds_long_recordings_chunk_by_chunk_like_identify(tmp_path, 
     inertial parameters held as given) and candidates come out of the chunked build (bounded
     memory: a Panda logged 120 s at 1 kHz held 3.6 GB before) as the whole recording's
     columns evaluated at once and filtered: the real TX40 subset, two runs."""
-    from baseparams.identify import data as data_module
-    from baseparams.identify.diagnose import prepare
-    from baseparams.identify.model import design, evaluate, standard_parameters
-    from baseparams.identify.recording import read_recording
+    from baseparams.recordings import data as data_module
+    from baseparams.diagnose.workflow import prepare
+    from baseparams.dynamics.forces import design, evaluate, standard_parameters
+    from baseparams.recordings.recording import read_recording
     tx40 = Path(__file__).parent / "data" / "tx40"
     text = (tx40 / "recording.toml").read_text().replace("pos_read_data.csv", str(tx40 / "pos_read_data.csv")) \
         .replace("curr_data.csv", str(tx40 / "curr_data.csv"))
@@ -276,7 +276,7 @@ def test_quantised_currents_are_not_taken_for_structure(tmp_path):
 
 
 def test_the_grid_a_signal_was_logged_on_is_found_and_only_a_grid():
-    from baseparams.identify.recording import quantum
+    from baseparams.recordings.recording import quantum
     rng = np.random.default_rng(3)
     x = np.cumsum(rng.standard_normal(5000))
     assert quantum(np.round(x / 0.007) * 0.007) == pytest.approx(0.007, rel=1e-9)
@@ -291,7 +291,7 @@ def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
     """A named effect whose rival correlates with it at 0.999 beyond the model and which it
     outdoes at p 0.031 only gets a note naming the rival; a rival it outdoes at p 1e-6, or a
     less correlated one, does not."""
-    from baseparams.identify.diagnose import _near_twins
+    from baseparams.diagnose.workflow import _near_twins
     effects = [{"kind": "body", "coordinate": "arm_6_link", "rivals": [
         {"candidate": "body:arm_7_link", "correlation": 0.9993, "pvalue_named_over_rival": 0.031},
         {"candidate": "mass:arm_7_link", "correlation": 0.9995, "pvalue_named_over_rival": 1e-6},
@@ -303,8 +303,8 @@ def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
 def test_a_negative_stribeck_friction_beside_a_sign_law_coulomb_says_what_it_may_be():
     """A Stribeck friction with fs < 0 is not physical alone; where the model has a sign-law
     Coulomb friction, its reason says what it may stand for: a smoother Coulomb law."""
-    from baseparams.identify.diagnose import Problem, _unphysical
-    from baseparams.identify.selection import Candidate
+    from baseparams.diagnose.workflow import Problem, _unphysical
+    from baseparams.diagnose.selection import Candidate
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate
     text = generate.serial_chain(1, bodies=2, types="R")

@@ -13,9 +13,9 @@ from baseparams import registry
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.identify.base import BaseModel
 from baseparams.identify.fit import identify
-from baseparams.identify.model import Motion, design
-from baseparams.identify.recording import read_data
-from baseparams.identify.simulate import random_physical_inertia
+from baseparams.dynamics.forces import Motion, design
+from baseparams.recordings.recording import read_data
+from baseparams.recordings.simulate import random_physical_inertia
 from baseparams.io.loader import resolve
 from baseparams.numeric.backends import Float64
 

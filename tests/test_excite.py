@@ -23,8 +23,8 @@ from baseparams.excite.plan import Settings, plan, problem_of
 from baseparams.excite.tangent import tree_regressor_with_tangents
 from baseparams.identify.base import BaseModel
 from baseparams.identify.fit import identify
-from baseparams.identify.model import standard_parameters
-from baseparams.identify.simulate import simulate
+from baseparams.dynamics.forces import standard_parameters
+from baseparams.recordings.simulate import simulate
 from baseparams.io.loader import load_mechanism, parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.numeric.backends import Float64
@@ -95,8 +95,8 @@ def test_closed_loop_tangents_equal_central_differences_of_the_evaluated_regress
     """K = R^T K_tree along the closure, and the singularity margin: their derivatives in z,
     zd, zdd against central differences of the evaluator's own Newton-solved samples."""
     from baseparams.excite.loops import regressor_with_tangents
-    from baseparams.identify.model import Motion, evaluate, inertial_columns
-    from baseparams.identify.simulate import trajectory_motion
+    from baseparams.dynamics.forces import Motion, evaluate, inertial_columns
+    from baseparams.recordings.simulate import trajectory_motion
     mechanism = resolve(name)
     f = len(mechanism.independent)
     rng = np.random.default_rng(7)
@@ -312,7 +312,7 @@ def test_tx40_planned_motion_beats_its_trajectory_and_its_recording(tmp_path):
     result = _run("excite", TX40, "-o", out, "--starts", "2", "--report", report, "--quiet")
     assert result.exit_code == 0, result.output
     data = json.loads(report.read_text())
-    from baseparams.identify.recording import read_data
+    from baseparams.recordings.recording import read_data
     mechanism = load_mechanism(TX40)
     recorded, model = read_data([str(DATA / "tx40" / "recording.toml")], mechanism)
     recorded_condition = identify(model, recorded, base=_base(mechanism)).condition_number
@@ -336,7 +336,7 @@ def test_sla_planned_motion_keeps_the_margin_and_rank_41_certified(tmp_path):
     solved = registry.solvers()["vp"].item.solve(written)
     assert solved.rank == 41 and solved.certified
     # the margin recomputed from the written file's own samples, ten times finer
-    from baseparams.identify.model import Motion, evaluate
+    from baseparams.dynamics.forces import Motion, evaluate
     spec = written.trajectory
     t = np.linspace(0, float(spec.t_end), 10 * (spec.samples - 1) + 1)
     values = [values_at(spec.expressions[name], Float64(), t) for name in written.independent]

@@ -131,7 +131,7 @@ def test_the_first_bad_field_is_named_by_row_then_column_in_any_batch(monkeypatc
     first bad field in the file's order (row, then column), and a row with the wrong number of
     fields after it comes first, as it did when every row was read before any number."""
     from baseparams.errors import InputError
-    from baseparams.identify import data as data_module
+    from baseparams.recordings import data as data_module
     text = "t,a,b\n" + "".join(f"{k},{k},{k}\n" for k in range(20))
     rows = text.splitlines()
     rows[9], rows[6] = "8,x,8", "5,5,y"                     # b on line 7 before a on line 10

@@ -16,11 +16,11 @@ from baseparams import registry
 from baseparams.cli import main
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
-from baseparams.identify.diagnose import prepare
+from baseparams.diagnose.workflow import prepare
 from baseparams.identify.fit import identify
-from baseparams.identify.model import Motion, evaluate, standard_parameters
-from baseparams.identify.recording import read_data
-from baseparams.identify.simulate import trajectory_motion
+from baseparams.dynamics.forces import Motion, evaluate, standard_parameters
+from baseparams.recordings.recording import read_data
+from baseparams.recordings.simulate import trajectory_motion
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.model.held import hold

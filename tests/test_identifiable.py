@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from baseparams.api.render import diagnosis_text
-from baseparams.identify.derived import body_name
-from baseparams.identify.diagnose import diagnose
-from baseparams.identify.identifiable import regroup
+from baseparams.diagnose.derived import body_name
+from baseparams.diagnose.workflow import diagnose
+from baseparams.diagnose.identifiable import regroup
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diagnose_campaign as C  # noqa: E402
@@ -115,7 +115,7 @@ def test_a_payload_under_coloured_noise_is_named_as_a_body_not_its_point_mass_st
 def test_the_stability_spread_of_one_coefficient_is_its_relative_spread():
     """Measured in the force the effect exerts, the spread of a one-coefficient effect is the
     same ratio as in its coefficient (the rows' scale cancels)."""
-    from baseparams.identify.outofsample import block_coefficients, stability
+    from baseparams.diagnose.outofsample import block_coefficients, stability
     rng = np.random.default_rng(5)
     n = 600
     columns = rng.standard_normal((n, 2, 1))
@@ -133,9 +133,9 @@ def test_named_bodies_that_the_motion_moves_alike_are_said_to_share_what_they_ad
     """Two named changed bodies whose masses move the joints alike: each mass is determined
     alone, not beside the other (a Z1's payload named as 0.395 kg on link06 and 0.557 kg on
     link04): the report says the split is not in the data, once for the pair."""
-    from baseparams.identify import diagnose as D
-    from baseparams.identify.derived import COEFFICIENTS
-    from baseparams.identify.selection import Candidate
+    from baseparams.diagnose import workflow as D
+    from baseparams.diagnose.derived import COEFFICIENTS
+    from baseparams.diagnose.selection import Candidate
     rng = np.random.default_rng(6)
     n, f = 300, 2
     a, b = rng.standard_normal((n, f, 10)), rng.standard_normal((n, f, 10))

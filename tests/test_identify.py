@@ -23,11 +23,11 @@ from baseparams.cli.identify import parse_effect
 from baseparams.errors import InputError
 from baseparams.identify import physical
 from baseparams.identify.base import BaseModel
-from baseparams.identify.data import write_measured
+from baseparams.recordings.data import write_measured
 from baseparams.identify.fit import identify, split_effects
-from baseparams.identify.model import design
+from baseparams.dynamics.forces import design
 from baseparams.identify.physical import physical_fit, pseudo_inertia
-from baseparams.identify.simulate import simulate
+from baseparams.recordings.simulate import simulate
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec

@@ -1,4 +1,4 @@
-"""The identification model (baseparams.identify.model) and the mechanism file's [[effects]].
+"""The identification model (baseparams.dynamics.forces) and the mechanism file's [[effects]].
 
 Checked against independent computations: the inertial columns against the observation
 matrix W that the solvers use; an effect on a dependent coordinate against virtual work
@@ -12,7 +12,7 @@ import pytest
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.observation import observation_matrix
 from baseparams.errors import InputError
-from baseparams.identify.model import (Motion, design, effect_values, evaluate, independent_names,
+from baseparams.dynamics.forces import (Motion, design, effect_values, evaluate, independent_names,
                                        standard_parameters)
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate

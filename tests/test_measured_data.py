@@ -1,4 +1,4 @@
-"""Measured data (baseparams.identify.data): the CSV layout read and written exactly, and the
+"""Measured data (baseparams.recordings.data): the CSV layout read and written exactly, and the
 Savitzky-Golay derivatives checked against the trajectory's exact derivatives."""
 
 from pathlib import Path
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from baseparams.errors import InputError
-from baseparams.identify.data import (MIN_SAMPLES, MeasuredData, atomic_write, read_measured,
+from baseparams.recordings.data import (MIN_SAMPLES, MeasuredData, atomic_write, read_measured,
                                       savgol_derivatives, savgol_window, write_measured)
-from baseparams.identify.model import Motion
-from baseparams.identify.simulate import simulate
+from baseparams.dynamics.forces import Motion
+from baseparams.recordings.simulate import simulate
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 

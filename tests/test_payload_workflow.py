@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.identify.diagnose import effects_toml
+from baseparams.diagnose.workflow import effects_toml
 from baseparams.io.loader import resolve
 from baseparams.model.mechanism import EffectSpec
 
@@ -22,10 +22,10 @@ def test_effect_on_every_coordinate_leaves_out_one_held_still(tmp_path):
     a note. Before, the command failed (exit 2: fv_q6 has no effect on these data), and
     KIND:* gave the user no way to drop one (an SO-101 whose gripper does not move)."""
     from baseparams.api import identify
-    from baseparams.identify.model import standard_parameters
-    from baseparams.identify.simulate import trajectory_motion
-    from baseparams.identify.diagnose import prepare
-    from baseparams.identify.model import evaluate
+    from baseparams.dynamics.forces import standard_parameters
+    from baseparams.recordings.simulate import trajectory_motion
+    from baseparams.diagnose.workflow import prepare
+    from baseparams.dynamics.forces import evaluate
     mechanism = resolve("puma560")
     motion = trajectory_motion(mechanism, 1500)
     motion.q[:, 5], motion.qd[:, 5], motion.qdd[:, 5] = 0.2, 0.0, 0.0
@@ -146,8 +146,8 @@ def test_an_identify_result_held_as_given_keeps_the_models_own_masses_where_the_
     of all that do, are the nearest to the mechanism's own inertias (the least-norm ones put
     a Panda's last link at -1.1e7 kg, and a payload there was held back for a negative mass).
     Every mass stays positive."""
-    from baseparams.identify.given import given_parameters
-    from baseparams.identify.model import standard_parameters
+    from baseparams.diagnose.given import given_parameters
+    from baseparams.dynamics.forces import standard_parameters
     fitted, _ = _planar_runs(tmp_path, "0.4")
     mechanism = resolve("planar_2r")
     given = given_parameters(mechanism, str(fitted))

@@ -17,11 +17,11 @@ from baseparams.cli import main
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
-from baseparams.identify.data import bandwidth
+from baseparams.recordings.data import bandwidth
 from baseparams.identify.fit import identify, predict
-from baseparams.identify.model import Motion, design, effect_values
-from baseparams.identify.recording import read_data, read_recording
-from baseparams.identify.simulate import random_physical_inertia
+from baseparams.dynamics.forces import Motion, design, effect_values
+from baseparams.recordings.recording import read_data, read_recording
+from baseparams.recordings.simulate import random_physical_inertia
 from baseparams.io.loader import load_mechanism, parse_mechanism
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec

@@ -1,4 +1,4 @@
-"""Recordings as robots write them (baseparams.identify.recording), on data made with known
+"""Recordings as robots write them (baseparams.recordings.recording), on data made with known
 truth: raw logs on the motor side (negative gear ratios, a coupled wrist, a differential),
 currents with gains, degrees and sign conventions, zero offsets, a measured velocity without
 acceleration, irregular time stamps, two runs with a seam, a known payload; identification
@@ -19,9 +19,9 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
 from baseparams.identify.fit import identify, predict
-from baseparams.identify.model import Motion, design, effect_values
-from baseparams.identify.recording import read_data, read_recording
-from baseparams.identify.simulate import random_physical_inertia
+from baseparams.dynamics.forces import Motion, design, effect_values
+from baseparams.recordings.recording import read_data, read_recording
+from baseparams.recordings.simulate import random_physical_inertia
 from baseparams.io.loader import parse_mechanism
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec
@@ -556,7 +556,7 @@ def test_long_data_are_built_chunk_by_chunk_with_the_same_result(tmp_path, monke
     """Model columns built in chunks (bounded memory on long recordings) reduce to the same
     rows as the whole at once: the margins outlast the zero-phase filter's transient. On the
     real TX40 subset (two runs, filtered and decimated) and a payload run."""
-    from baseparams.identify import data as data_module
+    from baseparams.recordings import data as data_module
     from baseparams.io.loader import load_mechanism
     tx40 = Path(__file__).parent / "data" / "tx40"
     mech = load_mechanism(tx40 / "tx40_mdh_modified.urdf")
@@ -652,7 +652,7 @@ def test_a_joint_held_still_does_not_set_the_filter(tmp_path, still):
     the decimation, are the moving joints'. (One still Panda finger made the bandwidth 12 Hz
     instead of 0.57: the filter kept 121 Hz, the decimation was 3 instead of 70, every
     joint's residual was 3.5 times its noise and diagnose took 28 s instead of 5.)"""
-    from baseparams.identify.data import bandwidth
+    from baseparams.recordings.data import bandwidth
     mech = parse_mechanism(_chain(12))
     t = np.arange(0, 10, 1 / RATE)
     motion, tau = _truth(mech, t, random_physical_inertia(mech, np.random.default_rng(12)))
@@ -675,7 +675,7 @@ def test_a_logs_columns_no_channel_uses_are_not_read(tmp_path, monkeypatch):
     RTDE log: robot mode, safety status): they are not read, so their content is no error
     and costs no memory; the columns used come back exactly, parsed in batches of rows; a
     bad field in a used column still names its row and column, in whichever batch."""
-    from baseparams.identify import data as data_module
+    from baseparams.recordings import data as data_module
     mech = parse_mechanism(_chain(11))
     phi = random_physical_inertia(mech, np.random.default_rng(11))
     t = np.arange(0, 4, 1 / RATE)

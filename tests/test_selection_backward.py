@@ -10,11 +10,12 @@ import statsmodels.api as sm
 from scipy import stats
 from scipy.signal import lfilter
 
-from baseparams.identify import longrun, selection as S
+from baseparams.identify import longrun
+from baseparams.diagnose import selection as S
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify.diagnose import diagnose, prepare
-from baseparams.identify.model import evaluate
-from baseparams.identify.simulate import random_physical_inertia, trajectory_motion
+from baseparams.diagnose.workflow import diagnose, prepare
+from baseparams.dynamics.forces import evaluate
+from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import resolve
 
 

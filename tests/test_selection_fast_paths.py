@@ -7,8 +7,8 @@ from scipy.signal import butter, sosfiltfilt
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 from baseparams.identify import longrun
-from baseparams.identify import selection as S
-from baseparams.identify.data import zero_phase
+from baseparams.diagnose import selection as S
+from baseparams.recordings.data import zero_phase
 from baseparams.identify.linear import WeightedLinearModel
 
 
@@ -114,7 +114,7 @@ def test_zero_phase_skips_zero_columns_and_equals_sosfiltfilt():
 def test_zero_phase_in_batches_of_columns_is_the_same_filter(monkeypatch):
     """The filter takes the columns a few at a time (bounded memory on long recordings):
     runs of live columns, scattered ones and all of them give sosfiltfilt's numbers exactly."""
-    from baseparams.identify import data as data_module
+    from baseparams.recordings import data as data_module
     sos = butter(4, 0.05, output="sos")
     rng = np.random.default_rng(7)
     x = rng.standard_normal((2000, 3, 7))

@@ -1,4 +1,4 @@
-"""Synthetic measured data (baseparams.identify.simulate), checked against physics computed
+"""Synthetic measured data (baseparams.recordings.simulate), checked against physics computed
 another way: the power balance (generalized forces times velocities = the time derivative
 of the energy, from the energy forms rather than the regressor), the pendulum's closed
 form, the virtual power of an effect on a dependent coordinate, and the noise statistics."""
@@ -8,9 +8,9 @@ import pytest
 from scipy import stats
 
 from baseparams.errors import InputError
-from baseparams.identify.model import evaluate
+from baseparams.dynamics.forces import evaluate
 from baseparams.identify.physical import pseudo_inertia
-from baseparams.identify.simulate import random_physical_inertia, simulate
+from baseparams.recordings.simulate import random_physical_inertia, simulate
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.model.mechanism import EffectSpec

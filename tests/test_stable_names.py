@@ -11,15 +11,15 @@ from click.testing import CliRunner
 
 from baseparams.api.render import diagnosis_text
 from baseparams.cli import main
-from baseparams.identify import diagnose as D
+from baseparams.diagnose import workflow as D
 from baseparams.identify.impossible import PHYSICAL_SCALE, beyond_scale
-from baseparams.identify.recording import read_data
-from baseparams.identify.selection import Candidate, Step, Test as WaldTest
+from baseparams.recordings.recording import read_data
+from baseparams.diagnose.selection import Candidate, Step, Test as WaldTest
 from baseparams.io.loader import resolve
 
 from test_diagnose import _data, _problem
 from test_held import URDF, _still, _torques
-from baseparams.identify.simulate import trajectory_motion
+from baseparams.recordings.simulate import trajectory_motion
 
 
 # ----- a named effect's Holm p ------------------------------------------------------------------

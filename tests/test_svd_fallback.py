@@ -13,10 +13,10 @@ the failure is forced here by making numpy's SVD raise."""
 import numpy as np
 import pytest
 
-from baseparams.identify.diagnose import reduced_model
+from baseparams.diagnose.workflow import reduced_model
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.longrun import long_run_each
-from baseparams.identify.selection import orthonormal_basis
+from baseparams.diagnose.selection import orthonormal_basis
 from baseparams.numeric.linalg import svd
 
 NUMPY_SVD = np.linalg.svd

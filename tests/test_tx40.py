@@ -71,8 +71,8 @@ def test_the_pipeline_does_not_bias_friction_on_tx40_like_logs(tmp_path):
 
     from baseparams.identify.base import BaseModel
     from baseparams.identify.fit import identify
-    from baseparams.identify.model import design, effect_values, standard_parameters
-    from baseparams.identify.recording import read_recording
+    from baseparams.dynamics.forces import design, effect_values, standard_parameters
+    from baseparams.recordings.recording import read_recording
     from baseparams.io.loader import load_mechanism
     from baseparams.model.mechanism import EffectSpec
     from baseparams import registry

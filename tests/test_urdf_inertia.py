@@ -87,7 +87,7 @@ def test_a_body_welded_to_the_ground_need_not_be_physical_for_given_parameters(t
     and no force depends on its values: diagnose --params holds the file as given without a
     word; a moving link's bad inertia is held as given too (the user's model, issue 48), with
     a note naming it (tests/test_impossible_estimates.py)."""
-    from baseparams.identify.given import given_parameters
+    from baseparams.diagnose.given import given_parameters
     fixed = BAD_ARM.replace('<link name="base"/>', '<link name="base"/>' + link(
         "antenna", "0.01", "0 0 0.1", ("1e-8", "2e-8", "0", "1e-8", "0", "1e-8"))
         + '<joint name="antenna_mount" type="fixed"><parent link="base"/><child link="antenna"/></joint>')

@@ -16,7 +16,7 @@ from baseparams import registry
 from baseparams.cli import main
 from baseparams.identify.base import BaseModel
 from baseparams.io.loader import resolve
-from baseparams.identify.model import standard_parameters
+from baseparams.dynamics.forces import standard_parameters
 
 pytest.importorskip("cvxpy", reason="identify --physical needs cvxpy (the 'physical' extra)")
 

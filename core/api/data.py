@@ -20,7 +20,7 @@ from baseparams.errors import InputError
 from .solving import DEFAULT_SOLVER, MechanismLike, Progress, get_solver, load, check_solver_options, run_solver
 
 if TYPE_CHECKING:
-    from baseparams.identify.data import MeasuredData
+    from baseparams.recordings.data import MeasuredData
     from baseparams.model.mechanism import EffectSpec, Mechanism
 
     from .results import ChangeDiagnosed, Diagnosed, Fit, Simulation
@@ -40,7 +40,7 @@ def _validation(path: str, loaded: Any, fitted: Any) -> Any:
     refer, and must hold the same ones; any other against the fitted (held) mechanism. Why:
     read against the held mechanism, the fit's own description failed: its held joints were
     no longer coordinates ("the pattern '*' matches no coordinate without a channel")."""
-    from baseparams.identify.recording import holds, read_data
+    from baseparams.recordings.recording import holds, read_data
     if not holds(path):
         return read_data([path], fitted)[0]
     measured, model = read_data([path], loaded)
@@ -71,9 +71,9 @@ def simulate(mech: MechanismLike, *, output: PathText | None = None, effects: Se
     ``effects`` (``"viscous_friction:q1=0.5"`` or EffectSpec with values) + Gaussian ``noise``
     (one SD or one per coordinate). Writes the CSV to ``output`` and the truth (JSON) to
     ``truth`` when given; the result holds both (``.data``, ``.truth``, ``.to_frame()``)."""
-    from baseparams.identify.data import MIN_SAMPLES, write_measured
+    from baseparams.recordings.data import MIN_SAMPLES, write_measured
     from baseparams.identify.fit import split_effects
-    from baseparams.identify.simulate import simulate as run_simulation
+    from baseparams.recordings.simulate import simulate as run_simulation
     from baseparams.io.atomic import atomic_write
 
     from .effects import parse_effect, parse_noise
@@ -117,7 +117,7 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     model. ``physical``: also physically consistent standard parameters (needs cvxpy)."""
     from baseparams.identify.base import BaseModel
     from baseparams.identify.fit import fitted, identify as fit, predict, split_effects
-    from baseparams.identify.recording import read_data
+    from baseparams.recordings.recording import read_data
 
     from .effects import parse_effects
     from .results import Fit
@@ -182,7 +182,7 @@ def _physical(identification: Any, mechanism: "Mechanism", base: Any) -> None:
     """Physically consistent standard parameters into ``identification`` (its ``physical``
     and ``extras["physical_fit"]``); cvxpy's own warnings are kept as the fit's warnings."""
     from baseparams.identify import physical as consistency
-    from baseparams.identify.model import standard_parameters
+    from baseparams.dynamics.forces import standard_parameters
     prior, source = None, "least-norm parameters B^+ phi_b"
     if all(b.inertia is not None for b in mechanism.bodies):
         from baseparams.model.consistency import require_physical
@@ -224,9 +224,9 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = 
         return diagnose_change(mech, data, baseline, params=params, alpha=alpha, progress=progress)
     from dataclasses import replace
 
-    from baseparams.identify.diagnose import check_writable, diagnose_data, write_fixed
-    from baseparams.identify.given import given_parameters
-    from baseparams.identify.recording import read_data
+    from baseparams.diagnose.workflow import check_writable, diagnose_data, write_fixed
+    from baseparams.diagnose.given import given_parameters
+    from baseparams.recordings.recording import read_data
 
     from .results import Diagnosed
     paths = _paths(data)
@@ -277,7 +277,7 @@ def _value_of(entry: dict, coefficient: str) -> float:
 
 def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
     """Measured data (CSV files or recording descriptions) as the fit reads it."""
-    from baseparams.identify.recording import read_data
+    from baseparams.recordings.recording import read_data
     return read_data(_paths(data), load(mech))[0]
 
 
@@ -287,13 +287,13 @@ def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths
     payload, a gain, a friction, a delay): one model shared by both (fitted on the baseline,
     or ``params`` held as given), what both lack cancelled between samples in the same
     state, the change's candidates tested on the changed runs only
-    (:mod:`baseparams.identify.change`). ``result.closed``: nothing changed, or the named
+    (:mod:`baseparams.diagnose.change`). ``result.closed``: nothing changed, or the named
     changes explain the difference."""
     from dataclasses import replace
 
-    from baseparams.identify.change import diagnose_change as run
-    from baseparams.identify.given import given_parameters
-    from baseparams.identify.recording import read_data
+    from baseparams.diagnose.change import diagnose_change as run
+    from baseparams.diagnose.given import given_parameters
+    from baseparams.recordings.recording import read_data
 
     from .render import coordinate_kinds
     from .results import ChangeDiagnosed

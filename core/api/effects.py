@@ -24,7 +24,7 @@ def parse_effect(text: str, mechanism: Mechanism, *, values: bool) -> EffectSpec
         form = "KIND:COORD=VALUE[,VALUE] or KIND:COORD:NAME=VALUE[,NAME=VALUE]" if values else "KIND:COORD"
         raise InputError(f"expected {form}", key=key)
     kind, coordinate = parts[0].strip(), parts[1].strip()
-    from baseparams.identify.model import checked_effect    # on use, like the verbs: fast --help
+    from baseparams.dynamics.forces import checked_effect    # on use, like the verbs: fast --help
     effect = checked_effect(mechanism, kind, coordinate, key)
     if not values:
         return EffectSpec(kind, coordinate)
@@ -59,7 +59,7 @@ def _number(text: str, key: str) -> Fraction:
 
 
 def parse_noise(text: str) -> list[float] | float:
-    from baseparams.identify.data import MAX_MAGNITUDE, NUMBER
+    from baseparams.recordings.data import MAX_MAGNITUDE, NUMBER
     parts = [v.strip() for v in text.split(",")]
     if not all(NUMBER.fullmatch(v) for v in parts):
         raise InputError(f"{text!r}: expected SD or SD,SD,... (one per independent coordinate; ASCII "
@@ -73,7 +73,7 @@ def parse_noise(text: str) -> list[float] | float:
 def parse_effects(texts: Iterable[str], mechanism: Mechanism, still: Iterable[str] = ()) -> list[EffectSpec]:
     """``--effect`` values; ``KIND:*`` is the effect on every independent coordinate but the
     ``still`` ones (held still in the data: the effect has no column there)."""
-    from baseparams.identify.model import independent_names
+    from baseparams.dynamics.forces import independent_names
     out = []
     skip = set(still)
     for text in texts:
@@ -88,7 +88,7 @@ def parse_effects(texts: Iterable[str], mechanism: Mechanism, still: Iterable[st
 
 def parse_separate(text: str, mechanism: Mechanism) -> tuple[tuple[str, str], ...]:
     """``KIND:COORD,KIND:COORD`` or a ``diagnose --format json`` file (its "ambiguous" groups)."""
-    from baseparams.identify.model import checked_effect
+    from baseparams.dynamics.forces import checked_effect
     pairs = []
     path = Path(text)
     if text.endswith(".json") or path.is_file():

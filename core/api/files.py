@@ -211,7 +211,7 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
     from baseparams.excite import plan as planner
     from baseparams.excite.limits import limits_of
     from baseparams.identify.base import BaseModel
-    from baseparams.identify.model import independent_names
+    from baseparams.dynamics.forces import independent_names
     from baseparams.io.atomic import atomic_write
     from baseparams.orchestrate.jobs import MechanismText
     from baseparams.orchestrate.runners import make_runner
@@ -294,7 +294,7 @@ def _trajectory_limits(mechanism: Mechanism, names: Sequence[str]) -> tuple[str 
     trajectory (its positions are known to close), as option texts."""
     import numpy as np
 
-    from baseparams.identify.simulate import trajectory_motion
+    from baseparams.recordings.simulate import trajectory_motion
     motion = trajectory_motion(mechanism)
     lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)
     ranges = ",".join(f"{n}={float(a)!r}:{float(b)!r}" for n, a, b in zip(names, lo, hi) if a < b) or None

@@ -8,8 +8,8 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from baseparams.identify.change import ChangeDiagnosis
-    from baseparams.identify.diagnose import Diagnosis
+    from baseparams.diagnose.change import ChangeDiagnosis
+    from baseparams.diagnose.workflow import Diagnosis
     from baseparams.model.mechanism import Mechanism
 
 
@@ -113,7 +113,7 @@ def _known_text(effect: dict) -> str:
     known = effect.get("known")
     if not known:
         return ""
-    from baseparams.identify.diagnose import absent
+    from baseparams.diagnose.workflow import absent
     values = effect["value"] if isinstance(effect["value"], dict) else {next(iter(known)): effect["value"]}
     gone = all(absent(values[k] + v, v) for k, v in known.items())
     return (" correcting the model's own " + ", ".join(f"{k} = {v:.4g}" for k, v in known.items())

@@ -18,9 +18,9 @@ if TYPE_CHECKING:       # the heavy modules load when a verb runs, not on `impor
     import pandas
 
     from baseparams.excite.plan import Plan
-    from baseparams.identify.data import MeasuredData
-    from baseparams.identify.change import ChangeDiagnosis
-    from baseparams.identify.diagnose import Diagnosis
+    from baseparams.recordings.data import MeasuredData
+    from baseparams.diagnose.change import ChangeDiagnosis
+    from baseparams.diagnose.workflow import Diagnosis
     from baseparams.identify.fit import Identification, Prediction
     from baseparams.model.mechanism import Mechanism
     from baseparams.orchestrate.validate import Report

@@ -1,6 +1,6 @@
 """``baseparams diagnose``: name the effect missing from a mechanism's model on measured
 data, add it, and show the gap shrink (registered on ``main``; the statistics live in
-:mod:`baseparams.identify.diagnose`)."""
+:mod:`baseparams.diagnose.workflow`)."""
 
 import sys
 from pathlib import Path
@@ -16,8 +16,8 @@ from baseparams.cli.plots import _figure, _save
 # The statistics (scipy.signal, scipy.stats, statsmodels: slow imports) are imported by
 # the verb when it runs, as in identify.py: every other command starts without them.
 if TYPE_CHECKING:
-    from baseparams.identify.change import ChangeDiagnosis
-    from baseparams.identify.diagnose import Diagnosis
+    from baseparams.diagnose.change import ChangeDiagnosis
+    from baseparams.diagnose.workflow import Diagnosis
 
 
 @main.command()
@@ -81,13 +81,13 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     bad input. JSON: {"verdict", "effects":
     [{"kind", "coordinate", "value", "std", "shape", "checks"}], "ambiguous", "unsupported",
     "gap": {"before", "after", "cv_before", "cv_after", "cv_blocks", ...}, "where",
-    "unexplained"} (`python -m pydoc baseparams.identify.diagnose`).
+    "unexplained"} (`python -m pydoc baseparams.diagnose.workflow`).
 
     With --baseline BASE: what changed between the BASE runs and DATA (the changed runs).
     JSON: {"mode": "change", "verdict" ("nothing changed", "changed", "partly explained",
     "unexplained"), "effects" (each change: "kind", "coordinate" (a body or a coordinate),
     "value", "std"), "ambiguous", "gap", "common", "pairing", "rest", "notes"}
-    (`python -m pydoc baseparams.identify.change`).
+    (`python -m pydoc baseparams.diagnose.change`).
     """
     from baseparams.api import ChangeDiagnosed, Diagnosed, diagnose as run
     mechanism = load(mech)

@@ -48,7 +48,7 @@ def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str
     tau = K phi + the effects' forces + Gaussian noise, with phi the file's inertial
     parameters (or random physically consistent ones), velocities and accelerations the
     trajectory's exact derivatives. The mechanism's own [[effects]] with every value given
-    are simulated too. CSV layout: `python -m pydoc baseparams.identify.data`; files are
+    are simulated too. CSV layout: `python -m pydoc baseparams.recordings.data`; files are
     written atomically.
     """
     from baseparams.api import simulate as run
@@ -102,7 +102,7 @@ def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], s
 
     DATA: CSV files in the project's layout or recording descriptions (.toml: raw logs
     with motor-side channels, gains, time stamps, filtering; `python -m pydoc
-    baseparams.identify.recording`), one or several; several runs are fitted together,
+    baseparams.recordings.recording`), one or several; several runs are fitted together,
     each filtered on its own. Weighted per coordinate (Gautier: each coordinate's noise SD
     from an ordinary fit, then refitted with weights 1/SD). Prints every estimate with its
     standard deviation and relative std (%), what each base parameter stands for, the

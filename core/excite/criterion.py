@@ -30,7 +30,7 @@ import scipy.linalg
 
 from baseparams.identify.base import BaseModel
 from baseparams.dynamics.evaluator import Sample
-from baseparams.identify.model import drive_rows, effect_columns
+from baseparams.dynamics.forces import drive_rows, effect_columns
 from baseparams.model.mechanism import EffectSpec, Mechanism
 from baseparams.excite.tangent import tree_regressor_with_tangents
 
@@ -118,14 +118,14 @@ class Model:
         margin = dmargin = None
         if tangents and self.mechanism.loops:
             from baseparams.excite.loops import regressor_with_tangents
-            from baseparams.identify.model import Motion, evaluate
+            from baseparams.dynamics.forces import Motion, evaluate
             if sample is None:
                 sample = evaluate(self.mechanism, Motion(np.arange(n, dtype=float), q, qd, qdd))
             K, dK, margin, dmargin = regressor_with_tangents(self.mechanism, sample, qd, qdd)
         elif tangents:
             K, dK = tree_regressor_with_tangents(self.mechanism, q, qd, qdd)
         else:
-            from baseparams.identify.model import Motion, evaluate, inertial_columns
+            from baseparams.dynamics.forces import Motion, evaluate, inertial_columns
             if sample is None:
                 sample = evaluate(self.mechanism, Motion(np.arange(n, dtype=float), q, qd, qdd))
             K, dK = inertial_columns(sample, n), None

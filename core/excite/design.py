@@ -31,7 +31,7 @@ from baseparams.errors import KinematicsError
 from baseparams.excite.criterion import Model, criterion
 from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
-from baseparams.identify.model import Motion, evaluate
+from baseparams.dynamics.forces import Motion, evaluate
 from baseparams.model.mechanism import Mechanism
 
 T = TypeVar("T")

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from baseparams.errors import InputError
-from baseparams.identify.model import independent_names
+from baseparams.dynamics.forces import independent_names
 from baseparams.model.mechanism import Mechanism
 
 DEFAULT_RANGE = {"angle": math.pi, "length": 0.5}          # half range without limits

@@ -28,7 +28,7 @@ from baseparams.excite.criterion import Model
 from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
 from baseparams.identify.base import BaseModel
-from baseparams.identify.model import standard_parameters
+from baseparams.dynamics.forces import standard_parameters
 from baseparams.model.mechanism import EffectSpec, Mechanism, TrajectorySpec
 from baseparams.orchestrate.jobs import ERROR, INTERNAL, OK, MechanismText, Outcome, load
 from baseparams.orchestrate.runners import InProcess, Progress
@@ -205,7 +205,7 @@ def default_motion(mechanism: Mechanism, problem: design.Problem) -> tuple[np.nd
     """(q, qd, qdd) of the file's own trajectory at its samples, or None."""
     if mechanism.trajectory is None:
         return None
-    from baseparams.identify.simulate import trajectory_motion
+    from baseparams.recordings.simulate import trajectory_motion
     motion = trajectory_motion(mechanism)
     return motion.q, motion.qd, motion.qdd
 

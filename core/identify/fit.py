@@ -1,6 +1,6 @@
 """Weighted least squares on the base parameters and the named effects' coefficients.
 
-The model (:mod:`baseparams.identify.model`): tau = K_b phi_b + C theta (+ the known effects'
+The model (:mod:`baseparams.dynamics.forces`): tau = K_b phi_b + C theta (+ the known effects'
 forces, subtracted first), stacked over samples and independent coordinates. Gautier's
 noise weighting: an ordinary least-squares fit gives each coordinate's residual, whose
 variance (over its own degrees of freedom, N minus the sum of the leverages of that
@@ -23,10 +23,10 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
-from baseparams.identify.data import MeasuredData
+from baseparams.recordings.data import MeasuredData
 from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, beyond, beyond_scale, judge, split
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.identify.model import Design, Motion, design, effect_values, effects_design, evaluate
+from baseparams.dynamics.forces import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # Unit-norm columns whose pivoted-QR diagonal (the base columns) or singular value (the whole

@@ -6,8 +6,8 @@ values are such before it runs (docs/identification.md, "Impossible estimates").
 What is claimed, and why it is sound:
 
 - **Effect coefficients.** An effect kind's coefficients that must be positive are those of
-  diagnosis's physical rule (:data:`baseparams.identify.outofsample.POSITIVE`, judged by
-  :func:`~baseparams.identify.outofsample.implausible`: friction, rotor inertia, stiffness):
+  diagnosis's physical rule (:data:`POSITIVE`, judged by
+  :func:`implausible`: friction, rotor inertia, stiffness):
   one home for the rule.
 - **Base parameters.** A base parameter is a linear combination ``c . phi`` of the standard
   parameters, so its sign is not that of any one body's value. A body's ten parameters are a
@@ -44,7 +44,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baseparams.identify.outofsample import POSITIVE, implausible
 
 IMPOSSIBLE_STD = 3.0            # std below zero beyond which a value is impossible, not noise
 # SI magnitude of an effect coefficient (value or std) beyond which no joint has it; a kind's own
@@ -83,6 +82,31 @@ class Flag:
         below = self.below
         where = f"{below:.3g} std below 0" if np.isfinite(below) else "an exact value"
         return f"{self.name} = {self.value:.4g} +- {self.std:.2g} ({where}): {self.reason}"
+
+
+
+DELAY_LIMIT = 0.1           # s: a longer delay between positions and torques is not plausible
+# ----- physical plausibility ---------------------------------------------------------------------
+POSITIVE = {"viscous_friction": ("fv",), "coulomb_friction": ("fc",), "stribeck_friction": ("fs",),
+            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",),
+            }
+
+
+def implausible(kind: str, values: dict) -> str:
+    """Why an effect's estimated coefficients are not physical ('' when they are): dissipative
+    friction, stiffness, rotor inertia, load friction and masses are positive; a load
+    friction coefficient is below 1 (it would dissipate more than the load); a delay is
+    shorter than DELAY_LIMIT; a torque gain scale is above -1."""
+    for name in POSITIVE.get(kind, ()):
+        if name in values and values[name] <= 0:
+            return f"{name} = {values[name]:.3g} <= 0 (must be positive)"
+    if kind == "load_friction" and values.get("mu", 0) >= 1:
+        return f"mu = {values['mu']:.3g} >= 1 (more than the load itself)"
+    if kind == "delay" and abs(values.get("d", 0)) > DELAY_LIMIT:
+        return f"|d| = {abs(values['d']):.3g} s > {DELAY_LIMIT} s"
+    if kind == "gain" and values.get("g", 0) <= -1:
+        return f"g = {values['g']:.3g} <= -1 (the torque would change sign)"
+    return ""
 
 
 def _flag(name: str, value: float, std: float, reason: str, inertial: bool = True) -> Flag | None:

@@ -30,7 +30,7 @@ from scipy.signal import savgol_coeffs, savgol_filter, sosfiltfilt
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import InputError, KinematicsError
 from baseparams.io.atomic import atomic_write  # noqa: F401  (re-exported: one atomic writer)
-from baseparams.identify.model import Motion, evaluate, independent_names
+from baseparams.dynamics.forces import Motion, evaluate, independent_names
 from baseparams.model.mechanism import Mechanism
 from baseparams.numeric.backends import Float64
 
@@ -381,7 +381,7 @@ def read_measured(path: str | os.PathLike, mechanism: Mechanism, *, check_kinema
     file, the row and/or column and the reason otherwise). ``check_kinematics``: close the
     loops at every sample now (and keep the result in ``sample``)."""
     path = str(path)
-    from baseparams.identify.arrays import is_array_file
+    from baseparams.recordings.arrays import is_array_file
     if is_array_file(path):
         raise InputError("a log saved as arrays is read through a recording description (a TOML file whose "
                          "[[runs]] file is this log and whose channels name its columns: docs/identification.md)",

@@ -28,7 +28,7 @@ per coordinate, one delay. Each of these steps must hold for a change to be name
    after each coordinate's autoregressive whitening fitted to the difference itself,
    :func:`rest_test`), or one candidate does (Holm) under the search's final noise model,
    each at ``alpha / 2``;
-2. the search, :func:`~baseparams.identify.selection.select_whitened` (Wald tests,
+2. the search, :func:`~baseparams.diagnose.selection.select_whitened` (Wald tests,
    coloured noise whitened, Holm over the candidates);
 3. each named group adds to the others by the whitened F test (Bonferroni);
 4. each predicts held-out blocks of the difference (:func:`held_out_gain`);
@@ -47,18 +47,18 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
 from baseparams.errors import InputError
-from baseparams.identify import derived
-from baseparams.identify.candidates import known_effect, library
-from baseparams.identify.data import MeasuredData
-from baseparams.identify.diagnose import _coefficient_map, coefficients, nrms
+from baseparams.diagnose import derived
+from baseparams.diagnose.candidates import known_effect, library
+from baseparams.recordings.data import MeasuredData
+from baseparams.diagnose.workflow import _coefficient_map, coefficients, nrms
 from baseparams.identify.fit import measured_design
-from baseparams.identify.given import Given
-from baseparams.identify.identifiable import regroup
+from baseparams.diagnose.given import Given
+from baseparams.diagnose.identifiable import regroup
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
-from baseparams.identify.model import evaluate, independent_names
-from baseparams.identify.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, held_out_gain, named_changes, predicts,
+from baseparams.dynamics.forces import evaluate, independent_names
+from baseparams.diagnose.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, held_out_gain, named_changes, predicts,
                                              rest_test)
-from baseparams.identify.selection import Candidate, Whitening
+from baseparams.diagnose.selection import Candidate, Whitening
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # The effects shared by both sides (fitted on the baseline) besides the mechanism's own.

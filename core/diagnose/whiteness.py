@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:            # selection imports this module: its Test only for the types
-    from baseparams.identify.selection import Test
+    from baseparams.diagnose.selection import Test
 
 # Replicates per test: enough that Holm over the coordinates can reach alpha (p >= 1/(B+1)).
 MIN_REPLICATES = 200
@@ -314,7 +314,7 @@ def _wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: 
     prewhitened Newey-West on their sparse scores rejected 26-38 % of nulls at 5 % under
     low-pass-filtered noise."""
     from baseparams.identify.longrun import hac_lags, stationary_variance
-    from baseparams.identify.selection import Test
+    from baseparams.diagnose.selection import Test
     n, f = shape
     k = basis.shape[1]
     gamma = basis.T @ residual
@@ -372,7 +372,7 @@ def predictable(model: np.ndarray, y: np.ndarray, weights: np.ndarray, basis: Se
     from scipy.special import fdtrc
 
     from baseparams.identify.linear import RANK_TOL, WeightedLinearModel
-    from baseparams.identify.selection import ABSORB_TOL, Test, orthonormal_basis, wilson_hilferty
+    from baseparams.diagnose.selection import ABSORB_TOL, Test, orthonormal_basis, wilson_hilferty
 
     n, f, p = model.shape
     weights = np.asarray(weights, float)

@@ -1,6 +1,6 @@
 """The candidate library of diagnosis: every registered effect (third parties' included) on
 every tree coordinate, or a user's selection ``KIND[:COORD]``, minus the effects the
-mechanism already has. Columns come from :func:`baseparams.identify.model.effect_columns`,
+mechanism already has. Columns come from :func:`baseparams.dynamics.forces.effect_columns`,
 so an effect on a dependent coordinate (a strut spring) reaches the independent ones
 through R^T exactly as simulation and identification model it.
 
@@ -19,9 +19,9 @@ import numpy as np
 from baseparams import registry
 from baseparams.dynamics.evaluator import Sample
 from baseparams.errors import InputError
-from baseparams.identify import derived
-from baseparams.identify.model import CoordinateMotion, coordinate_motion, coordinate_speed_rms, effect_columns
-from baseparams.identify.selection import Candidate
+from baseparams.diagnose import derived
+from baseparams.dynamics.forces import CoordinateMotion, coordinate_motion, coordinate_speed_rms, effect_columns
+from baseparams.diagnose.selection import Candidate
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 
@@ -177,7 +177,7 @@ def shape_grid(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordina
 
 def _reduced(columns: np.ndarray, reduce: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """``reduce`` applied to an effect's columns (N, f, c), contiguous (the filter skips the
-    coordinates they do not act on: :func:`~baseparams.identify.data.zero_phase`)."""
+    coordinates they do not act on: :func:`~baseparams.recordings.data.zero_phase`)."""
     return np.ascontiguousarray(reduce(columns))
 
 
@@ -186,7 +186,7 @@ def _maker(mechanism: Mechanism, sample: Sample, n: int, kind: str, coordinate: 
     """The columns of a shaped effect at any shape value (reduced like the data), each value's
     made once: the search between grid points meets the same values again at later steps
     (selection.SHAPE_STEP), and each making filters the full-rate columns. ``motion``: the
-    coordinate's (:func:`~baseparams.identify.model.coordinate_motion`)."""
+    coordinate's (:func:`~baseparams.dynamics.forces.coordinate_motion`)."""
     made: dict[tuple, np.ndarray] = {}
 
     def make(shape: dict) -> np.ndarray:

@@ -27,7 +27,6 @@ from baseparams.identify.linear import LinearFit, WeightedLinearModel
 FOLDS = 5
 MARGIN = 10                 # samples dropped from the training rows beside a held-out block
 UNSTABLE = 1.0 / 3.0        # a spread (RMS over blocks of the force's change / the force) counted as real
-DELAY_LIMIT = 0.1           # s: a longer delay between positions and torques is not plausible
 
 
 def blocks(n: int, folds: int = FOLDS) -> list[np.ndarray]:
@@ -188,26 +187,3 @@ def stability(partial: np.ndarray, columns: np.ndarray, weights: np.ndarray, fol
     spread = float(np.sqrt(np.mean([np.sum((exerted @ (estimates[k] - pooled)) ** 2) for k in ok])) / norm) \
         if norm > 0 else np.inf
     return Stability(pvalue, spread, len(ok), values)
-
-
-# ----- physical plausibility ---------------------------------------------------------------------
-POSITIVE = {"viscous_friction": ("fv",), "coulomb_friction": ("fc",), "stribeck_friction": ("fs",),
-            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",),
-            }
-
-
-def implausible(kind: str, values: dict) -> str:
-    """Why an effect's estimated coefficients are not physical ('' when they are): dissipative
-    friction, stiffness, rotor inertia, load friction and masses are positive; a load
-    friction coefficient is below 1 (it would dissipate more than the load); a delay is
-    shorter than DELAY_LIMIT; a torque gain scale is above -1."""
-    for name in POSITIVE.get(kind, ()):
-        if name in values and values[name] <= 0:
-            return f"{name} = {values[name]:.3g} <= 0 (must be positive)"
-    if kind == "load_friction" and values.get("mu", 0) >= 1:
-        return f"mu = {values['mu']:.3g} >= 1 (more than the load itself)"
-    if kind == "delay" and abs(values.get("d", 0)) > DELAY_LIMIT:
-        return f"|d| = {abs(values['d']):.3g} s > {DELAY_LIMIT} s"
-    if kind == "gain" and values.get("g", 0) <= -1:
-        return f"g = {values['g']:.3g} <= -1 (the torque would change sign)"
-    return ""

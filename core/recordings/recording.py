@@ -39,10 +39,10 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfiltfilt
 
 from baseparams.errors import InputError
-from baseparams.identify.arrays import is_array_file, read_arrays
-from baseparams.identify.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, Segment,
+from baseparams.recordings.arrays import is_array_file, read_arrays
+from baseparams.recordings.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, Segment,
                                       _read_text, read_columns, bandwidth, concatenate, kinematics)
-from baseparams.identify.model import Motion, drive_rows, independent_names
+from baseparams.dynamics.forces import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.expressions import ExpressionError, parse_expression
@@ -384,7 +384,7 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
     """Measured data from CSV files in the project's layout and recording descriptions
     (``.toml``), one run each or more, stacked with every run kept apart; and the mechanism
     with the descriptions' motors (which must agree)."""
-    from baseparams.identify.data import read_measured
+    from baseparams.recordings.data import read_measured
     parts, model = [], None
     for path in paths:
         if is_description(path):

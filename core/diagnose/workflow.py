@@ -34,24 +34,24 @@ from scipy.stats import chi2
 
 from baseparams import registry
 from baseparams.errors import InputError
-from baseparams.identify import derived
-from baseparams.identify.candidates import known_effect, known_values, library, parse_selection
-from baseparams.identify.given import Given
-from baseparams.identify.identifiable import Regrouping, regroup
-from baseparams.identify.derived import KINDS as DERIVED_KINDS
-from baseparams.identify.outofsample import (FOLDS, CrossValidation, blocks, cross_validate, held_out_gain,
-                                             implausible, stability)
-from baseparams.identify.data import MeasuredData, bandwidth
+from baseparams.diagnose import derived
+from baseparams.diagnose.candidates import known_effect, known_values, library, parse_selection
+from baseparams.diagnose.given import Given
+from baseparams.diagnose.identifiable import Regrouping, regroup
+from baseparams.diagnose.derived import KINDS as DERIVED_KINDS
+from baseparams.diagnose.outofsample import FOLDS, CrossValidation, blocks, cross_validate, held_out_gain, stability
+from baseparams.identify.impossible import implausible
+from baseparams.recordings.data import MeasuredData, bandwidth
 from baseparams.io.atomic import atomic_write
-from baseparams.identify.model import (Motion, design, effect_values, effects_design, evaluate,
+from baseparams.dynamics.forces import (Motion, design, effect_values, effects_design, evaluate,
                                        independent_names)
 from baseparams.identify.fit import measured_design, measured_forces
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
-from baseparams.identify.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, Test, added_test, holm,
+from baseparams.diagnose.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, Test, added_test, holm,
                                           outdone, select_whitened, simpler_in_place, weakest_over)
-from baseparams.identify.whiteness import (MOTION_BASIS_NAMES, MOTION_BLOCKS, monte_carlo_pvalues, motion_basis,
+from baseparams.diagnose.whiteness import (MOTION_BASIS_NAMES, MOTION_BLOCKS, monte_carlo_pvalues, motion_basis,
                                             predictable, replicates)
 from baseparams.dynamics.evaluator import Sample
 from baseparams.io.loader import parse_mechanism

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import bilinear, butter, lfilter, sosfiltfilt
 
-from baseparams.identify.selection import Candidate
+from baseparams.diagnose.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
 TORQUE_KINDS = ("load_friction", "delay")

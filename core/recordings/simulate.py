@@ -2,7 +2,7 @@
 
 Along the mechanism's default exciting trajectory (its exact derivatives), the generalized
 forces are ``tau = K phi + sum_e C_e theta_e + noise``: K and C_e from
-:mod:`baseparams.identify.model` (the same model the fit uses), phi the file's inertial
+:mod:`baseparams.dynamics.forces` (the same model the fit uses), phi the file's inertial
 parameters or random physically consistent ones, the effects' coefficients as given, and
 independent Gaussian noise of a given SD on each coordinate's tau. The truth is returned
 separately and never written into the data.
@@ -17,8 +17,8 @@ from scipy.spatial.transform import Rotation
 from baseparams import registry
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError
-from baseparams.identify.data import MeasuredData
-from baseparams.identify.model import (Motion, design, effect_values, evaluate, independent_names,
+from baseparams.recordings.data import MeasuredData
+from baseparams.dynamics.forces import (Motion, design, effect_values, evaluate, independent_names,
                                        standard_parameters)
 from baseparams.model.consistency import require_physical
 from baseparams.model.mechanism import EffectSpec, Mechanism

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from baseparams.errors import InputError
-from baseparams.identify.model import standard_parameters
+from baseparams.dynamics.forces import standard_parameters
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 
@@ -52,7 +52,7 @@ def given_parameters(mechanism: Mechanism, source: str) -> Given:
     if path.suffix.lower() == ".json":
         return _from_identify(mechanism, path)
     from baseparams.io.loader import resolve
-    from baseparams.identify.derived import welded
+    from baseparams.diagnose.derived import welded
     other = resolve(source)
     if list(other.parameters) != list(mechanism.parameters):
         raise InputError(f"its bodies do not match {mechanism.name}'s ({len(other.parameters)} standard "

@@ -1,0 +1,33 @@
+"""Reading logs into measured data: the one room every reader lives in.
+
+- :mod:`.recording`: recording descriptions (TOML) mapping raw logs onto the model;
+- :mod:`.data`: the project's CSV layout, :class:`MeasuredData`, filters and derivatives;
+- :mod:`.arrays`: ``.npz`` and ``.mat`` logs as named columns;
+- :mod:`.simulate`: synthetic measured data with a known truth (the proof bench).
+
+Imports only the layers below it (model, dynamics, io, numeric), never identify or diagnose.
+"""
+from importlib import import_module
+from typing import Any
+
+# public name -> its module; imported on first use so that reading a CSV does not load the
+# whole room (PEP 562)
+_PUBLIC = {
+    "MeasuredData": "data",
+    "read_measured": "data",
+    "write_measured": "data",
+    "concatenate": "data",
+    "read_recording": "recording",
+    "read_data": "recording",
+    "read_description": "recording",
+    "is_description": "recording",
+    "simulate": "simulate",
+    "simulate_change": "simulate",
+}
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _PUBLIC:
+        return getattr(import_module(f"{__name__}.{_PUBLIC[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
