@@ -47,7 +47,7 @@ def __dir__() -> list[str]:
 
 
 class _CallablePackage(types.ModuleType):
-    """``baseparams.identify`` and ``baseparams.excite`` are subpackages (their modules keep
+    """``baseparams.identify``, ``baseparams.diagnose`` and ``baseparams.excite`` are subpackages (their modules keep
     their dotted names) and, called, the API functions of the same name: importing a
     submodule binds the package to the attribute, so ``bp.identify(...)`` must work on it."""
 
@@ -57,9 +57,10 @@ class _CallablePackage(types.ModuleType):
 
 
 def _callable_packages() -> None:
-    # both packages' __init__ hold only a docstring: importing them here costs nothing
+    # the packages' __init__ import nothing (their public names load on first use): importing
+    # them here costs nothing
     import importlib
-    for name in ("identify", "excite"):
+    for name in ("identify", "diagnose", "excite"):
         importlib.import_module(f"{__name__}.{name}").__class__ = _CallablePackage
 
 

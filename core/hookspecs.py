@@ -13,7 +13,7 @@ import pluggy
 
 if TYPE_CHECKING:       # annotations only: the registry imports this module
     from baseparams.dynamics.effects import EffectKind
-    from baseparams.io.formats import Reader, Writer
+    from baseparams.formats import Reader, Writer
     from baseparams.model.joints import JointType
     from baseparams.model.multipoles import TransferRule
     from baseparams.registry import MechanismSource
@@ -47,7 +47,7 @@ def baseparams_transfer_rules(joint_type: str) -> list[TransferRule] | None:
 
 @hookspec
 def baseparams_readers() -> list[Reader]:
-    """Return a list of mechanism readers, :class:`baseparams.io.formats.Reader`: ``name``
+    """Return a list of mechanism readers, :class:`baseparams.formats.Reader`: ``name``
     (``"toml"``), ``suffixes`` (lower-case, with the dot: ``(".toml",)``), ``options``,
     ``read(path, **options)`` returning a :class:`baseparams.model.mechanism.Mechanism` and
     ``read_notes(path, **options)`` returning it with notes.
@@ -60,13 +60,13 @@ def baseparams_readers() -> list[Reader]:
     which ``baseparams convert`` offers as flags (``merge_fixed``, ``floating_base``);
     ``convert`` prints the notes of ``read_notes``. A reader with only ``name``, ``suffixes``
     and ``read(path)`` is accepted too: the registry completes it with no options and no
-    notes (:func:`baseparams.io.formats.complete_reader`).
+    notes (:func:`baseparams.formats.complete_reader`).
     """
 
 
 @hookspec
 def baseparams_writers() -> list[Writer]:
-    """Return a list of mechanism writers, :class:`baseparams.io.formats.Writer`: ``name`` (``"urdf"``), ``suffixes``
+    """Return a list of mechanism writers, :class:`baseparams.formats.Writer`: ``name`` (``"urdf"``), ``suffixes``
     (lower-case, with the dot) and ``write(mechanism, path)``, which writes the mechanism
     in their format (``baseparams convert``) and returns a list of notes (what the format
     could not hold, what was approximated). A bad request is an

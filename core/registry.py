@@ -19,11 +19,11 @@ import pluggy
 
 from baseparams import hookspecs
 from baseparams.errors import InputError
-from baseparams.io.formats import complete_reader
+from baseparams.formats import complete_reader
 
 if TYPE_CHECKING:
     from baseparams.dynamics.effects import EffectKind
-    from baseparams.io.formats import Reader, Writer
+    from baseparams.formats import Reader, Writer
     from baseparams.model.joints import JointType
     from baseparams.model.multipoles import TransferRule
     from baseparams.solvers.protocol import Solver

@@ -19,7 +19,7 @@ from baseparams.model.mechanism import Mechanism
 from .solving import DEFAULT_SOLVER, MechanismLike, Progress, check_solver_options, get_solver, load, run_solver
 
 if TYPE_CHECKING:
-    from baseparams.io.formats import Writer
+    from baseparams.formats import Writer
 
     from .results import Conversion, Excitation, Export, Validation
 

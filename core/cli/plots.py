@@ -4,7 +4,6 @@ Figures are made with :class:`matplotlib.figure.Figure` directly (the Agg canvas
 importing this module never changes matplotlib's global backend for a caller.
 """
 
-import io
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -14,7 +13,7 @@ from baseparams.dynamics.trajectory import Trajectory, samples_float64
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Float64
 from baseparams.errors import InputError
-from baseparams.io.atomic import atomic_write
+from baseparams.io.figures import new_figure as _figure, save_figure as _save
 from baseparams.model.mechanism import Mechanism
 
 if TYPE_CHECKING:
@@ -22,29 +21,7 @@ if TYPE_CHECKING:
 
 Poses = dict[int, list[tuple[np.ndarray, np.ndarray]]]     # body label -> (R, p) per instant
 
-IMAGE_FORMATS = ("png", "pdf", "svg")
 PIVOT = 0.07        # half-length of a ground joint's axis stub, relative to the mechanism's size
-
-
-def _figure(**kwargs: Any) -> Any:
-    from matplotlib.figure import Figure
-    return Figure(**kwargs)
-
-
-def _save(fig: Any, path: str | Path, fmt: str | None) -> Path:
-    path = Path(path)
-    suffix = path.suffix[1:].lower()
-    if fmt is None and suffix and suffix not in IMAGE_FORMATS:
-        # writing PNG bytes under a .jpg name would mislead every program that opens it
-        raise InputError(f"cannot write a {suffix!r} image (known formats: {', '.join(IMAGE_FORMATS)}); "
-                         f"name the file .png, .pdf or .svg, or give --image-format", file=path)
-    fmt = fmt or (suffix if suffix in IMAGE_FORMATS else "png")
-    if fmt not in IMAGE_FORMATS:
-        raise InputError(f"unknown image format {fmt!r} (known: {', '.join(IMAGE_FORMATS)})", file=path)
-    buffer = io.BytesIO()               # drawn in memory, then one atomic write: no partial image
-    fig.savefig(buffer, format=fmt, dpi=150)
-    atomic_write(path, buffer.getvalue(), what="the figure")
-    return path
 
 
 # ----- the mechanism in 3D -------------------------------------------------------

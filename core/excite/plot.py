@@ -10,7 +10,7 @@ from baseparams.excite.plan import FINER, Plan
 
 def plot_plan(plan: Plan, path: str | Path, fmt: str | None = None) -> Path:
     """Draw ``plan`` (motion against its limits, singular values) to ``path``; the path written."""
-    from baseparams.cli.plots import _figure, _save
+    from baseparams.io.figures import new_figure as _figure, save_figure as _save
     p = plan.problem
     lim = p.limits
     t = p.times(FINER)

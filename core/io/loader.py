@@ -15,7 +15,7 @@ from baseparams import registry
 from baseparams.dynamics.evaluator import ClosureStructure, closure_structure
 from baseparams.dynamics.trajectory import Trajectory, samples_float64
 from baseparams.errors import InputError, KinematicsError
-from baseparams.io.formats import Reader
+from baseparams.formats import Reader
 from baseparams.io.toml_reader import parse_toml
 from baseparams.model.mechanism import Mechanism
 

@@ -17,6 +17,7 @@ from collections.abc import Collection, Iterator
 import numpy as np
 
 from baseparams.errors import InputError
+from baseparams.recordings.budget import read_budget
 
 SUFFIXES = (".npz", ".mat")
 
@@ -33,7 +34,6 @@ def read_arrays(path: str, wanted: Collection[str] | None = None, dates: Collect
     one length; in them an infinite value or a non-number is an error naming its row and
     column (NaN is a missing value, left out later). ``dates``: datetime64 columns, read as
     nanoseconds since 1970 (the ``iso`` time unit's)."""
-    from baseparams.recordings.data import read_budget
     try:
         size = os.path.getsize(path)
     except OSError as exc:

@@ -32,6 +32,7 @@ from baseparams.errors import InputError, KinematicsError
 from baseparams.io.atomic import atomic_write  # noqa: F401  (re-exported: one atomic writer)
 from baseparams.dynamics.forces import Motion, evaluate, independent_names
 from baseparams.model.mechanism import Mechanism
+from baseparams.recordings.budget import PARSE_BYTES_PER_BYTE, read_budget
 from baseparams.numeric.backends import Float64
 
 # Savitzky-Golay differentiation: polynomial order, and the least number of samples it needs.
@@ -62,13 +63,6 @@ STILL_RANGE = 1e-3
 # fundamental for 90 and 99 %, 6.3 for 99.99 %); a real arm's last 1 % is its vibration and
 # the loop's jitter, up to 100 Hz on a Kinova's trapezoid (bandwidth 51 Hz, 2.9 with them).
 BULK_90, BULK_99 = 10.0, 4.0
-MAX_FILE_BYTES = 2_000_000_000
-# Reading a CSV takes at most about this many bytes of memory per byte of text (the bytes and
-# the text, a batch of the used fields' strings, the used columns as floats: measured 2.9 on a
-# 147 MB log of 101 columns and 4.0 on a 116 MB one of 15, reading and filtering included): a
-# file is refused before it is parsed when that exceeds BASEPARAMS_MAX_MEMORY (default 2 GiB,
-# so about 350 MB of text). It was 30 while every field of every row was kept as a string.
-PARSE_BYTES_PER_BYTE = 6
 READ_CHUNK = 1 << 20
 # |value| above this is refused as out of range: the fit squares and sums the columns, and
 # 1e150 squared is still finite where 1e300 is not.
@@ -489,13 +483,6 @@ def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] 
             lo = mid
     message = fails(slice(lo, hi))
     return None if message is None else (lo, message)
-
-
-def read_budget() -> int:
-    """The most bytes of text a data file may have: BASEPARAMS_MAX_MEMORY over what parsing
-    takes per byte, and at most MAX_FILE_BYTES."""
-    from baseparams.dynamics.trajectory import memory_limit
-    return min(MAX_FILE_BYTES, memory_limit() // PARSE_BYTES_PER_BYTE)
 
 
 def _read_text(path: str) -> str:

@@ -1,6 +1,6 @@
 """URDF in and out (docs/urdf.md): the reader and the writer, registered like any third party's."""
 
-from baseparams.io.formats import format_hooks
+from baseparams.formats import format_hooks
 
 from .reader import UrdfReader
 from .writer import UrdfWriter
