@@ -86,10 +86,11 @@ def test_bad_couplings_are_named(table, key):
     assert key in str(info.value)
 
 
-def test_couplings_on_a_closed_loop_are_refused():
-    text = generate.four_bar(1)
-    with pytest.raises(InputError, match="without closed loops"):
-        parse_mechanism(text + '\n[[couplings]]\ncoordinate = "q2"\nleader = "q1"\n')
+def test_couplings_on_a_closed_loop_are_accepted():
+    """Issue 49 (tests/test_loop_couplings.py checks them): a follower on a mechanism with a
+    loop is one more closure equation; it stays dependent."""
+    mech = parse_mechanism(generate.coupled_loop(0))
+    assert mech.loops and mech.couplings and mech.couplings[0].coordinate not in mech.independent
 
 
 def test_a_chain_of_couplings_is_refused():

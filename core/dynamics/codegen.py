@@ -231,12 +231,12 @@ def trace(mechanism: Mechanism, parts: Sequence[str] = PARTS) -> tuple[Graph, li
         kernels.append(Kernel("_tree_regressor", ("q", "qd", "qdd"), {
             "K": ((n, p), [((k, j), v) for k, row in enumerate(rows) for j, v in enumerate(row)])}))
     if "closure" in parts and mechanism.loops:
-        values, jac, _ = kin.closure(kin.forward(q))
+        values, jac, _ = kin.closure(kin.forward(q), q=q)
         m = len(values)
         kernels.append(Kernel("_closure", ("q",), {
             "phi": ((m,), [((i,), v) for i, v in enumerate(values)]),
             "jac": ((m, n), [((i, j), v) for i, row in enumerate(jac) for j, v in enumerate(row)])}))
-        _, _, bias = kin.closure(states, want_bias=True)
+        _, _, bias = kin.closure(states, want_bias=True, q=q)
         kernels.append(Kernel("_closure_bias", ("q", "qd"), {
             "gamma": ((m,), [((i,), v) for i, v in enumerate(bias)])}))
     return g, kernels

@@ -65,7 +65,7 @@ def closure_structure(mechanism: Mechanism) -> ClosureStructure:
         given = mechanism.independent if mechanism.independent else free
         return ClosureStructure((), tuple(names.index(c) for c in given), tuple(followers), 0, 0)
     kin = TreeKinematics(mechanism, Float64())
-    _, rows, _ = kin.closure(kin.forward([0.0] * n))
+    _, rows, _ = kin.closure(kin.forward([0.0] * n), q=[0.0] * n)
     jac = np.array([[float(v) for v in row] for row in rows])
     tol = 1e-9 * max(1.0, np.abs(jac).max())
     chosen = independent_rows(jac, tol)
@@ -77,11 +77,16 @@ def closure_structure(mechanism: Mechanism) -> ClosureStructure:
         if len(dep) != rank or np.linalg.matrix_rank(sub, tol) < rank:
             raise InputError(
                 f"the independent coordinates {list(mechanism.independent)} do not parameterize the "
-                f"mechanism: {n} tree coordinates, {rank} independent closure equations, so "
+                f"mechanism: {n} tree coordinates, {rank} independent closure equations"
+                + (f" ({len(mechanism.couplings)} coupling(s) included)" if mechanism.couplings else "")
+                + f", so "
                 f"{n - rank} independent coordinates are needed and the others must be solvable",
                 file=mechanism.path, key="coordinates.independent")
     else:
-        dep = independent_rows(jac[chosen].T, tol)
+        # followers first: a coupling makes its follower dependent, not its leader
+        followers = [names.index(c.coordinate) for c in mechanism.couplings]
+        order = followers + [i for i in range(n) if i not in followers]
+        dep = sorted(order[k] for k in independent_rows(jac[chosen][:, order].T, tol))
         indep = [i for i in range(n) if i not in dep]
     return ClosureStructure(tuple(chosen), tuple(indep), tuple(dep), rank, len(rows) - rank)
 
@@ -412,7 +417,7 @@ class Evaluator:
             if SCALAR_CLOSURE and _one_state(q):
                 return codegen.scalar_closure(self.mechanism, self.backend, [float(v) for v in q])
             return codegen.closure(self.mechanism, q)
-        values, rows, _ = self.kin.closure(self.kin.forward(q))
+        values, rows, _ = self.kin.closure(self.kin.forward(q), q=q)
         return values, rows
 
     def singular_joints(self, jd: Rows) -> str:
@@ -509,7 +514,7 @@ class Evaluator:
                 bias = codegen.closure_bias(self.mechanism, q, qd)
         else:
             states = self.kin.forward(q, qd)
-            _, _, bias = self.kin.closure(states, want_bias=True)
+            _, _, bias = self.kin.closure(states, want_bias=True, q=q)
         s = self.backend.solve(jd, [[bias[i]] for i in st.rows])
         extra = [zero] * self.n
         for a, i in enumerate(st.dependent):

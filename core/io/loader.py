@@ -97,8 +97,9 @@ def check_mobility(mech: Mechanism) -> None:
                               f"check the magnitudes of the geometry") from None
     _check_redundant_joints(mech, structure)
     if structure.dof == 0:
+        tied = f" with {len(mech.couplings)} coupling(s)" if mech.loops and mech.couplings else ""
         raise error("joints", f"the mechanism has no degree of freedom "
-                              f"(Gruebler count {mech.gruebler}; closure rank {structure.rank})")
+                              f"(Gruebler count {mech.gruebler}; closure rank {structure.rank}{tied})")
     if mech.loops and not mech.independent:
         names = [mech.coordinates[i] for i in structure.independent]
         raise error("coordinates.independent",
@@ -126,6 +127,12 @@ def _check_redundant_joints(mech: Mechanism, structure: ClosureStructure) -> Non
                              f"(a duplicated or coaxial joint?); remove it",
                              file=mech.path, key=f"joints[{index}]")
         start += count
+    for k, coupling in enumerate(mech.couplings):         # their equations follow the loops'
+        if start + k not in kept:
+            raise InputError(f"{coupling.coordinate} = {coupling.ratio} {coupling.leader} + {coupling.offset} "
+                             f"follows from the closed loops (the loop joints already tie {coupling.coordinate!r} "
+                             f"to {coupling.leader!r}, or the other couplings do); remove the coupling",
+                             file=mech.path, key=f"couplings[{k}]")
 
 
 def check_trajectory(mech: Mechanism, samples: int | None = None) -> None:

@@ -47,7 +47,7 @@ class BodyState:
         return w, v, bw, ba
 
 
-# mechanism -> {(backend type, digits, symbolic geometry): (edges, loops, gravity, zero, one)}
+# mechanism -> {(backend type, digits, symbolic geometry): (edges, loops, couplings, gravity, zero, one)}
 _PREPARED: weakref.WeakKeyDictionary[Mechanism, dict[tuple[Any, ...], tuple[Any, ...]]] = (
     weakref.WeakKeyDictionary())
 
@@ -61,6 +61,7 @@ class TreeKinematics:
 
     edges: list[tuple[int, int, Frame, list[tuple[str, int, int, int]], Frame]]
     loops: list[tuple[Joint, Frame, Frame]]
+    couplings: list[tuple[int, int, Any, Any]]   # closed loops only: (follower, leader, ratio, offset)
     gravity: list[Any]
     zero: Any
     one: Any
@@ -76,8 +77,8 @@ class TreeKinematics:
         if key not in cached:
             with backend.activate():
                 self._prepare(mechanism, backend, symbolic_geometry, index)
-            cached[key] = (self.edges, self.loops, self.gravity, self.zero, self.one)
-        self.edges, self.loops, self.gravity, self.zero, self.one = cached[key]
+            cached[key] = (self.edges, self.loops, self.couplings, self.gravity, self.zero, self.one)
+        self.edges, self.loops, self.couplings, self.gravity, self.zero, self.one = cached[key]
 
     def _prepare(self, mechanism: Mechanism, backend: Backend, symbolic_geometry: bool,
                  index: Mapping[str, int]) -> None:
@@ -95,6 +96,11 @@ class TreeKinematics:
                 known_frame, new_frame = fp, fc
             self.edges.append((edge.known, edge.new, known_frame, motions, new_frame))
         self.loops = [(j, frame(j.parent_frame), frame(j.child_frame)) for j in mechanism.loops]
+        # on a closed loop a coupling is one more closure equation, solved with the loops'
+        # (a follower may follow a dependent coordinate, a leader may close a loop); an open
+        # chain's followers are filled in directly by the evaluator instead
+        self.couplings = [(index[c.coordinate], index[c.leader], backend.rational(c.ratio),
+                           backend.rational(c.offset)) for c in mechanism.couplings] if mechanism.loops else []
         self.gravity = mechanism.numeric_gravity(backend, symbolic_geometry)
         self.zero = backend.rational(Fraction(0))
         self.one = backend.rational(Fraction(1))
@@ -140,12 +146,15 @@ class TreeKinematics:
         return states
 
     # ------------------------------------------------------------------
-    def closure(self, states: Mapping[int, BodyState],
-                want_bias: bool = False) -> tuple[list[Any], list[list[Any]], list[Any]]:
+    def closure(self, states: Mapping[int, BodyState], want_bias: bool = False,
+                q: Sequence[Any] | None = None) -> tuple[list[Any], list[list[Any]], list[Any]]:
         """Loop-closure equations: values, Jacobian rows (length n) and, optionally, bias terms.
 
         The bias gamma is the second time derivative of the equations with qdd = 0, so that
         ``Phi_q qdd + gamma = 0`` on the constraint manifold. Needs ``forward(q, qd)``.
+        After the loops' equations, one per coupling (closed loops only):
+        ``q_follower - ratio q_leader - offset = 0``, linear, so its bias is zero; its value
+        needs the coordinates ``q`` (required when the mechanism has couplings).
         """
         values: list[Any] = []
         rows: list[list[Any]] = []
@@ -187,6 +196,17 @@ class TreeKinematics:
                         o_dot = vec.cross(wb, other)
                         o_dd = vec.add(vec.cross(bwb, other), vec.cross(wb, o_dot))
                     biases.append(vec.dot(u_dd, other) + 2 * vec.dot(u_dot, o_dot) + vec.dot(u, o_dd))
+        if self.couplings and q is None:
+            raise ValueError("the closure of a mechanism with couplings needs the coordinates q")
+        for follower, leader, ratio, offset in self.couplings:
+            assert q is not None
+            values.append(q[follower] - ratio * q[leader] - offset)
+            row = [z] * n
+            row[follower] = self.one
+            row[leader] = -ratio
+            rows.append(row)
+            if want_bias:
+                biases.append(z)
         return values, rows, biases
 
     def accelerations(self, state: BodyState, qdd: Sequence[Any]) -> tuple[Vector, Vector]:

@@ -456,8 +456,9 @@ class MechanismBuilder:
     def coupling(self, coordinate: str, leader: str, ratio: Value = 1, offset: Value = 0, *,
                  key: str | None = None) -> Coupling:
         """``coordinate = ratio * leader + offset``: a joint coordinate that follows another
-        (a gear train between joints, URDF ``<mimic>``); it is then not independent. Only on
-        mechanisms without closed loops. Coordinates are checked by :meth:`build`."""
+        (a gear train between joints, URDF ``<mimic>``, a cable-driven counterweight); it is
+        then not independent. On a mechanism with closed loops it is one more closure
+        equation, solved with the loops'. Coordinates are checked by :meth:`build`."""
         key = key or f"couplings[{len(self._couplings)}]"
         for field, name in (("coordinate", coordinate), ("leader", leader)):
             if not isinstance(name, str):
@@ -543,9 +544,6 @@ class MechanismBuilder:
     def _checked_couplings(self, coordinates: Sequence[str], loops: Sequence[Joint]) -> tuple[Coupling, ...]:
         followers = {c.coordinate for c, _ in self._couplings}
         for coupling, key in self._couplings:
-            if loops:
-                raise self.error(key, "couplings between joint coordinates are supported on mechanisms "
-                                 "without closed loops only")
             for field in ("coordinate", "leader"):
                 name = getattr(coupling, field)
                 if name not in coordinates:
@@ -567,6 +565,13 @@ class MechanismBuilder:
                 raise self.error(key, f"{c!r} is not a tree coordinate (tree coordinates: {', '.join(coordinates)})")
         if len(set(names)) != len(names):
             raise self.error(key, "repeated coordinate")
+        if loops:
+            for coupling in couplings:
+                if coupling.coordinate in names:
+                    raise self.error(key, f"{coupling.coordinate!r} follows {coupling.leader!r} (a coupling): it is "
+                                     f"not independent; list another coordinate (or make {coupling.coordinate!r} "
+                                     f"the leader and {coupling.leader!r} its follower)")
+            return names
         if couplings and set(names) != {c for c in coordinates if c not in followers}:
             raise self.error(key, f"with couplings the independent coordinates are the tree coordinates "
                              f"that follow no other: {', '.join(c for c in coordinates if c not in followers)}")

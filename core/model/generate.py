@@ -379,7 +379,7 @@ def _four_bar_ok(a: tuple[float, ...], b: tuple[float, ...], c: tuple[float, ...
     return True
 
 
-def four_bar(seed: int, samples: int = 100) -> str:
+def four_bar(seed: int, samples: int = 100, parallelogram: bool = False) -> str:
     """A random planar four-bar (TOML text): crank A-B, coupler B-C, rocker D-C, the
     coupler-rocker joint closing the loop; the crank angle is independent.
 
@@ -388,11 +388,15 @@ def four_bar(seed: int, samples: int = 100) -> str:
     (decimals), the plane's orientation in ground axes and each body's frame (rational
     rotations about the joint axis and offsets along it), inertias, gravity and a crank
     motion of at most 0.5 rad about the reference that keeps the transmission angle in
-    25..155 degrees."""
-    draw = _Draw(f"four_bar:{seed}")
+    25..155 degrees. ``parallelogram``: the rocker parallel to the crank and as long, so
+    that exactly ``qb = -qa`` and ``qd = qa`` everywhere (every joint axis is the plane's
+    normal): the loop has a tree form with couplings to check it against."""
+    draw = _Draw(f"{'parallelogram' if parallelogram else 'four_bar'}:{seed}")
     while True:
         lengths = [draw.decimal(Fraction(1, 10), Fraction(6, 10)) for _ in range(3)]
         u1, u2, u3 = (_unit_2d(draw) for _ in range(3))
+        if parallelogram:
+            u3, lengths[2] = u1, lengths[0]
         b = _scale(u1, lengths[0])
         c = _add(b, _scale(u2, lengths[1]))
         d = _sub(c, _scale(u3, lengths[2]))
@@ -436,6 +440,50 @@ def four_bar(seed: int, samples: int = 100) -> str:
     out.append(f'[trajectory]\nt_start = "0"\nt_end = "10"\nsamples = {samples}\n'
                f'q = {{ qa = "{_fourier(draw, Fraction(1, 2))}" }}\n')
     return "\n".join(out)
+
+
+def coupled_loop(seed: int, samples: int = 100, parallelogram: bool = False, tree: bool = False) -> str:
+    """A random four-bar (:func:`four_bar`) with one or two more bodies whose coordinates
+    follow the loop's (``[[couplings]]``: a cable-driven counterweight, a belt, a gear):
+    each hangs from ground or a loop body by an R or P joint with random frames, and
+    follows a random tree coordinate of the loop (the crank, or a dependent one) with a
+    random nonzero rational ratio and offset.
+
+    ``tree`` (with ``parallelogram``): the same mechanism with the loop cut (its closing
+    joint left out) and the parallelogram's dependent angles written as couplings of the
+    crank (``qb = -qa``, ``qd = qa``), a follower of one of them rewritten as a follower
+    of the crank: same bodies, same motion, no closed loop, an independent form to check
+    the loop's against."""
+    if tree and not parallelogram:
+        raise ValueError("only a parallelogram has a tree form with couplings")
+    text = four_bar(seed, samples=samples, parallelogram=parallelogram)
+    draw = _Draw(f"coupled_loop:{seed}")
+    extra = [4] if draw.rng.random() < 0.5 else [4, 5]
+    leaders = ["qa", "qb", "qd"]
+    bodies, joints, couplings = [], [], []
+    for label in extra:
+        bodies.append(_body_text(label, draw))
+        jtype = draw.rng.choice("RRP")
+        parent = draw.rng.randrange(4)
+        frames = [_frame_text(_point(draw, 0.3), _default_frame(draw, _random_rotation(draw)), draw)
+                  for _ in range(2)]
+        joints.append(f'[[joints]]\nname = "JE{label}"\ntype = "{jtype}"\nparent = {parent}\nchild = {label}\n'
+                      f'coordinates = ["qe{label}"]\nparent_frame = {frames[0]}\nchild_frame = {frames[1]}\n')
+        leader = draw.rng.choice(leaders)
+        ratio = draw.sign() * draw.decimal(0.3, 3, 1) if jtype == "R" else draw.sign() * draw.decimal(0.05, 0.4, 2)
+        offset = draw.decimal(-0.2, 0.2, 2) if jtype == "R" else draw.decimal(-0.05, 0.05, 2)
+        couplings.append((f"qe{label}", leader, ratio, offset))
+    name = f"gen_coupled_{'parallelogram' if parallelogram else 'four_bar'}_{seed}" + ("_tree" if tree else "")
+    text = text.replace(f"gen_four_bar_{seed}", name)
+    head, tail = text.split("[coordinates]")
+    if tree:
+        head = re.sub(r'\[\[joints\]\]\nname = "JC"\n(?:(?!\n\n).)*\n', "", head, flags=re.S)
+        resolved = {"qb": Fraction(-1), "qd": Fraction(1)}          # qb = -qa, qd = qa
+        couplings = [(c, "qa", r * resolved[l], o) if l in resolved else (c, l, r, o) for c, l, r, o in couplings]
+        couplings = [("qb", "qa", Fraction(-1), Fraction(0)), ("qd", "qa", Fraction(1), Fraction(0))] + couplings
+    coupled = "".join(f'\n[[couplings]]\ncoordinate = "{c}"\nleader = "{l}"\nratio = "{exact_text(r)}"\n'
+                      f'offset = "{exact_text(o)}"\n' for c, l, r, o in couplings)
+    return head + "\n".join(bodies + joints) + "\n[coordinates]" + tail + coupled
 
 
 def _found(match: re.Match[str] | None) -> re.Match[str]:

@@ -262,8 +262,11 @@ class Float64(Defaults[Samples]):
         if all(isinstance(v, float) for row in a for v in row) and all(isinstance(v, float) for row in b for v in row):
             X = self.solve_arrays(np.array(a, dtype=float), np.array(b, dtype=float))    # one state
             return [[X[i, j] for j in range(k)] for i in range(n)]
-        A = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in a], axis=-2)
-        B = np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in b], axis=-2)
+        # every entry to one shape: a row may be all constants (a coupling's closure equation)
+        flat_a = np.broadcast_arrays(*(v for row in a for v in row))
+        flat_b = np.broadcast_arrays(*(v for row in b for v in row))
+        A = np.stack([np.stack(flat_a[i * n:(i + 1) * n], axis=-1) for i in range(n)], axis=-2)
+        B = np.stack([np.stack(flat_b[i * k:(i + 1) * k], axis=-1) for i in range(n)], axis=-2)
         shape = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
         X = self.solve_arrays(np.broadcast_to(A, shape + (n, n)), np.broadcast_to(B, shape + (n, k)))
         return [[X[..., i, j] for j in range(k)] for i in range(n)]

@@ -1,0 +1,232 @@
+"""Couplings between joint coordinates on mechanisms with closed loops (issue 49): a
+follower (``[[couplings]]``: a cable-driven counterweight, a belt, a gear) is one more
+closure equation, solved with the loops'.
+
+Checked against computations that do not use that path:
+- a random parallelogram with coupled bodies against its tree form (the loop cut, its
+  dependent angles written as couplings of the crank: the open-chain path, no closure):
+  the same regressor at every state, the same dp and certified vp ranks;
+- a random four-bar with coupled bodies against the same four-bar with the followers made
+  free (independent) and composed by hand: K = Rc^T K_free;
+- along simulated motion: the positions' time derivative is the velocity the projection
+  gives (every tree coordinate, followers included), the coupling holds, and the power of
+  the forces is the energy's derivative;
+- arb (certified, generated scalar closure and the generic kinematics) encloses float64,
+  and the batched float64 Newton agrees with the general one.
+"""
+
+import json
+from fractions import Fraction
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from flint import arb
+
+from baseparams import registry
+from baseparams.cli import main
+from baseparams.dynamics import evaluator as evaluator_module
+from baseparams.dynamics.evaluator import Evaluator
+from baseparams.errors import InputError
+from baseparams.io.loader import parse_mechanism
+from baseparams.io.toml_writer import mechanism_toml
+from baseparams.model import generate
+from baseparams.numeric.backends import Arb, Float64
+
+SEEDS = range(6)
+
+
+def _states(seed: int, count: int, f: int = 1) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    return ([rng.uniform(-0.5, 0.5, count) for _ in range(f)], [rng.normal(size=count) for _ in range(f)],
+            [rng.normal(size=count) for _ in range(f)])
+
+
+def _k(mech, z, zd, zdd) -> np.ndarray:
+    return Evaluator(mech, Float64()).sample(z, zd, zdd).regressor_array()
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_parallelogram_with_couplings_is_its_tree_form(seed):
+    """Loops + couplings against the tree with couplings (no closure solved): K equal to
+    rounding at every state (batched Newton over 300 states, the general path over 20),
+    and the same rank from dp and from vp (certified) in both forms."""
+    loop = parse_mechanism(generate.coupled_loop(seed, parallelogram=True))
+    tree = parse_mechanism(generate.coupled_loop(seed, parallelogram=True, tree=True))
+    assert loop.loops and loop.couplings and not tree.loops
+    assert loop.parameters == tree.parameters
+    for count in (20, 300):
+        z, zd, zdd = _states(seed, count)
+        k_loop, k_tree = _k(loop, z, zd, zdd), _k(tree, z, zd, zdd)
+        assert np.abs(k_loop - k_tree).max() <= 1e-12 * np.abs(k_tree).max()
+    solvers = registry.solvers()
+    ranks = {(m.name, s): solvers[s].item.solve(m) for m in (loop, tree) for s in ("dp", "vp")}
+    assert len({r.rank for r in ranks.values()}) == 1, {k: r.rank for k, r in ranks.items()}
+    assert ranks[(loop.name, "vp")].certified
+
+
+def _free_form(text: str) -> str:
+    """The same mechanism with every coupling left out and its follower made independent."""
+    head, _, _ = text.partition("\n[[couplings]]")
+    followers = [line.split('"')[1] for line in text.split("\n") if line.startswith('coordinate = "qe')]
+    listed = ", ".join(f'"{c}"' for c in ["qa"] + followers)
+    still = "".join(f'{c} = "0", ' for c in followers)
+    return head.replace('independent = ["qa"]', f"independent = [{listed}]").replace("q = { ", "q = { " + still)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_coupled_four_bar_is_the_free_one_composed_by_hand(seed):
+    """A general four-bar (dependent angles nonlinear in the crank) with followers: K equals
+    Rc^T K_free, where the free mechanism has the followers independent and is evaluated
+    where the followers' coupling puts them (velocities and accelerations by the chain rule
+    from the free loop's own solution): no coupling equation anywhere in this reference."""
+    text = generate.coupled_loop(seed)
+    mech, free = parse_mechanism(text), parse_mechanism(_free_form(text))
+    z, zd, zdd = _states(seed + 10, 60)
+    coupled = Evaluator(mech, Float64()).sample(z, zd, zdd)
+    # the loop's own coordinates do not depend on the extra bodies: solve them once
+    count = len(z[0])
+    extra = len(free.independent) - 1
+    zero = [np.zeros(count)] * extra
+    first = Evaluator(free, Float64()).sample(z + zero, zd + zero, zdd + zero)
+    names = list(free.coordinates)
+    fz, fzd, fzdd, column = list(z), list(zd), list(zdd), [np.ones(count)]
+    for c in mech.couplings:
+        lead, r, o = names.index(c.leader), float(c.ratio), float(c.offset)
+        fz.append(r * first.q[lead] + o)
+        fzd.append(r * first.qd[lead])
+        fzdd.append(r * first.qdd[lead])
+        column.append(r * np.broadcast_to(first.projection[lead][0], (count,)))   # d follower / d qa
+    k_free = Evaluator(free, Float64()).sample(fz, fzd, fzdd).regressor_array()    # (N, 1 + extra, p)
+    expected = np.einsum("fs,sfp->sp", np.array(column), k_free)[:, None, :]
+    k = coupled.regressor_array()
+    assert np.abs(k - expected).max() <= 1e-11 * np.abs(expected).max()
+    for c in mech.couplings:                               # the positions themselves
+        i, j = names.index(c.coordinate), names.index(c.leader)
+        np.testing.assert_allclose(coupled.q[i], float(c.ratio) * coupled.q[j] + float(c.offset), atol=1e-13)
+
+
+@pytest.mark.parametrize("seed", SEEDS[:3])
+def test_the_motion_is_consistent_and_the_energy_balances(seed):
+    """Along a simulated motion: dq/dt (finite differences of the Newton positions, which
+    never read R) is qd = R zd for every tree coordinate, and tau . zd = d(T + V)/dt."""
+    from baseparams.dynamics.forces import evaluate
+    from baseparams.recordings.simulate import simulate
+    mech = parse_mechanism(generate.coupled_loop(seed))
+    data, truth = simulate(mech, samples=4001, random_inertia=True, seed=seed)
+    sample = evaluate(mech, data.motion)
+    t = data.motion.t
+    for i, name in enumerate(mech.coordinates):
+        q = np.broadcast_to(np.asarray(sample.q[i], float), t.shape)
+        qd = np.broadcast_to(np.asarray(sample.qd[i], float), t.shape)
+        derivative = np.gradient(q, t, edge_order=2)
+        assert np.abs(derivative - qd)[2:-2].max() < 1e-4 * max(1.0, np.abs(qd).max()), name
+    phi = np.array([truth["parameters"][p] for p in mech.parameters])
+    t_form, v_form = sample.energies()
+    energy = sum(np.broadcast_to(np.asarray(c, float), t.shape) * p for c, p in zip(t_form + v_form, np.tile(phi, 2)))
+    power = np.sum(data.tau * data.motion.qd, axis=1)
+    assert np.abs(np.gradient(energy, t, edge_order=2) - power)[2:-2].max() < 1e-4 * np.abs(power).max()
+
+
+@pytest.mark.parametrize("seed", SEEDS[:4])
+def test_every_path_of_the_closure_agrees(seed, monkeypatch):
+    """The batched float64 Newton against the general one; one state in arb (certified:
+    Krawczyk over loops and couplings) by the generated scalar closure and by the generic
+    kinematics, each enclosing the float64 regressor; the follower's row of R is exactly
+    the ratio times the leader's (its ball contains that)."""
+    mech = parse_mechanism(generate.coupled_loop(seed))
+    z, zd, zdd = _states(seed, 80)
+    batched = _k(mech, z, zd, zdd)
+    monkeypatch.setattr(evaluator_module, "BATCHED_NEWTON", False)
+    np.testing.assert_allclose(_k(mech, z, zd, zdd), batched, rtol=0, atol=1e-11 * np.abs(batched).max())
+    state = [Fraction(float(v[0])) for v in z], [Fraction(float(v[0])) for v in zd], [Fraction(float(v[0])) for v in zdd]
+    names = list(mech.coordinates)
+    for scalar in (True, False):
+        monkeypatch.setattr(evaluator_module, "SCALAR_CLOSURE", scalar)
+        backend = Arb(40)
+        with backend.activate():
+            ev = Evaluator(mech, backend, certify=True)
+            sample = ev.sample(*([backend.rational(v) for v in part] for part in state))
+            k = sample.regressor()
+            for row, expected in zip(k, batched[0]):
+                for ball, value in zip(row, expected):
+                    assert abs(arb(ball).mid() - value) <= 1e-9 * max(1.0, np.abs(batched).max())
+                    assert arb(ball).rad() < 1e-25
+            for c in mech.couplings:
+                i, j = names.index(c.coordinate), names.index(c.leader)
+                gap = sample.projection[i][0] - backend.rational(c.ratio) * sample.projection[j][0]
+                assert arb(gap).contains(0)
+                assert (sample.q[i] - backend.rational(c.ratio) * sample.q[j] - backend.rational(c.offset)).contains(0)
+
+
+@pytest.mark.parametrize("seed", SEEDS[:3])
+def test_validate_passes_and_solvers_decline_with_reasons(tmp_path, seed):
+    path = tmp_path / f"coupled_loop_{seed}.toml"
+    path.write_text(generate.coupled_loop(seed))
+    result = CliRunner().invoke(main, ["validate", str(path), "--format", "json"])
+    assert result.exit_code == 0, result.output + result.stderr
+    (checked,) = json.loads(result.stdout)["mechanisms"]
+    checks = {c["name"]: c["ok"] for c in checked["checks"]}
+    assert checks["energy balance"] and checks["ranks"] and checks["space vp ~ dp"], checks
+    mech = parse_mechanism(path.read_text())
+    assert "closed loop" in (registry.solvers()["exact"].item.applicable(mech) or "")
+    assert "transfer rules" in (registry.solvers()["symbolic"].item.applicable(mech) or "")
+
+
+def test_a_coupled_loop_round_trips_through_the_writer():
+    mech = parse_mechanism(generate.coupled_loop(1))
+    back = parse_mechanism(mechanism_toml(mech))
+    assert back.couplings == mech.couplings and back.independent == mech.independent and len(back.loops) == 1
+    assert all(isinstance(c.ratio, Fraction) for c in back.couplings)
+
+
+def test_identification_on_a_coupled_loop_recovers_the_base_parameters():
+    from baseparams.identify.base import BaseModel
+    from baseparams.identify.fit import identify
+    from baseparams.recordings.simulate import simulate
+    mech = parse_mechanism(generate.coupled_loop(1))
+    data, truth = simulate(mech, samples=800, random_inertia=True, seed=3)
+    assert data.coordinates == ("qa",)
+    base = BaseModel.from_result(registry.solvers()["vp"].item.solve(mech), mech)
+    result = identify(mech, data, base=base)
+    expected = base.values(np.array([truth["parameters"][p] for p in mech.parameters]))
+    # noise-free data: the estimates are the truth up to rounding times the fit's condition
+    # number (a one-degree-of-freedom motion excites some base parameters only weakly)
+    assert result.nrms.max() < 1e-9
+    error = np.abs(result.base_estimates - expected).max() / np.abs(expected).max()
+    assert error < 1e-15 * result.condition_number, (error, result.condition_number)
+
+
+# ----- what is refused, and how it is said ---------------------------------------------------
+PARALLELOGRAM = generate.four_bar(1, parallelogram=True)
+
+
+@pytest.mark.parametrize("table, key, reason", [
+    ('coordinate = "qb"\nleader = "qa"\nratio = "-1"', "couplings[0]", "follows from the closed loops"),
+    ('coordinate = "qa"\nleader = "qb"\nratio = "2"', "coordinates.independent", "'qa' follows 'qb'"),
+    ('coordinate = "qb"\nleader = "qa"\nratio = "2"', "coordinates.independent", "coupling(s) included"),
+    ('coordinate = "qc"\nleader = "qa"', "couplings[0].coordinate", "not a tree coordinate"),
+])
+def test_bad_couplings_on_a_loop_are_named(tmp_path, table, key, reason):
+    text = PARALLELOGRAM + f"\n[[couplings]]\n{table}\n"
+    with pytest.raises(InputError) as info:
+        parse_mechanism(text)
+    assert key in str(info.value) and reason in str(info.value)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    result = CliRunner().invoke(main, ["show", str(path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output + result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("error: ") and str(path) in line and key in line
+
+
+def test_the_parallelogram_s_own_angles_as_couplings_agree_exactly():
+    """generate.four_bar(parallelogram=True) really is a parallelogram: qb = -qa and
+    qd = qa at every state (what the tree form writes as couplings)."""
+    mech = parse_mechanism(PARALLELOGRAM)
+    z, zd, zdd = _states(3, 50)
+    s = Evaluator(mech, Float64()).sample(z, zd, zdd)
+    names = list(mech.coordinates)
+    qa, qb, qd = (np.asarray(s.q[names.index(c)]) for c in ("qa", "qb", "qd"))
+    np.testing.assert_allclose(qb, -qa, atol=1e-14)
+    np.testing.assert_allclose(qd, qa, atol=1e-14)
