@@ -9,6 +9,7 @@ elsewhere). Process tables are read from /proc: Linux only.
 """
 
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -147,19 +148,33 @@ def test_a_worker_whose_parent_is_gone_exits_by_itself():
 
 def test_the_watchdog_notices_a_parent_that_dies_later():
     """Without prctl (not Linux), the watchdog thread is what ends the worker: here the
-    parent is a shell that exits after 0.5 s while its child sleeps."""
+    parent is a shell that waits on its standard input while its child sleeps.
+
+    No step depends on time (issue 46: the shell's ``sleep 1.5`` ended before a child
+    started on a loaded machine had armed its watchdog, which then watched init): the child
+    prints its pid once the watchdog is armed, and the shell exits only when the test closes
+    its input. The bound on the child's end is generous (the watchdog polls every 0.5 s; it
+    only limits how long a failure takes to show)."""
     code = ("import os, time\n"
             "from baseparams.orchestrate import runners\n"
             "runners.sys.platform = 'darwin'\n"             # no prctl: the watchdog alone
             "runners.die_with_parent(os.getppid())\n"
             "print(os.getpid(), flush=True)\n"
-            "time.sleep(60)\n")
-    shell = subprocess.Popen(["/bin/sh", "-c", f'"{sys.executable}" -c "$0" & sleep 1.5', code],
-                             stdout=subprocess.PIPE, text=True)
-    pid = int(shell.stdout.readline())
-    shell.wait(timeout=30)
-    shell.stdout.close()
+            "time.sleep(300)\n")
+    shell = subprocess.Popen(["/bin/sh", "-c", f'"{sys.executable}" -c "$0" </dev/null & read line', code],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    pid = 0
     try:
-        assert wait_gone([pid], runners.WATCHDOG_S * 4 + 1) == []
+        # the watchdog is armed (a child that failed to start: no line, and no hang here)
+        assert select.select([shell.stdout], [], [], 120)[0], "the child never started"
+        pid = int(shell.stdout.readline())
+        assert alive(pid)
+        shell.stdin.close()                             # now the parent ends
+        shell.wait(timeout=120)
+        shell.stdout.close()
+        assert wait_gone([pid], 120) == []
     finally:
-        _cleanup([pid])
+        if shell.poll() is None:
+            shell.kill()
+            shell.wait(timeout=30)
+        _cleanup([pid] if pid else [])

@@ -509,20 +509,20 @@ def test_unknown_current_gains_fixed_by_a_known_payload_run(tmp_path):
     (tmp_path / "mech.toml").write_text(_chain(9))
     cli = CliRunner().invoke(main, ["identify", str(tmp_path / "mech.toml"), str(tmp_path / "rec.toml"),
                                     "--solver", "dp", "--validate", str(tmp_path / "rec.toml"), "--format", "json"])
-    assert cli.exit_code == 0, cli.output
-    report = json.loads(cli.output)
+    assert cli.exit_code == 0, cli.stderr
+    report = json.loads(cli.stdout)           # stdout only: progress lines (after 2 s) go to stderr
     forces = np.concatenate([tau, tau_loaded])
     assert max(report["rms"].values()) < 1e-2 * np.abs(forces).max()
     assert max(report["validation"][0]["rms"].values()) < 1e-2 * np.abs(forces).max()
     # diagnose needs forces: refused without the gains (it had diagnosed zeros), converted with
     # the identify result's when held as given
     refused = CliRunner().invoke(main, ["diagnose", str(tmp_path / "mech.toml"), str(tmp_path / "rec.toml")])
-    assert refused.exit_code == 2 and "gain_q1, gain_q2, gain_q3 of these data are unknown" in refused.output
-    (tmp_path / "id.json").write_text(cli.output)
+    assert refused.exit_code == 2 and "gain_q1, gain_q2, gain_q3 of these data are unknown" in refused.stderr
+    (tmp_path / "id.json").write_text(cli.stdout)
     held = CliRunner().invoke(main, ["diagnose", str(tmp_path / "mech.toml"), str(tmp_path / "rec.toml"),
                                      "--params", str(tmp_path / "id.json"), "--format", "json"])
-    assert held.exit_code in (0, 1), held.output
-    diagnosis = json.loads(held.output)
+    assert held.exit_code in (0, 1), held.stderr
+    diagnosis = json.loads(held.stdout)
     (note,) = [n for n in diagnosis["notes"] if "converted with the identify result's: gain_q1 = " in n]
     assert abs(float(note.split("gain_q1 = ")[1].split(",")[0]) - 0.7) < 2e-3, note
     assert diagnosis["gap"]["before"] < 1e-2 and not [e for e in diagnosis["effects"] if e["kind"] == "body"]
