@@ -8,6 +8,7 @@ of each mechanism run in two worker processes, as on the 2-core CI machine.
 import pytest
 
 from baseparams import registry
+from baseparams.io.loader import resolve
 from baseparams.orchestrate.runners import Processes
 from baseparams.orchestrate.validate import mechanism_texts, render_text, validate
 
@@ -18,6 +19,10 @@ def test_every_solver_agrees_on(name):
     assert report.ok, render_text(report)
     row = report.mechanisms[0].solvers
     applicable = [s for s, r in row.items() if r["status"] == "ok"]
-    assert {"dp", "vp", "symbolic"} <= set(applicable)
-    assert all(row[s]["certified"] for s in ("vp", "symbolic"))
+    # the symbolic solver declines couplings between joint coordinates (its transfer rules
+    # assume free joints, and it says so): parallelogram_arm's counterweight (issue 49)
+    coupled = bool(resolve(name).couplings)
+    certifying = ("vp",) if coupled else ("vp", "symbolic")
+    assert {"dp", *certifying} <= set(applicable)
+    assert all(row[s]["certified"] for s in certifying)
     assert len({row[s]["rank"] for s in applicable}) == 1

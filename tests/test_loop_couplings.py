@@ -230,3 +230,47 @@ def test_the_parallelogram_s_own_angles_as_couplings_agree_exactly():
     qa, qb, qd = (np.asarray(s.q[names.index(c)]) for c in ("qa", "qb", "qd"))
     np.testing.assert_allclose(qb, -qa, atol=1e-14)
     np.testing.assert_allclose(qd, qa, atol=1e-14)
+
+
+# ----- the built-in parallelogram arm with its counterweight -----------------------------------
+def _arm_tree_form(text: str) -> str:
+    """parallelogram_arm as the authors of such an arm write it: the tree, the loop joints
+    left out and the passive angles as couplings of the pitch (the counterweight's stays)."""
+    import re
+    text = re.sub(r'(# loop \d[^\n]*\n)?\[\[joints\]\]\nname = "(front_top|bottom_end)"\n(?:(?!\n\n).)*\n', "", text,
+                  flags=re.S)
+    assert "loop = true" not in text
+    extra = "".join(f'\n[[couplings]]\ncoordinate = "{c}"\nleader = "pitch"\nratio = "{r}"\n' for c, r in
+                    (("pitch_front", 1), ("pitch_top", -1), ("pitch_end", 1), ("pitch_bottom", -1)))
+    return text.replace('name = "parallelogram_arm"', 'name = "parallelogram_arm_tree"') + extra
+
+
+def test_the_parallelogram_arm_is_its_tree_form():
+    """Issue 49, done when: the arm written as loops plus a coupling loads, its rank equals
+    the tree-with-couplings form's, certified by vp, and the regressors are equal."""
+    from baseparams.io.loader import resolve
+    from baseparams.registry import mechanisms
+    arm = resolve("parallelogram_arm")
+    tree = parse_mechanism(_arm_tree_form(mechanisms()["parallelogram_arm"].item.path.read_text()))
+    assert len(arm.loops) == 2 and not tree.loops and arm.independent == tree.independent
+    assert [c.coordinate for c in arm.couplings] == ["counterweight"]
+    rng = np.random.default_rng(49)
+    count = 120
+    z = [rng.uniform(-0.8, 0.8, count), rng.uniform(-0.8, 0.8, count), rng.uniform(0, 0.24, count)]
+    zd, zdd = [rng.normal(size=count) for _ in range(3)], [rng.normal(size=count) for _ in range(3)]
+    k_arm, k_tree = _k(arm, z, zd, zdd), _k(tree, z, zd, zdd)
+    assert np.abs(k_arm - k_tree).max() <= 1e-12 * np.abs(k_tree).max()
+    solvers = registry.solvers()
+    results = [solvers[s].item.solve(m) for m in (arm, tree) for s in ("dp", "vp")]
+    assert [r.rank for r in results] == [15] * 4
+    assert results[1].certified and results[3].certified
+
+
+def test_validate_passes_on_the_parallelogram_arm():
+    result = CliRunner().invoke(main, ["validate", "parallelogram_arm", "--format", "json"])
+    assert result.exit_code == 0, result.output + result.stderr
+    (checked,) = json.loads(result.stdout)["mechanisms"]
+    assert checked["ok"] and all(c["ok"] for c in checked["checks"])
+    assert {c["name"] for c in checked["checks"]} >= {"energy balance", "ranks", "space vp ~ dp"}
+    shown = json.loads(CliRunner().invoke(main, ["show", "parallelogram_arm", "--format", "json"]).stdout)
+    assert shown["dof"] == 3 and shown["closure_equations"] - shown["redundant_closure_equations"] == 5

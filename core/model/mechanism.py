@@ -152,7 +152,9 @@ class Mechanism:
 
     @property
     def closure_equation_count(self) -> int:
-        return sum(len(j.type.closure) for j in self.loops)
+        """The loop joints' closure equations and, on a mechanism with loops, one per
+        coupling (solved with them: the closure Jacobian's rows)."""
+        return sum(len(j.type.closure) for j in self.loops) + (len(self.couplings) if self.loops else 0)
 
     @property
     def motor_names(self) -> tuple[str, ...]:
