@@ -485,9 +485,10 @@ def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] 
     return None if message is None else (lo, message)
 
 
-def _read_text(path: str) -> str:
+def _read_text(path: str, what: str = "a CSV file") -> str:
     """The file's text, read in chunks up to :func:`read_budget` (a device such as /dev/zero
-    or an endless pipe is refused once past it, never read whole)."""
+    or an endless pipe is refused once past it, never read whole). ``what`` the file should
+    be, in messages: a log a description names is not the project's CSV layout."""
     budget = read_budget()
     try:
         size = os.path.getsize(path)
@@ -500,24 +501,25 @@ def _read_text(path: str) -> str:
                 if not chunk:
                     break
                 if b"\x00" in chunk:
-                    raise InputError("binary file (it contains NUL bytes): not a CSV file", file=path)
+                    raise InputError(f"binary file (it contains NUL bytes): not {what}", file=path)
                 total += len(chunk)
                 if total > budget:
                     raise InputError(_too_large(total, budget, more=True), file=path)
                 chunks.append(chunk)
         raw = b"".join(chunks)
     except IsADirectoryError:
-        raise InputError("is a directory, not a CSV file", file=path) from None
+        raise InputError(f"is a directory, not {what}", file=path) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror or exc}", file=path) from None
     if not raw.strip():
-        raise InputError("empty file: a CSV file with a header row and samples is needed", file=path)
+        raise InputError("empty file: a CSV file with a header row and samples is needed" if what == "a CSV file"
+                         else f"empty file: {what} with samples is needed", file=path)
     if b"\x00" in raw:
-        raise InputError("binary file (it contains NUL bytes): not a CSV file", file=path)
+        raise InputError(f"binary file (it contains NUL bytes): not {what}", file=path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise InputError(f"not a text file (byte {exc.start} is not UTF-8): not a CSV file", file=path) from None
+        raise InputError(f"not a text file (byte {exc.start} is not UTF-8): not {what}", file=path) from None
     return text
 
 
@@ -533,7 +535,8 @@ DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " 
 
 def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None = None,
                  wanted: Collection[str] | None = None, missing: bool = False,
-                 on_header: Callable[[list[str]], None] | None = None, dates: Collection[str] = ()
+                 on_header: Callable[[list[str]], None] | None = None, dates: Collection[str] = (),
+                 names: Sequence[str] | None = None, log: str | None = None
                  ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
     """(header, values, lines) of a delimited text: the header's names, the columns in
     ``wanted`` (None: all) that the header has as float64 by name, and each data row's line.
@@ -547,7 +550,12 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     structure is known (the errors come in the order: a row's field count, the header, the
     first bad number, whichever batch holds it). Why columns by name, row by row: a robot's
     log has many columns a description does not use (a UR's RTDE log 100 and more, some of
-    them text), and its rows kept as strings took 30 times the file's size in memory."""
+    them text), and its rows kept as strings took 30 times the file's size in memory.
+
+    ``names``: a file without a header row (a controller's export), its columns named in
+    order (pandas' ``names=``): every line is a sample. ``log``: where a recording
+    description names this file (its messages then speak of the description, never of the
+    project's CSV layout); a column it uses (``wanted``) that the header has twice is an error."""
     if delimiter == "auto":
         head = next((line for line in _lines(text)
                      if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
@@ -562,6 +570,10 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     pending: list[list[str]] = []              # the rows not yet converted, whole
     done: list[list[np.ndarray]] = []
     bad: list[InputError] = []                 # the first bad number, raised after the header's checks
+    if names is not None:                      # no header row: the columns named by the description
+        header = list(names)
+        used = [k for k, name in enumerate(header) if wanted is None or name in wanted]
+        done = [[] for _ in used]
     try:
         for fields in reader:
             if not fields or (not fields[0].strip() and not "".join(fields).strip()):
@@ -575,8 +587,15 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
                 done = [[] for _ in used]
                 continue
             if len(fields) != len(header):
-                raise InputError(f"{len(fields)} fields, the header has {len(header)}: not a CSV file "
-                                 "with this header", file=path, key=f"row {reader.line_num}")
+                if names is not None:
+                    raise InputError(f"{len(fields)} fields, the description names {len(header)} columns "
+                                     f"({log}: names = [{', '.join(header[:4])}{', ...' if len(header) > 4 else ''}])",
+                                     file=path, key=f"row {reader.line_num}")
+                raise InputError(f"{len(fields)} fields, the header has {len(header)}: "
+                                 + ("not a CSV file with this header" if log is None else
+                                    f"not a table with this header ({log}; a file without a header row: give its "
+                                    "columns' names in the description, names = [...])"),
+                                 file=path, key=f"row {reader.line_num}")
             lines.append(reader.line_num)
             pending.append(fields)
             if len(pending) >= PARSE_BATCH_ROWS:
@@ -584,13 +603,21 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
     except csv.Error as exc:
         raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
     if header is None:
-        raise InputError("no header row", file=path)
-    if len(header) < 2:
+        raise InputError("no header row" if log is None else f"no lines with values ({log})", file=path)
+    if log is None and len(header) < 2:
         raise InputError(f"the header {','.join(header)!r} has one column: not a comma-separated "
                          "file with columns t, q_<coordinate>, tau_<coordinate>", file=path,
                          key=f"row {header_line}")
     if not lines:
-        raise InputError("a header but no samples", file=path)
+        raise InputError("a header but no samples" if names is None else "no samples", file=path)
+    if log is not None and wanted is not None:  # a column used twice: which one is meant?
+        for name in sorted(set(wanted) & set(header)):
+            where = [k + 1 for k, n in enumerate(header) if n == name]
+            if len(where) > 1:
+                raise InputError(f"column {name!r} appears twice (columns {where[0]} and {where[1]}), and the "
+                                 f"description uses it ({log}): rename one in the file's header, or name the "
+                                 "columns in the description (names = [...])", file=path,
+                                 key="header" if names is None else None)
     if on_header is not None:
         on_header(header)
     _convert(path, header, used, pending, done, lines, missing, bad, dates)

@@ -1,0 +1,156 @@
+"""A description's log files as tables of named columns, whatever their layout.
+
+A ``[[runs]]`` file entry is a path (a log with a header row, an ``.npz``/``.mat`` file of
+arrays, a ROS bag) or a table ``{ path = "...", names = [...], stacked = true }``:
+
+- ``names``: a file without a header row (a UR's RTDE export of plain numbers), its
+  columns named in order, as pandas' ``names=`` reads it;
+- ``stacked = true``: one value a line, the values of one sample on ``len(names)``
+  consecutive lines (the Panda's published log: its 7 joints on 7 lines, one file per
+  quantity, the time in a file of its own, ``names = ["t"]``).
+
+Every error names the log, its line and column and says what the description asked for;
+none speaks of the project's own CSV layout (``t, q_c, tau_c``), which a description's log
+need not follow. Why: a headerless log gave "time column '1' found in 0 files", and a
+one-value-per-line log "not a comma-separated file with columns t, q_<coordinate>,
+tau_<coordinate>" (issue 44).
+"""
+
+from collections.abc import Collection
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from baseparams.errors import InputError
+from baseparams.io.schema import BOOLEAN, STRING, Array, Table
+from baseparams.recordings.data import NUMBER, _checked, _lines, _read_text, read_columns
+
+LOG = Table({"path": (STRING, True),
+             "names": (Array(STRING, min_length=1, what="a list of the columns' names, in order"), False),
+             "stacked": (BOOLEAN, False)},
+            what="a path, or a table { path = \"...\", names = [...], stacked = true }")
+"""A file entry of ``[[runs]]`` (``file``, or a value of ``files``) once a plain path is
+written as ``{ path = ... }``."""
+WHAT = "a log with one sample a row"
+
+
+@dataclass(frozen=True)
+class LogFile:
+    """One log a run reads: its ``path`` (relative to the description), the columns' names
+    when the file has no header row, and whether it holds one value a line (``stacked``);
+    ``key``: where the description names it (``runs[0].files.q``), for messages."""
+    path: str
+    names: tuple[str, ...] | None = None
+    stacked: bool = False
+    key: str = ""
+
+
+def as_table(entry: object) -> object:
+    """A file entry as a table: a plain path is ``{ path = ... }`` (other values are left for
+    the schema to refuse)."""
+    return {"path": entry} if isinstance(entry, str) else entry
+
+
+def log_files(run: dict, description: str, key: str) -> dict[str | None, LogFile]:
+    """The run's logs by alias (None: a run in one file), checked: ``stacked`` needs
+    ``names``, names are distinct, an array file or a bag names its own columns."""
+    if ("file" in run) == ("files" in run):
+        raise InputError("give file (one log) or files (alias = log, read side by side)", file=description, key=key)
+    entries = {None: (run["file"], f"{key}.file")} if "file" in run else \
+        {alias: (entry, f"{key}.files.{alias}") for alias, entry in run["files"].items()}
+    out: dict[str | None, LogFile] = {}
+    for alias, (entry, where) in entries.items():
+        spec = as_table(entry)
+        assert isinstance(spec, dict)                  # the schema checked it
+        names = tuple(spec["names"]) if "names" in spec else None
+        stacked = bool(spec.get("stacked", False))
+        if stacked and names is None:
+            raise InputError("stacked = true (one value a line) needs names = [...]: the columns of one sample, "
+                             "in the order of their lines", file=description, key=f"{where}.stacked")
+        if names is not None:
+            seen: set[str] = set()
+            for k, name in enumerate(names):
+                if not name.strip():
+                    raise InputError("an empty name", file=description, key=f"{where}.names[{k}]")
+                if name in seen:
+                    raise InputError(f"{name!r} is named twice", file=description, key=f"{where}.names[{k}]")
+                seen.add(name)
+            from baseparams.recordings.arrays import is_array_file
+            from baseparams.recordings.bags import is_bag
+            if is_array_file(spec["path"]) or is_bag(spec["path"]):
+                raise InputError("names and stacked are for text logs: an array file or a bag names its own "
+                                 "columns", file=description, key=f"{where}.names")
+        out[alias] = LogFile(spec["path"], names, stacked, where)
+    return out
+
+
+def read_log(path: str, log: LogFile, description: str, delimiter: str = "auto", comment: str | None = None,
+             wanted: Collection[str] | None = None, dates: Collection[str] = ()
+             ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+    """(header, the ``wanted`` columns by name, each sample's line) of a text log at ``path``
+    as ``log`` describes it (a header row, ``names``, or ``stacked``)."""
+    where = f"{log.key} of {Path(description).name}" if log.key else Path(description).name
+    text = _read_text(path, WHAT)
+    if log.stacked:
+        assert log.names is not None
+        if set(dates) & set(log.names):
+            raise InputError("dates and times (time_unit = \"iso\") are read from a log with one sample a row, not "
+                             "from a stacked one", file=description, key=f"{log.key}.stacked")
+        return _stacked(path, text, log.names, comment, wanted, where)
+    first = next((line for line in _lines(text) if line.strip()
+                  and not (comment and line.lstrip().startswith(comment))), "")
+    fields = [f.strip() for f in _split(first, delimiter)]
+    numbers = [f for f in fields if NUMBER.fullmatch(f)]
+    if log.names is None and fields and len(numbers) == len(fields):
+        shown = ", ".join(fields[:4]) + (", ..." if len(fields) > 4 else "")
+        raise InputError(f"its first line ({shown}) holds numbers, not the columns' names: a log without a header "
+                         f"row needs them in the description: {log.key or 'file'} = {{ path = \"{log.path}\", names = "
+                         f"[...] }} ({len(fields)} names, in order)"
+                         + ("; one value a line: add stacked = true" if len(fields) == 1 else ""),
+                         file=path, key="row 1")
+    if log.names is not None and fields and not numbers and len(fields) > 1:
+        shown = ", ".join(fields[:4]) + (", ..." if len(fields) > 4 else "")
+        raise InputError(f"its first line ({shown}) is a header row, and the description names the columns "
+                         f"({where}: names): leave names out to read the header's", file=path, key="row 1")
+    return read_columns(path, text, delimiter, comment, wanted, missing=True, dates=dates, names=log.names,
+                        log=where)
+
+
+def _split(line: str, delimiter: str) -> list[str]:
+    if delimiter == "auto":
+        delimiter = next((d for d in (",", ";", "\t") if d in line), " ")
+    return line.split() if delimiter == " " else line.strip("\r\n").split(delimiter)
+
+
+def _stacked(path: str, text: str, names: tuple[str, ...], comment: str | None, wanted: Collection[str] | None,
+             where: str) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+    """A log of one value a line, the values of one sample on ``len(names)`` consecutive lines
+    (blank and comment lines skipped): every column by name, each sample's first line."""
+    fields: list[str] = []
+    lines: list[int] = []
+    for number, line in enumerate(_lines(text), start=1):
+        stripped = line.strip()
+        if not stripped or (comment and stripped.startswith(comment)):
+            continue
+        if len(stripped.replace(",", " ").replace(";", " ").split()) > 1:
+            raise InputError(f"{stripped[:40]!r} holds several values: a stacked log ({where}: stacked = true) has "
+                             "one value a line; leave stacked out for a log with one sample a row", file=path,
+                             key=f"row {number}")
+        fields.append(stripped.rstrip(",;"))
+        lines.append(number)
+    width = len(names)
+    if not fields:
+        raise InputError(f"no values ({where})", file=path)
+    if len(fields) % width:
+        raise InputError(f"{len(fields)} values are not a whole number of samples of {width} ({where}: names = "
+                         f"[{', '.join(names[:4])}{', ...' if width > 4 else ''}]): the last sample has "
+                         f"{len(fields) % width} value(s), from row {lines[len(fields) - len(fields) % width]}; "
+                         "is a value missing, or the names?", file=path)
+    checked = _checked(path, "?", fields, lines, missing=True)
+    if isinstance(checked, tuple):                     # name the column of the bad value
+        k, error = checked
+        raise InputError(error.reason, file=path, key=f"row {lines[k]}, column {names[k % width]}")
+    table = checked.reshape(-1, width)
+    used = [k for k, name in enumerate(names) if wanted is None or name in wanted]
+    return list(names), {names[k]: np.ascontiguousarray(table[:, k]) for k in used}, lines[::width]
