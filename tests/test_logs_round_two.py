@@ -1,0 +1,162 @@
+"""Logs as robots write them, round two (issue 44): headerless and stacked logs read by a
+description alone, ROS bags (ROS 1 and ROS 2, written here with rosbags itself), one pipeline
+for the project's CSV layout and descriptions, and the checks that catch a bad setup. Every
+log is made from a simulated mechanism with a known truth, which identification recovers."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from baseparams import registry
+from baseparams.cli import main
+from baseparams.errors import InputError
+from baseparams.identify.base import BaseModel
+from baseparams.identify.fit import identify
+from baseparams.io.loader import parse_mechanism
+from baseparams.model import generate
+from baseparams.recordings.recording import read_data, read_recording
+from baseparams.recordings.simulate import simulate
+
+SEED = 3
+CHANNELS = '[position]\nq1 = "q1"\nq2 = "q2"\nq3 = "q3"\n[torque]\nq1 = "tau1"\nq2 = "tau2"\nq3 = "tau3"\n'
+
+
+def _mechanism(seed: int = SEED):
+    return parse_mechanism(generate.serial_chain(seed, bodies=3, types="R"))
+
+
+def _base(mech):
+    return BaseModel.from_result(registry.solvers()["dp"].item.solve(mech), mech)
+
+
+def _simulated(mech, samples: int = 4001, noise: float = 0.0, seed: int = 0):
+    """(t, q, qd, tau, truth's base parameters): the mechanism along its trajectory (10 s)."""
+    data, truth = simulate(mech, samples=samples, noise_sd=noise, seed=seed, random_inertia=True)
+    phi = np.array([truth["parameters"][p] for p in mech.parameters], float)
+    m = data.motion
+    return m.t, m.q, m.qd, data.tau, _base(mech).values(phi)
+
+
+def _recovered(path, mech, truth, rtol):
+    data, model = read_recording(path, mech)
+    result = identify(model, data, base=_base(mech))
+    error = np.abs(result.base_estimates - truth).max() / np.abs(truth).max()
+    assert error < rtol, (error, result.base_estimates, truth)
+    return data, result
+
+
+def _cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+# ----- headerless and stacked logs -----------------------------------------------------------
+def test_a_headerless_rtde_like_log_is_read_by_names(tmp_path):
+    """A controller's export of plain numbers (t, q1..q3, qd1..qd3, i1..i3, spaces, its clock
+    at 838 s): the description names its columns and the truth comes back. Before, time = "1"
+    said "found in 0 files" and the first row was taken for a header."""
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech)
+    gains = np.array([0.11, 0.09, 0.125])
+    table = np.column_stack([838.465 + t, q, qd, tau / gains, np.full(len(t), 7)])
+    (tmp_path / "rtde.txt").write_text("\n".join(" ".join(f"{v:.17g}" for v in row) for row in table) + "\n")
+    names = '["t", "q1", "q2", "q3", "qd1", "qd2", "qd3", "i1", "i2", "i3", "mode"]'
+    (tmp_path / "rec.toml").write_text(
+        f'[recording]\ntime = "t"\ndelimiter = "space"\n[[runs]]\nfile = {{ path = "rtde.txt", names = {names} }}\n'
+        '[position]\nq1 = "q1"\nq2 = "q2"\nq3 = "q3"\n[torque]\n'
+        + "".join(f'q{j + 1} = {{ column = "i{j + 1}", gain = {g} }}\n' for j, g in enumerate(gains)))
+    _recovered(tmp_path / "rec.toml", mech, truth, 2e-3)
+    # without names, the first row of numbers is refused with the way out, naming no CSV layout
+    (tmp_path / "bare.toml").write_text((tmp_path / "rec.toml").read_text().replace(
+        f'{{ path = "rtde.txt", names = {names} }}', '"rtde.txt"'))
+    out = _cli("identify", _mech_file(tmp_path), tmp_path / "bare.toml", "--solver", "dp")
+    assert out.exit_code == 2, out.output
+    assert "rtde.txt: row 1: its first line (838.465" in out.stderr and "names = [...]" in out.stderr
+    assert "q_<coordinate>" not in out.stderr and "Traceback" not in out.output
+    # a row with fields beyond the names: the row and the description's names
+    (tmp_path / "rtde.txt").write_text((tmp_path / "rtde.txt").read_text() + "1 2 3 4 5 6 7 8 9 10 11 12\n")
+    with pytest.raises(InputError, match=r"rtde\.txt: row 4002: 12 fields, the description names 11 columns "
+                                         r"\(runs\[0\]\.file of rec\.toml"):
+        read_recording(tmp_path / "rec.toml", mech)
+
+
+def _mech_file(tmp_path, seed: int = SEED) -> Path:
+    path = tmp_path / "mech.toml"
+    path.write_text(generate.serial_chain(seed, bodies=3, types="R"))
+    return path
+
+
+def test_a_stacked_log_with_time_in_its_own_file(tmp_path):
+    """The Panda's published layout: one file per quantity, the joints of a sample on
+    consecutive lines, the time in a file of its own, stamps irregular: read by a description
+    alone, and the truth comes back."""
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech, samples=6001)
+    keep = np.sort(np.random.default_rng(1).choice(len(t), size=4500, replace=False))   # irregular stamps
+    t, q, tau = t[keep], q[keep], tau[keep]
+    (tmp_path / "time.txt").write_text("\n".join(f"{v:.17g}" for v in t) + "\n")
+    (tmp_path / "q.txt").write_text("\n".join(f"{v:.17g}" for v in q.reshape(-1)) + "\n")
+    (tmp_path / "tau.txt").write_text("# effort, N m\n" + "\n".join(f"{v:.17g}" for v in tau.reshape(-1)) + "\n")
+    (tmp_path / "rec.toml").write_text(
+        '[recording]\ntime = "t"\ncomment = "#"\n[[runs]]\n'
+        'files = { t = { path = "time.txt", names = ["t"] }, '
+        'q = { path = "q.txt", names = ["q1", "q2", "q3"], stacked = true }, '
+        'tau = { path = "tau.txt", names = ["tau1", "tau2", "tau3"], stacked = true } }\n' + CHANNELS)
+    data, _ = _recovered(tmp_path / "rec.toml", mech, truth, 3e-3)
+    assert any("irregular time steps" in n for n in data.notes)
+    # a sample cut short: its count, its first row, and what the description asked for
+    (tmp_path / "q.txt").write_text((tmp_path / "q.txt").read_text() + "0.5\n")
+    with pytest.raises(InputError, match=r"q\.txt: 13501 values are not a whole number of samples of 3 "
+                                         r"\(runs\[0\]\.files\.q of rec\.toml: names = \[q1, q2, q3\]\): the last "
+                                         r"sample has 1 value\(s\), from row 13501"):
+        read_recording(tmp_path / "rec.toml", mech)
+    # a bad value: its line and the column it stands for
+    lines = (tmp_path / "tau.txt").read_text().splitlines()
+    lines[5] = "1.2.3"
+    (tmp_path / "tau.txt").write_text("\n".join(lines) + "\n")
+    (tmp_path / "q.txt").write_text("\n".join(f"{v:.17g}" for v in q.reshape(-1)) + "\n")
+    with pytest.raises(InputError, match=r"tau\.txt: row 6, column tau2: '1\.2\.3' is not a number"):
+        read_recording(tmp_path / "rec.toml", mech)
+
+
+def test_a_one_value_a_line_log_without_stacked_speaks_of_the_description(tmp_path):
+    """Before: "the header '0' has one column: not a comma-separated file with columns t,
+    q_<coordinate>, tau_<coordinate>". Now the log's first line is named, with the way out."""
+    mech = _mechanism()
+    (tmp_path / "q.txt").write_text("0\n0.1\n0.2\n" * 20)
+    (tmp_path / "rec.toml").write_text('[recording]\nrate = 100\n[[runs]]\nfile = "q.txt"\n' + CHANNELS)
+    out = _cli("identify", _mech_file(tmp_path), tmp_path / "rec.toml", "--solver", "dp")
+    assert out.exit_code == 2
+    assert "q.txt: row 1: its first line (0) holds numbers" in out.stderr and "stacked = true" in out.stderr
+    assert "comma-separated" not in out.stderr and "q_<coordinate>" not in out.stderr
+    for entry, message in [('{ path = "q.txt", stacked = true }', r"runs\[0\]\.file\.stacked: stacked = true"),
+                           ('{ path = "q.txt", names = ["a", "a"] }', r"runs\[0\]\.file\.names\[1\]: 'a' is named twice"),
+                           ('{ path = "q.txt", name = ["a"] }', r"runs\[0\]\.file\.name: unknown key"),
+                           ('3', r"runs\[0\]\.file: must be a path, or a table")]:
+        (tmp_path / "bad.toml").write_text(f'[recording]\nrate = 100\n[[runs]]\nfile = {entry}\n' + CHANNELS)
+        with pytest.raises(InputError, match=message):
+            read_recording(tmp_path / "bad.toml", mech)
+    # an empty log: the log is named, not "a CSV file with a header row"
+    (tmp_path / "q.txt").write_text("")
+    with pytest.raises(InputError, match=r"q\.txt: empty file: a log with one sample a row with samples"):
+        read_recording(tmp_path / "rec.toml", mech)
+
+
+def test_a_used_column_named_twice_in_a_logs_header_is_an_error(tmp_path):
+    """Issue 46: `time_ms,enc,enc,cur` with `enc` used read the first `enc` in silence; now exit
+    2 naming the file and the column, as the project's CSV reader does ("appears twice")."""
+    (tmp_path / "log.csv").write_text("time_ms,enc,enc,cur\n" + "".join(f"{k},{k * 0.01},{k * 0.02},1\n"
+                                                                       for k in range(50)))
+    (tmp_path / "mech.toml").write_text(generate.serial_chain(1, bodies=1, types="R"))
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "time_ms"\ntime_unit = "ms"\n[[runs]]\nfile = "log.csv"\n'
+                                       '[position]\nq1 = "enc"\n[torque]\nq1 = "cur"\n')
+    out = _cli("identify", tmp_path / "mech.toml", tmp_path / "rec.toml", "--solver", "dp")
+    assert out.exit_code == 2, out.output
+    assert "log.csv: header: column 'enc' appears twice (columns 2 and 3)" in out.stderr
+    assert "Traceback" not in out.output
+    # an unused duplicate is no error (a logger's repeated status column)
+    (tmp_path / "log.csv").write_text("time_ms,enc,st,st,cur\n" + "".join(f"{k},{np.sin(k / 5)},a,b,{np.cos(k / 5)}\n"
+                                                                          for k in range(50)))
+    read_recording(tmp_path / "rec.toml", parse_mechanism(generate.serial_chain(1, bodies=1, types="R")))
