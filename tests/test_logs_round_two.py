@@ -160,3 +160,105 @@ def test_a_used_column_named_twice_in_a_logs_header_is_an_error(tmp_path):
     (tmp_path / "log.csv").write_text("time_ms,enc,st,st,cur\n" + "".join(f"{k},{np.sin(k / 5)},a,b,{np.cos(k / 5)}\n"
                                                                           for k in range(50)))
     read_recording(tmp_path / "rec.toml", parse_mechanism(generate.serial_chain(1, bodies=1, types="R")))
+
+
+# ----- ROS bags ---------------------------------------------------------------------------------
+JOINTS = ["joint_a", "joint_b", "joint_c"]
+BAG_CHANNELS = ('[position]\n' + "".join(f'q{j + 1} = "/joint_states.position[{n}]"\n' for j, n in enumerate(JOINTS))
+                + '[velocity]\n' + "".join(f'q{j + 1} = "/joint_states.velocity[{n}]"\n' for j, n in enumerate(JOINTS)))
+
+
+def _write_bag(path: Path, topics: dict[str, list[tuple[float, dict]]], ros1: bool) -> Path:
+    """A bag written with rosbags itself: per topic, (stamp in s, JointState fields) messages;
+    each message's joints in a shuffled order (a publisher may order them as it likes)."""
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    State = store.types["sensor_msgs/msg/JointState"]
+    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    rng = np.random.default_rng(0)
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        writer = Writer(path)
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+        plugin = StoragePlugin.MCAP if path.suffix == ".mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(path.with_suffix(""), version=9, storage_plugin=plugin)
+    with writer:
+        for topic, messages in topics.items():
+            connection = writer.add_connection(topic, State.__msgtype__, typestore=store)
+            for k, (stamp, fields) in enumerate(messages):
+                ns = int(round(stamp * 1e9)) + 1_700_000_000 * 10 ** 9      # an epoch clock
+                header = dict(stamp=Time(sec=ns // 10 ** 9, nanosec=ns % 10 ** 9), frame_id="base")
+                order = rng.permutation(len(JOINTS))
+                message = State(header=Header(seq=k, **header) if ros1 else Header(**header),
+                                name=[JOINTS[i] for i in order],
+                                **{f: np.asarray(fields.get(f, []), float)[order] if f in fields else np.zeros(0)
+                                   for f in ("position", "velocity", "effort")})
+                raw = store.serialize_ros1(message, State.__msgtype__) if ros1 else \
+                    store.serialize_cdr(message, State.__msgtype__)
+                writer.write(connection, ns + 2_000_000, raw)          # received 2 ms later
+    if ros1:
+        return path
+    written = path.with_suffix("") / (path.with_suffix("").name + path.suffix)
+    return written
+
+
+def test_a_ros1_bag_of_joint_states_recovers_the_truth(tmp_path):
+    """sensor_msgs/JointState by joint name (each message's own order), header stamps as the
+    clock, a measured velocity: the description alone reads the bag and the truth comes back."""
+    pytest.importorskip("rosbags")
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech)
+    messages = [(t[k], {"position": q[k], "velocity": qd[k], "effort": tau[k]}) for k in range(len(t))]
+    bag = _write_bag(tmp_path / "arm.bag", {"/joint_states": messages}, ros1=True)
+    (tmp_path / "rec.toml").write_text(f'[[runs]]\nfile = "{bag.name}"\n' + BAG_CHANNELS + '[torque]\n'
+                                       + "".join(f'q{j + 1} = "/joint_states.effort[{n}]"\n' for j, n in enumerate(JOINTS)))
+    data, _ = _recovered(tmp_path / "rec.toml", mech, truth, 2e-3)
+    assert data.estimated == ("qdd",)
+    # through the command, with a typo in a joint and in a topic: exit 2, naming what the bag has
+    mech_file = _mech_file(tmp_path)
+    out = _cli("identify", mech_file, tmp_path / "rec.toml", "--solver", "dp", "--format", "json")
+    assert out.exit_code == 0, out.output
+    (tmp_path / "typo.toml").write_text((tmp_path / "rec.toml").read_text().replace("/joint_states.effort[joint_c]",
+                                                                                    "/joint_state.effort[joint_c]"))
+    out = _cli("identify", mech_file, tmp_path / "typo.toml", "--solver", "dp")
+    assert out.exit_code == 2 and "no topic of the bag starts the column '/joint_state.effort[joint_c]' (topics: " \
+        "/joint_states (sensor_msgs/msg/JointState))" in out.stderr, out.output
+    (tmp_path / "typo.toml").write_text((tmp_path / "rec.toml").read_text().replace("/joint_states.effort[joint_c]",
+                                                                                    "/joint_states.efort[joint_c]"))
+    out = _cli("identify", mech_file, tmp_path / "typo.toml", "--solver", "dp")
+    assert out.exit_code == 2 and "topic /joint_states, message 1: sensor_msgs/msg/JointState has no field 'efort'" \
+        in out.stderr, out.output
+    (tmp_path / "typo.toml").write_text((tmp_path / "rec.toml").read_text().replace("/joint_states.effort[joint_c]",
+                                                                                    "/joint_states.effort[joint_d]"))
+    out = _cli("identify", mech_file, tmp_path / "typo.toml", "--solver", "dp")
+    assert out.exit_code == 2 and "joint_d" in out.stderr and "Traceback" not in out.output, out.output
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".db3"])
+def test_a_ros2_bag_with_topics_on_their_own_clocks_recovers_the_truth(tmp_path, suffix):
+    """Positions and velocities on /joint_states at 400 Hz, efforts on /joint_efforts at 200
+    Hz with stamps of their own (jittered): each topic on its own clock, read on the torques'
+    clock, and the truth comes back."""
+    pytest.importorskip("rosbags")
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech)
+    rng = np.random.default_rng(2)
+    states = [(t[k], {"position": q[k], "velocity": qd[k]}) for k in range(len(t))]
+    picked = np.sort(rng.choice(np.arange(3, len(t) - 3), size=len(t) // 2, replace=False))
+    efforts = [(t[k], {"effort": tau[k]}) for k in picked]
+    bag = _write_bag(tmp_path / f"arm{suffix}", {"/joint_states": states, "/joint_efforts": efforts}, ros1=False)
+    (tmp_path / "rec.toml").write_text(f'[recording]\ntime = "header.stamp"\n[[runs]]\nfile = "{bag.relative_to(tmp_path)}"\n'
+                                       + BAG_CHANNELS + '[torque]\n'
+                                       + "".join(f'q{j + 1} = "/joint_efforts.effort[{n}]"\n' for j, n in enumerate(JOINTS)))
+    data, _ = _recovered(tmp_path / "rec.toml", mech, truth, 2e-3)
+    assert any("interpolated onto the clock of" in n and "/joint_efforts" in n for n in data.notes), data.notes
+    # a bag's folder (metadata.yaml beside the storage file) reads the same
+    (tmp_path / "dir.toml").write_text((tmp_path / "rec.toml").read_text().replace(
+        str(bag.relative_to(tmp_path)), str(bag.parent.relative_to(tmp_path))))
+    again, _ = read_recording(tmp_path / "dir.toml", mech)
+    assert np.array_equal(again.tau, data.tau)
+    # the recorder's clock instead of the stamps (2 ms later, the same steps): the same samples
+    (tmp_path / "log.toml").write_text((tmp_path / "rec.toml").read_text().replace('"header.stamp"', '"log_time"'))
+    received, _ = read_recording(tmp_path / "log.toml", mech)
+    np.testing.assert_allclose(received.tau, data.tau, rtol=0, atol=1e-9 * np.abs(data.tau).max())

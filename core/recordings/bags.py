@@ -181,6 +181,12 @@ def read_bag(path: str | Path, wanted: Collection[str], clock: str = STAMP, stri
                 raise InputError(f"topic {topic} has no messages", file=str(path))
             stamps[topic] = np.asarray(times, dtype=np.int64)
             table = {f.column: np.asarray(v, dtype=float) for f, v in zip(used, values)}
+            for field in used:           # a joint in no message: a typo, not missing samples
+                joints = [str(step) for kind, step in field.steps if kind == "joint"]
+                if joints and np.isnan(table[field.column]).all():
+                    listed = sorted({n for key in names for n in key})
+                    raise InputError(f"no message of topic {topic} names the joint {joints[0]!r} of {field.column!r} "
+                                     f"(joints: {', '.join(listed)})", file=str(path))
             out[topic] = ([clock] + [f.column for f in used], table, list(range(1, len(times) + 1)))
         if stamps:                   # seconds from the first stamp: exact steps, a shared origin
             origin = min(int(s.min()) for s in stamps.values())
