@@ -782,6 +782,12 @@ def _check_times(path: str, t: np.ndarray, rows: list[int]) -> None:
                          file=path, key=f"row {rows[k]}, column t")
 
 
+class NonUniform(InputError):
+    """Derivatives to estimate from irregular stamps: Savitzky-Golay cannot; a recording
+    description's pipeline can (resampled, filtered and taken back to each sample's time),
+    and :func:`baseparams.recordings.recording.read_data` reads the file through it."""
+
+
 def _uniform_step(path: str, t: np.ndarray, rows: list[int], estimated: tuple[str, ...]
                   ) -> float:
     """The sampling step, checked uniform (Savitzky-Golay assumes it)."""
@@ -790,7 +796,7 @@ def _uniform_step(path: str, t: np.ndarray, rows: list[int], estimated: tuple[st
     off = np.nonzero(np.abs(steps - step) > UNIFORM_TOLERANCE * step)[0]
     if off.size:
         k = int(off[0]) + 1
-        raise InputError(f"time step {steps[k - 1]:.6g} s differs from the median step {step:.6g} s: "
+        raise NonUniform(f"time step {steps[k - 1]:.6g} s differs from the median step {step:.6g} s: "
                          f"{' and '.join(estimated)} can only be estimated from uniformly sampled data "
                          f"(Savitzky-Golay); resample, or give the columns "
                          f"{', '.join(kind + '_<coordinate>' for kind in estimated)}",

@@ -42,7 +42,7 @@ from baseparams.errors import InputError
 from baseparams.recordings.arrays import is_array_file, read_arrays
 from baseparams.recordings.bags import STAMP, is_bag, read_bag
 from baseparams.recordings.tables import LOG, LogFile, as_table, log_files, read_log
-from baseparams.recordings.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, Segment,
+from baseparams.recordings.data import (DELIMITERS, MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, NonUniform, Segment,
                                       _read_text, read_columns, bandwidth, concatenate, kinematics)
 from baseparams.dynamics.forces import Motion, drive_rows, independent_names
 from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
@@ -170,6 +170,14 @@ def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Descripti
         data = tomllib.loads(text, parse_float=Decimal)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"malformed TOML: {exc}", file=path) from None
+    return describe(data, path, mechanism)
+
+
+def describe(data: dict, path: str, mechanism: Mechanism) -> Description:
+    """A description's parsed TOML ``data`` (numbers as Decimal), checked against
+    ``mechanism``; ``path``: where it stands (logs are relative to its folder; messages name it).
+    One home for a description written by a user and one implied by a log's layout
+    (:mod:`.implied`)."""
     for quantity in QUANTITIES:                # a plain string is the column
         table = data.get(quantity)
         if isinstance(table, dict):
@@ -392,7 +400,13 @@ def read_recording(path: str | os.PathLike, mechanism: Mechanism, *, check_kinem
     """Every run of the description at ``path`` as one MeasuredData (runs kept apart), and
     the mechanism with the description's motors."""
     path, _, chosen = str(path).partition("#")
-    description = read_description(path, mechanism)
+    return read_described(read_description(path, mechanism), chosen, check_kinematics=check_kinematics)
+
+
+def read_described(description: Description, chosen: str = "", *, check_kinematics: bool = True
+                   ) -> tuple[MeasuredData, Mechanism]:
+    """The runs of a checked description (``chosen``: some of them by name, comma-separated)."""
+    path = description.path
     runs = list(enumerate(description.data["runs"]))
     if chosen:
         names = [run.get("name") for _, run in runs]
@@ -433,7 +447,11 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
                 raise InputError("holds other coordinates than the descriptions before it", file=path, key="held")
             model = with_motors
         else:
-            part = read_measured(path, mechanism, check_kinematics=check_kinematics)
+            try:
+                part = read_measured(path, mechanism, check_kinematics=check_kinematics)
+            except NonUniform:            # the project's layout, its stamps irregular: one pipeline
+                from baseparams.recordings.implied import read_layout
+                part = read_layout(path, mechanism, check_kinematics=check_kinematics)
         parts.append(part)
     if model is not None and model.gravity != mechanism.gravity and any(not is_description(p) for p in paths):
         raise InputError("a CSV log cannot be fitted beside a recording with its own gravity ([recording] "
