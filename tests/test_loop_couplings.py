@@ -274,3 +274,27 @@ def test_validate_passes_on_the_parallelogram_arm():
     assert {c["name"] for c in checked["checks"]} >= {"energy balance", "ranks", "space vp ~ dp"}
     shown = json.loads(CliRunner().invoke(main, ["show", "parallelogram_arm", "--format", "json"]).stdout)
     assert shown["dof"] == 3 and shown["closure_equations"] - shown["redundant_closure_equations"] == 5
+
+
+# ----- coordinates no motion can move apart (issue 49, part 3) ---------------------------------
+def test_tied_coordinates_are_found_from_loops_and_couplings():
+    """parallelogram_arm: the passive angles are +-1 times the pitch (a loop, found at random
+    states) and the counterweight -1 times the insertion (the coupling); a four-bar's
+    rocker is not tied (its ratio changes with the crank), nor is anything in a tree
+    without couplings; a generated coupled loop's followers are tied with their ratio."""
+    from baseparams.dynamics.tied import ties, tied_group
+    from baseparams.io.loader import resolve
+    arm = resolve("parallelogram_arm")
+    found = {t.coordinate: (t.leader, round(t.ratio, 12), t.how) for t in ties(arm)}
+    assert found == {"pitch_front": ("pitch", 1.0, "loop"), "pitch_top": ("pitch", -1.0, "loop"),
+                     "pitch_end": ("pitch", 1.0, "loop"), "pitch_bottom": ("pitch", -1.0, "loop"),
+                     "counterweight": ("insertion", -1.0, "coupling")}
+    assert tied_group(arm, ["pitch_front", "pitch_end"]) is not None
+    assert tied_group(arm, ["pitch", "insertion"]) is None and tied_group(arm, ["pitch", "pitch"]) is None
+    assert ties(resolve("four_bar")) == () and ties(resolve("puma560")) == ()
+    for seed in range(3):
+        mech = parse_mechanism(generate.coupled_loop(seed))
+        tied = {t.coordinate: t for t in ties(mech)}
+        for c in mech.couplings:
+            t = tied[c.coordinate]
+            assert t.leader == c.leader and abs(t.ratio - float(c.ratio)) < 1e-9 and t.how == "coupling"
