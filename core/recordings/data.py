@@ -211,6 +211,11 @@ class MeasuredData:
     gain_names: tuple[str, ...] = ()
     gain_columns: np.ndarray | None = field(default=None, repr=False, compare=False)
     quanta: np.ndarray | None = None   # (f,) each force's quantisation step as logged (0: none), or None
+    # the forces at the fit's rows without the parallel filter ((n, f), and (n, f, G) per unknown gain), where
+    # they differ from tau: an NRMS beside the fit's band's, comparable with another tool's (None: tau itself)
+    unfiltered: np.ndarray | None = field(default=None, repr=False, compare=False)
+    unfiltered_gains: np.ndarray | None = field(default=None, repr=False, compare=False)
+    filters: tuple[dict, ...] = ()     # per run: the positions' low-pass {"cutoff" (Hz), "order"}; () when none
 
     def __post_init__(self) -> None:
         if not self.segments:
@@ -224,6 +229,29 @@ class MeasuredData:
     def count(self) -> int:
         """Rows of the fit (after reduction)."""
         return len(self.tau)
+
+    def unfiltered_forces(self) -> tuple[np.ndarray, np.ndarray]:
+        """(tau, gain columns) at the fit's rows without the parallel filter (the measured
+        samples as logged, mapped to the joints); ``tau`` and ``gain_columns`` when nothing
+        was filtered."""
+        assert self.gain_columns is not None
+        if self.unfiltered is None:
+            return self.tau, self.gain_columns
+        gains = self.unfiltered_gains if self.unfiltered_gains is not None else np.zeros_like(self.gain_columns)
+        return self.unfiltered, gains
+
+    def unreduced(self) -> "MeasuredData":
+        """The fit's rows as unfiltered data: the motion at the kept rows, the unfiltered forces,
+        each run's segment without filter or decimation (its payloads and masked channels
+        kept), so that a model's forces there are compared with the forces as measured."""
+        tau, gains = self.unfiltered_forces()
+        segments, first = [], 0
+        for s in self.segments:
+            count = len(s.kept())
+            segments.append(Segment(first, first + count, s.run, skip=s.skip))
+            first += count
+        return MeasuredData(self.motion.take(self.kept_rows()), tau, self.coordinates, self.path, self.notes,
+                            self.estimated, None, tuple(segments), self.runs, self.payloads, self.gain_names, gains)
 
     def noise_correlation(self) -> np.ndarray:
         """The autocorrelation at the fit's lags of white noise in the torques as read, after the
@@ -362,10 +390,22 @@ def concatenate(parts: list["MeasuredData"], path: str | None = None) -> "Measur
     motion = Motion(*(np.concatenate([getattr(m, k) for m in motions]) for k in ("t", "q", "qd", "qdd")))
     estimated = tuple(sorted({k for p in parts for k in p.estimated}))
     quanta = [p.quanta for p in parts if p.quanta is not None]
+    unfiltered, unfiltered_gains = None, None
+    if any(p.unfiltered is not None for p in parts):
+        unfiltered = np.concatenate([p.unfiltered_forces()[0] for p in parts])
+        blocks = []
+        for part in parts:
+            raw = part.unfiltered_forces()[1]
+            block = np.zeros(part.tau.shape + (len(gain_names),))
+            for k, name in enumerate(part.gain_names):
+                block[:, :, gain_names.index(name)] = raw[:, :, k]
+            blocks.append(block)
+        unfiltered_gains = np.concatenate(blocks)
     return MeasuredData(motion, np.concatenate([p.tau for p in parts]), coordinates,
                         path or ", ".join(str(p.path) for p in parts), tuple(notes), estimated,
                         None, tuple(segments), tuple(runs), tuple(payloads), gain_names,
-                        np.concatenate(gains), np.max(quanta, axis=0) if quanta else None)
+                        np.concatenate(gains), np.max(quanta, axis=0) if quanta else None,
+                        unfiltered, unfiltered_gains, tuple(f for p in parts for f in p.filters))
 
 
 # ----- reading ----------------------------------------------------------------------------

@@ -35,11 +35,14 @@ def implied_description(path: str | os.PathLike, mechanism: Mechanism) -> dict:
     return data
 
 
-def read_layout(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True) -> MeasuredData:
+def read_layout(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True,
+                fit_filter: dict | None = None) -> MeasuredData:
     """The CSV at ``path`` (the project's layout, already checked field by field) through the
-    recording pipeline with its implied description, with a note saying so."""
+    recording pipeline with its implied description, with a note saying so (``fit_filter``: as
+    :func:`~.recording.read_described` takes it)."""
     data = implied_description(path, mechanism)
-    measured, _ = read_described(describe(data, str(path), mechanism), check_kinematics=check_kinematics)
+    measured, _ = read_described(describe(data, str(path), mechanism), check_kinematics=check_kinematics,
+                                 fit_filter=fit_filter)
     given = [q for q in ("velocity", "acceleration") if q in data]
     measured.notes = (f"irregular time stamps: read as a recording with the description its columns imply (time t, "
                       f"positions q_c{''.join(', ' + q + 's ' + ('qd_c' if q == 'velocity' else 'qdd_c') for q in given)}"

@@ -395,17 +395,20 @@ def _check_time_source(head: dict, path: str) -> None:
 
 
 # ----- reading a description ---------------------------------------------------------------
-def read_recording(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True
-                   ) -> tuple[MeasuredData, Mechanism]:
+def read_recording(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True,
+                   fit_filter: dict | None = None) -> tuple[MeasuredData, Mechanism]:
     """Every run of the description at ``path`` as one MeasuredData (runs kept apart), and
     the mechanism with the description's motors."""
     path, _, chosen = str(path).partition("#")
-    return read_described(read_description(path, mechanism), chosen, check_kinematics=check_kinematics)
+    return read_described(read_description(path, mechanism), chosen, check_kinematics=check_kinematics,
+                          fit_filter=fit_filter)
 
 
-def read_described(description: Description, chosen: str = "", *, check_kinematics: bool = True
-                   ) -> tuple[MeasuredData, Mechanism]:
-    """The runs of a checked description (``chosen``: some of them by name, comma-separated)."""
+def read_described(description: Description, chosen: str = "", *, check_kinematics: bool = True,
+                   fit_filter: dict | None = None) -> tuple[MeasuredData, Mechanism]:
+    """The runs of a checked description (``chosen``: some of them by name, comma-separated);
+    ``fit_filter``: the low-pass of the data a model was fitted to ({"cutoff", "order"}), which
+    a validation recording is filtered with (else each run's own)."""
     path = description.path
     runs = list(enumerate(description.data["runs"]))
     if chosen:
@@ -416,7 +419,7 @@ def read_described(description: Description, chosen: str = "", *, check_kinemati
             raise InputError(f"no run named {', '.join(map(repr, unknown))} (runs: "
                              f"{', '.join(str(n) for n in names if n) or 'none named'})", file=path, key="runs")
         runs = [(i, run) for i, run in runs if run.get("name") in wanted]
-    parts = [_read_run(description, i, run) for i, run in runs]
+    parts = [_read_run(description, i, run, fit_filter) for i, run in runs]
     data = concatenate(parts, path=description.path)
     data.path = description.path + (f"#{chosen}" if chosen else "")
     if check_kinematics:
@@ -427,8 +430,8 @@ def read_described(description: Description, chosen: str = "", *, check_kinemati
     return data, description.mechanism
 
 
-def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool = True
-              ) -> tuple[MeasuredData, Mechanism]:
+def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool = True,
+              fit_filter: dict | None = None) -> tuple[MeasuredData, Mechanism]:
     """Measured data from CSV files in the project's layout and recording descriptions
     (``.toml``), one run each or more, stacked with every run kept apart; and the mechanism
     with the descriptions' motors (which must agree)."""
@@ -436,7 +439,8 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
     parts, model = [], None
     for path in paths:
         if is_description(path):
-            part, with_motors = read_recording(path, mechanism, check_kinematics=check_kinematics)
+            part, with_motors = read_recording(path, mechanism, check_kinematics=check_kinematics,
+                                               fit_filter=fit_filter)
             if model is not None and with_motors.motors != model.motors:
                 raise InputError("declares other motors than the descriptions before it", file=path,
                                  key="motors")
@@ -451,7 +455,7 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
                 part = read_measured(path, mechanism, check_kinematics=check_kinematics)
             except NonUniform:            # the project's layout, its stamps irregular: one pipeline
                 from baseparams.recordings.implied import read_layout
-                part = read_layout(path, mechanism, check_kinematics=check_kinematics)
+                part = read_layout(path, mechanism, check_kinematics=check_kinematics, fit_filter=fit_filter)
         parts.append(part)
     if model is not None and model.gravity != mechanism.gravity and any(not is_description(p) for p in paths):
         raise InputError("a CSV log cannot be fitted beside a recording with its own gravity ([recording] "
@@ -475,7 +479,11 @@ def constant_torques(data: MeasuredData) -> list[str]:
     and a diagnosis bend every coupled coordinate to it (a zero torque on a PUMA's fifth
     joint named a spring and rotor inertia elsewhere)."""
     out = []
+    scaled = np.any(data.gain_columns != 0, axis=(0, 2)) if data.gain_columns is not None and data.gain_columns.size \
+        else np.zeros(len(data.coordinates), dtype=bool)
     for j, name in enumerate(data.coordinates):
+        if scaled[j]:            # its force is a current times a gain the fit finds: not in tau (issue 44)
+            continue
         tau = data.tau[:, j]
         if len(tau) > 1 and np.ptp(tau) == 0 and np.ptp(data.motion.q[:, j]) > 0:
             out.append(f"tau_{name} is {tau[0]:g} in every row while {name} moves: a force that was not "
@@ -483,7 +491,7 @@ def constant_torques(data: MeasuredData) -> list[str]:
     return out
 
 
-def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
+def _read_run(description: Description, index: int, run: dict, fit_filter: dict | None = None) -> MeasuredData:
     path, key = description.path, f"runs[{index}]"
     mechanism = description.mechanism
     coordinates = independent_names(mechanism)
@@ -619,6 +627,10 @@ def _read_run(description: Description, index: int, run: dict) -> MeasuredData:
     still, still_note = _still(q, mechanism, coordinates, name)
     notes += still_note
     settings = dict(description.data.get("filter", {}))
+    if fit_filter:                         # a validation run: filtered as the fit's data were
+        settings.update(cutoff=fit_filter["cutoff"], order=fit_filter["order"], fit=True,
+                        how=f"the fit's filter ({fit_filter['cutoff']:.4g} Hz, order {fit_filter['order']})")
+        settings.pop("decimate", None)
     if "cutoff" not in settings and len(pieces) > 1:     # one filter for the run: the longest piece's
         a, b = max(pieces, key=lambda piece: piece[1] - piece[0])
         signal = q[a:b][:, ~still if not still.all() else slice(None)]     # never a measured velocity's noise
@@ -1098,6 +1110,9 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     if "cutoff" in settings:
         cutoff = _number(settings["cutoff"], path, "filter.cutoff")
         how = settings.get("how", "as set")
+        if settings.get("fit") and cutoff >= DECIMATION_BAND * fs / 2:     # the fit's, above this log's band
+            cutoff = DECIMATION_BAND * fs / 2
+            how += f", capped at {DECIMATION_BAND:g} x this log's Nyquist frequency"
     else:
         # from the positions, even beside a measured velocity: a velocity's noise (a Panda's, differentiated
         # by its controller) set the cut-off at 33 Hz and nothing was filtered (NRMS 0.83 against 0.080)
@@ -1146,7 +1161,8 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
                  f"({fs:.4g} -> {fs / factor:.4g} Hz; {edge} samples dropped at each end): {kept} samples")
     segment = Segment(0, len(t), 0, parallel, factor, edge)
     data = MeasuredData(Motion(t, qf, qd, qdd), segment.reduce(tau), (), None, (), estimated,
-                        segments=(segment,))
+                        segments=(segment,), unfiltered=tau[segment.kept()],
+                        filters=({"cutoff": float(cutoff), "order": order},))
     return data, notes
 
 
@@ -1187,14 +1203,18 @@ def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: lis
             gain_names: tuple[str, ...]) -> MeasuredData:
     """The pieces of one run as one MeasuredData; ``tau`` of each piece holds the known
     forces and, behind them, one column per unknown gain (split here)."""
+    filters = parts[0].filters                     # one filter for the run's pieces
     parts = [MeasuredData(p.motion, p.tau[:, :, 0], coordinates, path, (), p.estimated, segments=p.segments,
-                          runs=("run",), gain_names=gain_names, gain_columns=p.tau[:, :, 1:]) for p in parts]
+                          runs=("run",), gain_names=gain_names, gain_columns=p.tau[:, :, 1:],
+                          unfiltered=None if p.unfiltered is None else p.unfiltered[:, :, 0],
+                          unfiltered_gains=None if p.unfiltered is None else p.unfiltered[:, :, 1:]) for p in parts]
     joined = concatenate(parts, path=path)
     segments = tuple(replace(s, run=0) for s in joined.segments)
     return MeasuredData(joined.motion, joined.tau, coordinates, path, tuple(notes), joined.estimated,
                         segments=segments, runs=("run",),
                         payloads=tuple((0, label, phi) for label, phi in payloads),
-                        gain_names=gain_names, gain_columns=joined.gain_columns)
+                        gain_names=gain_names, gain_columns=joined.gain_columns,
+                        unfiltered=joined.unfiltered, unfiltered_gains=joined.unfiltered_gains, filters=filters)
 
 
 def _payload(spec: dict | None, mechanism: Mechanism, path: str, key: str) -> list[tuple[int, np.ndarray]]:
