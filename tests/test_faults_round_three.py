@@ -1,0 +1,259 @@
+"""Faults and bad input, third round (issue 46): the newest readers and options.
+
+Each case failed before (the issue gives the measurement) and gives now exit 2 with one
+``error:`` line naming the file, the key or the option, or a clearly marked answer. Tests
+read stdout only (progress goes to stderr) and depend on no wall time. Array logs that
+inflate to gigabytes are written by hand (deflate blocks repeated), a few MB on disk, and
+are only ever read in a child process with a capped address space.
+"""
+
+import json
+import resource
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from baseparams.cli import main
+
+CLI = [sys.executable, "-m", "baseparams"]
+SAMPLES = 2000
+
+
+def run(*args, env=None):
+    """The CLI in-process: (exit code, stdout, stderr)."""
+    result = CliRunner().invoke(main, [str(a) for a in args], env=env)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def one_error(stderr: str, *words: str) -> str:
+    """The one ``error:`` line of ``stderr`` (and nothing else there), containing ``words``."""
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), stderr
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    assert "Traceback" not in stderr
+    return lines[0]
+
+
+# ----- array logs --------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def logged(tmp_path_factory):
+    """planar_2r simulated: (folder, t, q (n, 2), tau (n, 2)) and a description per log."""
+    folder = tmp_path_factory.mktemp("arrays")
+    code, _, err = run("simulate", "planar_2r", "-o", folder / "sim.csv", "--samples", SAMPLES, "--quiet")
+    assert code == 0, err
+    table = np.genfromtxt(folder / "sim.csv", delimiter=",", names=True)
+    t = table["t"]
+    q = np.column_stack([table["q_q1"], table["q_q2"]])
+    tau = np.column_stack([table["tau_q1"], table["tau_q2"]])
+    return folder, t, q, tau
+
+
+def describe(folder: Path, log: str, q: str = "q", tau: str = "tau", name: str = "rec.toml") -> Path:
+    path = folder / name
+    path.write_text(f'[recording]\ntime = "t"\n[[runs]]\nfile = "{log}"\n'
+                    f'[position]\nq1 = "{q}[0]"\nq2 = "{q}[1]"\n[torque]\nq1 = "{tau}[0]"\nq2 = "{tau}[1]"\n')
+    return path
+
+
+def npy_header(shape, descr="<f8") -> bytes:
+    import io
+    out = io.BytesIO()
+    np.lib.format.write_array_header_1_0(out, {"descr": descr, "fortran_order": False, "shape": tuple(shape)})
+    return out.getvalue()                            # the magic string, the version and the header
+
+
+def write_zip(path: Path, members: dict[str, tuple[bytes, int]]) -> None:
+    """A zip archive (deflated) whose member NAME holds ``prefix`` then ``zeros`` zero bytes;
+    the zeros are one 16 MiB deflate block repeated, so gigabytes take megabytes."""
+    chunk = 1 << 24
+    block = zlib.compressobj(9, zlib.DEFLATED, -15)
+    zero_block = block.compress(bytes(chunk)) + block.flush(zlib.Z_FULL_FLUSH)
+    local, central = bytearray(), bytearray()
+    for name, (prefix, zeros) in members.items():
+        deflate = zlib.compressobj(9, zlib.DEFLATED, -15)
+        data = bytearray(deflate.compress(prefix) + deflate.flush(zlib.Z_FULL_FLUSH))
+        crc = zlib.crc32(prefix)
+        whole, rest = divmod(zeros, chunk)
+        data += zero_block * whole
+        zero_chunk = bytes(chunk)
+        for _ in range(whole):                       # about 1 s for 2.4 GB
+            crc = zlib.crc32(zero_chunk, crc)
+        tail = zlib.compressobj(9, zlib.DEFLATED, -15)
+        data += tail.compress(bytes(rest)) + tail.flush()
+        crc = zlib.crc32(bytes(rest), crc)
+        size = len(prefix) + zeros
+        assert size < 2 ** 32 and len(data) < 2 ** 32
+        encoded = name.encode()
+        offset = len(local)
+        head = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 8, 0, 0x21, crc, len(data), size, len(encoded), 0)
+        local += head + encoded + data
+        central += struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 8, 0, 0x21, crc, len(data), size,
+                               len(encoded), 0, 0, 0, 0, 0, offset) + encoded
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, len(members), len(members), len(central), len(local), 0)
+    path.write_bytes(bytes(local + central + end))
+
+
+def logs_npz(path: Path, t, q, tau, extra: dict[str, tuple[bytes, int]] | None = None) -> None:
+    """t, q (saved 2 x n) and tau as a .npz written by hand, with ``extra`` members."""
+    members = {}
+    for name, array in (("t", t), ("q", np.ascontiguousarray(q.T)), ("tau", np.ascontiguousarray(tau))):
+        members[f"{name}.npy"] = (npy_header(array.shape) + array.astype("<f8").tobytes(), 0)
+    members.update(extra or {})
+    write_zip(path, members)
+
+
+def test_a_hand_written_npz_reads_as_numpy_saves_it(logged):
+    """The writer of these tests is sound: its archive reads back as numpy's own."""
+    folder, t, q, tau = logged
+    logs_npz(folder / "plain.npz", t, q, tau, {"zeros.npy": (npy_header((5000,)), 40000)})
+    with np.load(folder / "plain.npz") as archive:
+        np.testing.assert_array_equal(archive["q"], q.T)
+        assert not archive["zeros"].any() and archive["zeros"].shape == (5000,)
+    code, out, err = run("identify", "planar_2r", describe(folder, "plain.npz"), "--quiet", "--format", "json")
+    assert code == 0, err
+    assert json.loads(out)["samples"] > 0
+
+
+GIB_24 = 2_400_000_000                       # 2.4 GB of zeros: 300 million float64
+
+
+def _capped(limit_bytes: int):
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (limit_bytes, limit_bytes))
+    return cap
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="caps the child's address space (RLIMIT_AS)")
+def test_an_unused_variable_inflating_to_gigabytes_is_never_read(logged, tmp_path):
+    """Issue 46: a 2.4 MB .npz whose unused variable inflates to 2.4 GB was read whole (exit 0
+    at 2.4 GB; here, under a 1.5 GB address-space cap, exit 3 MemoryError). Only the variables
+    the description uses are read: exit 0 under the cap."""
+    _, t, q, tau = logged
+    logs_npz(tmp_path / "log.npz", t, q, tau, {"video.npy": (npy_header((GIB_24 // 8,)), GIB_24)})
+    assert (tmp_path / "log.npz").stat().st_size < 5_000_000
+    description = describe(tmp_path, "log.npz")
+    proc = subprocess.run([*CLI, "identify", "planar_2r", str(description), "--quiet", "--format", "json"],
+                          capture_output=True, text=True, timeout=600, preexec_fn=_capped(1_500_000_000))
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["samples"] > 0
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="caps the child's address space (RLIMIT_AS)")
+def test_a_used_variable_inflating_to_gigabytes_is_refused_with_an_estimate(logged, tmp_path):
+    """The same 2.4 GB variable, used (as the torques): refused from its header, with the
+    estimate and the budget's variable, before a byte of it is inflated."""
+    _, t, q, tau = logged
+    logs_npz(tmp_path / "log.npz", t, q, tau, {"big.npy": (npy_header((GIB_24 // 16, 2)), GIB_24)})
+    description = describe(tmp_path, "log.npz", tau="big")
+    proc = subprocess.run([*CLI, "identify", "planar_2r", str(description), "--quiet"],
+                          capture_output=True, text=True, timeout=600, preexec_fn=_capped(1_500_000_000))
+    assert proc.returncode == 2, proc.stderr
+    one_error(proc.stderr, "log.npz", "variable 'big'", "(150000000, 2)", "2.4 GB", "BASEPARAMS_MAX_MEMORY")
+
+
+def test_a_header_declaring_10_to_the_12_samples_is_exit_2(logged, tmp_path):
+    """Issue 46: a header declaring shape (10^12,): exit 3, MemoryError 7.28 TiB. Now the
+    declared size is checked first: exit 2 with the estimate (8 TB)."""
+    _, t, q, tau = logged
+    logs_npz(tmp_path / "log.npz", t, q, tau, {"huge.npy": (npy_header((10 ** 12,)), 64)})
+    (tmp_path / "rec.toml").write_text(describe(tmp_path, "log.npz").read_text().replace('time = "t"',
+                                                                                          'time = "huge"'))
+    code, out, err = run("identify", "planar_2r", tmp_path / "rec.toml", "--quiet")
+    assert code == 2 and out == ""
+    one_error(err, "log.npz", "variable 'huge'", "8 TB", "BASEPARAMS_MAX_MEMORY")
+
+
+def test_a_variable_past_a_lowered_budget_is_refused_and_an_unused_one_is_not(logged, tmp_path):
+    """The budget is BASEPARAMS_MAX_MEMORY's: 30 MB of zeros (a few kB on disk) used under a
+    60 MiB limit (10.5 MB for a data file) is refused; unused, it is never read."""
+    _, t, q, tau = logged
+    logs_npz(tmp_path / "log.npz", t, q, tau, {"big.npy": (npy_header((1_875_000, 2)), 30_000_000)})
+    env = {"BASEPARAMS_MAX_MEMORY": "60M"}
+    code, _, err = run("identify", "planar_2r", describe(tmp_path, "log.npz"), "--quiet", env=env)
+    assert code == 0, err
+    code, _, err = run("identify", "planar_2r", describe(tmp_path, "log.npz", q="big"), "--quiet", env=env)
+    assert code == 2
+    one_error(err, "variable 'big'", "about 30 MB", "10.5 MB", "BASEPARAMS_MAX_MEMORY")
+
+
+def test_a_mat_struct_inflating_past_the_budget_is_refused_and_an_unused_one_is_not(logged, tmp_path):
+    """A compressed MATLAB struct is judged by its element's declared size (the fields are only
+    known once read): used, refused; beside it, unused, never read."""
+    import scipy.io
+    _, t, q, tau = logged
+    scipy.io.savemat(tmp_path / "log.mat", {"log": {"t": t, "q": q, "tau": tau},
+                                            "camera": {"frames": np.zeros((1_875_000, 2))}},
+                     do_compression=True)
+    assert (tmp_path / "log.mat").stat().st_size < 2_000_000
+    env = {"BASEPARAMS_MAX_MEMORY": "60M"}
+    rec = tmp_path / "rec.toml"
+    rec.write_text('[recording]\ntime = "log.t"\n[[runs]]\nfile = "log.mat"\n[position]\nq1 = "log.q[0]"\n'
+                   'q2 = "log.q[1]"\n[torque]\nq1 = "log.tau[0]"\nq2 = "log.tau[1]"\n')
+    code, _, err = run("identify", "planar_2r", rec, "--quiet", env=env)
+    assert code == 0, err
+    rec.write_text(rec.read_text().replace('q1 = "log.tau[0]"', 'q1 = "camera.frames[0]"'))
+    code, _, err = run("identify", "planar_2r", rec, "--quiet", env=env)
+    assert code == 2
+    one_error(err, "log.mat", "variable 'camera'", "struct", "BASEPARAMS_MAX_MEMORY")
+
+
+@pytest.mark.parametrize("imaginary", [0.0, 1e-9])
+def test_complex_values_are_refused_unless_their_imaginary_part_is_zero(logged, tmp_path, imaginary):
+    """Issue 46: a complex-valued array: exit 0, the imaginary part dropped with numpy's
+    ComplexWarning. Now refused naming the variable and the first row, unless the imaginary
+    part is exactly 0 (a real signal saved as complex): then read as the real one."""
+    _, t, q, tau = logged
+    np.savez(tmp_path / "real.npz", t=t, q=q.T, tau=tau)
+    wave = tau.astype(complex)
+    wave[7, 1] += 1j * imaginary
+    np.savez(tmp_path / "log.npz", t=t, q=q.T, tau=wave)
+    code, want, err = run("identify", "planar_2r", describe(tmp_path, "real.npz", name="real.toml"), "--quiet",
+                          "--format", "json")
+    assert code == 0, err
+    code, out, err = run("identify", "planar_2r", describe(tmp_path, "log.npz"), "--quiet", "--format", "json")
+    if imaginary == 0:
+        assert code == 0, err
+        assert json.loads(out)["base"] == json.loads(want)["base"]
+        assert "ComplexWarning" not in err
+    else:
+        assert code == 2 and out == ""
+        one_error(err, "log.npz", "row 8, column tau[1]", "complex values (variable 'tau')")
+
+
+@pytest.mark.parametrize("content", [b"", b"t,q,tau\n0,1,2\n1,2,3\n", b"MATLAB 5.0 MAT-file" + bytes(20)],
+                         ids=["empty", "csv-text", "truncated"])
+def test_a_mat_file_that_is_no_mat_file_is_exit_2(logged, tmp_path, content):
+    """Issue 46: a 0-byte .mat, or CSV text named .mat: exit 3, scipy's MatReadError. Now one
+    ``error:`` line naming the file."""
+    (tmp_path / "log.mat").write_bytes(content)
+    code, out, err = run("identify", "planar_2r", describe(tmp_path, "log.mat", q="log.q", tau="log.tau"),
+                         "--quiet")
+    assert code == 2 and out == ""
+    line = one_error(err, "log.mat")
+    assert "MatReadError" not in line and "internal error" not in line
+
+
+def test_a_mat_header_declaring_huge_dimensions_is_exit_2(logged, tmp_path):
+    """A MATLAB element whose dimensions claim 10^6 x 10^6 values (its data 48 bytes): the
+    declared size is refused before scipy allocates anything."""
+    import scipy.io
+    _, t, q, tau = logged
+    scipy.io.savemat(tmp_path / "log.mat", {"q": q, "tau": tau, "t": t, "big": np.ones((2, 3))},
+                     do_compression=False)
+    raw = bytearray((tmp_path / "log.mat").read_bytes())
+    dims = struct.pack("<ii", 2, 3)
+    at = raw.index(dims)
+    raw[at:at + 8] = struct.pack("<ii", 1_000_000, 1_000_000)
+    (tmp_path / "log.mat").write_bytes(bytes(raw))
+    code, _, err = run("identify", "planar_2r", describe(tmp_path, "log.mat", q="big"), "--quiet")
+    assert code == 2
+    one_error(err, "log.mat", "variable 'big'", "BASEPARAMS_MAX_MEMORY")
+    code, _, err = run("identify", "planar_2r", describe(tmp_path, "log.mat"), "--quiet")
+    assert code == 0, err                           # unused: its header is all that is read
