@@ -301,3 +301,128 @@ def test_the_projects_csv_layout_with_irregular_stamps_is_read_as_a_recording(tm
         ",".join(f"{v:.17g}" for v in row[:-1]) for row in np.column_stack(columns)) + "\n")
     with pytest.raises(InputError, match="missing columns tau_q3"):
         read_data([str(tmp_path / "partial.csv")], mech)
+
+
+# ----- checks that catch a bad setup ----------------------------------------------------------
+def _log(tmp_path, name, t, q, tau, qd=None):
+    header = ["t", "q1", "q2", "q3", "tau1", "tau2", "tau3"] + (["v1", "v2", "v3"] if qd is not None else [])
+    table = np.column_stack([t, q, tau] + ([qd] if qd is not None else []))
+    (tmp_path / name).write_text(",".join(header) + "\n" + "\n".join(",".join(f"{v:.17g}" for v in row)
+                                                                     for row in table) + "\n")
+
+
+def _cutoff(data) -> float:
+    (note,) = [n for n in data.notes if "low-passed at" in n]
+    return float(note.split("low-passed at ")[1].split(" Hz")[0])
+
+
+def test_the_cut_off_comes_from_the_positions_never_a_measured_velocitys_noise(tmp_path):
+    """A controller's velocity: differenced and low-passed at 40 Hz by the drive, its noise
+    filling that band. Before, the cut-off came from its spectrum (the Panda's: 33 Hz, nothing
+    filtered); now from the positions, as without [velocity]."""
+    from scipy.signal import butter, sosfilt
+
+    from baseparams.recordings.recording import auto_cutoff
+    mech = _mechanism()
+    t, q, qd, tau, _ = _simulated(mech, samples=10001)
+    rng = np.random.default_rng(5)
+    read_q = q + 1e-6 * rng.standard_normal(q.shape)                  # an encoder's noise
+    band = sosfilt(butter(2, 40, fs=1000, output="sos"), rng.standard_normal(q.shape), axis=0)
+    velocity = qd + 0.02 * np.sqrt(np.mean(qd ** 2, axis=0)) * band / band.std(axis=0)
+    _log(tmp_path, "log.csv", t, read_q, tau, velocity)
+    head = '[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS
+    (tmp_path / "q.toml").write_text(head)
+    (tmp_path / "v.toml").write_text(head + '[velocity]\nq1 = "v1"\nq2 = "v2"\nq3 = "v3"\n')
+    from_positions, _ = read_recording(tmp_path / "q.toml", mech)
+    with_velocity, _ = read_recording(tmp_path / "v.toml", mech)
+    assert _cutoff(with_velocity) == _cutoff(from_positions)
+    assert "the positions' bandwidth" in " ".join(with_velocity.notes)
+    # the velocity's own spectrum would have set it far higher (the test has a bad setup to catch)
+    assert auto_cutoff(velocity, float(t[1] - t[0]), "velocities")[0] > 3 * _cutoff(from_positions)
+
+
+def test_gains_at_or_below_zero_and_an_ill_conditioned_fit_are_said_with_their_numbers(tmp_path):
+    """A current logged with the other sign fitted with gain = "unknown": a negative gain,
+    said on stderr with its number and in JSON warnings (it was exit 0 in silence), and no
+    false "tau_X is 0 in every row" note for the channels scaled by unknown gains (six of them on
+    every such UR run)."""
+    from baseparams.identify.fit import setup_warnings
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech, noise=0.01)
+    gains = np.array([0.7, 1.9, 0.35])
+    current = tau / gains
+    current[:, 1] *= -1                                           # logged with the drive's own sign
+    _log(tmp_path, "log.csv", t, q, current)
+    (tmp_path / "rec.toml").write_text(
+        '[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n[position]\nq1 = "q1"\nq2 = "q2"\nq3 = "q3"\n'
+        '[torque]\nq1 = { column = "tau1", gain = 0.7 }\nq2 = { column = "tau2", gain = "unknown" }\n'
+        'q3 = { column = "tau3", gain = "unknown" }\n')
+    out = _cli("identify", _mech_file(tmp_path), tmp_path / "rec.toml", "--solver", "dp", "--format", "json")
+    assert out.exit_code == 0, out.output
+    report = json.loads(out.stdout)
+    gain = {g["name"]: g for g in report["gains"]}
+    assert abs(gain["gain_q2"]["value"] + 1.9) < 0.01 and abs(gain["gain_q3"]["value"] - 0.35) < 0.01
+    (warning,) = [w for w in report["warnings"] if w.startswith("gain_q2 = -1.9")]
+    assert "negative gain" in warning and f"warning: {warning}" in out.stderr
+    assert not [n for n in report["notes"] if "in every row" in n], report["notes"]
+    # zero within its noise, and an ill-conditioned fit: each with its number
+    names, kinds = ("phi_b01", "gain_q3"), ("base", "gain")
+    said = setup_warnings(names, kinds, np.array([1.0, -1.8e-17]), np.diag([1e-4, 9e-6]), 7.45e11)
+    assert said[0].startswith("gain_q3 = -1.8e-17 +- 0.003: zero within its noise")
+    assert "condition number 7.45e+11" in said[1]
+    assert setup_warnings(names, kinds, np.array([1.0, 0.35]), np.diag([1e-4, 9e-6]), 1e3) == []
+
+
+def test_validation_is_filtered_with_the_fits_filter_and_nrms_is_given_unfiltered_too(tmp_path):
+    """The fit's own log given to --validate through a description with another cut-off: read
+    with the fit's filter, its prediction is the fit's own (it was on another band). NRMS on
+    the unfiltered torques beside the fit band's: white noise of SD s on torques of RMS r gives
+    about s / r there, and far less on the band."""
+    mech = _mechanism()
+    t, q, qd, tau, _ = _simulated(mech, samples=10001, noise=0.0)
+    noise = 0.05 * np.random.default_rng(6).standard_normal(tau.shape)
+    _log(tmp_path, "log.csv", t, q, tau + noise)
+    head = '[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS
+    (tmp_path / "fit.toml").write_text(head)
+    (tmp_path / "other.toml").write_text(head + "[filter]\ncutoff = 150\n")
+    import baseparams as bp
+    fit = bp.identify(_mech_file(tmp_path), tmp_path / "fit.toml", solver="dp",
+                      validate=[tmp_path / "other.toml"])
+    report = fit.to_json()
+    (validation,) = report["validation"]
+    for c in ("q1", "q2", "q3"):
+        assert abs(validation["rms"][c] - report["rms"][c]) <= 1e-9 * report["rms"][c], (validation, report["rms"])
+    expected = 0.05 / np.sqrt(np.mean(tau ** 2, axis=0))
+    raw = np.array([report["nrms_unfiltered"][c] for c in ("q1", "q2", "q3")])
+    np.testing.assert_allclose(raw, expected, rtol=0.1)
+    assert all(report["nrms"][c] < 0.5 * report["nrms_unfiltered"][c] for c in ("q1", "q2", "q3"))
+    assert validation["nrms_unfiltered"] == pytest.approx(report["nrms_unfiltered"], rel=1e-9)
+    assert "NRMS on the unfiltered torques" in fit.to_text()
+
+
+def test_a_window_outside_the_log_gives_the_logs_span(tmp_path):
+    """Before: "0 samples between 0 and 200 s"; the log's clock ran from 838 to 888 s."""
+    mech = _mechanism()
+    t, q, qd, tau, _ = _simulated(mech, samples=2001)
+    _log(tmp_path, "log.csv", 838.4 + t, q, tau)
+    (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\nwindow = [0, 200]\n'
+                                       + CHANNELS)
+    with pytest.raises(InputError, match=r"rec\.toml: runs\[0\]\.window: 0 samples between 0 and 200 s: the log's "
+                                         r"time runs from 838\.4 to 848\.4 s \(in the log's own clock\)"):
+        read_recording(tmp_path / "rec.toml", mech)
+
+
+def test_the_api_takes_a_result_object_wherever_the_cli_takes_a_result_file(tmp_path):
+    """bp.diagnose(params=fit) with identify's result object failed with a 67 000-character
+    error; now it is the same diagnosis as with the result's JSON file."""
+    import baseparams as bp
+    bp.simulate("planar_2r", output=tmp_path / "d.csv", noise=0.01, seed=1, samples=400)
+    fit = bp.identify("planar_2r", tmp_path / "d.csv", solver="dp")
+    (tmp_path / "fit.json").write_text(json.dumps(fit.to_json()))
+    by_object = bp.diagnose("planar_2r", tmp_path / "d.csv", params=fit, candidates=["viscous_friction"])
+    by_file = bp.diagnose("planar_2r", tmp_path / "d.csv", params=tmp_path / "fit.json",
+                          candidates=["viscous_friction"])
+    a, b = by_object.to_json(), by_file.to_json()
+    assert a["verdict"] == b["verdict"] and a["gap"] == b["gap"]
+    with pytest.raises(InputError, match="expected a result file's path or a result object"):
+        bp.diagnose("planar_2r", tmp_path / "d.csv", params=3.5)   # type: ignore[arg-type]

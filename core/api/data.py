@@ -8,8 +8,10 @@ prints. scipy, statsmodels and cvxpy are imported when a function runs.
 from __future__ import annotations
 
 import json
+import tempfile
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from fractions import Fraction
 from os import PathLike
 from pathlib import Path
@@ -34,7 +36,7 @@ def _paths(data: DataPaths) -> list[str]:
     return [str(data)] if isinstance(data, (str, PathLike)) else [str(p) for p in data]
 
 
-def _validation(path: str, loaded: Any, fitted: Any) -> Any:
+def _validation(path: str, loaded: Any, fitted: Any, fit_filter: dict | None = None) -> Any:
     """A ``--validate`` recording's data. One that holds joints (``[held]``, as the fit's
     description does) is read against the mechanism as loaded, where its names and patterns
     refer, and must hold the same ones; any other against the fitted (held) mechanism. Why:
@@ -42,14 +44,58 @@ def _validation(path: str, loaded: Any, fitted: Any) -> Any:
     no longer coordinates ("the pattern '*' matches no coordinate without a channel")."""
     from baseparams.recordings.recording import holds, read_data
     if not holds(path):
-        return read_data([path], fitted)[0]
-    measured, model = read_data([path], loaded)
+        return read_data([path], fitted, fit_filter=fit_filter)[0]
+    measured, model = read_data([path], loaded, fit_filter=fit_filter)
     if model.coordinates != fitted.coordinates:
         raise InputError("holds other coordinates than the fitted data's description ("
                          f"{', '.join(c for c in loaded.coordinates if c not in model.coordinates) or 'none'} "
                          f"against {', '.join(c for c in loaded.coordinates if c not in fitted.coordinates) or 'none'})",
                          file=path, key="held")
     return measured
+
+
+ResultLike = Union[PathText, Mapping[str, Any], Any]
+"""A result file's path, or the result itself: an object with ``to_json()`` (``bp.identify``'s
+:class:`~.results.Fit`, an :class:`~baseparams.identify.fit.Identification`) or its JSON dict."""
+
+
+def result_json(value: Any) -> dict | None:
+    """The JSON of a result given as an object (``to_json()``) or a dict; None for a path."""
+    if hasattr(value, "to_json") and callable(value.to_json):
+        return dict(value.to_json())
+    if isinstance(value, Mapping):
+        return dict(value)
+    return None
+
+
+def _check_result(value: Any, key: str = "params") -> None:
+    """A result argument is a path, a result object or its JSON dict (else exit 2, not a
+    repr taken for a file name)."""
+    if value is not None and result_json(value) is None and not isinstance(value, (str, PathLike)):
+        raise InputError(f"expected a result file's path or a result object (bp.identify's), not "
+                         f"{type(value).__name__}", key=key)
+
+
+@contextmanager
+def result_file(value: ResultLike | None, name: str = "result.json") -> Iterator[str | None]:
+    """A path wherever the command line takes a result file: the path given, or the result
+    object's JSON written to a temporary file for the duration. Why: ``bp.diagnose(params=fit)``
+    with an identify result object failed with a 67 000-character error (its repr taken for a
+    path); the API takes a result wherever the CLI takes a result file (issue 44)."""
+    if value is None:
+        yield None
+        return
+    data = result_json(value)
+    if data is None:
+        if not isinstance(value, (str, PathLike)):
+            raise InputError(f"expected a result file's path or a result object (bp.identify's), not "
+                             f"{type(value).__name__}", key="params")
+        yield str(value)
+        return
+    with tempfile.TemporaryDirectory(prefix="baseparams-result-") as folder:
+        path = Path(folder) / name
+        path.write_text(json.dumps(data), encoding="utf-8")
+        yield str(path)
 
 
 def _say(progress: Progress | None, message: str) -> None:
@@ -116,7 +162,7 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     several fitted together). ``validate``: recordings to predict with the identified
     model. ``physical``: also physically consistent standard parameters (needs cvxpy)."""
     from baseparams.identify.base import BaseModel
-    from baseparams.identify.fit import fitted, identify as fit, predict, split_effects
+    from baseparams.identify.fit import fitted, identify as fit, predict, split_effects, unfiltered
     from baseparams.recordings.recording import read_data
 
     from .effects import parse_effects
@@ -130,7 +176,8 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     _say(progress, "reading the data")
     loaded = mechanism
     measured, mechanism = read_data(_paths(data), mechanism)
-    others = [_validation(str(path), loaded, mechanism) for path in validate]
+    fit_filter = measured.filters[0] if measured.filters else None      # validation on the fit's band (issue 44)
+    others = [_validation(str(path), loaded, mechanism, fit_filter) for path in validate]
     texts = [e for e in effects if isinstance(e, str)]
     import numpy as np
     qd = np.asarray(measured.motion.qd, float)
@@ -151,7 +198,16 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
         _say(progress, "physically consistent parameters (cvxpy)")
         _physical(identification, mechanism, base)
     on_its_data = fitted(identification, measured)
+    on_its_data.nrms_unfiltered = unfiltered(identification, mechanism, measured, on_its_data).nrms
     predictions = [predict(identification, mechanism, other) for other in others]
+    for prediction, other in zip(predictions, others):
+        prediction.nrms_unfiltered = unfiltered(identification, mechanism, other, prediction).nrms
+    identification.extras["nrms_unfiltered"] = dict(zip(measured.coordinates,
+                                                        map(float, on_its_data.nrms_unfiltered)))
+    if predictions and fit_filter is not None and len({(f["cutoff"], f["order"]) for f in measured.filters}) > 1:
+        cutoffs = ", ".join(sorted({"%.4g" % f["cutoff"] for f in measured.filters}))
+        identification.notes += (f"the fit's runs were filtered at {cutoffs} Hz: --validate recordings at the first "
+                                 f"run's, {fit_filter['cutoff']:.4g} Hz",)
     identification.extras["rms"] = on_its_data.to_json()["rms"]
     identification.extras["rms_overall"] = on_its_data.overall_rms
     identification.extras["runs"] = list(measured.runs)
@@ -166,7 +222,8 @@ def identify(mech: MechanismLike, data: DataPaths, *, effects: Sequence[EffectLi
     far = [f"{f.name} = {f.value:.3g} +- {f.std:.2g}" for f in identification.impossible if f.beyond is not None]
     said += [f"{len(far)} estimate{'s' if len(far) > 1 else ''} beyond any physical scale: {', '.join(far)} (the "
              "data do not determine them, or are read wrong; JSON: beyond_physical_scale)"] if far else []
-    return Fit(identification, on_its_data, predictions, warnings=list(result.warnings) + said)
+    return Fit(identification, on_its_data, predictions,
+               warnings=list(result.warnings) + said + list(identification.warnings))
 
 
 def exact(value: Any) -> str:
@@ -202,7 +259,7 @@ def _physical(identification: Any, mechanism: "Mechanism", base: Any) -> None:
 
 
 # ----- diagnose --------------------------------------------------------------------------
-def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = None,
+def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None = None,
              candidates: Sequence[str] | None = None, alpha: float = 0.05, folds: int = 5,
              holdout: float = 0.0, max_steps: int | None = None, write: PathText | None = None,
              baseline: DataPaths | None = None,
@@ -214,7 +271,13 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: PathText | None = 
     mechanism with the named effects. ``result.closed`` says whether the gap closed.
 
     ``baseline``: runs of the same robot before a change; then what changed between them
-    and ``data`` is named instead (:func:`diagnose_change`)."""
+    and ``data`` is named instead (:func:`diagnose_change`). ``params`` may be the result of
+    :func:`identify` itself (or its JSON dict) wherever a file's path is taken."""
+    _check_result(params)
+    if params is not None and result_json(params) is not None:
+        with result_file(params, "identify-result.json") as path:
+            return diagnose(mech, data, params=path, candidates=candidates, alpha=alpha, folds=folds,
+                            holdout=holdout, max_steps=max_steps, write=write, baseline=baseline, progress=progress)
     if baseline is not None:
         refused = [name for name, value in (("candidates", candidates), ("holdout", holdout),
                                             ("max_steps", max_steps), ("write", write)) if value]
@@ -281,14 +344,18 @@ def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
     return read_data(_paths(data), load(mech))[0]
 
 
-def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths, *, params: PathText | None = None,
+def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths, *, params: ResultLike | None = None,
                     alpha: float = 0.05, progress: Progress | None = None) -> "ChangeDiagnosed":
     """What changed between the ``baseline`` runs and the ``changed`` runs of one robot (a
     payload, a gain, a friction, a delay): one model shared by both (fitted on the baseline,
     or ``params`` held as given), what both lack cancelled between samples in the same
     state, the change's candidates tested on the changed runs only
     (:mod:`baseparams.diagnose.change`). ``result.closed``: nothing changed, or the named
-    changes explain the difference."""
+    changes explain the difference. ``params``: a path, or :func:`identify`'s result itself."""
+    _check_result(params)
+    if params is not None and result_json(params) is not None:
+        with result_file(params, "identify-result.json") as path:
+            return diagnose_change(mech, changed, baseline, params=path, alpha=alpha, progress=progress)
     from dataclasses import replace
 
     from baseparams.diagnose.change import diagnose_change as run

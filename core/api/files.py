@@ -56,8 +56,18 @@ def writer_for(path: PathText) -> "Writer":
     return writers[suffix]
 
 
-def load_physical(path: PathText) -> dict[str, str]:
-    """The ``"physical"`` table of an identify JSON file: parameter name -> decimal string."""
+def load_physical(path: Any) -> dict[str, str]:
+    """The ``"physical"`` table of an identify JSON file (or of the identify result itself, as
+    the API takes it wherever the command line takes a result file): parameter name -> decimal
+    string."""
+    from .data import result_json
+    given = result_json(path)
+    if given is not None:
+        physical = given.get("physical")
+        if not isinstance(physical, dict):
+            raise InputError("the result has no physical parameters: identify with physical=True (--physical)",
+                             key="inertia")
+        return physical
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -127,7 +137,7 @@ def consistency_problem(phi: Sequence[Any]) -> str | None:
 
 # ----- convert ---------------------------------------------------------------------------
 def convert(mech: MechanismLike, output: PathText, *, merge_fixed: bool = False, floating_base: bool = False,
-            inertia: PathText | None = None) -> "Conversion":
+            inertia: Any = None) -> "Conversion":
     """Write ``mech`` (a registered name or a file) to ``output`` in the format its suffix
     names (``.toml``, ``.urdf``, a plugin's), atomically. Reader options for URDF:
     ``merge_fixed``, ``floating_base``. ``inertia``: an ``identify --physical`` JSON whose
@@ -141,7 +151,8 @@ def convert(mech: MechanismLike, output: PathText, *, merge_fixed: bool = False,
     else:
         mechanism, notes = read(mech, options)
     if inertia is not None:
-        mechanism = with_inertia(mechanism, load_physical(inertia), inertia)
+        mechanism = with_inertia(mechanism, load_physical(inertia),
+                                 inertia if isinstance(inertia, (str, PathLike)) else "the identify result")
     writer = writer_for(output)
     # every writer (a plugin's too) writes to a temporary file renamed over OUTPUT when it
     # is complete: a missing folder, a full disk or a kill never leaves a partial file
@@ -196,90 +207,35 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
            solver_options: Mapping[str, Any] | None = None, criterion: str = "condition", harmonics: int = 5,
            period: float = 10.0, samples: int = 100, effects: Sequence[str] = (), separate: str | None = None,
            position_range: str | None = None, max_velocity: str | None = None, max_acceleration: str | None = None,
-           max_torque: str | None = None, singularity_margin: float = 0.03, noise: str | None = None,
-           starts: int = 4, workers: int | None = None, scheduler: str | None = None, iterations: int = 200,
+           max_torque: str | None = None, max_jerk: str | None = None, velocity_margin: float | None = None,
+           singularity_margin: float = 0.03, noise: str | None = None,
+           starts: int = 2, workers: int | None = None, scheduler: str | None = None, iterations: int = 150,
            seed: int = 0, csv: PathText | None = None, rate: float = 1000.0, report: PathText | None = None,
-           plot: PathText | None = None, progress: StepProgress | None = None,
-           say: Progress | None = None) -> "Excitation":
+           plot: PathText | None = None, collision: bool | None = None, collision_model: str | None = None,
+           srdf: str | None = None, package_dirs: Sequence[str] = (), clearance: float | None = None,
+           keep_out: Sequence[str] = (), floor: bool = True, progress: StepProgress | None = None,
+           say: Progress | None = None, verbose: bool = False) -> "Excitation":
     """Plan a periodic motion of ``mech`` (a finite Fourier series per independent
     coordinate) that minimises the condition number (``criterion="d-optimal"``: maximises
     log det) of the observation matrix on ``solver``'s base columns and the ``effects``'
-    columns, under the limits (texts as the command line's options); ``separate``: effects
-    to tell apart instead. Writes the mechanism with the motion as its ``[trajectory]`` to
-    ``output`` when given (``result.toml()`` gives the text) and ``csv``, ``report``, ``plot``.
-    ``progress(done, total, label)`` follows the starts; ``say`` receives messages."""
-    from baseparams.excite import plan as planner
-    from baseparams.excite.limits import limits_of
-    from baseparams.identify.base import BaseModel
-    from baseparams.dynamics.forces import independent_names
-    from baseparams.io.atomic import atomic_write
-    from baseparams.orchestrate.jobs import MechanismText
-    from baseparams.orchestrate.runners import make_runner
-
-    from .effects import parse_effect, parse_separate
-    from .results import Excitation
-    if samples < 10:
-        raise InputError(f"{samples} samples: the optimisation needs at least 10 per period", key="--samples")
-    chosen = get_solver(solver)
-    check_solver_options(chosen, solver_options or {})
-    mechanism = load(mech)
-    if not mechanism.path:
-        raise InputError("the mechanism has no file to plan for", key="MECH")
-    names = independent_names(mechanism)
-    parsed_effects = []
-    for effect in effects:
-        spec = parse_effect(effect, mechanism, values=False)
-        parsed_effects.append((spec.kind, spec.coordinate))
-    pairs = parse_separate(separate, mechanism) if separate else ()
-    weights = None
-    if noise is not None:
-        sd = [float(v) for v in noise.split(",")] if all(_is_number(v) for v in noise.split(",")) else None
-        if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
-            raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
-        weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
-    if mechanism.loops and mechanism.trajectory is not None:
-        # closed loops: the file's trajectory is known to stay in the reachable range
-        ranges, velocities, accelerations = _trajectory_limits(mechanism, names)
-        position_range = position_range or ranges
-        max_velocity = max_velocity or velocities
-        max_acceleration = max_acceleration or accelerations
-    limits = limits_of(mechanism, positions=position_range, velocity=max_velocity,
-                       acceleration=max_acceleration, torque=max_torque)
-    if say is not None:
-        say(f"base parameters ({solver})")
-    base = BaseModel.from_result(run_solver(chosen, mechanism, solver_options), mechanism)
-    settings = planner.Settings(harmonics=harmonics, period=period, samples=samples,
-                                criterion="separation" if pairs else criterion, effects=tuple(parsed_effects),
-                                separate=pairs, margin=singularity_margin if mechanism.loops else 0.0,
-                                maxiter=iterations, weights=weights)
-    text = MechanismText.read(mechanism.name, Path(mechanism.path))
-    runner = make_runner(workers, scheduler)
-
-    def rebase(planned: Mechanism) -> BaseModel:
-        return BaseModel.from_result(run_solver(chosen, planned, solver_options), planned)
-
-    try:
-        found = planner.plan(mechanism, text, base, limits, settings, starts=starts, runner=runner,
-                             progress=progress, seed=seed, rebase=rebase)
-    finally:
-        close = getattr(runner, "close", None)
-        if close:
-            close()
-    result = Excitation(found, mechanism, None if output is None else str(output))
-    if output is not None:
-        atomic_write(output, result.toml(), "the planned mechanism file")
-    if csv:
-        result.extra["csv"] = {"path": str(csv), "rate": rate,
-                               "rows": planner.write_csv(Path(csv), found.problem, found.x, rate)}
-        result.written.append(str(csv))
-    if report:
-        atomic_write(report, json.dumps(result.to_json(), indent=2) + "\n", "the report")
-        result.written.append(str(report))
-    if plot:
-        from baseparams.excite.plot import plot_plan
-        plot_plan(found, Path(plot))
-        result.written.append(str(plot))
-    return result
+    columns, under the limits (texts as the command line's options) and, for a URDF with
+    Pinocchio installed, away from collisions (``clearance`` m, ``keep_out`` planes and
+    boxes, the base plane a floor unless ``floor=False``); ``separate``: effects to tell
+    apart instead. ``output``: ``.toml`` writes the mechanism with the motion as its
+    ``[trajectory]`` (``result.toml()`` gives the text), ``.csv`` the motion at ``rate``;
+    also ``csv``, ``report``, ``plot``. ``result.plan.improved`` is false when the start is
+    returned (the optimised motion was not better). ``progress(done, total, label)`` follows
+    the starts; ``say`` receives messages, iterations within a start included;
+    ``verbose=True``: those messages on stderr (docs/excite.md)."""
+    from baseparams.excite.run import excite as run
+    return run(mech, output=output, solver=solver, solver_options=solver_options, criterion=criterion,
+               harmonics=harmonics, period=period, samples=samples, effects=effects, separate=separate,
+               position_range=position_range, max_velocity=max_velocity, max_acceleration=max_acceleration,
+               max_torque=max_torque, max_jerk=max_jerk, velocity_margin=velocity_margin,
+               singularity_margin=singularity_margin, noise=noise, starts=starts, workers=workers,
+               scheduler=scheduler, iterations=iterations, seed=seed, csv=csv, rate=rate, report=report, plot=plot,
+               collision=collision, collision_model=collision_model, srdf=srdf, package_dirs=package_dirs,
+               clearance=clearance, keep_out=keep_out, floor=floor, progress=progress, say=say, verbose=verbose)
 
 
 def _is_number(text: str) -> bool:

@@ -185,6 +185,10 @@ class Fit(Result):
         lines = [ident.to_text()]
         lines.append(f"  RMS residual overall {fitted.overall_rms:.4g}; per coordinate: "
                      + ", ".join(f"{c} {r:.4g}" for c, r in zip(fitted.coordinates, fitted.rms)))
+        raw = ident.extras.get("nrms_unfiltered")
+        if raw and any(abs(raw[c] - n) > 1e-12 for c, n in zip(ident.coordinates, ident.nrms)):
+            lines.append("  NRMS on the unfiltered torques (the fit's rows, without its filter): "
+                         + ", ".join(f"{c} {v:.4g}" for c, v in raw.items()))
         if ident.base.expressions:
             lines.append("  base parameters (what each estimate stands for):")
             lines += [f"    {line}" for line in legend_lines(self.base_rows())]

@@ -42,6 +42,10 @@ ABSORB = 1e-9
 BASE_MODEL_TOLERANCE = 1e-8
 # A coordinate's noise SD is taken at least this fraction of its RMS force (noise-free data).
 NOISE_FLOOR = 1e-13
+# Above this condition number of the weighted regressor (unit-norm columns) a fit is said to be
+# ill-conditioned, with its number: some estimates are combinations the data barely tell apart.
+# Why: a wrong payload guess gave 7.45e11, a wrist gain of -1.8e-17 and exit 0 in silence.
+ILL_CONDITIONED = 1e10
 
 
 @dataclass
@@ -75,6 +79,8 @@ class Identification:
     extras: dict = field(default_factory=dict)
     # estimates no robot has, and negative ones within their noise (.impossible.judge)
     impossible: tuple[Flag, ...] = ()
+    # a bad setup said with its numbers (unknown gains at or below zero, an ill-conditioned fit)
+    warnings: tuple[str, ...] = ()
 
     @property
     def std(self) -> np.ndarray:
@@ -155,6 +161,7 @@ class Identification:
         out["impossible"] = [f.to_json() for f in impossible]
         out["consistent_with_zero"] = [f.to_json() for f in near_zero]
         out["beyond_physical_scale"] = [f.to_json() for f in beyond(self.impossible)]
+        out["warnings"] = list(self.warnings)
         out.update(self.extras)
         if self.physical is not None:
             out["physical"] = dict(self.physical)
@@ -311,7 +318,52 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                           estimates=estimates, covariance=covariance, noise_sd=sigma, nrms=nrms,
                           residual=final, condition_number=condition, samples=n, dof=n * f - p,
                           residual_variance=variance, notes=tuple(notes), absorbed=absorbed,
-                          base_model_error=outside, impossible=tuple(flags))
+                          base_model_error=outside, impossible=tuple(flags),
+                          warnings=tuple(setup_warnings(names, kinds, estimates, covariance, condition)))
+
+
+def setup_warnings(names: Sequence[str], kinds: Sequence[str], estimates: np.ndarray, covariance: np.ndarray,
+                   condition: float) -> list[str]:
+    """What says a bad setup, with its numbers: an unknown current gain that is zero within
+    IMPOSSIBLE_STD of its std, or negative (a torque constant is positive: the logged current's
+    sign is the other way, or the model misses the force the gain was to scale), and a
+    condition number above ILL_CONDITIONED. Why: a wrist gain of -1.8e-17 with a condition
+    number of 7.45e11 was exit 0 without a word (issue 44)."""
+    std = np.sqrt(np.clip(np.diag(covariance), 0, None))
+    out = []
+    for k, (name, kind) in enumerate(zip(names, kinds)):
+        if kind != "gain":
+            continue
+        value = float(estimates[k])
+        if abs(value) <= IMPOSSIBLE_STD * std[k]:
+            out.append(f"{name} = {value:.3g} +- {std[k]:.2g}: zero within its noise, so the data do not determine "
+                       "this current's gain (nothing known fixes its scale on this coordinate: a known payload that "
+                       "moves it, or a known gain; a wrong payload guess gives this too)")
+        elif value < 0:
+            out.append(f"{name} = {value:.3g} +- {std[k]:.2g}: a negative gain (a torque constant is positive): the "
+                       "current is logged with the other sign (scale = -1 on the channel), or the model misses the "
+                       "force it was to scale")
+    if math.isfinite(condition) and condition > ILL_CONDITIONED:
+        weakest = [names[k] for k in np.argsort(-np.where(np.abs(estimates) > 0, std / np.maximum(np.abs(estimates),
+                                                                                                 np.finfo(float).tiny),
+                                                          np.inf))[:3]]
+        out.append(f"the fit is ill-conditioned: condition number {condition:.3g} (above {ILL_CONDITIONED:.0e}); the "
+                   f"data barely tell some estimates apart (largest relative std: {', '.join(weakest)}): excite the "
+                   "motion more richly, or check the description (payload, gains, held joints)")
+    elif not math.isfinite(condition):
+        out.append("the fit is singular (condition number infinite): some estimates are not determined")
+    return out
+
+
+def unfiltered(result: "Identification", mechanism: Mechanism, data: MeasuredData, on_band: "Prediction"
+               ) -> "Prediction":
+    """The model's forces against the forces as measured, without the parallel filter, at the
+    fit's rows (``on_band``: the prediction on the filtered rows, returned when nothing was
+    filtered). Why: an NRMS on filtered torques cannot be compared with another tool's unless
+    its filter is matched (issue 44); this one can."""
+    if not data.reduced:
+        return on_band
+    return predict(result, mechanism, data.unreduced())
 
 
 def measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[EffectSpec],
@@ -365,6 +417,8 @@ class Prediction:
     measured: np.ndarray
     predicted: np.ndarray
     rows: np.ndarray | None = None     # (n, f) bool: the forces measured (a run's channel left out: False)
+    # the NRMS against the forces as measured, without the parallel filter (:func:`unfiltered`)
+    nrms_unfiltered: np.ndarray | None = None
 
     def _mean(self, x: np.ndarray) -> np.ndarray:
         """Per coordinate, the mean of ``x`` (n, f) over its measured rows (0 where none)."""
@@ -402,12 +456,16 @@ class Prediction:
         return {"data": self.data, "samples": int(len(self.t)),
                 "rms": dict(zip(self.coordinates, map(float, self.rms))),
                 "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
-                "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {})
+                "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {}) \
+            | ({"nrms_unfiltered": dict(zip(self.coordinates, map(float, self.nrms_unfiltered)))}
+               if self.nrms_unfiltered is not None else {})
 
     def to_text(self) -> str:
         lines = [f"  prediction on {self.data} ({len(self.t)} samples): RMS error overall {self.overall_rms:.4g}"]
+        raw = self.nrms_unfiltered if self.nrms_unfiltered is not None else [None] * len(self.coordinates)
         lines += [f"    {c}: not measured (its torque channel left out)" if c in self.unmeasured else
-                  f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" for c, r, q in zip(self.coordinates, self.rms, self.nrms)]
+                  f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" + (f" (unfiltered {u:.4g})" if u is not None else "")
+                  for c, r, q, u in zip(self.coordinates, self.rms, self.nrms, raw)]
         return "\n".join(lines)
 
 
