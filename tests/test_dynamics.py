@@ -189,7 +189,7 @@ def test_exact_rational_state_gives_exact_regressor():
 
 
 BUILTIN = {"pendulum", "planar_2r", "puma560", "scara", "four_bar", "slider_crank", "stewart_platform",
-           "sla_suspension"}
+           "sla_suspension", "parallelogram_arm"}
 
 
 def test_the_parametrized_tests_see_every_builtin_mechanism():
