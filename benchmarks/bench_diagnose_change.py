@@ -83,28 +83,38 @@ def main() -> None:
 
 
 def speed(mechanism, samples: int, repeats: int = 3) -> None:
-    """diagnose --baseline against one identify of the changed runs (with the shared effects),
-    both from CSV files through the Python API, CPU s in this process, three times each."""
+    """diagnose --baseline, and diagnose --params (the baseline's identify held), against one
+    identify of the changed runs (with the shared effects), all from CSV files through the
+    Python API, CPU s in this process, ``repeats`` times each (medians)."""
+    import json
     import baseparams as bp
     from baseparams.recordings.data import write_measured
+    name = mechanism.path or mechanism.name
     with tempfile.TemporaryDirectory() as folder:
         before, after, _ = simulate_change(mechanism, samples=samples, seed=0, payload=0.25)
         base, changed = Path(folder) / "base.csv", Path(folder) / "changed.csv"
+        held = Path(folder) / "base.json"
         write_measured(base, before)
         write_measured(changed, after)
         effects = [f"{e.kind}:{e.coordinate}" for e in shared_effects(mechanism)]
-        bp.identify(mechanism.path or mechanism.name, str(changed), effects=effects)      # warm the caches
-        times = {"diagnose --baseline": [], "identify": []}
+        held.write_text(json.dumps(bp.identify(name, str(base), effects=effects).to_json()))
+        bp.identify(name, str(changed), effects=effects)      # warm the caches
+        times: dict[str, list[float]] = {"diagnose --baseline": [], "diagnose --params": [], "identify": []}
         for _ in range(repeats):
             start = time.process_time()
-            bp.identify(mechanism.path or mechanism.name, str(changed), effects=effects)
+            bp.identify(name, str(changed), effects=effects)
             times["identify"].append(time.process_time() - start)
             start = time.process_time()
-            bp.diagnose(mechanism.path or mechanism.name, str(changed), baseline=str(base))
+            bp.diagnose(name, str(changed), baseline=str(base))
             times["diagnose --baseline"].append(time.process_time() - start)
-    d, i = np.median(times["diagnose --baseline"]), np.median(times["identify"])
-    print(f"speed ({samples} samples x {len(after.coordinates)} coordinates per run): diagnose --baseline "
-          f"{d:.2f} CPU s, identify {i:.2f} CPU s: ratio {d / i:.2f} (target <= 5)")
+            start = time.process_time()
+            bp.diagnose(name, str(changed), params=str(held))
+            times["diagnose --params"].append(time.process_time() - start)
+    i = np.median(times["identify"])
+    print(f"speed ({samples} samples x {len(after.coordinates)} coordinates per run), identify {i:.2f} CPU s:")
+    for verb in ("diagnose --baseline", "diagnose --params"):
+        d = np.median(times[verb])
+        print(f"  {verb}: {d:.2f} CPU s, ratio {d / i:.2f} (target <= 5)")
 
 
 if __name__ == "__main__":

@@ -202,3 +202,16 @@ def test_report_fits_one_screen_whatever_the_counts(puma):
     assert "note: the change's own note" in lines
     full = change_text(result, verbose=True).splitlines()
     assert sum(line.startswith("  body on body") for line in full) == 30
+
+
+def test_shifting_is_exact_on_cubics_on_any_spacing():
+    """The delay's columns are the signals as they were d seconds earlier: a cubic in t is
+    shifted exactly (irregular stamps too), and before a segment's first row it is held."""
+    from baseparams.diagnose.change import local_cubic
+    t = np.sort(np.random.default_rng(4).uniform(0.0, 3.0, 400))
+    x = np.stack([t ** 3 - 2 * t, 0.5 * t ** 2 + 1.0], axis=1)
+    at = np.clip(t - 0.0137, t[0], t[-1])
+    expected = np.stack([at ** 3 - 2 * at, 0.5 * at ** 2 + 1.0], axis=1)
+    assert np.allclose(local_cubic(t, x, at), expected, rtol=0, atol=1e-9)
+    smooth = np.sin(2 * np.pi * 0.7 * t)
+    assert np.max(np.abs(local_cubic(t, smooth[:, None], at)[:, 0] - np.sin(2 * np.pi * 0.7 * at))) < 1e-4

@@ -43,7 +43,6 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
 from baseparams.errors import InputError
@@ -184,8 +183,10 @@ def time_derivative(x: np.ndarray, data: MeasuredData) -> np.ndarray:
 
 
 def shifted(x: np.ndarray, data: MeasuredData, delay: float) -> np.ndarray:
-    """``x`` (n, ...) at the fit's rows as it was ``delay`` seconds earlier, run by run: a cubic
-    spline through each segment's rows (held at its first row before it)."""
+    """``x`` (n, ...) at the fit's rows as it was ``delay`` seconds earlier, run by run: cubic
+    interpolation through the four rows around each instant (held at a segment's first row
+    before it). Local, so its cost is four gathers: a spline through every column cost a third
+    of a diagnosis between recordings, for the same order of accuracy (h^4)."""
     if delay == 0.0:
         return x
     t = data.t
@@ -193,8 +194,22 @@ def shifted(x: np.ndarray, data: MeasuredData, delay: float) -> np.ndarray:
     edges = np.cumsum([0] + [len(s.kept()) for s in data.segments])
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a >= 4:
-            at = np.clip(t[a:b] - delay, t[a], t[b - 1])
-            out[a:b] = CubicSpline(t[a:b], x[a:b], axis=0)(at)
+            out[a:b] = local_cubic(t[a:b], x[a:b], np.clip(t[a:b] - delay, t[a], t[b - 1]))
+    return out
+
+
+def local_cubic(t: np.ndarray, x: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``x`` (n >= 4, ...) sampled at increasing ``t``, at the instants ``at`` (within t's span):
+    the Lagrange cubic through the nearest four samples (exact on cubics; any spacing)."""
+    first = np.clip(np.searchsorted(t, at, side="right") - 2, 0, len(t) - 4)
+    nodes = t[first[:, None] + np.arange(4)]                      # (m, 4)
+    out = np.zeros((len(at),) + x.shape[1:])
+    for k in range(4):
+        weight = np.ones(len(at))
+        for j in range(4):
+            if j != k:
+                weight *= (at - nodes[:, j]) / (nodes[:, k] - nodes[:, j])
+        out += weight.reshape((-1,) + (1,) * (x.ndim - 1)) * x[first + k]
     return out
 
 
