@@ -257,3 +257,148 @@ def test_a_mat_header_declaring_huge_dimensions_is_exit_2(logged, tmp_path):
     one_error(err, "log.mat", "variable 'big'", "BASEPARAMS_MAX_MEMORY")
     code, _, err = run("identify", "planar_2r", describe(tmp_path, "log.mat"), "--quiet")
     assert code == 0, err                           # unused: its header is all that is read
+
+
+# ----- diagnose --params: a result of identify held as given -------------------------------------
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """planar_2r data with a viscous friction, and identify's JSON of it; the pendulum's too."""
+    folder = tmp_path_factory.mktemp("given")
+    data = folder / "two.csv"
+    code, _, err = run("simulate", "planar_2r", "-o", data, "--samples", 1500, "--effect", "viscous_friction:q1=0.3",
+                       "--noise", 0.01, "--quiet")
+    assert code == 0, err
+    code, out, err = run("identify", "planar_2r", data, "--effect", "viscous_friction:q1", "--format", "json",
+                         "--quiet")
+    assert code == 0, err
+    (folder / "two.json").write_text(out)
+    code, _, err = run("simulate", "pendulum", "-o", folder / "one.csv", "--samples", 400, "--quiet")
+    code, out, err = run("identify", "pendulum", folder / "one.csv", "--format", "json", "--quiet")
+    assert code == 0, err
+    (folder / "one.json").write_text(out)
+    return folder, data, json.loads((folder / "two.json").read_text())
+
+
+def test_a_result_of_another_mechanism_is_refused(fitted):
+    """Issue 46: a pendulum's identify JSON was accepted for planar_2r (exit 1, UNEXPLAINED): its
+    parameters are among planar_2r's. The result's mechanism is compared now: exit 2."""
+    folder, data, _ = fitted
+    code, out, err = run("diagnose", "planar_2r", data, "--params", folder / "one.json", "--quiet")
+    assert code == 2 and out == ""
+    one_error(err, "one.json", "mechanism", "'pendulum', not on 'planar_2r'")
+    code, out, err = run("diagnose", "planar_2r", data, "--baseline", data, "--params", folder / "one.json",
+                         "--quiet")
+    assert code == 2
+    one_error(err, "one.json", "'pendulum', not on 'planar_2r'")
+
+
+def test_a_result_listing_other_parameters_is_refused(fitted, tmp_path):
+    """A result that lists its standard parameters (``parameters``) must list the mechanism's."""
+    _, data, report = fitted
+    from baseparams.api import load
+    names = list(load("planar_2r").parameters)
+    for listed, ok in ((names, True), (names[:10], False), ("m1", False)):
+        (tmp_path / "r.json").write_text(json.dumps(report | {"parameters": listed}))
+        code, out, err = run("diagnose", "planar_2r", data, "--params", tmp_path / "r.json", "--quiet")
+        if ok:
+            assert code in (0, 1), err
+        else:
+            assert code == 2
+            one_error(err, "r.json", "parameters", "not planar_2r's")
+
+
+def _set(report, path, value):
+    out = json.loads(json.dumps(report))
+    target = out
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    return out
+
+
+@pytest.mark.parametrize("path, value, key, words", [
+    (("base", 0, "expression", "mx1"), "1/0", "base[0].expression.mx1", "divides by zero"),
+    (("base", 0, "expression"), ["mx1", "1"], "base[0].expression", "not a list"),
+    (("base", 0, "expression", "mx1"), "1e400", "base[0].expression.mx1", "beyond any float"),
+    (("base", 0, "expression", "mx1"), [1], "base[0].expression.mx1", "not a list"),
+    (("base", 0, "expression", "x9"), "1", "base[0].expression.x9", "not a standard parameter"),
+    (("base", 0, "value"), "nan", "base[0].value", "finite"),
+    (("base", 0), [], "base[0]", "not a list"),
+    (("effects",), 5, "effects", "a list is needed"),
+    (("effects", 0, "coefficients", 0, "value"), "x", "effects[0].coefficients[0].value", "finite number"),
+    (("effects", 0, "coefficients", 0), {"name": "fv_q1", "value": None, "absorbed_into": {"m1": "x"}}, None, None),
+    (("gains",), {"gain_q1": 1}, "gains", "a list is needed"),
+    (("gains",), [{"name": "gain_q1", "value": "1/0"}], "gains[0].value", "finite number"),
+    (("covariance", "matrix", 0, 0), 10 ** 400, "covariance", "naming every base parameter"),
+    (("mechanism",), 7, "mechanism", "no 'mechanism' name"),
+], ids=lambda v: str(v)[:24] if not isinstance(v, tuple) else ".".join(map(str, v)))
+def test_a_bad_value_in_a_result_is_exit_2_naming_the_key(fitted, tmp_path, path, value, key, words):
+    """Issue 46: a coefficient "1/0", an expression given as a list: exit 3 (ZeroDivisionError,
+    AttributeError). Now one line naming the file and the key (or, for a value only used to
+    judge, held without it)."""
+    _, data, report = fitted
+    (tmp_path / "r.json").write_text(json.dumps(_set(report, path, value)))
+    code, out, err = run("diagnose", "planar_2r", data, "--params", tmp_path / "r.json", "--quiet")
+    if key is None:
+        assert code in (0, 1), err
+        return
+    assert code == 2 and out == ""
+    one_error(err, "r.json", f": {key}: ", words)
+
+
+def test_a_json_nested_200000_deep_is_exit_2(fitted, tmp_path):
+    """Issue 46: a JSON nested 200 000 deep: exit 3, RecursionError."""
+    _, data, _ = fitted
+    (tmp_path / "deep.json").write_text("[" * 200_000 + "]" * 200_000)
+    code, out, err = run("diagnose", "planar_2r", data, "--params", tmp_path / "deep.json", "--quiet")
+    assert code == 2 and out == ""
+    one_error(err, "deep.json", "--params", "nested too deep")
+
+
+_BAD_VALUES = [None, "x", "1/0", [], {}, [[1]], True, 1e308, -1, 10 ** 30, "9" * 5000, {"a": {"b": []}}]
+
+
+def _paths(value, prefix=(), depth=4):
+    """Key paths into a JSON value (lists: their first two items), to ``depth``."""
+    yield prefix
+    if depth == 0:
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _paths(v, prefix + (k,), depth - 1)
+    elif isinstance(value, list):
+        for k, v in enumerate(value[:2]):
+            yield from _paths(v, prefix + (k,), depth - 1)
+
+
+def test_no_bad_value_anywhere_in_a_result_is_an_internal_error(fitted, tmp_path):
+    """Every key path of an identify result (four levels deep) with every kind of bad value:
+    held or refused with an InputError, never another exception."""
+    from baseparams.api import load
+    from baseparams.diagnose.given import given_parameters
+    from baseparams.errors import InputError
+    _, _, report = fitted
+    mechanism = load("planar_2r")
+    tried = 0
+    for path in _paths(report):
+        if not path:
+            continue
+        for value in _BAD_VALUES:
+            (tmp_path / "r.json").write_text(json.dumps(_set(report, path, value)))
+            try:
+                given_parameters(mechanism, str(tmp_path / "r.json"))
+            except InputError:
+                pass
+            tried += 1
+    assert tried > 500
+
+
+@pytest.mark.parametrize("where", ["--baseline", "DATA"])
+def test_a_result_given_as_runs_says_where_it_belongs(fitted, where):
+    """A result of identify given to --baseline (or as DATA) was read as a CSV log ("row 2: 2
+    fields, the header has 1"): now the line says a result is held with --params."""
+    folder, data, _ = fitted
+    args = [data, "--baseline", folder / "two.json"] if where == "--baseline" else [folder / "two.json"]
+    code, out, err = run("diagnose", "planar_2r", *args, "--quiet")
+    assert code == 2 and out == ""
+    one_error(err, "two.json", where, "--params")

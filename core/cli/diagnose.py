@@ -90,6 +90,8 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     (`python -m pydoc baseparams.diagnose.change`).
     """
     from baseparams.api import ChangeDiagnosed, Diagnosed, diagnose as run
+    _no_results(data_paths, "DATA")
+    _no_results(baseline, "--baseline")
     mechanism = load(mech)
     with Progress("diagnose", steps=2 + bool(baseline) + bool(plot_path), quiet=quiet) as progress:
         result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
@@ -104,6 +106,17 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
                 plot_diagnosis(result.diagnosis, plot_path)
     emit(fmt, result.to_json(), lambda: result.to_text(verbose=verbose), output)
     sys.exit(0 if result.closed else 1)
+
+
+def _no_results(paths: tuple[str, ...], option: str) -> None:
+    """Refuse a JSON file among recordings (DATA, --baseline): a result is held with --params,
+    never read as runs (it was "row 2: 2 fields, the header has 1": true, and no help)."""
+    from baseparams.errors import InputError
+    for path in paths:
+        if Path(path).suffix.lower() == ".json":
+            raise InputError(f"a JSON file, not runs: {option} takes recordings (CSV files or recording "
+                             "descriptions); a result of `baseparams identify` is held as given with --params",
+                             file=path, key=option)
 
 
 def plot_diagnosis(result: "Diagnosis", path: str, fmt: str | None = None) -> Path:

@@ -71,50 +71,161 @@ def given_parameters(mechanism: Mechanism, source: str) -> Given:
 
 
 def _from_identify(mechanism: Mechanism, path: Path) -> Given:
-    try:
-        report = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", file=str(path), key="--params") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"not JSON: {exc.msg} (line {exc.lineno})", file=str(path), key="--params") from None
-    base = report.get("base") if isinstance(report, dict) else None
+    report = _read_report(path)
+    file = str(path)
+    base = report.get("base")
     if not isinstance(base, list) or not base:
-        raise InputError("not the JSON of `baseparams identify` (no 'base' list)", file=str(path), key="base")
+        raise InputError("not the JSON of `baseparams identify` (no 'base' list)", file=file, key="base")
+    _check_identity(mechanism, report, file)
     names = list(mechanism.parameters)
     E = np.zeros((len(base), len(names)))
     beta = np.zeros(len(base))
     for k, entry in enumerate(base):
         where = f"base[{k}]"
-        try:
-            beta[k] = float(entry["value"])
-            for name, coefficient in entry["expression"].items():
-                E[k, names.index(name)] = float(Fraction(str(coefficient)))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"a value and an expression over {mechanism.name}'s standard parameters are "
-                             f"needed ({exc})", file=str(path), key=where) from None
-    if not np.all(np.isfinite(beta)):
-        raise InputError("a base parameter value is not finite", file=str(path), key="base")
+        if not isinstance(entry, dict):
+            raise InputError(f"a base parameter is an object with a value and an expression, not "
+                             f"{_kind(entry)}", file=file, key=where)
+        beta[k] = _finite(entry.get("value"), file, f"{where}.value")
+        expression = entry.get("expression")
+        if not isinstance(expression, dict) or not expression:
+            raise InputError(f"an expression is an object {{parameter: coefficient}} over {mechanism.name}'s "
+                             f"standard parameters, not {_kind(expression)}", file=file, key=f"{where}.expression")
+        for name, coefficient in expression.items():
+            key = f"{where}.expression.{name}"
+            if name not in names:
+                raise InputError(f"{name!r} is not a standard parameter of {mechanism.name}", file=file, key=key)
+            E[k, names.index(name)] = _coefficient(coefficient, file, key)
     own = all(b.inertia is not None for b in mechanism.bodies)
     prior = standard_parameters(mechanism) if own else np.zeros(len(names))
     phi = prior + np.linalg.lstsq(E, beta - E @ prior, rcond=None)[0]
     effects = []
-    for k, entry in enumerate(report.get("effects") or []):
+    raw_effects = _list(report, "effects", file)
+    for k, entry in enumerate(raw_effects):
+        where = f"effects[{k}]"
         try:
-            values = {c["name"].rsplit("_" + entry["coordinate"], 1)[0]: c["value"] for c in entry["coefficients"]
-                      if c.get("value") is not None}
-            effects.append(EffectSpec(entry["kind"], entry["coordinate"], values))
+            coordinate = entry["coordinate"]
+            if not isinstance(entry["kind"], str) or not isinstance(coordinate, str):
+                raise TypeError("kind and coordinate are names")
+            values = {}
+            for j, c in enumerate(entry["coefficients"]):
+                if c.get("value") is None:
+                    continue
+                values[str(c["name"]).rsplit("_" + coordinate, 1)[0]] = _finite(
+                    c["value"], file, f"{where}.coefficients[{j}].value")
+            effects.append(EffectSpec(entry["kind"], coordinate, values))
         except (KeyError, TypeError, AttributeError) as exc:
-            raise InputError(f"an effect needs kind, coordinate and coefficients ({exc})", file=str(path),
-                             key=f"effects[{k}]") from None
+            raise InputError(f"an effect needs kind, coordinate and coefficients ({exc})", file=file,
+                             key=where) from None
     gains = {}
-    for k, entry in enumerate(report.get("gains") or []):
+    for k, entry in enumerate(_list(report, "gains", file)):
         try:
-            gains[str(entry["name"])] = float(entry["value"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"a gain needs a name and a value ({exc})", file=str(path), key=f"gains[{k}]") from None
+            gains[str(entry["name"])] = _finite(entry["value"], file, f"gains[{k}].value")
+        except (KeyError, TypeError) as exc:
+            raise InputError(f"a gain needs a name and a value ({exc})", file=file, key=f"gains[{k}]") from None
     covariance = _base_covariance(report, base, path)
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
-                 notes=_impossible_notes(mechanism, path, E, base, report.get("effects") or [], covariance))
+                 notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance))
+
+
+# An identify result is a few kB to a few MB; a file far larger is not one (and is not read whole)
+MAX_RESULT_BYTES = 200_000_000
+
+
+def _read_report(path: Path) -> dict:
+    """The JSON object of an identify result, or the InputError naming the file: unreadable,
+    too large, not JSON, nested deeper than Python's parser goes (issue 46: 200 000 levels
+    were a RecursionError), not an object."""
+    file = str(path)
+    try:
+        if path.stat().st_size > MAX_RESULT_BYTES:
+            raise InputError(f"{path.stat().st_size:,} bytes: larger than any identify result "
+                             f"(at most {MAX_RESULT_BYTES:,} are read)", file=file, key="--params")
+        report = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", file=file, key="--params") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text (byte {exc.start}): not JSON", file=file, key="--params") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not JSON: {exc.msg} (line {exc.lineno})", file=file, key="--params") from None
+    except RecursionError:
+        raise InputError("not the JSON of `baseparams identify`: nested too deep to read", file=file,
+                         key="--params") from None
+    except ValueError as exc:               # a number of more than 4300 digits
+        raise InputError(f"not the JSON of `baseparams identify`: {exc}", file=file, key="--params") from None
+    if not isinstance(report, dict):
+        raise InputError(f"not the JSON of `baseparams identify` (an object is needed, not {_kind(report)})",
+                         file=file, key="--params")
+    return report
+
+
+def _check_identity(mechanism: Mechanism, report: dict, file: str) -> None:
+    """The result is of this mechanism: the same name, and the same standard parameters where
+    the result lists them. Why (issue 46): a pendulum's result was held for planar_2r (its
+    parameters are among planar_2r's) and the diagnosis said UNEXPLAINED."""
+    name = report.get("mechanism")
+    if not isinstance(name, str):
+        raise InputError("not the JSON of `baseparams identify` (no 'mechanism' name)", file=file, key="mechanism")
+    if name != mechanism.name:
+        raise InputError(f"the result of identify on {name!r}, not on {mechanism.name!r}: give a result of the "
+                         f"same mechanism", file=file, key="mechanism")
+    listed = report.get("parameters")
+    if listed is not None and listed != list(mechanism.parameters):
+        count = len(listed) if isinstance(listed, list) else _kind(listed)
+        raise InputError(f"its standard parameters ({count}) are not {mechanism.name}'s "
+                         f"({len(mechanism.parameters)}): a result of another version of the mechanism file?",
+                         file=file, key="parameters")
+
+
+def _list(report: dict, key: str, file: str) -> list:
+    """``report[key]``, a list (absent or null: empty)."""
+    value = report.get(key)
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise InputError(f"a list is needed, not {_kind(value)}", file=file, key=key)
+    return value
+
+
+def _finite(value: object, file: str, key: str) -> float:
+    """A finite number (a JSON number or a decimal string), or the InputError naming ``key``."""
+    try:
+        number = float(value) if not isinstance(value, bool) else float("nan")  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        number = float("nan")
+    if not np.isfinite(number):
+        raise InputError(f"a finite number is needed, not {_shown(value)}", file=file, key=key)
+    return number
+
+
+def _coefficient(value: object, file: str, key: str) -> float:
+    """A coefficient: a number, a decimal or ``p/q`` string (exact), finite."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return _finite(value, file, key)
+    if not isinstance(value, str) or len(value) > 1000:
+        raise InputError(f"a coefficient is a number or a string such as \"0.25\" or \"1/3\", not {_shown(value)}",
+                         file=file, key=key)
+    try:
+        exact = Fraction(value.strip())
+    except ZeroDivisionError:
+        raise InputError(f"{value!r} divides by zero", file=file, key=key) from None
+    except ValueError:
+        raise InputError(f"{_shown(value)} is not a number (a decimal or p/q)", file=file, key=key) from None
+    try:
+        return _finite(float(exact), file, key)
+    except OverflowError:
+        raise InputError(f"{_shown(value)} is beyond any float", file=file, key=key) from None
+
+
+def _kind(value: object) -> str:
+    """What a JSON value is, for messages."""
+    names = {dict: "an object", list: "a list", str: "a string", bool: "true/false", type(None): "null",
+             int: "a number", float: "a number"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _shown(value: object) -> str:
+    text = repr(value) if isinstance(value, (str, int, float)) and not isinstance(value, bool) else _kind(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: list, effects: list,
@@ -141,7 +252,8 @@ def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: lis
             if c.get("value") is None:
                 into = c.get("absorbed_into")
                 if isinstance(into, dict):
-                    absorbed[name] = {str(k): float(v) for k, v in into.items()}
+                    shares = {str(k): _number(v) for k, v in into.items()}
+                    absorbed[name] = {k: v for k, v in shares.items() if np.isfinite(v)}
                 continue
             names.append(name)
             values.append(float(c["value"]))
@@ -166,7 +278,7 @@ def _number(value: object) -> float:
     """A JSON number, NaN when absent (an exact value then: judged without noise)."""
     try:
         return float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         return float("nan")
 
 
@@ -180,7 +292,7 @@ def _base_covariance(report: dict, base: list, path: Path) -> np.ndarray | None:
         names = list(held["names"])
         matrix = np.array([[np.nan if v is None else float(v) for v in row] for row in held["matrix"]])
         index = [names.index(entry["name"]) for entry in base]
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise InputError(f"expected {{\"names\": [...], \"matrix\": [[...]]}} naming every base parameter "
                          f"({exc})", file=str(path), key="covariance") from None
     if matrix.shape != (len(names), len(names)):
