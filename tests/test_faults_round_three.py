@@ -402,3 +402,31 @@ def test_a_result_given_as_runs_says_where_it_belongs(fitted, where):
     code, out, err = run("diagnose", "planar_2r", *args, "--quiet")
     assert code == 2 and out == ""
     one_error(err, "two.json", where, "--params")
+
+
+# ----- identify --validate on a run whose torques are all zero -----------------------------------
+def test_validation_on_zero_torques_has_an_undefined_nrms_not_a_perfect_one(tmp_path):
+    """Issue 46: --validate on a run whose torques are all 0: exit 0 with "nrms": 0.0, which
+    reads as a perfect prediction. Now null, the coordinate listed in ``nrms_undefined``, and
+    the text says undefined; the RMS error (the predicted force itself) is kept."""
+    code, _, err = run("simulate", "planar_2r", "-o", tmp_path / "fit.csv", "--samples", 800, "--quiet")
+    assert code == 0, err
+    lines = (tmp_path / "fit.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    zero = [header.index("tau_q1")]
+    rows = [r.split(",") for r in lines[1:]]
+    for r in rows:
+        for k in zero:
+            r[k] = "0"
+    (tmp_path / "dead.csv").write_text("\n".join([lines[0]] + [",".join(r) for r in rows]) + "\n")
+    code, out, err = run("identify", "planar_2r", tmp_path / "fit.csv", "--validate", tmp_path / "dead.csv",
+                         "--format", "json", "--quiet")
+    assert code == 0, err
+    (validation,) = json.loads(out)["validation"]
+    assert validation["nrms"]["q1"] is None and validation["nrms_undefined"] == ["q1"]
+    assert validation["nrms"]["q2"] is not None and validation["nrms"]["q2"] < 1e-6
+    assert validation["rms"]["q1"] > 0.1
+    code, out, err = run("identify", "planar_2r", tmp_path / "fit.csv", "--validate", tmp_path / "dead.csv",
+                         "--quiet")
+    (line,) = [x for x in out.splitlines() if x.strip().startswith("q1: RMS")]
+    assert "NRMS undefined (the measured force is 0 in every sample" in line

@@ -143,7 +143,8 @@ def plot_predictions(predictions: "list[Prediction]", path: str, title: str = ""
             ax.plot(p.t, p.measured[:, j], lw=0.6, color="0.45", label="measured")
             ax.plot(p.t, p.predicted[:, j], lw=0.8, color="tab:blue", label="predicted")
             what = "fit" if k == 0 else "validation"
-            ax.set_title(f"{c} ({what}): RMS {p.rms[j]:.3g}, NRMS {p.nrms[j]:.2f}", fontsize=8)
+            nrms = "undefined (force 0)" if c in p.undefined else f"{p.nrms[j]:.2f}"
+            ax.set_title(f"{c} ({what}): RMS {p.rms[j]:.3g}, NRMS {nrms}", fontsize=8)
             ax.tick_params(labelsize=7)
             if j == 0 and k == 0:
                 ax.legend(loc="upper right", fontsize=7)

@@ -436,6 +436,14 @@ class Prediction:
         return tuple(c for c, any_row in zip(self.coordinates, measured) if not any_row)
 
     @property
+    def undefined(self) -> tuple[str, ...]:
+        """The coordinates whose NRMS is undefined: measured, and their force 0 in every sample
+        (a dead channel). Their ``nrms`` reads 0 and means nothing: JSON null, text "undefined".
+        Why (issue 46): a run with every torque 0 was predicted with "nrms": 0.0, a perfect score."""
+        size = self._mean(self.measured ** 2)
+        return tuple(c for c, s in zip(self.coordinates, size) if s == 0 and c not in self.unmeasured)
+
+    @property
     def rms(self) -> np.ndarray:
         return np.sqrt(self._mean((self.measured - self.predicted) ** 2))
 
@@ -453,17 +461,23 @@ class Prediction:
         return float(np.sqrt(np.mean(error)))
 
     def to_json(self) -> dict:
+        undefined = self.undefined
+
+        def ratios(values: np.ndarray) -> dict[str, float | None]:
+            return {c: None if c in undefined else float(v) for c, v in zip(self.coordinates, values)}
         return {"data": self.data, "samples": int(len(self.t)),
                 "rms": dict(zip(self.coordinates, map(float, self.rms))),
-                "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
+                "nrms": ratios(self.nrms),
                 "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {}) \
-            | ({"nrms_unfiltered": dict(zip(self.coordinates, map(float, self.nrms_unfiltered)))}
-               if self.nrms_unfiltered is not None else {})
+            | ({"nrms_undefined": list(undefined)} if undefined else {}) \
+            | ({"nrms_unfiltered": ratios(self.nrms_unfiltered)} if self.nrms_unfiltered is not None else {})
 
     def to_text(self) -> str:
         lines = [f"  prediction on {self.data} ({len(self.t)} samples): RMS error overall {self.overall_rms:.4g}"]
         raw = self.nrms_unfiltered if self.nrms_unfiltered is not None else [None] * len(self.coordinates)
         lines += [f"    {c}: not measured (its torque channel left out)" if c in self.unmeasured else
+                  f"    {c}: RMS {r:.4g} / NRMS undefined (the measured force is 0 in every sample: a dead "
+                  "channel?)" if c in self.undefined else
                   f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" + (f" (unfiltered {u:.4g})" if u is not None else "")
                   for c, r, q, u in zip(self.coordinates, self.rms, self.nrms, raw)]
         return "\n".join(lines)
