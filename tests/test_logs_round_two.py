@@ -426,3 +426,18 @@ def test_the_api_takes_a_result_object_wherever_the_cli_takes_a_result_file(tmp_
     assert a["verdict"] == b["verdict"] and a["gap"] == b["gap"]
     with pytest.raises(InputError, match="expected a result file's path or a result object"):
         bp.diagnose("planar_2r", tmp_path / "d.csv", params=3.5)   # type: ignore[arg-type]
+
+
+def test_a_bag_whose_publisher_leaves_efforts_empty_says_so(tmp_path):
+    """A JointState publisher that fills positions only (effort = []): the quantity and the
+    counts are named, exit 2, never a traceback."""
+    pytest.importorskip("rosbags")
+    t = np.arange(40) * 0.01
+    messages = [(tk, {"position": np.full(3, np.sin(tk)), "velocity": np.zeros(3)}) for tk in t]
+    bag = _write_bag(tmp_path / "arm.bag", {"/joint_states": messages}, ros1=True)
+    (tmp_path / "rec.toml").write_text(f'[[runs]]\nfile = "{bag.name}"\n' + BAG_CHANNELS + '[torque]\n'
+                                       + "".join(f'q{j + 1} = "/joint_states.effort[{n}]"\n' for j, n in enumerate(JOINTS)))
+    out = _cli("identify", _mech_file(tmp_path), tmp_path / "rec.toml", "--solver", "dp")
+    assert out.exit_code == 2 and "Traceback" not in out.output, out.output
+    assert "topic /joint_states, message 1: '/joint_states.effort[joint_" in out.stderr
+    assert "the message's effort has 0 values for its 3 joints" in out.stderr, out.stderr

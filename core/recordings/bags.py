@@ -214,6 +214,13 @@ def _field_error(field: Field, message: Any, msgtype: str, exc: Exception) -> st
                 size = len(value) if hasattr(value, "__len__") else 0
                 return f"{field.column!r}: index {step} is outside its {size} values"
         else:
-            return (f"{field.column!r}: [{step}] names a joint, and the message has no list of joint names there "
-                    f"(name, joint_names)")
+            listed = getattr(message, "name", None) if field.steps[0][0] == "attr" else None
+            if listed is not None and hasattr(value, "__len__") and len(value) < len(listed):
+                return (f"{field.column!r}: the message's {field.steps[-2][1]} has {len(value)} values for its "
+                        f"{len(listed)} joints (a publisher that does not fill it): map this quantity from another "
+                        "topic, or leave it out")
+            if listed is None and not hasattr(message, "joint_names"):
+                return (f"{field.column!r}: [{step}] names a joint, and the message has no list of joint names "
+                        f"there (name, joint_names)")
+            return f"{field.column!r}: [{step}] cannot be read in this message ({type(exc).__name__}: {exc})"
     return f"{field.column!r} is not a number in {msgtype} ({type(value).__name__}: give a numeric field)"
