@@ -100,10 +100,14 @@ def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], s
              output: str | None, fmt: str, quiet: bool) -> None:
     """Least squares on MECH's base parameters (and named effects) from measured DATA.
 
-    DATA: CSV files in the project's layout or recording descriptions (.toml: raw logs
-    with motor-side channels, gains, time stamps, filtering; `python -m pydoc
+    DATA: CSV files in the project's layout (irregular stamps read as a recording) or
+    recording descriptions (.toml: raw logs as robots write them, with or without a header
+    row, one value a line, .npz/.mat arrays, ROS 1 and ROS 2 bags; motor-side channels, gains,
+    time stamps, filtering; docs/identification.md, `python -m pydoc
     baseparams.recordings.recording`), one or several; several runs are fitted together,
-    each filtered on its own. Weighted per coordinate (Gautier: each coordinate's noise SD
+    each filtered on its own; --validate recordings are filtered with the fit's low-pass.
+    NRMS is printed on the fit's band and on the unfiltered torques; a bad setup (a gain
+    at or below zero, an ill-conditioned fit) is a warning with its numbers. Weighted per coordinate (Gautier: each coordinate's noise SD
     from an ordinary fit, then refitted with weights 1/SD). Prints every estimate with its
     standard deviation and relative std (%), what each base parameter stands for, the
     condition number and the NRMS residual per coordinate, and with --validate the

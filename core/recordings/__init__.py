@@ -2,6 +2,9 @@
 
 - :mod:`.recording`: recording descriptions (TOML) mapping raw logs onto the model;
 - :mod:`.data`: the project's CSV layout, :class:`MeasuredData`, filters and derivatives;
+- :mod:`.tables`: a description's text logs (a header row, ``names`` for none, ``stacked`` for one value a line);
+- :mod:`.bags`: ROS 1 and ROS 2 bags as tables, a topic each on its own clock (the ``ros`` extra);
+- :mod:`.implied`: the project's CSV layout read as a recording (irregular stamps: one pipeline);
 - :mod:`.arrays`: ``.npz`` and ``.mat`` logs as named columns;
 - :mod:`.simulate`: synthetic measured data with a known truth (the proof bench).
 

@@ -19,6 +19,10 @@ mechanism's independent coordinates:
    filtered and differentiated once), then torques and model columns alike filtered and
    decimated (Gautier's parallel filtering, :class:`~.data.Segment`), each run on its own.
 
+Logs are read as tables of named columns by :mod:`.tables` (text: a header row, or
+``names``, or ``stacked``), :mod:`.arrays` (``.npz``, ``.mat``) and :mod:`.bags` (ROS bags,
+a table per topic on its own clock).
+
 Nothing here rewrites a raw file; every error names the description or the log, the key
 or the row and column, and the reason.
 """
