@@ -24,9 +24,14 @@ Decorator = Callable[[F], F]
 
 def output_option(help: str = "Write the output to FILE (atomically) instead of standard output.",
                   required: bool = False) -> Decorator:
-    """``-o/--output FILE``: the verb's output goes there; standard output when absent."""
+    """``-o/--output FILE``: the verb's output goes there; standard output when absent.
+    ``required``: no default at all (click 8.3 and later take an explicit ``default=None`` as a
+    value given, and a required ``-o`` was None: ``plot`` ended in a TypeError, issue 46)."""
+    if required:
+        return click.option("-o", "--output", "output", type=click.Path(dir_okay=False), required=True,
+                            metavar="FILE", help=help)
     return click.option("-o", "--output", "output", type=click.Path(dir_okay=False), default=None,
-                        required=required, metavar="FILE", help=help)
+                        metavar="FILE", help=help)
 
 
 def solver_option(help: str = "A registered solver (`baseparams plugins` lists them).",
