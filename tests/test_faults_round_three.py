@@ -27,7 +27,7 @@ SAMPLES = 2000
 
 def run(*args, env=None):
     """The CLI in-process: (exit code, stdout, stderr)."""
-    result = CliRunner().invoke(main, [str(a) for a in args], env=env)
+    result = CliRunner().invoke(main, [str(a) for a in args], env=env, prog_name="baseparams")
     return result.exit_code, result.stdout, result.stderr
 
 
@@ -430,3 +430,31 @@ def test_validation_on_zero_torques_has_an_undefined_nrms_not_a_perfect_one(tmp_
                          "--quiet")
     (line,) = [x for x in out.splitlines() if x.strip().startswith("q1: RMS")]
     assert "NRMS undefined (the measured force is 0 in every sample" in line
+
+
+# ----- the command line: plot without -o, option values on one line ---------------------------------
+@pytest.mark.parametrize("verb", [["plot", "mechanism", "pendulum"], ["plot", "singular-values", "pendulum"],
+                                  ["convert", "pendulum"]])
+def test_a_verb_that_needs_dash_o_says_so_before_any_work(verb):
+    """Issue 46: ``plot mechanism X`` without -o: exit 3 TypeError, after all the work (click
+    8.3+ took the option's explicit default None as given). Now exit 2 at once, one line."""
+    code, out, err = run(*verb)
+    assert code == 2 and out == ""
+    one_error(err, "Missing option '-o' / '--output'", f"baseparams {verb[0]}")
+    assert "vp:" not in err                     # no solver ran
+
+
+@pytest.mark.parametrize("args, words", [
+    (["solve", "pendulum", "--format", "xml"], ["--format: 'xml' is not one of 'text', 'json', 'csv'"]),
+    (["list", "--format", "yaml"], ["--format: 'yaml' is not one of"]),
+    (["validate", "pendulum", "--format", "png"], ["--format: 'png'"]),
+    (["solve", "pendulum", "--samples", "1"], ["--samples: 1 is not in the range"]),
+    (["plot", "mechanism", "pendulum", "-o", "x.png", "--image-format", "jpg"], ["--image-format: 'jpg'"]),
+    (["show"], ["Missing argument 'MECH'"]),
+])
+def test_a_bad_option_value_is_one_error_line(args, words):
+    """Issue 46: a bad --format gave click's three lines (usage, hint, error). A bad or missing
+    value is bad input like any other: one ``error:`` line naming the option, exit 2."""
+    code, out, err = run(*args)
+    assert code == 2 and out == ""
+    one_error(err, *words)

@@ -73,6 +73,8 @@ class Group(click.Group):
             return super().invoke(ctx)
         except BaseparamsError as exc:
             raise UserError(getattr(exc, "message", str(exc))) from None
+        except click.BadParameter as exc:
+            raise UserError(bad_parameter(exc)) from None
         except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
         except Exception as exc:
@@ -81,6 +83,21 @@ class Group(click.Group):
             click.echo(f"internal error: {type(exc).__name__}: {exc} (a bug in baseparams or a plugin; "
                        f"please report it; rerun with --debug for the traceback)", err=True)
             ctx.exit(INTERNAL_ERROR)
+
+
+def bad_parameter(exc: click.BadParameter) -> str:
+    """One line for an option's or argument's bad or missing value (``--format: 'xml' is not
+    one of 'text', 'json'``), as every other bad input: click's three lines (usage, hint,
+    error) were kept for usage errors proper, an unknown option or a missing argument
+    (issue 46: a bad ``--format`` was the one option error not on one line)."""
+    if isinstance(exc, click.MissingParameter):
+        where = f" (see '{exc.ctx.command_path} --help')" if exc.ctx is not None else ""
+        return exc.format_message().rstrip(".") + where
+    hint = exc.param_hint if isinstance(exc.param_hint, str) else None
+    if hint is None and exc.param is not None:
+        hint = exc.param.get_error_hint(exc.ctx) if exc.ctx is not None else exc.param.name
+    hint = (hint or "").replace("'", "")
+    return f"{hint}: {exc.message}".rstrip(".") if hint else exc.message
 
 
 INTERNAL_ERROR = 3
