@@ -511,29 +511,12 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
     if len(set(lengths.values())) > 1:
         shown = ", ".join(f"{files[a]}: {n} rows" for a, n in lengths.items())
         raise InputError(f"the files of one run must have the same rows ({shown}), or each its own time "
-                         "column (time = \"COLUMN\" found in every file: read on the positions' clock)",
+                         "column (time = \"COLUMN\" found in every file: read on the first torque channel's clock)",
                          file=path, key=key)
     name = run.get("name", str(logs[next(iter(logs))].path))
     t, t_file = _times(head, tables, files, path, groups)
     rows = next(iter(tables.values()))[2]
-    if "rows" in run:                      # a part of the log (FIGAROH's protocols give rows; a clock reset)
-        first, last = run["rows"]
-        inside = np.array([first <= line <= last for line in rows], dtype=bool)
-        if inside.sum() < MIN_SAMPLES:
-            raise InputError(f"{int(inside.sum())} samples in rows {first} to {last} (the log's samples are on rows "
-                             f"{rows[0]} to {rows[-1]})", file=path, key=f"{key}.rows")
-        t, rows = t[inside], [line for line, keep in zip(rows, inside) if keep]
-        tables = {alias: (header, {c: v[inside] for c, v in table.items()}, rows)
-                  for alias, (header, table, _) in tables.items()}
-    if "window" in run:
-        start, end = (_number(v, path, f"{key}.window") for v in run["window"])
-        inside = (t >= start) & (t <= end)
-        if inside.sum() < MIN_SAMPLES:
-            raise InputError(f"{int(inside.sum())} samples between {start:g} and {end:g} s: {_span(t, head)}",
-                             file=path, key=f"{key}.window")
-        t, rows = t[inside], [line for line, keep in zip(rows, inside) if keep]
-        tables = {alias: (header, {c: v[inside] for c, v in table.items()}, rows)
-                  for alias, (header, table, _) in tables.items()}
+    t, rows, tables = _selected(run, t, rows, tables, head, path, key)
 
     def values(channel: Channel) -> np.ndarray:
         if channel.absent or (channel.quantity == "torque" and channel.coordinate in skipped):
@@ -731,6 +714,33 @@ def _owner(tables: dict, groups: dict, channel: Channel, path: str, key: str) ->
                          key=f"{channel.key}.column")
     raise InputError(f"column {channel.column!r} is in {len(owners)} of the run's files: write "
                      "FILE:COLUMN with the file's alias", file=path, key=f"{channel.key}.column")
+
+
+def _selected(run: dict, t: np.ndarray, rows: list[int], tables: dict, head: dict, path: str, key: str
+              ) -> tuple[np.ndarray, list[int], dict]:
+    """(t, rows, tables) of the run's part of the log: its ``rows = [first, last]`` (the log's
+    rows; FIGAROH's protocols give rows, a clock reset splits a log) and its ``window`` (s,
+    in the clock ``window`` reads); too few samples there is an error giving the log's span."""
+    def keep(inside: np.ndarray) -> tuple[np.ndarray, list[int], dict]:
+        kept = [line for line, k in zip(rows, inside) if k]
+        return t[inside], kept, {alias: (header, {c: v[inside] for c, v in table.items()}, kept)
+                                 for alias, (header, table, _) in tables.items()}
+
+    if "rows" in run:
+        first, last = run["rows"]
+        inside = np.array([first <= line <= last for line in rows], dtype=bool)
+        if inside.sum() < MIN_SAMPLES:
+            raise InputError(f"{int(inside.sum())} samples in rows {first} to {last} (the log's samples are on rows "
+                             f"{rows[0]} to {rows[-1]})", file=path, key=f"{key}.rows")
+        t, rows, tables = keep(inside)
+    if "window" in run:
+        start, end = (_number(v, path, f"{key}.window") for v in run["window"])
+        inside = (t >= start) & (t <= end)
+        if inside.sum() < MIN_SAMPLES:
+            raise InputError(f"{int(inside.sum())} samples between {start:g} and {end:g} s: {_span(t, head)}",
+                             file=path, key=f"{key}.window")
+        t, rows, tables = keep(inside)
+    return t, rows, tables
 
 
 def _span(t: np.ndarray, head: dict) -> str:
