@@ -441,3 +441,20 @@ def test_a_bag_whose_publisher_leaves_efforts_empty_says_so(tmp_path):
     assert out.exit_code == 2 and "Traceback" not in out.output, out.output
     assert "topic /joint_states, message 1: '/joint_states.effort[joint_" in out.stderr
     assert "the message's effort has 0 values for its 3 joints" in out.stderr, out.stderr
+
+
+def test_blank_lines_in_a_stacked_log_separate_samples_or_stand_for_a_missing_value(tmp_path):
+    """A blank line after a whole sample separates samples; one inside a sample is a missing
+    value (NaN, the sample left out later), never skipped: skipped, every later value would
+    move into the next column."""
+    from baseparams.recordings.tables import LogFile, read_log
+    log = LogFile("q.txt", ("a", "b"), True, "runs[0].files.q")
+    (tmp_path / "q.txt").write_text("1\n2\n\n3\n4\n\n5\n6\n\n")
+    _, table, rows = read_log(str(tmp_path / "q.txt"), log, str(tmp_path / "rec.toml"))
+    assert table["a"].tolist() == [1, 3, 5] and table["b"].tolist() == [2, 4, 6] and rows == [1, 4, 7]
+    (tmp_path / "q.txt").write_text("1\n2\n3\n\n5\n6\n")
+    _, table, rows = read_log(str(tmp_path / "q.txt"), log, str(tmp_path / "rec.toml"))
+    assert table["a"].tolist()[::2] == [1, 5] and np.isnan(table["b"][1]) and table["b"][2] == 6
+    (tmp_path / "q.txt").write_text("1\n2 3\n")
+    with pytest.raises(InputError, match=r"q\.txt: row 2: '2 3' holds several values"):
+        read_log(str(tmp_path / "q.txt"), log, str(tmp_path / "rec.toml"))

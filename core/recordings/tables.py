@@ -24,7 +24,8 @@ import numpy as np
 
 from baseparams.errors import InputError
 from baseparams.io.schema import BOOLEAN, STRING, Array, Table
-from baseparams.recordings.data import NUMBER, _checked, _lines, _read_text, read_columns
+from baseparams.recordings.data import (MAX_MAGNITUDE, MISSING_CHARACTERS, NUMBER, _checked, _lines, _read_text,
+                                         read_columns)
 
 LOG = Table({"path": (STRING, True),
              "names": (Array(STRING, min_length=1, what="a list of the columns' names, in order"), False),
@@ -126,31 +127,62 @@ def _split(line: str, delimiter: str) -> list[str]:
 def _stacked(path: str, text: str, names: tuple[str, ...], comment: str | None, wanted: Collection[str] | None,
              where: str) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
     """A log of one value a line, the values of one sample on ``len(names)`` consecutive lines
-    (blank and comment lines skipped): every column by name, each sample's first line."""
-    fields: list[str] = []
-    lines: list[int] = []
-    for number, line in enumerate(_lines(text), start=1):
-        stripped = line.strip()
-        if not stripped or (comment and stripped.startswith(comment)):
-            continue
-        if len(stripped.replace(",", " ").replace(";", " ").split()) > 1:
-            raise InputError(f"{stripped[:40]!r} holds several values: a stacked log ({where}: stacked = true) has "
-                             "one value a line; leave stacked out for a log with one sample a row", file=path,
-                             key=f"row {number}")
-        fields.append(stripped.rstrip(",;"))
-        lines.append(number)
+    (comment lines skipped): every column by name, each sample's first line. A blank line
+    between samples (after a whole number of them) separates them; one inside a sample is a
+    missing value (NaN: the sample is left out later, with a note), never skipped, which would
+    shift every later value into the next column."""
     width = len(names)
+    lines = text.splitlines()
+    while lines and not lines[-1].strip():              # trailing blank lines
+        lines.pop()
+    fields: list[str] = []
+    numbers: list[int] = []
+    blanks: list[int] = []                              # values before each blank line
+    for number, line in enumerate(lines, start=1):
+        stripped = line.strip()
+        if not stripped:
+            blanks.append(len(fields))
+            fields.append("")
+            numbers.append(number)
+        elif not (comment and stripped.startswith(comment)):
+            fields.append(stripped)
+            numbers.append(number)
+    if blanks:
+        values_before = np.array(blanks) - np.arange(len(blanks))
+        if np.all(values_before % width == 0):          # separators between samples
+            keep = np.ones(len(fields), dtype=bool)
+            keep[blanks] = False
+            fields = [f for f, k in zip(fields, keep) if k]
+            numbers = [n for n, k in zip(numbers, keep) if k]
+    several = next((k for k, f in enumerate(fields) if " " in f or "\t" in f or "," in f.rstrip(",")
+                    or ";" in f.rstrip(";")), None)
+    if several is not None:
+        raise InputError(f"{fields[several][:40]!r} holds several values: a stacked log ({where}: stacked = true) has "
+                         "one value a line; leave stacked out for a log with one sample a row", file=path,
+                         key=f"row {numbers[several]}")
+    fields = [f.rstrip(",;") for f in fields]
     if not fields:
         raise InputError(f"no values ({where})", file=path)
     if len(fields) % width:
+        rest = len(fields) % width
         raise InputError(f"{len(fields)} values are not a whole number of samples of {width} ({where}: names = "
                          f"[{', '.join(names[:4])}{', ...' if width > 4 else ''}]): the last sample has "
-                         f"{len(fields) % width} value(s), from row {lines[len(fields) - len(fields) % width]}; "
-                         "is a value missing, or the names?", file=path)
-    checked = _checked(path, "?", fields, lines, missing=True)
-    if isinstance(checked, tuple):                     # name the column of the bad value
-        k, error = checked
-        raise InputError(error.reason, file=path, key=f"row {lines[k]}, column {names[k % width]}")
-    table = checked.reshape(-1, width)
+                         f"{rest} value(s), from row {numbers[len(fields) - rest]}; is a value missing, or the names?",
+                         file=path)
+    values = None
+    try:                                                 # at once when every field is a number
+        if not "".join(fields).encode("ascii").translate(None, MISSING_CHARACTERS) and "" not in fields:
+            values = np.array(fields, dtype=float)
+    except (UnicodeEncodeError, ValueError):
+        values = None
+    if values is not None and not np.all(np.abs(values[~np.isnan(values)]) <= MAX_MAGNITUDE):
+        values = None
+    if values is None:
+        checked = _checked(path, "?", fields, numbers, missing=True)
+        if isinstance(checked, tuple):                   # name the column of the bad value
+            k, error = checked
+            raise InputError(error.reason, file=path, key=f"row {numbers[k]}, column {names[k % width]}")
+        values = checked
+    table = values.reshape(-1, width)
     used = [k for k, name in enumerate(names) if wanted is None or name in wanted]
-    return list(names), {names[k]: np.ascontiguousarray(table[:, k]) for k in used}, lines[::width]
+    return list(names), {names[k]: np.ascontiguousarray(table[:, k]) for k in used}, numbers[::width]
