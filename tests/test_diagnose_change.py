@@ -215,3 +215,20 @@ def test_shifting_is_exact_on_cubics_on_any_spacing():
     assert np.allclose(local_cubic(t, x, at), expected, rtol=0, atol=1e-9)
     smooth = np.sin(2 * np.pi * 0.7 * t)
     assert np.max(np.abs(local_cubic(t, smooth[:, None], at)[:, 0] - np.sin(2 * np.pi * 0.7 * at))) < 1e-4
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_payload_through_a_gearbox_with_load_friction_is_one_change(seed):
+    """A gear's load friction (mu |tau| sign(qd), mu 0.1, not in the model, common to both
+    runs) grows with a payload's torque: the shared model holds it, computed from each side's
+    own torque, so the payload is the change and no joint's friction is named beside it
+    (before: friction changes on two or three of the shoulder and elbow joints)."""
+    ur5 = resolve(str(Path(__file__).parent / "data" / "urdf" / "ur5.urdf"))
+    before, after, truth = simulate_change(ur5, samples=1000, seed=seed, payload_mass=0.48, load_friction=0.1,
+                                           quantum=0.01)
+    result = diagnose_change(ur5, before, after)
+    first = result.changes[0]
+    assert (first["kind"], first["coordinate"]) == ("body", "wrist_3_link"), _names(result)
+    assert abs(first["value"]["m"] - 0.48) <= 0.05 * 0.48
+    assert all(e["coordinate"] in ("wrist_3_link", "wrist_3_joint") for e in result.changes), _names(result)
+    assert all(0.05 < mu < 0.15 for mu in result.common["load_friction"].values()), result.common["load_friction"]

@@ -165,7 +165,8 @@ def coloured_noise(rng: np.random.Generator, shape: tuple[int, int], kind: str) 
 
 def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: int = 0, noise: str = "ar1",
                     noise_level: float = 0.01, payload: float = 0.0, friction_drift: float = 0.0,
-                    drift_coordinate: int = 0, common_errors: bool = True, random_inertia: bool = False
+                    drift_coordinate: int = 0, common_errors: bool = True, random_inertia: bool = False,
+                    payload_mass: float | None = None, load_friction: float = 0.0, quantum: float = 0.0
                     ) -> tuple[MeasuredData, MeasuredData, dict]:
     """(baseline, changed, truth): two recordings of the default trajectory, the second after
     a change, for the proof of ``diagnose --baseline``. ``payload``: a rigid point load of this
@@ -175,7 +176,10 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
     the model errors a real robot's model has (``common_errors``: a smooth Coulomb law,
     viscous friction, a delay; none of them in the mechanism), and carry independent noise
     of one ``noise`` kind (:func:`coloured_noise`) at ``noise_level`` times each coordinate's
-    RMS torque."""
+    RMS torque. ``payload_mass``: the payload in kg instead (a last body of no mass, a tool
+    frame, has none to scale). ``load_friction``: gear friction mu |tau| sign(qd) on every
+    coordinate, common to both runs, so a payload's torque changes it too (as on a real
+    gearbox). ``quantum``: torques rounded to this step (N m), as a drive reports them."""
     rng = np.random.default_rng(seed)
     coordinates = independent_names(mechanism)
     motion = trajectory_motion(mechanism, samples)
@@ -199,10 +203,10 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
 
     change = np.zeros_like(phi)
     last = len(mechanism.bodies) - 1
-    mass = payload * phi[10 * last]
+    mass = payload * phi[10 * last] if payload_mass is None else payload_mass
     direction = rng.standard_normal(3)
     centre = direction / np.linalg.norm(direction) * 0.05 * rng.uniform() ** (1 / 3)
-    if payload:
+    if mass:
         x, y, z = centre
         change[10 * last:10 * last + 10] = mass * np.array([1.0, x, y, z, y * y + z * z, -x * y, -x * z,
                                                             x * x + z * z, -y * z, x * x + y * y])
@@ -213,9 +217,17 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
         fv = friction_drift * peak[j] / max(float(np.max(np.abs(qd[:, j]))), 1e-300)
         drift[:, j] = fv * qd[:, j]
     sd = noise_level * np.sqrt(np.mean(clean ** 2, axis=0))
-    before = late(clean + common) + coloured_noise(rng, clean.shape, noise) * sd
-    after = late(clean + K @ change + common + drift) + coloured_noise(rng, clean.shape, noise) * sd
-    truth = {"payload": {"body": last, "mass": mass, "centre": centre.tolist()} if payload else None,
+
+    def gear(rigid: np.ndarray) -> np.ndarray:
+        return load_friction * np.abs(rigid) * np.tanh(qd / (COMMON_TRANSITION * speed))
+
+    def reported(x: np.ndarray) -> np.ndarray:
+        return np.round(x / quantum) * quantum if quantum > 0 else x
+
+    loaded = clean + K @ change
+    before = reported(late(clean + common + gear(clean)) + coloured_noise(rng, clean.shape, noise) * sd)
+    after = reported(late(loaded + common + gear(loaded) + drift) + coloured_noise(rng, clean.shape, noise) * sd)
+    truth = {"payload": {"body": last, "mass": mass, "centre": centre.tolist()} if mass else None,
              "friction_drift": {"coordinate": coordinates[drift_coordinate], "fv": fv} if friction_drift else None,
              "noise": noise, "noise_sd": sd.tolist(), "delay": COMMON_DELAY * float(np.median(np.diff(motion.t)))
              if common_errors else 0.0, "seed": seed}
