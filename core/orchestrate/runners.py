@@ -316,6 +316,13 @@ class DaskCluster:
             self._close_cluster()
             raise InputError(f"no Dask scheduler answered at {address} ({exc}): is it the address of a "
                              f"running Dask scheduler?", key="--scheduler") from None
+        except Exception as exc:      # noqa: BLE001 -- any answer no scheduler gives (issue 46)
+            # a peer that answers garbage: Dask read a frame length of 3.07 EiB (MemoryError), a
+            # dimension (ValueError), ... -- not a scheduler, whatever the error it provoked
+            self._close_cluster()
+            raise InputError(f"no Dask scheduler answered at {address}: the peer's answer is not Dask's "
+                             f"({type(exc).__name__}: {str(exc)[:120]}): is it the address of a running Dask "
+                             f"scheduler?", key="--scheduler") from None
         self.workers = max(1, sum(nthreads.values()))
         self._checked = 0.0
         self._trouble_since: float | None = None
