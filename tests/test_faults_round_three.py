@@ -458,3 +458,86 @@ def test_a_bad_option_value_is_one_error_line(args, words):
     code, out, err = run(*args)
     assert code == 2 and out == ""
     one_error(err, *words)
+
+
+# ----- a MemoryError anywhere -------------------------------------------------------------------------
+def test_a_memory_error_anywhere_is_exit_2_naming_the_allocation_and_the_budget(monkeypatch):
+    """Any MemoryError a verb meets (numpy's names the allocation) is exit 2: one line with
+    what was being allocated and BASEPARAMS_MAX_MEMORY, never exit 3."""
+    import baseparams.api
+
+    def solve(*args, **kwargs):
+        raise MemoryError("Unable to allocate 7.28 TiB for an array with shape (1000000000000,) and data type float64")
+    monkeypatch.setattr(baseparams.api, "solve", solve)
+    code, out, err = run("solve", "pendulum")
+    assert code == 2 and out == ""
+    one_error(err, "out of memory in 'solve'", "Unable to allocate 7.28 TiB", "BASEPARAMS_MAX_MEMORY")
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="caps the child's address space (RLIMIT_AS)")
+def test_a_budget_set_above_the_machine_ends_in_exit_2_not_3():
+    """Issue 46: BASEPARAMS_MAX_MEMORY=100000000G solve sla_suspension --solver dp --samples
+    1000000 under an address-space cap: exit 3, MemoryError at 3.6 GB. Now exit 2 naming the
+    allocation (here under a 1.5 GB cap)."""
+    env = {**__import__("os").environ, "BASEPARAMS_MAX_MEMORY": "100000000G"}
+    proc = subprocess.run([*CLI, "solve", "sla_suspension", "--solver", "dp", "--samples", "1000000"],
+                          capture_output=True, text=True, timeout=600, env=env, preexec_fn=_capped(1_500_000_000))
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr
+    line = [x for x in proc.stderr.splitlines() if x.startswith("error: ")]
+    assert len(line) == 1 and "out of memory in 'solve'" in line[0] and "Unable to allocate" in line[0], proc.stderr
+    assert "BASEPARAMS_MAX_MEMORY" in line[0] and "internal error" not in proc.stderr
+
+
+class _Garbage:
+    """A TCP server on 127.0.0.1 (started and stopped by the test) that answers every
+    connection with ``payload`` and closes it."""
+
+    def __init__(self, payload: bytes):
+        import socket
+        import threading
+        self.payload = payload
+        self.socket = socket.socket()
+        self.socket.bind(("127.0.0.1", 0))
+        self.socket.listen(8)
+        self.socket.settimeout(0.2)
+        self.port = self.socket.getsockname()[1]
+        self.running = True
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self):
+        for _ in range(3000):                         # bounded: 10 min at most
+            if not self.running:
+                return
+            try:
+                connection = self.socket.accept()[0]
+            except OSError:
+                continue
+            try:
+                connection.sendall(self.payload)
+            except OSError:
+                pass
+            connection.close()
+
+    def close(self):
+        self.running = False
+        self.thread.join(5)
+        self.socket.close()
+
+
+@pytest.mark.parametrize("payload", [b"HTTP/1.1 400 Bad Request\r\n\r\n", b"\xff" * 4096], ids=["http-answer", "ff"])
+def test_a_scheduler_address_that_answers_garbage_is_exit_2(payload):
+    """Issue 46: validate --scheduler pointed at a loopback port that answers garbage: exit 3,
+    MemoryError "3.07 EiB" (Dask read "HTTP/1.1" as a frame length). Now exit 2 naming
+    --scheduler."""
+    pytest.importorskip("distributed")
+    server = _Garbage(payload)
+    try:
+        proc = subprocess.run([*CLI, "validate", "pendulum", "--scheduler", f"tcp://127.0.0.1:{server.port}",
+                               "--quiet"], capture_output=True, text=True, timeout=300)
+    finally:
+        server.close()
+    assert proc.returncode == 2, proc.stderr
+    line = [x for x in proc.stderr.splitlines() if x.startswith("error: ")]
+    assert len(line) == 1 and "--scheduler" in line[0] and "no Dask scheduler answered" in line[0], proc.stderr
+    assert "internal error" not in proc.stderr

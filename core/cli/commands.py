@@ -77,6 +77,10 @@ class Group(click.Group):
             raise UserError(bad_parameter(exc)) from None
         except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
+        except MemoryError as exc:
+            if ctx.find_root().params.get("debug"):
+                raise
+            raise UserError(out_of_memory(exc, ctx)) from None
         except Exception as exc:
             if ctx.find_root().params.get("debug"):
                 raise
@@ -98,6 +102,24 @@ def bad_parameter(exc: click.BadParameter) -> str:
         hint = exc.param.get_error_hint(exc.ctx) if exc.ctx is not None else exc.param.name
     hint = (hint or "").replace("'", "")
     return f"{hint}: {exc.message}".rstrip(".") if hint else exc.message
+
+
+def out_of_memory(exc: MemoryError, ctx: click.Context) -> str:
+    """One line for a MemoryError, wherever it was raised: what was being allocated (numpy
+    says: "Unable to allocate 7.28 TiB for an array with shape ..."), and the budget that
+    refuses such work before it starts. Bad input (data or options too large for this
+    machine), not a bug: exit 2 (issue 46: exit 3 at 3.6 GB under a 4 GB address-space cap
+    with BASEPARAMS_MAX_MEMORY set far above it)."""
+    from baseparams.dynamics.trajectory import MEMORY_VARIABLE, memory_limit
+    try:
+        budget = f"{memory_limit() / 2 ** 30:.3g} GiB"
+    except BaseparamsError:
+        budget = "not a size"
+    what = str(exc).strip() or "an allocation failed"
+    verb = ctx.invoked_subcommand or ctx.info_name or "the command"
+    return (f"out of memory in '{verb}': {what}. The work needs more memory than this machine gives: use "
+            f"fewer samples or smaller data, or set {MEMORY_VARIABLE} (now {budget}) to the memory the "
+            f"machine has, so that such work is refused with an estimate before it starts")
 
 
 INTERNAL_ERROR = 3
