@@ -210,8 +210,12 @@ def test_urdf_velocity_and_effort_limits_are_read():
     limits = limits_of(mechanism, acceleration="joint_2=3", velocity="1.5")
     assert limits.upper[4] == pytest.approx(2.33) and limits.lower[4] == pytest.approx(-2.09)
     assert list(limits.velocity) == [1.5] * 6
-    assert limits.acceleration[1] == 3 and limits.acceleration[0] == 6.0
+    assert limits.acceleration[1] == 3 and limits.acceleration[0] == np.inf      # no invented default
     assert limits.torque[5] == pytest.approx(30.72)
+    assert any("no acceleration limit" in a and "joint_1" in a for a in limits.assumptions())
+    assert "acceleration" not in " ".join(limits_of(mechanism, acceleration="2").assumptions())
+    margin = limits_of(mechanism, velocity_margin=0.1)
+    assert margin.velocity[0] == pytest.approx(0.9 * 5.009)
 
 
 # ----- the verb ----------------------------------------------------------------------------------

@@ -209,7 +209,7 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
            position_range: str | None = None, max_velocity: str | None = None, max_acceleration: str | None = None,
            max_torque: str | None = None, max_jerk: str | None = None, velocity_margin: float | None = None,
            singularity_margin: float = 0.03, noise: str | None = None,
-           starts: int = 2, workers: int | None = None, scheduler: str | None = None, iterations: int = 150,
+           starts: int = 2, workers: int | None = None, scheduler: str | None = None, iterations: int = 200,
            seed: int = 0, csv: PathText | None = None, rate: float = 1000.0, report: PathText | None = None,
            plot: PathText | None = None, collision: bool | None = None, collision_model: str | None = None,
            srdf: str | None = None, package_dirs: Sequence[str] = (), clearance: float | None = None,

@@ -28,6 +28,7 @@ import scipy.optimize
 from baseparams.dynamics import codegen
 from baseparams.dynamics.evaluator import Sample, closure_structure
 from baseparams.errors import KinematicsError
+from baseparams.excite.collision import slack
 from baseparams.excite.criterion import Model, criterion
 from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
@@ -54,6 +55,8 @@ class Problem:
     separate: tuple[Any, ...] = ()
     margin: float = 0.0              # closed loops: min 1/cond of the dependent closure Jacobian
     maxiter: int = 200
+    scene: Any = None                # collision.Scene: distances the motion must keep, or None
+    buffer: float = 0.0              # m the optimiser keeps beyond the clearance (between samples)
 
     @property
     def mechanism(self) -> Mechanism:
@@ -74,12 +77,14 @@ class Check:
     margins: dict[str, float]
     feasible: bool
     reason: str = ""
+    collision: dict[str, Any] | None = None      # smallest distance, where, guaranteed between samples
 
     def to_json(self) -> dict[str, Any]:
         return {"criterion": _finite(self.value), "condition_number": _finite(self.condition),
                 "smallest_angle_deg": self.angle, "singular_values": [float(v) for v in self.singular_values],
                 "margins": {k: _finite(v) for k, v in self.margins.items()}, "feasible": self.feasible,
-                **({"reason": self.reason} if self.reason else {})}
+                **({"reason": self.reason} if self.reason else {}),
+                **({"collision": self.collision} if self.collision is not None else {})}
 
 
 def _finite(x: float | None) -> float | None:
@@ -98,8 +103,12 @@ def singularity_margin(mechanism: Mechanism, sample: Sample) -> np.ndarray:
     return s[:, -1] / s[:, 0]
 
 
-def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safety: float = 0.0) -> Check:
-    """The figures of a motion given by its samples (N, f), limits shrunk by ``safety``."""
+def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safety: float = 0.0,
+          jerk: np.ndarray | None = None, times: np.ndarray | None = None, motion: Any = None) -> Check:
+    """The figures of a motion given by its samples (N, f), limits shrunk by ``safety``;
+    ``jerk`` (N, f) checks the jerk limits; with the samples' ``times`` the collision margin
+    holds between the samples too, and with ``motion(t) -> (q, qd, qdd)`` the intervals that
+    need it are sampled more densely (:func:`.collision.guaranteed`)."""
     lim, m = problem.limits, problem.mechanism
     half = (lim.upper - lim.lower) / 2
     margins = {
@@ -107,6 +116,11 @@ def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safe
         "velocity": float(np.min((1 - safety) * lim.velocity - np.abs(qd))),
         "acceleration": float(np.min((1 - safety) * lim.acceleration - np.abs(qdd))),
     }
+    if jerk is not None and lim.jerk is not None and np.any(np.isfinite(lim.jerk)):
+        margins["jerk"] = float(np.min((1 - safety) * lim.jerk - np.abs(jerk)))
+    collision = None
+    if problem.scene is not None and problem.scene.checks:
+        margins["collision"], collision = collision_margin(problem, q, qd, qdd, times, motion)
     sample = None
     if m.loops or m.couplings:
         try:
@@ -126,7 +140,37 @@ def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safe
     feasible = all(v >= 0 for v in margins.values())
     bad = [k for k, v in margins.items() if v < 0]
     return Check(value.value, value.condition, value.smallest_angle_deg, value.singular_values, margins,
-                 feasible, f"outside the {', '.join(bad)} limits" if bad else "")
+                 feasible, f"outside the {', '.join(bad)} limits" if bad else "", collision)
+
+
+def collision_margin(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                     times: np.ndarray | None, motion: Any = None) -> tuple[float, dict[str, Any]]:
+    """(smallest slack, details): each item's distance less what it must keep, at the
+    samples, or with ``times`` guaranteed between them. Details: the smallest distance at
+    the samples and where, the smallest height above each keep-out plane, and the smallest
+    distance guaranteed between samples."""
+    from baseparams.excite.collision import guaranteed
+    scene = problem.scene
+    if times is None or len(times) < 2:
+        at, _, labels = scene.distances(q)
+        low = at
+    else:
+        at, labels, low = guaranteed(scene, times, q, qd, qdd, motion)
+    n, k = np.unravel_index(int(np.argmin(at)), at.shape)
+    pairs = len(scene.pair_names)
+    planes = {}
+    for p in range(len(scene.spec.planes)):
+        cols = [pairs + i for i, (pp, _) in enumerate(scene.plane_items) if pp == p]
+        if cols:
+            planes[f"plane {p}"] = float(np.min(at[:, cols]))
+    details = {"clearance": scene.spec.clearance, "smallest_distance": float(at[n, k]), "where": labels[k],
+               "sample": int(n), "self_collision_checked": scene.self_checked,
+               "self_smallest_distance": float(np.min(at[:, :pairs])) if pairs else None,
+               "above_planes": planes, "pairs": pairs, "plane_items": len(scene.plane_items)}
+    if times is not None and len(times) >= 2:
+        details["guaranteed_between_samples"] = float(np.min(low))
+        details["spacing_s"] = float(np.max(np.diff(times)))
+    return float(np.min(slack(scene, low))), details
 
 
 def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
@@ -135,7 +179,7 @@ def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     filling LOOP_FILL of their limits (a random motion there is often numerically rank
     deficient, where the criterion is flat)."""
     if problem.model.differentiable and not problem.mechanism.loops:
-        return random_start(problem, rng)
+        return clear_start(problem, random_start(problem, rng))
     best: tuple[float, np.ndarray] | None = None
     first: np.ndarray | None = None
     for _ in range(CANDIDATES):
@@ -148,6 +192,26 @@ def start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     return first if best is None else best[1]
 
 
+def clear_start(problem: Problem, x: np.ndarray) -> np.ndarray:
+    """``x`` with the largest oscillation (a factor in [0, 1], by bisection) that keeps the
+    clearance and the optimiser's reserve at every sample: a start in collision leaves SLSQP
+    restoring feasibility through nonsmooth minima instead of optimising."""
+    scene = problem.scene
+    if scene is None or not scene.checks:
+        return x
+    def clear(factor: float) -> bool:
+        q = problem.form.motion(shrink(problem, x, factor), problem.times())[0]
+        return bool(np.min(slack(scene, scene.distances(q)[0])) >= problem.buffer)
+
+    if clear(1.0):
+        return x
+    lo, hi = 0.0, 1.0
+    for _ in range(8):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if clear(mid) else (lo, mid)
+    return shrink(problem, x, lo)
+
+
 def random_start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     """A random motion at rest at both ends, centred in the ranges, filling START_FILL of
     its tightest limit."""
@@ -155,12 +219,34 @@ def random_start(problem: Problem, rng: np.random.Generator) -> np.ndarray:
     L = form.harmonics
     f = len(form.names)
     coefficients = np.zeros((f, 2 * L + 1))
-    coefficients[:, 0] = (lim.lower + lim.upper) / 2
+    coefficients[:, 0] = clear_centre(problem, rng)
     decay = 1.0 / np.arange(1, L + 1)
     coefficients[:, 1:L + 1] = rng.standard_normal((f, L)) * decay
     coefficients[:, L + 1:] = rng.standard_normal((f, L)) * decay
     x = form.variables(coefficients)
     return scale_to_limits(problem, x, START_FILL)
+
+
+CENTRE_CANDIDATES = 64       # configurations tried for a start's centre when collisions are checked
+ROOM = 0.3                   # m of distance a start's centre needs, no more
+
+
+def clear_centre(problem: Problem, rng: np.random.Generator) -> np.ndarray:
+    """A start's centre: the centre of the ranges, or with collisions checked the
+    configuration (of CENTRE_CANDIDATES random ones in the middle half of the ranges, and the
+    centre) farthest from any collision, up to ROOM (of those, the nearest the centre): a
+    UR5 at zero has its wrist at the floor, and a start needs room to move."""
+    lim = problem.limits
+    centre = (lim.lower + lim.upper) / 2
+    scene = problem.scene
+    if scene is None or not scene.checks:
+        return centre
+    half = (lim.upper - lim.lower) / 4
+    candidates = np.vstack([centre, centre + rng.uniform(-1, 1, (CENTRE_CANDIDATES, len(centre))) * half])
+    distance = np.minimum(slack(scene, scene.distances(candidates)[0]), ROOM)
+    best = distance >= np.max(distance) - 1e-9
+    gap = np.linalg.norm((candidates - centre) / np.maximum(half, 1e-12), axis=1)
+    return candidates[int(np.argmin(np.where(best, gap, np.inf)))]
 
 
 def scale_to_limits(problem: Problem, x: np.ndarray, fill: float) -> np.ndarray:
@@ -171,7 +257,8 @@ def scale_to_limits(problem: Problem, x: np.ndarray, fill: float) -> np.ndarray:
     centre = coefficients[:, 0]
     q, qd, qdd = form.motion(x, problem.times())
     ratios = [np.max(np.abs(q - centre), axis=0) / np.minimum(centre - lim.lower, lim.upper - centre),
-              np.max(np.abs(qd), axis=0) / lim.velocity, np.max(np.abs(qdd), axis=0) / lim.acceleration]
+              np.max(np.abs(qd), axis=0) / lim.velocity, np.max(np.abs(qdd), axis=0) / lim.acceleration,
+              np.max(np.abs(form.jerk(x, problem.times())), axis=0) / lim.jerk]
     worst = np.max(np.vstack(ratios), axis=0)
     coefficients[:, 1:] *= (fill / np.maximum(worst, 1e-12))[:, None]
     return form.variables(coefficients)
@@ -186,17 +273,21 @@ def shrink(problem: Problem, x: np.ndarray, factor: float) -> np.ndarray:
 
 
 def _linear_constraints(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
-    """(G, h): position, velocity and acceleration limits (shrunk by SAFETY) as G x + h >= 0."""
+    """(G, h): position, velocity, acceleration and jerk limits (shrunk by SAFETY) as
+    G x + h >= 0; a limit that is not given (inf) has no rows."""
     form, lim = problem.form, problem.limits
-    rows = form.rows(problem.times())
+    rows = form.rows(problem.times()) + (form.jerk_rows(problem.times()),)
     f, m = len(form.names), form.per_coordinate
     half = (lim.upper - lim.lower) / 2
     blocks, offsets = [], []
     bounds = [(lim.upper - SAFETY * half, lim.lower + SAFETY * half),
               ((1 - SAFETY) * lim.velocity, -(1 - SAFETY) * lim.velocity),
-              ((1 - SAFETY) * lim.acceleration, -(1 - SAFETY) * lim.acceleration)]
+              ((1 - SAFETY) * lim.acceleration, -(1 - SAFETY) * lim.acceleration),
+              ((1 - SAFETY) * lim.jerk, -(1 - SAFETY) * lim.jerk)]
     for phi, (upper, lower) in zip(rows, bounds):
         for j in range(f):
+            if not (math.isfinite(upper[j]) and math.isfinite(lower[j])):
+                continue
             G = np.zeros((len(phi), f * m))
             G[:, j * m:(j + 1) * m] = phi
             blocks += [-G, G]
@@ -216,11 +307,16 @@ class Outcome:
     extra: dict = field(default_factory=dict)
 
 
-def optimise(problem: Problem, x0: np.ndarray) -> Outcome:
-    """One local optimisation from ``x0``: SLSQP with gradients (open chains) or COBYLA."""
+Report = Callable[[int, float], None]
+REPORT_EVERY = 10            # iterations between two progress reports of a start
+
+
+def optimise(problem: Problem, x0: np.ndarray, report: Report | None = None) -> Outcome:
+    """One local optimisation from ``x0``: SLSQP with gradients (open chains) or COBYLA.
+    ``report(iteration, criterion)``: called at the first iteration and every REPORT_EVERY."""
     if problem.model.differentiable:
-        return _slsqp(problem, x0)
-    return _cobyla(problem, x0)
+        return _slsqp(problem, x0, report)
+    return _cobyla(problem, x0, report)
 
 
 def _chain(problem: Problem, inputs: np.ndarray, rows: Sequence[np.ndarray]) -> np.ndarray:
@@ -240,7 +336,7 @@ def _per_sample(problem: Problem, inputs: np.ndarray, rows: Sequence[np.ndarray]
     return out.reshape(out.shape[:2] + (-1,))
 
 
-def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
+def _slsqp(problem: Problem, x0: np.ndarray, report: Report | None = None) -> Outcome:
     form, lim, model = problem.form, problem.limits, problem.model
     t = problem.times()
     rows = form.rows(t)
@@ -266,27 +362,31 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
         c = evaluate_at(x)
         return c["f"], c["g"]
 
-    constraints: list[dict[str, Any]] = [{"type": "ineq", "fun": lambda x: G @ x + h, "jac": lambda x: G}]
+    groups = G.shape[0] // len(t)
+    Gg = G.reshape(groups, len(t), -1)
+
+    def linear(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _block_min((G @ x + h).reshape(groups, len(t)), Gg)
+
+    linear_at = _LastPoint(linear)
+    constraints: list[dict[str, Any]] = [{"type": "ineq", "fun": lambda x: linear_at(x)[0],
+                                          "jac": lambda x: linear_at(x)[1]}] if groups else []
     if torque_limited:
         finite = np.isfinite(lim.torque)
         bound = (1 - SAFETY) * lim.torque[finite]
 
-        def torque(x: np.ndarray) -> np.ndarray:
+        def torque_both(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             columns = evaluate_at(x)["columns"]
+            blocks = 2 * int(finite.sum()) * -(-len(t) // BLOCK)
             if columns is None:
-                return -np.ones(2 * len(t) * int(finite.sum()))
-            tau = columns.torque[:, finite]
-            return np.concatenate([(bound - tau).ravel(), (bound + tau).ravel()])
+                return -np.ones(blocks), np.zeros((blocks, x.size))
+            tau = columns.torque[:, finite].T                                     # (fT, N)
+            d = _per_sample(problem, columns.torque_tangents, rows)[:, finite].transpose(1, 0, 2)
+            values = np.concatenate([bound[:, None] - tau, bound[:, None] + tau])
+            return _block_min(values, np.concatenate([-d, d]))
 
-        def torque_jac(x: np.ndarray) -> np.ndarray:
-            columns = evaluate_at(x)["columns"]
-            if columns is None:
-                return np.zeros((2 * len(t) * int(finite.sum()), x.size))
-            d = _per_sample(problem, columns.torque_tangents, rows)[:, finite]
-            d = d.reshape(-1, d.shape[-1])
-            return np.vstack([-d, d])
-
-        constraints.append({"type": "ineq", "fun": torque, "jac": torque_jac})
+        torque_at = _LastPoint(torque_both)
+        constraints.append({"type": "ineq", "fun": lambda x: torque_at(x)[0], "jac": lambda x: torque_at(x)[1]})
     if problem.mechanism.loops:
         least = (1 + SAFETY) * problem.margin
 
@@ -301,15 +401,64 @@ def _slsqp(problem: Problem, x0: np.ndarray) -> Outcome:
             return _per_sample(problem, columns.margin_tangents[:, :, None], rows)[:, 0, :]
 
         constraints.append({"type": "ineq", "fun": margin, "jac": margin_jac})
+    if problem.scene is not None and problem.scene.checks:
+        constraints.append(_collision_constraint(problem, rows[0]))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = scipy.optimize.minimize(objective, x0, jac=True, method="SLSQP", constraints=constraints,
-                                         options={"maxiter": problem.maxiter, "ftol": 1e-7})
+                                         options={"maxiter": problem.maxiter, "ftol": FTOL},
+                                         callback=_callback(report, lambda x: evaluate_at(x)["f"]))
     x = result.x
     q, qd, qdd = form.motion(x, t)
     final = check(problem, q, qd, qdd)
     return Outcome(x, final.value, final.feasible, bool(result.success), str(result.message),
                    int(getattr(result, "nit", 0)), evaluate_at.count)
+
+
+FTOL = 1e-4
+BLOCK = 5                    # a limit's constraint is its smallest margin over this many samples
+
+
+def _block_min(values: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per group (rows of ``values`` (g, N)) the smallest value over each BLOCK consecutive
+    samples, and its row of ``jac`` (g, N, n): SLSQP's subproblem grows with the number of
+    constraints, and neighbouring samples of a smooth motion are rarely both active."""
+    g, count = values.shape
+    blocks = -(-count // BLOCK)
+    padded = np.full((g, blocks * BLOCK), np.inf)
+    padded[:, :count] = values
+    index = np.argmin(padded.reshape(g, blocks, BLOCK), axis=2) + np.arange(blocks) * BLOCK
+    rows = np.arange(g)[:, None]
+    return values[rows, index].ravel(), jac[rows, index].reshape(g * blocks, -1)
+
+
+def _callback(report: Report | None, value: Callable[[np.ndarray], float]) -> Callable[[np.ndarray], None] | None:
+    """scipy's per-iteration callback, reporting the first iteration and every REPORT_EVERY."""
+    if report is None:
+        return None
+    count = [0]
+
+    def callback(x: np.ndarray) -> None:
+        count[0] += 1
+        if count[0] == 1 or count[0] % REPORT_EVERY == 0:
+            report(count[0], float(value(x)))
+    return callback
+
+
+def _collision_constraint(problem: Problem, phi_q: np.ndarray) -> dict[str, Any]:
+    """Per sample: the smallest distance (self, boxes, planes) minus the clearance and the
+    buffer, >= 0, with its Jacobian (the active item's gradient through the form)."""
+    scene, t = problem.scene, problem.times()
+    f, m = len(problem.form.names), problem.form.per_coordinate
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = problem.form.motion(x, t)[0]
+        at, grad, _ = scene.distances(q, gradient=True)
+        jac = (grad[:, :, None] * phi_q[:, None, :]).reshape(len(t), f * m)
+        return slack(scene, at) - problem.buffer, jac
+
+    at = _LastPoint(evaluate)
+    return {"type": "ineq", "fun": lambda x: at(x)[0], "jac": lambda x: at(x)[1]}
 
 
 class _LastPoint(Generic[T]):
@@ -330,7 +479,7 @@ class _LastPoint(Generic[T]):
         return self.value
 
 
-def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
+def _cobyla(problem: Problem, x0: np.ndarray, report: Report | None = None) -> Outcome:
     form = problem.form
     t = problem.times()
     G, h = _linear_constraints(problem)
@@ -344,7 +493,7 @@ def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
         result = evaluate_at(x)
         if not math.isfinite(result.value):
             return np.array([-1.0])
-        extra = [v for k, v in result.margins.items() if k in ("singularity", "torque")]
+        extra = [v for k, v in result.margins.items() if k in ("singularity", "torque", "collision")]
         return np.array(extra or [1.0])
 
     constraints = [{"type": "ineq", "fun": lambda x: G @ x + h}, {"type": "ineq", "fun": nonlinear}]
@@ -353,7 +502,8 @@ def _cobyla(problem: Problem, x0: np.ndarray) -> Outcome:
         warnings.simplefilter("ignore")
         result = scipy.optimize.minimize(objective, x0, method="COBYLA", constraints=constraints,
                                          options={"maxiter": problem.maxiter * 5, "rhobeg": 0.2 * scale,
-                                                  "tol": 1e-6})
+                                                  "tol": 1e-6},
+                                         callback=_callback(report, objective))
     x = result.x
     q, qd, qdd = form.motion(x, t)
     final = check(problem, q, qd, qdd)
@@ -371,7 +521,10 @@ def independent_states(problem: Problem, count: int, seed: int = 0) -> Check:
     f = len(lim.names)
     q = rng.uniform(lim.lower, lim.upper, size=(count, f))
     qd = rng.uniform(-lim.velocity, lim.velocity, size=(count, f))
-    qdd = rng.uniform(-lim.acceleration, lim.acceleration, size=(count, f))
+    # without an acceleration limit: the largest the form reaches at the velocity limit
+    peak = np.where(np.isfinite(lim.acceleration), lim.acceleration,
+                    problem.form.omega * problem.form.harmonics * lim.velocity)
+    qdd = rng.uniform(-peak, peak, size=(count, f))
     sample = None
     if m.loops or m.couplings:
         kept: list[np.ndarray] = []

@@ -71,6 +71,19 @@ class FourierForm:
         N = self.basis
         return pq @ N, pqd @ N, pqdd @ N
 
+    def jerk_rows(self, t: np.ndarray) -> np.ndarray:
+        """Phi_jerk (N, 2 L - 1): d3q_j/dt3 = Phi_jerk @ x_j (jerk limits are linear too)."""
+        t = np.asarray(t, dtype=float)
+        L, w = self.harmonics, self.omega
+        wl = w * np.arange(1, L + 1)
+        s, c = np.sin(np.outer(t, wl)), np.cos(np.outer(t, wl))
+        return np.hstack([np.zeros((len(t), 1)), -c * wl ** 3, s * wl ** 3]) @ self.basis
+
+    def jerk(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """d3q/dt3 (N, f) of the variables ``x``."""
+        X = np.asarray(x, dtype=float).reshape(len(self.names), self.per_coordinate).T
+        return np.asarray(self.jerk_rows(t) @ X)
+
     def motion(self, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, qdd), each (N, f), of the variables ``x`` (f blocks of 2 L - 1)."""
         X = np.asarray(x, dtype=float).reshape(len(self.names), self.per_coordinate).T

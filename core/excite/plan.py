@@ -5,8 +5,11 @@ in local worker processes (``--workers``) or on a Dask cluster (``--scheduler``)
 carries the mechanism file's text, the base model's matrix, the limits and the settings,
 so a worker needs nothing else. The best feasible result wins; the written motion (its
 coefficients rounded to exact rationals) is checked on a grid ten times finer than the
-optimisation's, and its amplitude shrunk until every limit holds there: the planner never
-returns a motion that breaks a limit, and says so when no start converged.
+optimisation's, and its amplitude shrunk until every limit holds there; collisions are
+checked there with a bound on what happens between samples, and a plan that comes too near
+is optimised again with a larger distance in reserve. The planner never returns a motion
+that breaks a limit, never one worse than where it started (the file's trajectory, else
+the best start): then it returns that start and says so (``Plan.kept``; the verb exits 1).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 
 from baseparams.errors import BaseparamsError, InputError, KinematicsError
 from baseparams.excite import design
+from baseparams.excite.collision import SceneSpec, build
 from baseparams.excite.criterion import Model
 from baseparams.excite.fourier import FourierForm
 from baseparams.excite.limits import Limits
@@ -36,6 +40,12 @@ from baseparams.orchestrate.runners import InProcess, Progress
 FINER = 10                   # the verification grid is this many times finer
 SHRINK = 0.98                # amplitude factor per verification step
 SHRINK_STEPS = 400
+REPAIRS = 3                  # re-optimisations with more distance in reserve after a near collision
+BUFFER = 0.01                # m the optimiser keeps beyond the clearance at first
+
+# In this process: where a start reports its iterations (set by :func:`plan` around an
+# in-process run; worker processes and Dask report per start only).
+_say: Callable[[str], None] | None = None
 
 
 @dataclass(frozen=True)
@@ -50,6 +60,8 @@ class Settings:
     margin: float = 0.0
     maxiter: int = 200
     weights: tuple | None = None
+    scene: SceneSpec | None = None   # collision geometry and keep-out, or None: not checked
+    buffer: float = BUFFER
 
 
 def problem_of(mechanism: Mechanism, base: BaseModel, limits: Limits, settings: Settings) -> design.Problem:
@@ -76,8 +88,11 @@ def problem_of(mechanism: Mechanism, base: BaseModel, limits: Limits, settings: 
             chosen |= set(registry.effects()[kind].item.coefficient_names(coordinate))
         separate = tuple(k for k, name in enumerate(names) if name in chosen)
     form = FourierForm(tuple(limits.names), settings.harmonics, settings.period)
+    scene = None
+    if settings.scene is not None:
+        scene = build(settings.scene, mechanism, tuple(limits.names), (limits.lower + limits.upper) / 2)
     return design.Problem(model, limits, form, settings.samples, settings.criterion, separate,
-                          settings.margin, settings.maxiter)
+                          settings.margin, settings.maxiter, scene, settings.buffer if scene is not None else 0.0)
 
 
 @dataclass(frozen=True)
@@ -102,7 +117,17 @@ class ExciteJob:
             problem = problem_of(load(self.mechanism), self.base, self.limits, self.settings)
             x0 = np.array(self.x0) if self.x0 is not None else \
                 design.start(problem, np.random.default_rng(self.seed))
-            result = design.optimise(problem, x0)
+            first = design.check(problem, *problem.form.motion(x0, problem.times()))
+            say = _say
+            report = None
+            if say is not None:
+                kind, total = problem.kind, problem.maxiter
+
+                def report(iteration: int, value: float) -> None:
+                    figure = f"condition number {math.exp(value):.4g}" if kind == "condition" and value < 700 \
+                        else f"criterion {value:.4g}"
+                    say(f"{self.label}: iteration {iteration}/{total}, {figure}")
+            result = design.optimise(problem, x0, report)
         except BaseparamsError as exc:
             return Outcome(name, self.solver, ERROR, time.perf_counter() - start, message=str(exc))
         except Exception as exc:                                 # a bug: reported, the others go on
@@ -111,7 +136,8 @@ class ExciteJob:
         return Outcome(name, self.solver, OK, time.perf_counter() - start, result={
             "x": result.x.tolist(), "value": result.value, "feasible": result.feasible,
             "converged": result.converged, "message": result.message, "iterations": result.iterations,
-            "evaluations": result.evaluations, "seed": self.seed, "cpu_s": time.process_time()})
+            "evaluations": result.evaluations, "seed": self.seed, "cpu_s": time.process_time(),
+            "x0": x0.tolist(), "start_value": design._finite(first.value) if first.feasible else None})
 
 
 @dataclass
@@ -131,6 +157,14 @@ class Plan:
     notes: list = field(default_factory=list)
     seconds: float = 0.0
     rounds: int = 1
+    solver: str = ""                 # whose base the figures are on
+    kept: str | None = None          # the start returned instead of a motion not better than it
+    assumptions: list = field(default_factory=list)
+
+    @property
+    def improved(self) -> bool:
+        """The returned motion is the optimised one, better than where it started."""
+        return self.kept is None
 
     @property
     def expressions(self) -> dict:
@@ -144,7 +178,11 @@ class Plan:
         p = self.problem
         return {
             "mechanism": self.mechanism,
+            "solver": self.solver,
             "criterion": p.kind,
+            "improved": self.improved,
+            "kept": self.kept,
+            "assumptions": list(self.assumptions),
             "form": {"kind": "fourier", "harmonics": p.form.harmonics, "period": p.form.period,
                      "coefficients": {name: {"c": str(row[0]), "A": [str(v) for v in row[1:p.form.harmonics + 1]],
                                              "B": [str(v) for v in row[p.form.harmonics + 1:]]}
@@ -179,12 +217,26 @@ class Plan:
             ok = "" if c.feasible else f" [{c.reason}]"
             return f"  {label}: condition number {c.condition:.4g}{extra}{ok}"
 
+        on = f" on the {self.solver} solver's base" if self.solver else ""
+        lines[0] += on
         lines.append(figures("before (the file's trajectory)", self.before))
-        lines.append(figures("after", self.after))
+        lines.append(figures("after" + (f" (optimised; {self.kept} is returned)" if self.kept else ""), self.after))
         lines.append(figures(f"after, {FINER}x finer sampling", self.finer))
         lines.append(figures(f"{p.samples} independent random states inside the limits", self.random_states))
         lines.append("  margins at the finer sampling (>= 0: the limit holds): " +
                      ", ".join(f"{k} {v:.4g}" for k, v in self.finer.margins.items()))
+        c = self.finer.collision
+        if c is not None:
+            planes = ", ".join(f"{k} {v:.3g} m" for k, v in c["above_planes"].items())
+            self_part = (f"between links {c['self_smallest_distance']:.3g} m" if c["self_smallest_distance"] is not None
+                         else "self-collision not checked (no collision geometry)")
+            lines.append(f"  collisions ({c['pairs']} link pairs, {c['plane_items']} link-plane checks, clearance "
+                         f"{c['clearance']:g} m): smallest distance {c['smallest_distance']:.3g} m ({c['where']}), "
+                         f"{self_part}; above the planes {planes or '-'}; guaranteed between samples "
+                         f"{c['guaranteed_between_samples']:.3g} m")
+        else:
+            lines.append("  collisions: not checked")
+        lines += [f"  assumed: {a}" for a in self.assumptions]
         first = [s for s in self.starts if s.get("round", 1) == 1]
         lines.append(f"  starts: {len(first)}, rounds on the solver's new base: {self.rounds}, converged: {'yes' if self.converged else 'no'}"
                      + ("" if self.shrink == 1 else f"; amplitude scaled by {self.shrink:.3g} to keep the limits"))
@@ -212,7 +264,8 @@ def default_motion(mechanism: Mechanism, problem: design.Problem) -> tuple[np.nd
 
 def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Limits, settings: Settings,
          starts: int = 4, runner: StartRunner | None = None, progress: Progress | None = None,
-         seed: int = 0, rebase: Callable[[Mechanism], BaseModel] | None = None, rounds: int = 3) -> Plan:
+         seed: int = 0, rebase: Callable[[Mechanism], BaseModel] | None = None, rounds: int = 3,
+         say: Callable[[str], None] | None = None, solver: str = "") -> Plan:
     """Run ``starts`` optimisations on ``runner`` and verify the best feasible one.
 
     ``rebase(mechanism)``: the base model the solver gives for a mechanism (with the planned
@@ -220,70 +273,86 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
     pivoted QR) may pick other ones on the new motion, and the condition number identify
     reports depends on that choice; so the plan is refined from its best motion on the new
     base, up to ``rounds`` times, until the solver's choice no longer changes, and the figures
-    are reported on the base the solver gives for the written file."""
+    are reported on the base the solver gives for the written file. ``say(message)``: progress
+    within each start (in-process runs) and of the verification."""
+    global _say
     began = time.perf_counter()
     original = base
     problem = problem_of(mechanism, base, limits, settings)
-    notes = []
+    notes: list[str] = []
+    if problem.scene is not None:
+        notes += problem.scene.notes
     if problem.separate:
         problem, dropped = _drop_inseparable(problem)
         if dropped:
             notes.append(f"{', '.join(dropped)}: identical to a combination of the other columns on any "
                          "motion (their effect is absorbed, as identify does), left out of the separation")
-    summary, converged, x, factor, used = [], False, None, 1.0, 0
-    for round_ in range(rounds if rebase else 1):
-        used += 1
-        if x is None:
-            jobs = [ExciteJob(text, base, limits, settings, seed + k) for k in range(starts)]
-        else:
-            jobs = [ExciteJob(text, base, limits, settings, seed, tuple(map(float, x)))]
-        outcomes = (runner or InProcess()).run(jobs, progress=progress)
-        results = [o.result for o in outcomes if o.status == OK and o.result]
-        failures = [f"start {job.seed}: {o.status}: {o.message}" for job, o in zip(jobs, outcomes)
-                    if o.status != OK]
-        notes += failures
-        feasible = [r for r in results if r["feasible"] and math.isfinite(r["value"])]
-        summary += [{"round": round_ + 1, **{k: r[k] for k in ("seed", "feasible", "converged", "message",
-                                                                "iterations", "evaluations")},
-                     "value": design._finite(r["value"])} for r in results]
-        if not feasible:
-            if x is not None:
+    summary: list[dict[str, Any]] = []
+    converged, x, factor, used = False, None, 1.0, 0
+    runner = runner or InProcess()
+    best_start: tuple[float, np.ndarray] | None = None
+    previous = _say
+    _say = say if isinstance(runner, InProcess) else None
+    try:
+        for round_ in range(rounds if rebase else 1):
+            used += 1
+            if x is None:
+                jobs = [ExciteJob(text, base, limits, settings, seed + k) for k in range(starts)]
+            else:
+                jobs = [ExciteJob(text, base, limits, settings, seed, tuple(map(float, x)))]
+            results, failures = _run(runner, jobs, progress)
+            notes += failures
+            for r in results:
+                if x is None and r.get("start_value") is not None and \
+                        (best_start is None or r["start_value"] < best_start[0]):
+                    best_start = (r["start_value"], np.array(r["x0"]))
+            feasible = [r for r in results if r["feasible"] and math.isfinite(r["value"])]
+            summary += [{"round": round_ + 1, **{k: r[k] for k in ("seed", "feasible", "converged", "message",
+                                                                    "iterations", "evaluations")},
+                         "value": design._finite(r["value"]), "start_value": r.get("start_value")} for r in results]
+            if not feasible:
+                if x is not None:
+                    break
+                reasons = "; ".join(failures) or "every start ended outside the limits"
+                raise InputError(f"no motion inside the limits was found ({reasons}): widen the limits "
+                                 "(--max-velocity, --max-acceleration, --max-torque, --position-range, "
+                                 "--clearance, --keep-out) or lower --harmonics", file=mechanism.path, key="limits")
+            best = min(feasible, key=lambda r: r["value"])
+            converged = any(r["converged"] for r in feasible)
+            if say:
+                say("verifying the best motion on a grid ten times finer")
+            x, factor, settings, problem = _verified_clear(problem, np.array(best["x"]), settings, text, base, limits,
+                                                           runner, notes, say)
+            if rebase is None:
                 break
-            reasons = "; ".join(failures) or "every start ended outside the limits"
-            raise InputError(f"no motion inside the limits was found ({reasons}): widen the limits "
-                             "(--max-velocity, --max-acceleration, --max-torque, --position-range) or "
-                             "lower --harmonics", file=mechanism.path, key="limits")
-        best = min(feasible, key=lambda r: r["value"])
-        converged = any(r["converged"] for r in feasible)
-        x, factor = _verified(problem, np.array(best["x"]))
-        if rebase is None:
-            break
-        new = rebase(with_x(mechanism, problem, x))
-        if new.rank != base.rank:
-            notes.append(f"the {new.solver} solver finds rank {new.rank} on the planned motion, {base.rank} on the "
-                         "file's: its rank on one of them is wrong (a certified solver, --solver vp, settles "
-                         f"it); the plan keeps the base parameters of rank {base.rank}")
-            break
-        same = new.names == base.names and np.allclose(new.B, base.B, atol=1e-9)
-        base = new
-        problem = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=base))
-        if same:
-            break
-    else:
-        if rebase is not None:
-            notes.append(f"the solver's choice of base parameters still changed after {rounds} rounds: the "
-                         "figures are on the base it gives for the written motion")
+            new = rebase(with_x(mechanism, problem, x))
+            if new.rank != base.rank:
+                notes.append(f"the {new.solver} solver finds rank {new.rank} on the planned motion, {base.rank} on the "
+                             "file's: its rank on one of them is wrong (a certified solver, --solver vp, settles "
+                             f"it); the plan keeps the base parameters of rank {base.rank}")
+                break
+            same = new.names == base.names and np.allclose(new.B, base.B, atol=1e-9)
+            base = new
+            problem = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=base))
+            if same:
+                break
+        else:
+            if rebase is not None:
+                notes.append(f"the solver's choice of base parameters still changed after {rounds} rounds: the "
+                             "figures are on the base it gives for the written motion")
+    finally:
+        _say = previous
     if not converged:
         notes.append("no start converged: the best feasible motion found is returned; more --iterations or "
                      "--starts may improve it")
     assert x is not None                   # set by the first round, or no motion was feasible
     form = problem.form
-    after = design.check(problem, *form.motion(x, problem.times()))
-    finer = design.check(problem, *form.motion(x, problem.times(FINER)))
+    after = design.check(problem, *form.motion(x, problem.times()), jerk=form.jerk(x, problem.times()))
+    finer = _finer(problem, x)
     before = None
     motion = default_motion(mechanism, problem)
+    was = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=original))
     if motion is not None:
-        was = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=original))
         try:
             before = design.check(was, *motion)
         except KinematicsError as exc:
@@ -296,10 +365,80 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
                      f"Jacobian {nearest:.3g}) than the margin {problem.margin:g} allows: where the weakest base "
                      "columns are excited only near it, the condition number is bounded by how near the motion "
                      "may come (a smaller --singularity-margin lets it come nearer)")
+    kept = None
+    if before is not None and math.isfinite(before.value) and not after.value < before.value:
+        kept = "the file's trajectory"
+        notes.append(f"the optimised motion ({_figure(problem, after)}) is not better than the file's own "
+                     f"trajectory ({_figure(problem, before)}) on the {solver or 'chosen'} solver's base: the file's "
+                     "trajectory is returned unchanged" + ("" if before.feasible else
+                                                           f", although it is {before.reason}"))
+    elif before is None and best_start is not None and not after.value < best_start[0]:
+        start_x = form.rounded(best_start[1])
+        start_check = design.check(was, *form.motion(start_x, problem.times()))
+        if start_check.value <= after.value and _finer(was, start_x).feasible:
+            kept = "the best start"
+            notes.append(f"the optimised motion ({_figure(problem, after)}) is not better than the best start "
+                         f"({_figure(problem, start_check)}): that start is returned")
+            x, problem = start_x, was
+            after, finer = start_check, _finer(was, start_x)
     out = Plan(mechanism.name, problem, x, before, after, finer, reference, summary, converged, factor,
                notes, time.perf_counter() - began)
-    out.rounds = used
+    out.rounds, out.solver, out.kept = used, solver, kept
+    out.assumptions = limits.assumptions()
     return out
+
+
+def _figure(problem: design.Problem, c: design.Check) -> str:
+    if problem.kind == "condition" or problem.kind == "d-optimal":
+        return f"condition number {c.condition:.4g}" + ("" if problem.kind == "condition" else
+                                                        f", criterion {c.value:.4g}")
+    return f"criterion {c.value:.4g}"
+
+
+def _run(runner: StartRunner, jobs: list[ExciteJob], progress: Progress | None) -> tuple[list[dict], list[str]]:
+    outcomes = runner.run(jobs, progress=progress)
+    results = [o.result for o in outcomes if o.status == OK and o.result]
+    failures = [f"start {job.seed}: {o.status}: {o.message}" for job, o in zip(jobs, outcomes) if o.status != OK]
+    return results, failures
+
+
+def _finer(problem: design.Problem, x: np.ndarray) -> design.Check:
+    """The checks on the grid FINER times the optimisation's, collisions between samples too."""
+    t = problem.times(FINER)
+    return design.check(problem, *problem.form.motion(x, t), jerk=problem.form.jerk(x, t), times=t,
+                        motion=lambda times: problem.form.motion(x, times))
+
+
+def _verified_clear(problem: design.Problem, x: np.ndarray, settings: Settings, text: MechanismText,
+                    base: BaseModel, limits: Limits, runner: StartRunner, notes: list[str],
+                    say: Callable[[str], None] | None) -> tuple[np.ndarray, float, Settings, design.Problem]:
+    """:func:`_verified`, then the collision check between the finer samples: a motion that
+    comes nearer than the clearance there is optimised again from itself with that much
+    more distance in reserve (REPAIRS times at most)."""
+    x, factor = _verified(problem, x)
+    if problem.scene is None or not problem.scene.checks:
+        return x, factor, settings, problem
+    for attempt in range(REPAIRS + 1):
+        finer = _finer(problem, x)
+        short = finer.margins.get("collision", 0.0)
+        if short >= 0:
+            return x, factor, settings, problem
+        if attempt == REPAIRS:
+            break
+        settings = dataclasses.replace(settings, buffer=settings.buffer - short + 0.005)
+        notes.append(f"the motion came {-short:.3g} m nearer than the clearance between samples: optimised "
+                     f"again with {settings.buffer:.3g} m in reserve")
+        if say:
+            say(f"re-optimising with {settings.buffer:.3g} m more distance in reserve")
+        results, failures = _run(runner, [ExciteJob(text, base, limits, settings, 0, tuple(map(float, x)))], None)
+        problem = dataclasses.replace(problem, buffer=settings.buffer)
+        feasible = [r for r in results if r["feasible"]]
+        if not feasible:
+            break
+        x, factor = _verified(problem, np.array(feasible[0]["x"]))
+    raise InputError("no motion found that keeps the clearance to the keep-out geometry and between the links "
+                     "on the finer sampling: lower --clearance, move --keep-out, or narrow --position-range",
+                     key="--clearance")
 
 
 def with_x(mechanism: Mechanism, problem: design.Problem, x: np.ndarray) -> Mechanism:
@@ -310,11 +449,14 @@ def with_x(mechanism: Mechanism, problem: design.Problem, x: np.ndarray) -> Mech
 
 
 def _verified(problem: design.Problem, x: np.ndarray) -> tuple[np.ndarray, float]:
-    """The rounded motion, its amplitude shrunk until every limit holds on the finer grid."""
+    """The rounded motion, its amplitude shrunk until every limit (collisions apart: see
+    :func:`_verified_clear`) holds on the finer grid."""
     factor = 1.0
+    limits_only = dataclasses.replace(problem, scene=None)
+    t = problem.times(FINER)
     for _ in range(SHRINK_STEPS):
         candidate = problem.form.rounded(design.shrink(problem, x, factor))
-        if design.check(problem, *problem.form.motion(candidate, problem.times(FINER))).feasible:
+        if design.check(limits_only, *problem.form.motion(candidate, t), jerk=problem.form.jerk(candidate, t)).feasible:
             return candidate, factor
         factor *= SHRINK
     raise InputError("the planned motion could not be made to respect the limits on the finer sampling "
@@ -355,15 +497,14 @@ def _drop_inseparable(problem: design.Problem) -> tuple[design.Problem, list]:
     return dataclasses.replace(problem, model=new_model, separate=separate), [names[k] for k in sorted(dependent)]
 
 
-def write_csv(path: str | Path, problem: design.Problem, x: np.ndarray, rate: float) -> int:
+def write_csv(path: str | Path, mechanism: Mechanism, plan_: Plan, rate: float) -> int:
     """q, qd, qdd of every coordinate at ``rate`` Hz over one period (simulate's layout
     without tau); returns the number of rows."""
-    period = problem.form.period
-    count = int(math.floor(period * rate + 1e-9)) + 1
-    t = np.arange(count) / rate
-    q, qd, qdd = problem.form.motion(x, t)
-    header = ["t"] + [f"{k}_{c}" for c in problem.form.names for k in ("q", "qd", "qdd")]
-    columns = [t] + [a[:, j] for j in range(len(problem.form.names)) for a in (q, qd, qdd)]
+    t, q, qd, qdd = motion_at(mechanism, plan_, rate)
+    count = len(t)
+    names = plan_.problem.form.names
+    header = ["t"] + [f"{k}_{c}" for c in names for k in ("q", "qd", "qdd")]
+    columns = [t] + [a[:, j] for j in range(len(names)) for a in (q, qd, qdd)]
     from baseparams.io.atomic import atomic_write
     body = "\n".join(",".join(f"{v:.17g}" for v in row) for row in zip(*columns))
     atomic_write(path, ",".join(header) + "\n" + body + "\n", "the motion CSV")
@@ -371,5 +512,28 @@ def write_csv(path: str | Path, problem: design.Problem, x: np.ndarray, rate: fl
 
 
 def with_trajectory(mechanism: Mechanism, plan_: Plan) -> Mechanism:
-    """The mechanism with the planned motion as its ``[trajectory]``."""
+    """The mechanism with the planned motion as its ``[trajectory]`` (unchanged when the
+    plan keeps the file's own trajectory)."""
+    if plan_.kept == "the file's trajectory":
+        return mechanism
     return with_x(mechanism, plan_.problem, plan_.x)
+
+
+def motion_at(mechanism: Mechanism, plan_: Plan, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t, q, qd, qdd) of the returned motion at ``rate`` Hz over one period (the file's own
+    trajectory's expressions when the plan keeps it)."""
+    if plan_.kept == "the file's trajectory":
+        from baseparams.dynamics.trajectory import values_at
+        from baseparams.numeric.backends import Float64
+        spec = mechanism.trajectory
+        assert spec is not None
+        start, end = float(spec.t_start), float(spec.t_end)
+        t = start + np.arange(int(math.floor((end - start) * rate + 1e-9)) + 1) / rate
+        values = [values_at(spec.expressions[name], Float64(), t) for name in plan_.problem.form.names]
+        q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v[k], float), t.shape) for v in values], axis=1)
+                      for k in range(3))
+        return t - start, q, qd, qdd
+    period = plan_.problem.form.period
+    t = np.arange(int(math.floor(period * rate + 1e-9)) + 1) / rate
+    q, qd, qdd = plan_.problem.form.motion(plan_.x, t)
+    return t, q, qd, qdd
