@@ -132,6 +132,11 @@ def _stacked(path: str, text: str, names: tuple[str, ...], comment: str | None, 
     missing value (NaN: the sample is left out later, with a note), never skipped, which would
     shift every later value into the next column."""
     width = len(names)
+    body = text.rstrip()
+    if (not comment or comment not in text) and not any(c in body for c in ", ;\t\r") and "\n\n" not in body \
+            and body and body[0] != "\n":   # the common case at once: one number a line, nothing else, no blank line
+        tokens = body.split("\n")
+        return _stacked_values(path, tokens, list(range(1, len(tokens) + 1)), names, wanted, where)
     lines = text.splitlines()
     while lines and not lines[-1].strip():              # trailing blank lines
         lines.pop()
@@ -161,6 +166,13 @@ def _stacked(path: str, text: str, names: tuple[str, ...], comment: str | None, 
                          "one value a line; leave stacked out for a log with one sample a row", file=path,
                          key=f"row {numbers[several]}")
     fields = [f.rstrip(",;") for f in fields]
+    return _stacked_values(path, fields, numbers, names, wanted, where)
+
+
+def _stacked_values(path: str, fields: list[str], numbers: list[int], names: tuple[str, ...],
+                    wanted: Collection[str] | None, where: str) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
+    """A stacked log's fields (one a value, ``numbers`` their lines) as its columns."""
+    width = len(names)
     if not fields:
         raise InputError(f"no values ({where})", file=path)
     if len(fields) % width:
