@@ -232,3 +232,14 @@ def test_a_payload_through_a_gearbox_with_load_friction_is_one_change(seed):
     assert abs(first["value"]["m"] - 0.48) <= 0.05 * 0.48
     assert all(e["coordinate"] in ("wrist_3_link", "wrist_3_joint") for e in result.changes), _names(result)
     assert all(0.05 < mu < 0.15 for mu in result.common["load_friction"].values()), result.common["load_friction"]
+
+
+def test_real_tx40_halves_nothing_changed():
+    """The real TX40 recording (motor side, coupled wrist) split in two halves of other
+    motions: nothing changed between them, so nothing is named (a load friction fitted on one
+    half and extrapolated to the other once named an 85 % gain change on joint 5)."""
+    import baseparams as bp
+    tx40 = Path(__file__).parent / "data" / "tx40"
+    result = bp.diagnose(str(tx40 / "tx40_mdh_modified.urdf"), str(tx40 / "recording.toml") + "#last",
+                         baseline=str(tx40 / "recording.toml") + "#first")
+    assert result.to_json()["verdict"] == "nothing changed", result.to_json()["changes"]
