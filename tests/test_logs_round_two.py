@@ -458,3 +458,24 @@ def test_blank_lines_in_a_stacked_log_separate_samples_or_stand_for_a_missing_va
     (tmp_path / "q.txt").write_text("1\n2 3\n")
     with pytest.raises(InputError, match=r"q\.txt: row 2: '2 3' holds several values"):
         read_log(str(tmp_path / "q.txt"), log, str(tmp_path / "rec.toml"))
+
+
+def test_a_bags_messages_are_read_in_the_order_of_their_stamps(tmp_path):
+    """Messages received out of order (two publishers, a network) are placed by their stamps:
+    the truth comes back; a publisher that leaves every stamp 0 is named with the way out."""
+    pytest.importorskip("rosbags")
+    mech = _mechanism()
+    t, q, qd, tau, truth = _simulated(mech)
+    messages = [(t[k], {"position": q[k], "velocity": qd[k], "effort": tau[k]}) for k in range(len(t))]
+    for k in range(10, len(messages) - 1, 37):                  # swapped on arrival
+        messages[k], messages[k + 1] = messages[k + 1], messages[k]
+    bag = _write_bag(tmp_path / "arm.bag", {"/joint_states": messages}, ros1=True)
+    effort = "".join(f'q{j + 1} = "/joint_states.effort[{n}]"\n' for j, n in enumerate(JOINTS))
+    (tmp_path / "rec.toml").write_text(f'[[runs]]\nfile = "{bag.name}"\n' + BAG_CHANNELS + '[torque]\n' + effort)
+    _recovered(tmp_path / "rec.toml", mech, truth, 2e-3)
+    unstamped = _write_bag(tmp_path / "zero.bag", {"/joint_states": [(-1.7e9, m) for _, m in messages[:50]]},
+                           ros1=True)
+    (tmp_path / "zero.toml").write_text(f'[[runs]]\nfile = "{unstamped.name}"\n' + BAG_CHANNELS + '[torque]\n' + effort)
+    with pytest.raises(InputError, match=r"zero\.bag: recording\.time: every message of topic /joint_states is "
+                                         r"stamped 0 s \(header\.stamp\).*time = \"log_time\""):
+        read_recording(tmp_path / "zero.toml", mech)

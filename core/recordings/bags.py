@@ -179,15 +179,21 @@ def read_bag(path: str | Path, wanted: Collection[str], clock: str = STAMP, stri
                                          file=str(path), key=f"topic {topic}, message {number}") from None
             if not times:
                 raise InputError(f"topic {topic} has no messages", file=str(path))
-            stamps[topic] = np.asarray(times, dtype=np.int64)
-            table = {f.column: np.asarray(v, dtype=float) for f, v in zip(used, values)}
+            stamp = np.asarray(times, dtype=np.int64)
+            if clock != LOG_TIME and len(stamp) > 1 and np.all(stamp == stamp[0]):
+                raise InputError(f"every message of topic {topic} is stamped {stamp[0] * 1e-9:.9g} s ({clock}): a "
+                                 "publisher that does not stamp its messages; read it on the recorder's clock with "
+                                 f"time = \"{LOG_TIME}\" in [recording]", file=str(path), key="recording.time")
+            order = np.argsort(stamp, kind="stable")     # messages in the order received: by their stamps
+            stamps[topic] = stamp[order]
+            table = {f.column: np.asarray(v, dtype=float)[order] for f, v in zip(used, values)}
             for field in used:           # a joint in no message: a typo, not missing samples
                 joints = [str(step) for kind, step in field.steps if kind == "joint"]
                 if joints and np.isnan(table[field.column]).all():
                     listed = sorted({n for key in names for n in key})
                     raise InputError(f"no message of topic {topic} names the joint {joints[0]!r} of {field.column!r} "
                                      f"(joints: {', '.join(listed)})", file=str(path))
-            out[topic] = ([clock] + [f.column for f in used], table, list(range(1, len(times) + 1)))
+            out[topic] = ([clock] + [f.column for f in used], table, [int(k) + 1 for k in order])
         if stamps:                   # seconds from the first stamp: exact steps, a shared origin
             origin = min(int(s.min()) for s in stamps.values())
             for topic, (_, table, _) in out.items():
