@@ -479,3 +479,14 @@ def test_a_bags_messages_are_read_in_the_order_of_their_stamps(tmp_path):
     with pytest.raises(InputError, match=r"zero\.bag: recording\.time: every message of topic /joint_states is "
                                          r"stamped 0 s \(header\.stamp\).*time = \"log_time\""):
         read_recording(tmp_path / "zero.toml", mech)
+
+
+def test_a_bag_without_rosbags_installed_says_how_to_install_it(tmp_path, monkeypatch):
+    """The extra is optional: without it, exit 2 with the pip command, not an ImportError."""
+    import sys
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)     # import fails as if not installed
+    (tmp_path / "arm.bag").write_bytes(b"#ROSBAG V2.0\n")
+    (tmp_path / "rec.toml").write_text('[[runs]]\nfile = "arm.bag"\n' + BAG_CHANNELS + '[torque]\n'
+                                       + "".join(f'q{j + 1} = "/joint_states.effort[{n}]"\n' for j, n in enumerate(JOINTS)))
+    out = _cli("identify", _mech_file(tmp_path), tmp_path / "rec.toml", "--solver", "dp")
+    assert out.exit_code == 2 and "pip install 'baseparams[ros]'" in out.stderr and "arm.bag" in out.stderr, out.output
