@@ -63,6 +63,19 @@ def _reader(path: Path) -> Any:
     return AnyReader([path], default_typestore=store)
 
 
+def _refusals() -> tuple[type[BaseException], ...]:
+    """The errors rosbags raises on a damaged or foreign file or message (input, not a bug)."""
+    import struct
+
+    from rosbags.highlevel import AnyReaderError
+    from rosbags.rosbag1 import ReaderError as ReaderError1
+    from rosbags.rosbag2 import ReaderError as ReaderError2
+    from rosbags.serde import SerdeError
+    from rosbags.typesys import TypesysError
+    return (AnyReaderError, ReaderError1, ReaderError2, SerdeError, TypesysError, OSError, ValueError, KeyError,
+            IndexError, struct.error, UnicodeDecodeError)
+
+
 def parse_field(column: str, topics: Collection[str]) -> Field | None:
     """The column's topic (the longest one that starts it, followed by ``.``) and steps; None
     when no topic of the bag starts it (the column may be another file's)."""
@@ -139,9 +152,10 @@ def read_bag(path: str | Path, wanted: Collection[str], clock: str = STAMP, stri
     if not path.exists():
         raise InputError("no such file", file=str(path))
     reader = _reader(path)
+    refused = _refusals()
     try:
         reader.open()
-    except Exception as exc:          # rosbags' own errors: a damaged or foreign file
+    except refused as exc:            # rosbags' own errors: a damaged or foreign file
         raise InputError(f"not a readable ROS bag: {exc}", file=str(path)) from None
     try:
         types = {c.topic: c.msgtype for c in reader.connections}
@@ -167,7 +181,7 @@ def read_bag(path: str | Path, wanted: Collection[str], clock: str = STAMP, stri
             for number, (connection, received, raw) in enumerate(reader.messages(connections=connections), start=1):
                 try:
                     message = reader.deserialize(raw, connection.msgtype)
-                except Exception as exc:
+                except refused as exc:
                     raise InputError(f"message {number} of topic {topic} cannot be read: {exc}",
                                      file=str(path)) from None
                 times.append(_stamp_ns(message, clock, received, topic, connection.msgtype, path))
