@@ -122,9 +122,11 @@ def test_random_batch_with_starts_takes_the_batched_path(monkeypatch):
 
 def test_batched_path_follows_the_homotopy_where_four_stages_jump(monkeypatch):
     """An SLA state near the edge of the reachable range (dp's excitation draw 18, seed 2):
-    the four plain Newton stages of the general path land on another assembly mode; the
-    predicted stages agree with a 64-stage continuation (50, 100 and 400 stages agree too).
-    Single states therefore keep the general path (evaluator._assemble_batch)."""
+    four plain Newton stages landed on another assembly mode; the predicted stages agree
+    with a 64-stage continuation (50, 100 and 400 stages agree too). Since issue 49 the
+    general path (a single state) predicts its stages along the tangent as well, and
+    follows the same path (before: more than 0.1 apart; a generated parallelogram with a
+    short coupler folded onto its crossed branch at 0.7 rad of crank)."""
     mech = resolve("sla_suspension")
     evaluator.codegen.compiled(mech, "closure")
     z = [float(Fraction(2327712038408277079, 2814749767106560000)),
@@ -136,7 +138,7 @@ def test_batched_path_follows_the_homotopy_where_four_stages_jump(monkeypatch):
         q = ev._newton(q, [k / 64 * v for v in z], -12, "")
     assert np.abs(batched - np.array(q, dtype=float)).max() <= 1e-10
     single = np.array(ev.assemble(z), dtype=float)             # a scalar state: the general path
-    assert np.abs(single - batched).max() > 0.1
+    assert np.abs(single - batched).max() <= 1e-10
 
 
 def test_unreachable_trajectory_reports_as_before(monkeypatch):

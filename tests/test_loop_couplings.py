@@ -325,3 +325,22 @@ def test_two_loops_with_their_cranks_coupled(seed, ratio, offset):
     # s_r near 1e-17 on seed 1), so dp is asked to agree only on a rich trajectory
     results = [registry.solvers()[s].item.solve(coupled) for s in ("dp", "vp")]
     assert results[0].rank == results[1].rank and results[1].certified
+
+
+@pytest.mark.parametrize("seed", [20, 25])
+def test_single_states_stay_on_the_parallelogram_branch(seed):
+    """One state at a time (the excitation check's random draws) by continuation from the
+    reference: a parallelogram with a short coupler, whose plain Newton stages folded onto
+    the crossed branch (qb = -6.98 = -0.7 - 2 pi, or qb = 3.65 with qd = 0.51 at qa = 0.8),
+    stays a parallelogram: qb = -qa and qd = qa up to 1 rad of crank; and its rank equals
+    its tree form's (dp and vp), which the folded draws had raised (9 -> 13, vp 14)."""
+    mech = parse_mechanism(generate.coupled_loop(seed, parallelogram=True))
+    tree = parse_mechanism(generate.coupled_loop(seed, parallelogram=True, tree=True))
+    ev = Evaluator(mech, Float64())
+    names = list(mech.coordinates)
+    for qa in (0.5, 0.7, 0.8, 0.9, 1.0, -0.8, -1.0):
+        q = ev.assemble([qa])
+        assert abs(q[names.index("qb")] + qa) < 1e-12 and abs(q[names.index("qd")] - qa) < 1e-12
+    solvers = registry.solvers()
+    ranks = {(m.name, s): solvers[s].item.solve(m).rank for m in (mech, tree) for s in ("dp", "vp")}
+    assert len(set(ranks.values())) == 1, ranks

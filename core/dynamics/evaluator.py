@@ -237,14 +237,41 @@ class Evaluator:
                 return solved
         if guess is None:
             # continuation from the reference configuration (q = 0 closes the loops), in steps
-            # of at most 0.25 in every independent coordinate
+            # of at most 0.25 in every independent coordinate, each stage started from the
+            # last one moved along its tangent (Euler, as the batched path predicts): from
+            # the last solution itself a parallelogram with a short coupler took a 2.6 rad
+            # Newton step onto its crossed branch at 0.15 rad of crank
             reach = max(float(np.max(np.abs(self.backend.to_float(v)))) for v in z)
             steps = max(4, int(np.ceil(reach / 0.25)))
+            q = [self.kin.zero] * self.n
+            self._newton_closure = self.closure(q)            # the tangent at the reference
+            dz = [v * self.backend.rational(Fraction(1, steps)) for v in z]
             for step in range(1, steps):
                 lam = self.backend.rational(Fraction(step, steps))
-                q = self._newton(q, [lam * v for v in z], -6, where + "(continuation) ")
+                q = self._newton(self._predicted(q, dz), [lam * v for v in z], -6, where + "(continuation) ")
+            q = self._predicted(q, dz)
         q = self._newton(q, z, self.tolerance(), where)
         return enclose(self, q, where, at=self._newton_closure) if self.certify else q
+
+    def _predicted(self, q: list[Any], dz: Sequence[Any]) -> list[Any]:
+        """``q`` (a continuation stage's solution) with the dependent coordinates moved by
+        -Phi_d^-1 Phi_z dz, the tangent step for the independent ones' move ``dz``, using
+        the closure Jacobian of Newton's last evaluation (at q); q unchanged when that
+        Jacobian is singular (Newton then reports it)."""
+        if self._newton_closure is None:
+            return q
+        st = self.structure
+        _, rows = self._newton_closure
+        jd = [[rows[i][j] for j in st.dependent] for i in st.rows]
+        shift = [[_dot([rows[i][j] for j in st.independent], dz, self.kin.zero)] for i in st.rows]
+        try:
+            step = self.backend.solve(jd, shift)
+        except KinematicsError:
+            return q
+        out = list(q)
+        for (s,), j in zip(step, st.dependent):
+            out[j] = self.backend.point(q[j] - s)
+        return out
 
     def _newton(self, q: list[Any], z: Sequence[Any], tol: int, where: str) -> list[Any]:
         st = self.structure
@@ -313,8 +340,8 @@ class Evaluator:
             return None
         if len(shape) != 1:
             # one state at a time (the excitation check's random draws) keeps the general
-            # path: on draws near the edge of the reachable range its four Newton stages can
-            # land on another assembly mode than the followed path, and the draws must not change
+            # path; its stages are tangent-predicted too since issue 49 (before, plain Newton
+            # stages could land on another assembly mode than the followed path)
             return None
         dep, ind, rows = list(st.dependent), list(st.independent), list(st.rows)
         zs = np.array([np.broadcast_to(np.asarray(v, dtype=float), shape) for v in z])    # (f, samples)

@@ -401,7 +401,9 @@ def four_bar(seed: int, samples: int = 100, parallelogram: bool = False) -> str:
         c = _add(b, _scale(u2, lengths[1]))
         d = _sub(c, _scale(u3, lengths[2]))
         a_, b_, c_, d_ = (tuple(map(float, p)) for p in ((0, 0), b, c, d))
-        if math.dist((0, 0), d) > 0.05 and _four_bar_ok(a_, b_, c_, d_, 0.5):
+        # a parallelogram's change point (links collinear: it may fold into the crossed
+        # form) kept beyond the random states' reach too (the trajectory's range + 0.3 rad)
+        if math.dist((0, 0), d) > 0.05 and _four_bar_ok(a_, b_, c_, d_, 0.9 if parallelogram else 0.5):
             break
     plane = _random_rotation(draw)              # the plane's axes (x, y in plane, z normal) in ground
     origin = _point(draw, 0.5)
