@@ -36,15 +36,16 @@ def implied_description(path: str | os.PathLike, mechanism: Mechanism) -> dict:
 
 
 def read_layout(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True,
-                fit_filter: dict | None = None) -> MeasuredData:
+                fit_filter: dict | None = None, why: str = "irregular time stamps") -> MeasuredData:
     """The CSV at ``path`` (the project's layout, already checked field by field) through the
-    recording pipeline with its implied description, with a note saying so (``fit_filter``: as
-    :func:`~.recording.read_described` takes it)."""
+    recording pipeline with its implied description, with a note saying so and ``why``
+    (``fit_filter``: as :func:`~.recording.read_described` takes it: a --validate recording
+    filtered as the fit's data were)."""
     data = implied_description(path, mechanism)
     measured, _ = read_described(describe(data, str(path), mechanism), check_kinematics=check_kinematics,
                                  fit_filter=fit_filter)
     given = [q for q in ("velocity", "acceleration") if q in data]
-    measured.notes = (f"irregular time stamps: read as a recording with the description its columns imply (time t, "
+    measured.notes = (f"{why}: read as a recording with the description its columns imply (time t, "
                       f"positions q_c{''.join(', ' + q + 's ' + ('qd_c' if q == 'velocity' else 'qdd_c') for q in given)}"
                       ", torques tau_c; docs/identification.md, \"One pipeline\")",) + measured.notes
     measured.path = str(path)

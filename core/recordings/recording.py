@@ -455,11 +455,17 @@ def read_data(paths: list[str], mechanism: Mechanism, *, check_kinematics: bool 
                 raise InputError("holds other coordinates than the descriptions before it", file=path, key="held")
             model = with_motors
         else:
+            # the project's layout, every field checked; through the recording pipeline (one pipeline) when its
+            # stamps are irregular, or when it is filtered as a fit's data were (a --validate recording)
+            why = "to be filtered with the fit's low-pass" if fit_filter is not None else ""
             try:
-                part = read_measured(path, mechanism, check_kinematics=check_kinematics)
-            except NonUniform:            # the project's layout, its stamps irregular: one pipeline
+                part = read_measured(path, mechanism, check_kinematics=check_kinematics and not why)
+            except NonUniform:
+                why = "irregular time stamps"
+            if why:
                 from baseparams.recordings.implied import read_layout
-                part = read_layout(path, mechanism, check_kinematics=check_kinematics, fit_filter=fit_filter)
+                part = read_layout(path, mechanism, check_kinematics=check_kinematics, fit_filter=fit_filter,
+                                   why=why)
         parts.append(part)
     if model is not None and model.gravity != mechanism.gravity and any(not is_description(p) for p in paths):
         raise InputError("a CSV log cannot be fitted beside a recording with its own gravity ([recording] "
