@@ -344,3 +344,19 @@ def test_single_states_stay_on_the_parallelogram_branch(seed):
     solvers = registry.solvers()
     ranks = {(m.name, s): solvers[s].item.solve(m).rank for m in (mech, tree) for s in ("dp", "vp")}
     assert len(set(ranks.values())) == 1, ranks
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(6, 30))
+def test_more_generated_coupled_loops(seed):
+    """The default run's checks on 24 more seeds of each family: a parallelogram's regressor
+    is its tree form's, and dp and vp (certified) agree on every coupled loop."""
+    loop = parse_mechanism(generate.coupled_loop(seed, parallelogram=True))
+    tree = parse_mechanism(generate.coupled_loop(seed, parallelogram=True, tree=True))
+    z, zd, zdd = _states(seed, 100)
+    k_loop, k_tree = _k(loop, z, zd, zdd), _k(tree, z, zd, zdd)
+    assert np.abs(k_loop - k_tree).max() <= 1e-12 * np.abs(k_tree).max()
+    solvers = registry.solvers()
+    for mech in (loop, tree, parse_mechanism(generate.coupled_loop(seed))):
+        dp, vp = (solvers[s].item.solve(mech) for s in ("dp", "vp"))
+        assert dp.rank == vp.rank and vp.certified, mech.name
