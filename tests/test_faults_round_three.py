@@ -541,3 +541,48 @@ def test_a_scheduler_address_that_answers_garbage_is_exit_2(payload):
     line = [x for x in proc.stderr.splitlines() if x.startswith("error: ")]
     assert len(line) == 1 and "--scheduler" in line[0] and "no Dask scheduler answered" in line[0], proc.stderr
     assert "internal error" not in proc.stderr
+
+
+# ----- Ctrl-C on a Dask run -----------------------------------------------------------------------------
+def test_ctrl_c_on_a_local_dask_cluster_prints_interrupted_alone():
+    """Issue 46: Dask's warnings ("Worker process still alive after 4.0 seconds, killing", "...
+    ended with CancelledError") printed before ``interrupted`` on Ctrl-C. Now, besides the
+    progress lines, stderr is that one line. Waits on an event (the first progress line: the
+    cluster is up and jobs run), not on time."""
+    pytest.importorskip("distributed")
+    import os
+    import queue
+    import signal
+    import threading
+    proc = subprocess.Popen([*CLI, "validate", "--all", "--scheduler", "local", "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: "queue.Queue[str | None]" = queue.Queue()
+
+    def read():
+        for line in proc.stderr:
+            lines.put(line.rstrip("\n"))
+        lines.put(None)
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    seen = []
+    try:
+        while True:                                 # the first progress line: jobs are running
+            line = lines.get(timeout=600)
+            assert line is not None, seen
+            seen.append(line)
+            if line.startswith("validate"):
+                break
+        os.kill(proc.pid, signal.SIGINT)
+        proc.wait(timeout=300)
+        reader.join(60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    while not lines.empty():
+        line = lines.get()
+        if line is not None:
+            seen.append(line)
+    proc.stdout.close()
+    assert proc.returncode == 130, seen
+    assert [x for x in seen if x.strip() and not x.startswith("validate")] == ["interrupted"], seen

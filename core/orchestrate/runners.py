@@ -304,8 +304,11 @@ class DaskCluster:
             from dask.distributed import Client, LocalCluster     # optional extra: imported on use
         except ImportError:
             raise InputError("--scheduler needs Dask: pip install 'baseparams[distributed]'") from None
+        self._log_level = _quiet_dask_logs()
         if address == "local":
-            with _sigint_ignored():     # the workers inherit it: Ctrl-C is this process's to handle
+            # the workers inherit both: Ctrl-C is this process's to handle, and their warnings
+            # (a task cancelled when the run stops) are not the user's to read
+            with _sigint_ignored(), _environment(DASK_LOGGING__DISTRIBUTED="error"):
                 self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
                                             dashboard_address=None)
             address = self.cluster.scheduler_address
@@ -314,12 +317,14 @@ class DaskCluster:
             nthreads = _bounded(self.client.nthreads, RPC_S)
         except (OSError, TimeoutError) as exc:
             self._close_cluster()
+            _restore_dask_logs(self._log_level)
             raise InputError(f"no Dask scheduler answered at {address} ({exc}): is it the address of a "
                              f"running Dask scheduler?", key="--scheduler") from None
         except Exception as exc:      # noqa: BLE001 -- any answer no scheduler gives (issue 46)
             # a peer that answers garbage: Dask read a frame length of 3.07 EiB (MemoryError), a
             # dimension (ValueError), ... -- not a scheduler, whatever the error it provoked
             self._close_cluster()
+            _restore_dask_logs(self._log_level)
             raise InputError(f"no Dask scheduler answered at {address}: the peer's answer is not Dask's "
                              f"({type(exc).__name__}: {str(exc)[:120]}): is it the address of a running Dask "
                              f"scheduler?", key="--scheduler") from None
@@ -397,6 +402,7 @@ class DaskCluster:
         except Exception:
             pass                              # a scheduler already gone: nothing to close
         self._close_cluster()
+        _restore_dask_logs(self._log_level)
 
     def _close_cluster(self) -> None:
         cluster = self.cluster
@@ -420,6 +426,42 @@ def _sigint_ignored() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_dask_logs() -> int:
+    """Dask's own log lines below ERROR silenced in this process while a cluster is in use;
+    the level before, for :func:`_restore_dask_logs`. Why (issue 46): on Ctrl-C the nannies'
+    "Worker process still alive after 4.0 seconds, killing" and the workers' "ended with
+    CancelledError" warnings printed before ``interrupted``; the runner reports every job's
+    outcome itself."""
+    import logging
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    if logger.getEffectiveLevel() < logging.ERROR:
+        logger.setLevel(logging.ERROR)
+    return level
+
+
+def _restore_dask_logs(level: int) -> None:
+    import logging
+    logging.getLogger("distributed").setLevel(level)
+
+
+@contextlib.contextmanager
+def _environment(**values: str) -> Iterator[None]:
+    """Environment variables set while worker processes are started (they inherit them), and
+    the previous values back afterwards; a value the user set is kept."""
+    previous = {name: os.environ.get(name) for name in values}
+    for name, value in values.items():
+        os.environ.setdefault(name, value)
+    try:
+        yield
+    finally:
+        for name, value in previous.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 class _Failed:
