@@ -161,28 +161,28 @@ def _side(mechanism: Mechanism, data: MeasuredData, given: Given | None, gains: 
 
 
 # A coordinate's load friction mu is shared when the baseline determines it (mu above LOAD_Z
-# standard deviations) and it is physical (0 < mu < LOAD_MAX: a gear dissipating half the
-# load is already a poor one). Why: on a coordinate whose baseline torque is near zero (the
-# PUMA's last joint) mu is free, came out at 0.7, and turned a payload's own torque there
-# into a "gain" change.
+# standard deviations, the delay fitted too) and it is a gear's: LOAD_MIN <= mu < LOAD_MAX.
+# Why the floor: a mu of 1 % is no gearbox worth naming, and such small ones were stand-ins
+# for other errors (the simulations' smooth Coulomb law): on the PUMA, mu 0.012 on the last
+# joint turned a payload's own torque there into a Coulomb or gain change in 10 of 10 runs.
+# Why the bound: a gear dissipating half the load is already a poor one.
 LOAD_Z = 3.0
+LOAD_MIN = 0.02
 LOAD_MAX = 0.5
 
 
-def _load_friction_kept(base: _Side, other: _Side, f: int, paired: bool) -> tuple[_Side, _Side, np.ndarray]:
-    """Both sides without the load-friction columns (their last ``f``) the baseline does not
-    determine as physical, and which coordinates kept theirs (f,). None when the runs are not
-    paired: on another motion the shared model extrapolates, and a load friction fitted to one
-    half of the real TX40 recording (mu 0.4 on joint 3, standing in for what the model lacks)
-    made an 85 % "gain change" on joint 5 of the other half."""
-    keep = np.zeros(f, bool)
-    if paired:
-        fit = WeightedLinearModel(base.shared, base.tau - base.known).fit()
-        mu, std = fit.coefficients[-f:], fit.std[-f:]
-        keep = (mu > LOAD_Z * std) & (mu < LOAD_MAX)
-    columns = np.concatenate([np.ones(base.shared.shape[-1] - f, bool), keep])
-    return (dataclasses.replace(base, shared=base.shared[:, :, columns]),
-            dataclasses.replace(other, shared=other.shared[:, :, columns]), keep)
+def _without_load_friction(side: _Side, f: int, keep: np.ndarray) -> _Side:
+    """``side`` with only the load-friction columns (its last ``f``) that ``keep`` says."""
+    columns = np.concatenate([np.ones(side.shared.shape[-1] - f, bool), keep])
+    return dataclasses.replace(side, shared=side.shared[:, :, columns])
+
+
+def _load_friction_kept(base: _Side, given: Given | None, parameters: int, f: int) -> np.ndarray:
+    """Which coordinates' load friction (the shared columns' last ``f``) the baseline
+    determines as a gear's (f,), from the shared fit with every one of them."""
+    _, _, fit = _shared_fit(base, given, parameters)
+    mu, std = fit.coefficients[-f - 1:-1], fit.std[-f - 1:-1]       # the delay's step column is last
+    return (mu > LOAD_Z * std) & (mu >= LOAD_MIN) & (mu < LOAD_MAX)
 
 
 def pair(baseline: np.ndarray, changed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -320,8 +320,8 @@ def _physical_text(entry: dict) -> None:
         entry["centre_of_mass"] = [float(v) / float(m) for v in firsts]
 
 
-def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[float, np.ndarray]:
-    """(delay, coefficients): the shared model fitted to the baseline, a delay between the
+def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[float, np.ndarray, LinearFit]:
+    """(delay, coefficients, the last step's fit): the shared model fitted to the baseline, a delay between the
     positions and the torques included (a filter's or a bus's lag is the robot's, on both
     sides): Gauss-Newton on the delay, the model's columns shifted exactly (cubic) at each
     step and the rigid bodies' torque's derivative the step's column (a friction's jumps made
@@ -340,7 +340,7 @@ def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[floa
         delay += step
         if abs(step) <= DELAY_TOLERANCE * step_size:
             break
-    return delay, theta
+    return delay, theta, fit
 
 
 def _change_lag(chosen: Search, kept: set, y: np.ndarray, data: MeasuredData, rows: np.ndarray) -> float:
@@ -385,8 +385,12 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     matched = (distance <= PAIR_DISTANCE) & replayed(partner, base.data.t, other.data.t)
     share = float(np.mean(matched))
     paired = share >= PAIRED_SHARE
-    base, other, loaded = _load_friction_kept(base, other, f, paired)
-    delay, theta = _shared_fit(base, given, len(mechanism.parameters))
+    # the load friction only between runs of one motion: on another the shared model
+    # extrapolates, and a mu fitted to one half of the real TX40 recording (0.4 on joint 3,
+    # standing in for what the model lacks) made an 85 % "gain change" on joint 5 of the other
+    loaded = _load_friction_kept(base, given, len(mechanism.parameters), f) if paired else np.zeros(f, bool)
+    base, other = _without_load_friction(base, f, loaded), _without_load_friction(other, f, loaded)
+    delay, theta, _ = _shared_fit(base, given, len(mechanism.parameters))
     shared_base, known_base = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
     shared_other, known_other = shifted(other.shared, other.data, delay), shifted(other.known, other.data, delay)
     y_base, y_other = base.tau - known_base, other.tau - known_other
