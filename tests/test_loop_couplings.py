@@ -360,3 +360,31 @@ def test_more_generated_coupled_loops(seed):
     for mech in (loop, tree, parse_mechanism(generate.coupled_loop(seed))):
         dp, vp = (solvers[s].item.solve(mech) for s in ("dp", "vp"))
         assert dp.rank == vp.rank and vp.certified, mech.name
+
+
+def test_diagnose_reports_tied_candidates_as_equivalent(tmp_path):
+    """A viscous friction on a parallelogram's passive angle (simulated on pitch_top, which
+    moves as -1 x pitch): every candidate of that kind on the tied angles gives the same
+    column for every motion. diagnose says so, with the ties, never advises a motion, and
+    gives the group's coefficient as one effect (the ratio is -1: the value itself)."""
+    data = tmp_path / "friction.csv"
+    result = CliRunner().invoke(main, ["simulate", "parallelogram_arm", "-o", str(data), "--samples", "3000",
+                                       "--noise", "0.02", "--seed", "5", "--effect",
+                                       "viscous_friction:pitch_top=0.3", "--quiet"])
+    assert result.exit_code == 0, result.output + result.stderr
+    result = CliRunner().invoke(main, ["diagnose", "parallelogram_arm", str(data), "--format", "json"])
+    report = json.loads(result.stdout)
+    groups = [g for g in report["ambiguous"] if "equivalent" in g]
+    named = [e for e in report["effects"] if e["kind"] == "viscous_friction"]
+    assert groups or named, report
+    for g in groups:
+        coordinates = {c["coordinate"] for c in g["candidates"]}
+        assert coordinates <= {"pitch", "pitch_front", "pitch_top", "pitch_end", "pitch_bottom"}
+        assert "closed loop" in g["equivalent"] and g["separate_by"].startswith("no motion can")
+        assert "wider range" not in g["separate_by"]
+        (value,) = g["value"]
+        assert abs(value - 0.3) < 0.015
+    for e in named:
+        assert abs(e["value"] - 0.3) < 0.015
+    text = CliRunner().invoke(main, ["diagnose", "parallelogram_arm", str(data)]).stdout
+    assert "wider range" not in text and ("equivalent:" in text or "viscous_friction" in text)

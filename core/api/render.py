@@ -75,7 +75,7 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in a["candidates"])
         corr = max((abs(ev["correlation"]) for ev in a["evidence"]), default=float("nan"))
         lines.append(f"ambiguous: {names} (|corr| up to {corr:.3f}; none adds significantly over the others)")
-        lines.append(f"  to separate them: {a['separate_by']}")
+        lines.append(f"  equivalent: {a['equivalent']}" if "equivalent" in a else f"  to separate them: {a['separate_by']}")
     for u in result.unsupported:
         lines.append(f"not named (unsupported): {u['kind']} on {u['coordinate']}: {u['reason']}")
     un = result.unexplained
@@ -305,6 +305,10 @@ def _not_named_count(result: "Diagnosis", notes: int) -> str:
 def _ambiguous_line(group: dict) -> str:
     names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in group["candidates"])
     corr = max((abs(ev["correlation"]) for ev in group["evidence"]), default=float("nan"))
+    if "equivalent" in group:                      # tied coordinates: no motion separates them
+        fitted = (f"; as one effect on {group['strongest']}: " + ", ".join(f"{v:.4g}" for v in group["value"])
+                  if "value" in group else "")
+        return f"equivalent: {names}: {group['equivalent']}{fitted}"
     return f"ambiguous: {names} (|corr| up to {corr:.3f}); to separate them: {group['separate_by']}"
 
 

@@ -333,8 +333,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i, regrouped.get(i)),
                 "checks": checks.get(i, {}), **_known_entry(problem, candidates[i])}
                for i in chosen.added if i not in ambiguous_idx and i in by_index]
-    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i)) for i in chosen.added
-                 if i in ambiguous_idx and i not in dropped]
+    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i), problem.mechanism, by_index)
+                 for i in chosen.added if i in ambiguous_idx and i not in dropped]
     unsupported += _sparse_left(model[rows], y[rows], candidates, in_model, last, weights, alpha)
     rounding = _within_rounding(problem, model[rows], candidates, in_model, unsupported, y[rows], after.fit.weights)
     rounding |= _left_nothing(model[rows], y[rows], candidates, in_model, unsupported, last.whiten, weights, alpha)
@@ -1361,11 +1361,42 @@ def _rival_json(rival_candidate: Candidate, rival: Rival) -> dict:
             "pvalue_rival_over_named": rival.rival_over_winner.pvalue}
 
 
+def tied_reason(mechanism: Mechanism, cands: Sequence[Candidate]) -> str | None:
+    """Why no motion can separate a group: one kind of effect on joint coordinates that a
+    coupling or a closed loop ties at a fixed ratio (a parallelogram's angles, a
+    counterweight on a cable: their columns are proportional for every motion, issue 49);
+    None when the group is not such a group."""
+    coordinates = [c.coordinate for c in cands]
+    if len({c.kind for c in cands}) != 1 or not all(c in mechanism.coordinates for c in coordinates):
+        return None
+    from baseparams.dynamics.tied import ties, tied_group
+    if tied_group(mechanism, coordinates) is None:
+        return None
+    why = {"coupling": "a coupling", "loop": "a closed loop"}
+    parts = [f"{t.coordinate} = {t.ratio:.6g} x {t.leader} ({why[t.how]})" for t in ties(mechanism)
+             if t.coordinate in coordinates]
+    return f"{'; '.join(parts)} at every state: one effect for every motion, on any of them"
+
+
+def _as_strongest(cands: Sequence[Candidate], estimates: Sequence[np.ndarray]) -> list[float]:
+    """An equivalent group's coefficients as one effect on its first member (the strongest):
+    sum_k S_k est_k, S_k the exact map of member k's columns onto the first's (they are
+    proportional for every motion, so the fit splits one force among them at will)."""
+    base = cands[0].columns.reshape(-1, cands[0].columns.shape[-1])
+    total = np.zeros(base.shape[1])
+    for cand, est in zip(cands, estimates):
+        s, *_ = np.linalg.lstsq(base, cand.columns.reshape(-1, cand.columns.shape[-1]), rcond=None)
+        total += s @ np.asarray(est, dtype=float)
+    return [float(v) for v in total]
+
+
 def _ambiguous_entry(all_candidates: list[Candidate], chosen: Selection, index: int,
-                     estimate: tuple[np.ndarray, np.ndarray] | None) -> dict:
+                     estimate: tuple[np.ndarray, np.ndarray] | None, mechanism: Mechanism | None = None,
+                     estimates: dict | None = None) -> dict:
     step = next(s for s in chosen.steps if s.chosen == index)
     members = [index] + [r.index for r in chosen.ambiguous[index]]
     cands = [all_candidates[i] for i in members]
+    tied = tied_reason(mechanism, cands) if mechanism is not None else None
     evidence = []
     for r in chosen.ambiguous[index]:
         evidence.append({"candidate": all_candidates[r.index].label,
@@ -1378,7 +1409,10 @@ def _ambiguous_entry(all_candidates: list[Candidate], chosen: Selection, index: 
                            for c, i in zip(cands, members)],
             "strongest": all_candidates[index].label,
             "evidence": evidence,
-            "separate_by": separation([c.kind for c in cands], False),
+            "separate_by": (f"no motion can: {tied}" if tied else separation([c.kind for c in cands], False)),
+            **({"equivalent": tied} if tied else {}),
+            **({"value": _as_strongest(cands, [estimates[i][0] for i in members])}
+               if tied and estimates is not None and all(i in estimates for i in members) else {}),
             "reason": "the data cannot tell these apart: none adds significantly to what the "
                       "strongest explains, and it adds nothing significant over them (at the bar a "
                       "further effect must clear when each adds at alpha)"}
