@@ -35,10 +35,12 @@ if TYPE_CHECKING:
 
 
 def __getattr__(name: str) -> Any:
-    """The API functions, imported from :mod:`baseparams.api` on first use."""
-    if name in API:
-        from baseparams import api
-        return getattr(api, name)
+    """The API functions, imported from :mod:`baseparams.api` on first use, and ``bp.api``
+    itself (``bp.api.DEFAULT_SOLVER``)."""
+    if name in API or name == "api":
+        import importlib
+        api = importlib.import_module(f"{__name__}.api")     # not `from baseparams import api`: it asks here
+        return api if name == "api" else getattr(api, name)
     raise AttributeError(f"module 'baseparams' has no attribute {name!r}")
 
 
