@@ -388,3 +388,22 @@ def test_diagnose_reports_tied_candidates_as_equivalent(tmp_path):
         assert abs(e["value"] - 0.3) < 0.015
     text = CliRunner().invoke(main, ["diagnose", "parallelogram_arm", str(data)]).stdout
     assert "wider range" not in text and ("equivalent:" in text or "viscous_friction" in text)
+
+
+def test_a_body_named_like_a_tied_coordinate_is_not_called_equivalent():
+    """parallelogram_arm names its bodies as its coordinates (body pitch_top turns on the
+    coordinate pitch_top): body, mass and gain candidates are not on joint coordinates,
+    and two bodies are never 'tied' by the coordinates' names."""
+    from baseparams.diagnose.selection import Candidate
+    from baseparams.diagnose.workflow import tied_reason
+    from baseparams.io.loader import resolve
+    arm = resolve("parallelogram_arm")
+    column = np.zeros((4, 3, 1))
+    bodies = [Candidate("body", name, ("m",), column) for name in ("pitch_top", "pitch_front")]
+    assert tied_reason(arm, bodies) is None
+    frictions = [Candidate("viscous_friction", name, ("fv",), column) for name in ("pitch_top", "pitch_front")]
+    assert "closed loop" in (tied_reason(arm, frictions) or "")
+    mixed = [Candidate("viscous_friction", "pitch_top", ("fv",), column), Candidate("offset", "pitch", ("off",), column)]
+    assert tied_reason(arm, mixed) is None
+    counterweight = [Candidate("offset", name, ("off",), column) for name in ("insertion", "counterweight")]
+    assert "coupling" in (tied_reason(arm, counterweight) or "")

@@ -1367,8 +1367,9 @@ def tied_reason(mechanism: Mechanism, cands: Sequence[Candidate]) -> str | None:
     counterweight on a cable: their columns are proportional for every motion, issue 49);
     None when the group is not such a group."""
     coordinates = [c.coordinate for c in cands]
-    if len({c.kind for c in cands}) != 1 or not all(c in mechanism.coordinates for c in coordinates):
-        return None
+    kinds = {c.kind for c in cands}
+    if len(kinds) != 1 or kinds & set(DERIVED_KINDS) or not all(c in mechanism.coordinates for c in coordinates):
+        return None                  # a body's, a gain's, a delay's candidates are not on a joint coordinate
     from baseparams.dynamics.tied import ties, tied_group
     if tied_group(mechanism, coordinates) is None:
         return None
