@@ -7,8 +7,9 @@ Savitzky-Golay; it is read as a recording description would read the same column
 given, ``[torque] c = "tau_c"``): resampled to be filtered and differentiated, taken back
 to each sample's own time, filtered and decimated in parallel. One pipeline, so the two
 ways of reading the same samples cannot disagree (tests/test_logs_round_two.py compares
-them). Why: the Panda's samples in the project's layout (irregular stamps, a measured
-velocity, no acceleration) were refused while the description path read them (issue 44).
+them; :func:`baseparams.recordings.recording.read_data` reads the file so). Why: the Panda's
+samples in the project's layout (irregular stamps, a measured velocity, no acceleration)
+were refused while the description path read them (issue 44).
 """
 
 import os
@@ -16,8 +17,7 @@ from pathlib import Path
 
 from baseparams.dynamics.forces import independent_names
 from baseparams.model.mechanism import Mechanism
-from baseparams.recordings.data import MeasuredData, _read_text, read_columns
-from baseparams.recordings.recording import describe, read_described
+from baseparams.recordings.data import _read_text, read_columns
 
 
 def implied_description(path: str | os.PathLike, mechanism: Mechanism) -> dict:
@@ -35,18 +35,10 @@ def implied_description(path: str | os.PathLike, mechanism: Mechanism) -> dict:
     return data
 
 
-def read_layout(path: str | os.PathLike, mechanism: Mechanism, *, check_kinematics: bool = True,
-                fit_filter: dict | None = None, why: str = "irregular time stamps") -> MeasuredData:
-    """The CSV at ``path`` (the project's layout, already checked field by field) through the
-    recording pipeline with its implied description, with a note saying so and ``why``
-    (``fit_filter``: as :func:`~.recording.read_described` takes it: a --validate recording
-    filtered as the fit's data were)."""
-    data = implied_description(path, mechanism)
-    measured, _ = read_described(describe(data, str(path), mechanism), check_kinematics=check_kinematics,
-                                 fit_filter=fit_filter)
-    given = [q for q in ("velocity", "acceleration") if q in data]
-    measured.notes = (f"{why}: read as a recording with the description its columns imply (time t, "
-                      f"positions q_c{''.join(', ' + q + 's ' + ('qd_c' if q == 'velocity' else 'qdd_c') for q in given)}"
-                      ", torques tau_c; docs/identification.md, \"One pipeline\")",) + measured.notes
-    measured.path = str(path)
-    return measured
+def implied_note(description: dict, why: str) -> str:
+    """The note saying that a CSV in the project's layout was read through the recording
+    pipeline, and why (irregular stamps; a --validate recording filtered as the fit's data)."""
+    given = [q for q in ("velocity", "acceleration") if q in description]
+    return (f"{why}: read as a recording with the description its columns imply (time t, positions q_c"
+            + "".join(f", {q}s {'qd_c' if q == 'velocity' else 'qdd_c'}" for q in given)
+            + ", torques tau_c; docs/identification.md, \"One pipeline\")")

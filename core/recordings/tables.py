@@ -19,13 +19,19 @@ tau_<coordinate>" (issue 44).
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from baseparams.errors import InputError
 from baseparams.io.schema import BOOLEAN, STRING, Array, Table
-from baseparams.recordings.data import (MAX_MAGNITUDE, MISSING_CHARACTERS, NUMBER, _checked, _lines, _read_text,
-                                         read_columns)
+from baseparams.recordings.arrays import is_array_file, read_arrays
+from baseparams.recordings.bags import STAMP, is_bag, read_bag
+from baseparams.recordings.data import (DELIMITERS, MAX_MAGNITUDE, MISSING_CHARACTERS, NUMBER, _checked, _lines,
+                                         _read_text, read_columns)
+
+if TYPE_CHECKING:
+    from baseparams.recordings.recording import Description
 
 LOG = Table({"path": (STRING, True),
              "names": (Array(STRING, min_length=1, what="a list of the columns' names, in order"), False),
@@ -77,13 +83,65 @@ def log_files(run: dict, description: str, key: str) -> dict[str | None, LogFile
                 if name in seen:
                     raise InputError(f"{name!r} is named twice", file=description, key=f"{where}.names[{k}]")
                 seen.add(name)
-            from baseparams.recordings.arrays import is_array_file
-            from baseparams.recordings.bags import is_bag
             if is_array_file(spec["path"]) or is_bag(spec["path"]):
                 raise InputError("names and stacked are for text logs: an array file or a bag names its own "
                                  "columns", file=description, key=f"{where}.names")
         out[alias] = LogFile(spec["path"], names, stacked, where)
     return out
+
+
+def read_run_tables(description: "Description", logs: dict[str | None, LogFile], folder: Path
+                 ) -> tuple[dict, dict, dict]:
+    """(tables, files, groups) of one run's logs: each table (header, the used columns by name,
+    each sample's row) by alias; ``files``: each alias's name in messages; ``groups``: the
+    alias a channel names it by (a bag is one table per topic, each on its own clock, all
+    under the bag's alias). Only the columns the description uses are read."""
+    head = description.data.get("recording", {})
+    delimiter = log_format(description)
+    wanted = {c.column for chans in description.channels.values() for c in chans if not c.absent}
+    clock = str(head.get("time", "")).rpartition(":")[2]
+    if clock:
+        wanted.add(clock)
+    dates = {clock} if head.get("time_unit") == "iso" else set()
+    tables: dict = {}
+    files: dict = {}
+    groups: dict = {}
+    only_bags = all(is_bag(folder / log.path) for log in logs.values())
+    for alias, log in logs.items():
+        where = str(folder / log.path)
+        if is_bag(where):
+            topics = read_bag(where, wanted, clock or STAMP, strict=only_bags)
+            for topic, table in topics.items():
+                tables[(alias, topic)] = table
+                files[(alias, topic)] = f"{log.path} (topic {topic})"
+                groups[(alias, topic)] = alias
+            continue
+        tables[alias] = read_arrays(where, wanted, dates) if is_array_file(where) else \
+            read_log(where, log, description.path, *delimiter, wanted=wanted, dates=dates)
+        files[alias] = log.path
+        groups[alias] = alias
+    if not tables:
+        raise InputError("no topic of its bag(s) holds a column the description uses", file=description.path,
+                         key="runs")
+    if dates:                     # nanoseconds since 1970, as seconds since the run's first stamp
+        (stamp,) = dates
+        origin = min(int(table[stamp][0]) for _, table, _ in tables.values() if stamp in table)
+        for _, table, _ in tables.values():
+            if stamp in table:
+                table[stamp] = (table[stamp] - origin) * 1e-9
+    return tables, files, groups
+
+
+def log_format(description: "Description") -> tuple[str, str | None]:
+    """(delimiter, comment prefix) of the logs: ``[recording] delimiter`` (",", ";", "tab",
+    "space" or "auto", the default) and ``comment`` (a prefix of lines to skip, none by default)."""
+    head = description.data.get("recording", {})
+    delimiter = head.get("delimiter", "auto")
+    if delimiter != "auto" and delimiter not in DELIMITERS:
+        raise InputError(f"unknown delimiter {delimiter!r}: one of auto, ',', ';', tab, space",
+                         file=description.path, key="recording.delimiter")
+    comment = head.get("comment") or None
+    return DELIMITERS.get(delimiter, delimiter), comment
 
 
 def read_log(path: str, log: LogFile, description: str, delimiter: str = "auto", comment: str | None = None,
