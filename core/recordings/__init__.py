@@ -4,7 +4,9 @@
 - :mod:`.data`: the project's CSV layout, :class:`MeasuredData`, filters and derivatives;
 - :mod:`.tables`: a description's text logs (a header row, ``names`` for none, ``stacked`` for one value a line);
 - :mod:`.bags`: ROS 1 and ROS 2 bags as tables, a topic each on its own clock (the ``ros`` extra);
-- :mod:`.implied`: the project's CSV layout read as a recording (irregular stamps: one pipeline);
+- :mod:`.clocks`: a run's tables on one clock (time, rows and window, files on their own clocks, gaps);
+- :mod:`.values`: a description's numbers (decimals exact, expressions);
+- :mod:`.implied`: the description a CSV in the project's layout implies (irregular stamps: one pipeline);
 - :mod:`.arrays`: ``.npz`` and ``.mat`` logs as named columns;
 - :mod:`.simulate`: synthetic measured data with a known truth (the proof bench).
 
