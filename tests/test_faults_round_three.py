@@ -586,3 +586,61 @@ def test_ctrl_c_on_a_local_dask_cluster_prints_interrupted_alone():
     proc.stdout.close()
     assert proc.returncode == 130, seen
     assert [x for x in seen if x.strip() and not x.startswith("validate")] == ["interrupted"], seen
+
+
+def test_no_damaged_array_log_is_an_internal_error(logged, tmp_path):
+    """A .npz and a .mat (compressed and not), truncated at many lengths and with bytes
+    flipped: read or refused with an InputError, never another exception (a reader of
+    foreign binary files meets every error its parsers have)."""
+    import scipy.io
+    from baseparams.errors import InputError
+    from baseparams.recordings.arrays import read_arrays
+    _, t, q, tau = logged
+    t, q, tau = t[:200], q[:200], tau[:200]
+    np.savez_compressed(tmp_path / "a.npz", t=t, q=q.T, tau=tau)
+    np.savez(tmp_path / "b.npz", t=t, q=q.T, tau=tau)
+    scipy.io.savemat(tmp_path / "c.mat", {"log": {"t": t, "q": q, "tau": tau}}, do_compression=True)
+    scipy.io.savemat(tmp_path / "d.mat", {"t": t, "q": q, "tau": tau, "s": "text"}, do_compression=False)
+    scipy.io.savemat(tmp_path / "e.mat", {"t": t, "q": q, "tau": tau}, format="4")
+    wanted = {"t", "q[0]", "q[1]", "tau[0]", "tau[1]", "log.t", "log.q[0]", "log.tau[1]"}
+    rng = np.random.default_rng(46)
+    tried = 0
+    for name in ("a.npz", "b.npz", "c.mat", "d.mat", "e.mat"):
+        raw = (tmp_path / name).read_bytes()
+        suffix = name[-4:]
+        damaged = [raw[:n] for n in sorted({int(x) for x in rng.integers(0, len(raw), 40)})]
+        for _ in range(60):
+            flipped = bytearray(raw)
+            for at in rng.integers(0, len(raw), int(rng.integers(1, 4))):
+                flipped[at] = int(rng.integers(0, 256))
+            damaged.append(bytes(flipped))
+        for k, data in enumerate(damaged):
+            path = tmp_path / f"x{k}{suffix}"
+            path.write_bytes(data)
+            try:
+                read_arrays(str(path), wanted)
+            except InputError:
+                pass
+            tried += 1
+    assert tried >= 400
+
+
+def test_a_mat_element_of_an_unknown_type_is_refused_not_a_crash(logged, tmp_path):
+    """One byte flipped in a .mat (the type of a variable's data element, 9 -> 179) ended the
+    process with a segmentation fault inside scipy's reader, which indexes a table by that type
+    unchecked. The used variables' elements are walked and checked first: exit 2. In a child
+    process, so that the old crash cannot take the test run with it."""
+    import scipy.io
+    _, t, q, tau = logged
+    scipy.io.savemat(tmp_path / "log.mat", {"t": t, "q": q, "tau": tau}, do_compression=False)
+    raw = bytearray((tmp_path / "log.mat").read_bytes())
+    # the first variable (t): tag 8, flags 16, dims 16, name 8 (small element): then its data's tag
+    at = 128 + 8 + 16 + 16 + 8
+    assert struct.unpack_from("<I", raw, at)[0] == 9                   # miDOUBLE
+    raw[at] = 179
+    (tmp_path / "log.mat").write_bytes(bytes(raw))
+    description = describe(tmp_path, "log.mat")
+    proc = subprocess.run([*CLI, "identify", "planar_2r", str(description), "--quiet"], capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    one_error(proc.stderr, "log.mat", "cannot read as a MATLAB .mat file", "type 179")

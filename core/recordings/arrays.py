@@ -22,10 +22,10 @@ import re
 import struct
 import zipfile
 import zlib
-from collections.abc import Collection, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Collection, Iterator
+from dataclasses import dataclass, replace
 from math import prod
-from typing import IO
+from typing import IO, TypeVar
 
 import numpy as np
 
@@ -51,6 +51,7 @@ class Variable:
     declared: int
     what: str                       # its shape and type as declared, for messages
     placeholder: str = ""           # its columns in the list of names while not read (columns None)
+    offset: int = -1                # a MATLAB v5 element's position in the file
 
 
 def read_arrays(path: str, wanted: Collection[str] | None = None, dates: Collection[str] = ()
@@ -83,7 +84,8 @@ def read_arrays(path: str, wanted: Collection[str] | None = None, dates: Collect
         raise InputError(_too_large_message(path, None, "reading its variables ran out of memory"),
                          file=path) from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, struct.error, NotImplementedError,
-            TypeError, KeyError, IndexError, OverflowError, AttributeError, UnicodeDecodeError, RecursionError) as exc:
+            RuntimeError, TypeError, KeyError, IndexError, OverflowError, AttributeError, UnicodeDecodeError,
+            RecursionError) as exc:
         raise InputError(f"cannot read as {kind} file: {exc or type(exc).__name__}", file=path) from None
     except Exception as exc:            # scipy's MatReadError and its kin: a file that is not a .mat
         if type(exc).__module__.startswith("scipy."):
@@ -193,6 +195,23 @@ def _columns_of(name: str, shape: tuple[int, ...]) -> tuple[str, ...] | None:
     return tuple(f"{name}[{k}]" for k in range(channels))
 
 
+T = TypeVar("T")
+
+
+def _foreign(call: Callable[[], T]) -> T:
+    """``call()``, a parser of numpy's or scipy's reading the file's bytes: whatever it raises
+    on bytes it does not expect (a TokenError from numpy's header parser, scipy's
+    UnboundLocalError on a damaged .mat, both found by flipping bytes) is a file that cannot be
+    read (ValueError here, an InputError above), not a bug of ours; running out of memory stays
+    a MemoryError."""
+    try:
+        return call()
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise ValueError(f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__) from None
+
+
 # ----- NumPy .npz -------------------------------------------------------------------------
 def _npz(path: str, wanted: Collection[str] | None
          ) -> tuple[list[Variable], list[str], dict[str, np.ndarray]]:
@@ -205,7 +224,7 @@ def _npz(path: str, wanted: Collection[str] | None
                 continue
             name = info.filename[:-4]
             with archive.open(info) as fp:
-                shape, dtype = _npy_header(fp)
+                shape, dtype = _foreign(lambda: _npy_header(fp))
             members[name] = info.filename
             if dtype.hasobject or dtype.fields is not None or len(shape) not in (1, 2):
                 continue                                         # not columns: never read
@@ -219,7 +238,7 @@ def _npz(path: str, wanted: Collection[str] | None
         loaded: dict[str, np.ndarray] = {}
         for variable in used:
             with archive.open(members[variable.name]) as fp:
-                array = np.lib.format.read_array(fp, allow_pickle=False)
+                array = _foreign(lambda: np.lib.format.read_array(fp, allow_pickle=False))
             loaded.update(_columns(variable.name, array))
     return variables, _names(variables, loaded), loaded
 
@@ -277,10 +296,14 @@ def _mat(path: str, wanted: Collection[str] | None
             raise InputError("a MATLAB v7.3 (HDF5) file, which is not read: save it with -v7", file=path)
     used = _used(variables, wanted)
     _check_budget(path, used)
+    if version == 1:
+        with open(path, "rb") as fh:
+            for variable in used:
+                _check_mat5_element(fh, variable)
     loaded: dict[str, np.ndarray] = {}
     if used:
-        data = scipy.io.loadmat(path, variable_names=[v.name for v in used], squeeze_me=True,
-                                struct_as_record=False)
+        data = _foreign(lambda: scipy.io.loadmat(path, variable_names=[v.name for v in used], squeeze_me=True,
+                                                 struct_as_record=False))
 
         def add(name: str, value: object) -> None:
             if hasattr(value, "_fieldnames"):                      # a struct: its fields
@@ -318,7 +341,7 @@ def _mat5_variables(fh: IO[bytes], size: int) -> Iterator[Variable]:
             continue
         variable = _mat5_header(head, endian)
         if variable is not None:
-            yield variable
+            yield replace(variable, offset=position)
         position = after
 
 
@@ -356,12 +379,24 @@ def _mat5_header(head: bytes, endian: str) -> Variable | None:
         offset += 8 + count + (-count) % 8
         return data
 
-    flags = element()
+    kinds = []
+
+    def typed(allowed: tuple[int, ...]) -> bytes:
+        """The next subelement, of one of the ``allowed`` types (scipy's reader indexes a
+        table by the type unchecked: a flipped byte there crashed the process)."""
+        kind = struct.unpack(endian + "I", head[offset:offset + 4])[0]
+        kind = kind & 0xFFFF if kind >> 16 else kind
+        if kind not in allowed:
+            raise ValueError(f"a MATLAB element of type {kind} where one of {allowed} belongs")
+        kinds.append(kind)
+        return element()
+
+    flags = typed((6,))
     word = struct.unpack(endian + "I", flags[:4])[0]
     klass, complex_ = word & 0xFF, bool(word & 0x0800)
-    raw_dims = element()
+    raw_dims = typed((5,))
     dims = tuple(struct.unpack(endian + f"{len(raw_dims) // 4}i", raw_dims[:len(raw_dims) // 4 * 4]))
-    name = element().decode("latin-1").rstrip("\x00")
+    name = typed((1, 2, 16)).decode("latin-1").rstrip("\x00")
     if any(d < 0 for d in dims):
         raise ValueError(f"variable {name!r} declares negative dimensions {dims}")
     count = prod(dims)
@@ -378,6 +413,93 @@ def _mat5_header(head: bytes, endian: str) -> Variable | None:
     converted = count * 8 if (klass != 6 or complex_) and columns != () else 0
     return Variable(name, columns, max(element_bytes, count * itemsize) + converted,
                     f"{'x'.join(map(str, dims))} values of {_size(count * itemsize)}", f"{name}[...]")
+
+
+# the MATLAB data types (miINT8 .. miUTF32) scipy's reader has a dtype for
+_MI_DATA = (1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 16, 17, 18)
+
+
+def _check_mat5_element(fh: IO[bytes], variable: Variable) -> None:
+    """Walk a used variable's whole element (inflated, within its declared size, which the
+    budget allowed) and check every subelement's type and bounds before scipy reads it: its
+    reader indexes a table by the type without a check, and a .mat with one byte flipped there
+    ended the process with a segmentation fault."""
+    fh.seek(126)
+    endian = "<" if fh.read(2) == b"IM" else ">"
+    fh.seek(variable.offset)
+    mdtype, nbytes = struct.unpack(endian + "II", fh.read(8))
+    if mdtype == _MI_COMPRESSED:
+        inflate = zlib.decompressobj()
+        data = inflate.decompress(fh.read(nbytes), variable.declared + 8)
+    else:
+        data = struct.pack(endian + "II", mdtype, nbytes) + fh.read(nbytes)
+    _walk_matrix(data, 0, endian)
+
+
+def _walk_matrix(data: bytes, at: int, endian: str) -> int:
+    """Check the miMATRIX element at ``at`` (its subelements, its cells' and fields' matrices);
+    the position after it."""
+
+    def tag(at: int) -> tuple[int, int, int, int]:
+        """(type, bytes, where the data starts, where the next element starts)"""
+        if at + 8 > len(data):
+            raise ValueError("a MATLAB element runs past its end")
+        kind, count = struct.unpack_from(endian + "II", data, at)
+        if kind >> 16:
+            kind, count = kind & 0xFFFF, kind >> 16
+            if count > 4:
+                raise ValueError("a MATLAB small element of more than 4 bytes")
+            return kind, count, at + 4, at + 8
+        after = at + 8 + count + (-count) % 8
+        if at + 8 + count > len(data):
+            raise ValueError("a MATLAB element runs past its end")
+        return kind, count, at + 8, after
+
+    def data_element(at: int, allowed: tuple[int, ...] = _MI_DATA) -> tuple[int, int, int]:
+        kind, count, start, after = tag(at)
+        if kind not in allowed:
+            raise ValueError(f"a MATLAB data element of type {kind}, which no reader knows")
+        return count, start, after
+
+    kind, count, start, after = tag(at)
+    if kind != _MI_MATRIX:
+        raise ValueError(f"a MATLAB element of type {kind} where an array belongs")
+    if count == 0:
+        return after
+    _, flags, at = data_element(start, (6,))
+    word = struct.unpack_from(endian + "I", data, flags)[0]
+    klass, complex_ = word & 0xFF, bool(word & 0x0800)
+    size, dims, at = data_element(at, (5,))
+    shape = struct.unpack_from(endian + f"{size // 4}i", data, dims)
+    if any(d < 0 for d in shape):
+        raise ValueError("negative MATLAB dimensions")
+    _, _, at = data_element(at, (1, 2, 16))                        # the name
+    entries = prod(shape)
+    if klass in _MAT_ITEMSIZE or klass == _MAT_CHAR:                # numeric, logical, char
+        _, _, at = data_element(at)
+        if complex_:
+            _, _, at = data_element(at)
+    elif klass == _MAT_SPARSE:
+        for _ in range(4 if complex_ else 3):
+            _, _, at = data_element(at)
+    elif klass == _MAT_CELL:
+        for _ in range(entries):
+            at = _walk_matrix(data, at, endian)
+    elif klass in (_MAT_STRUCT, _MAT_OBJECT):
+        if klass == _MAT_OBJECT:
+            _, _, at = data_element(at, (1, 2, 16))                # the class name
+        width_bytes, width_at, at = data_element(at, (5,))
+        width = struct.unpack_from(endian + "i", data, width_at)[0] if width_bytes >= 4 else 0
+        names, _, at = data_element(at, (1, 2, 16))
+        if width <= 0 and names:
+            raise ValueError("MATLAB struct field names of no length")
+        for _ in range(entries * (names // width if width > 0 else 0)):
+            at = _walk_matrix(data, at, endian)
+    else:                           # a function handle, an opaque object: scipy's own (not columns)
+        return after
+    if at > after:
+        raise ValueError("a MATLAB array's parts run past its element")
+    return after
 
 
 def _mat4_variables(fh: IO[bytes], size: int) -> Iterator[Variable]:
