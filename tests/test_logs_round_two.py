@@ -501,3 +501,19 @@ def test_a_bag_without_rosbags_installed_says_how_to_install_it(tmp_path, monkey
                                        + "".join(f'q{j + 1} = "/joint_states.effort[{n}]"\n' for j, n in enumerate(JOINTS)))
     out = _cli("identify", _mech_file(tmp_path), tmp_path / "rec.toml", "--solver", "dp")
     assert out.exit_code == 2 and "pip install 'baseparams[ros]'" in out.stderr and "arm.bag" in out.stderr, out.output
+
+
+def test_a_joint_name_index_finds_the_names_of_the_enclosing_or_the_whole_message():
+    """JointState's own name list, or a controller state's joint_names at the top of the message
+    for actual.positions[joint] (a field path without ROS installed: plain objects)."""
+    from types import SimpleNamespace
+
+    from baseparams.recordings.bags import _value, parse_field
+    state = SimpleNamespace(joint_names=["a", "b"], actual=SimpleNamespace(positions=np.array([1.0, 2.0])))
+    field = parse_field("/state.actual.positions[b]", ["/state"])
+    assert field is not None and _value(state, field, {}) == 2.0
+    joint_state = SimpleNamespace(name=["b", "a"], position=np.array([3.0, 4.0]))
+    assert _value(joint_state, parse_field("/js.position[a]", ["/js"]), {}) == 4.0
+    assert np.isnan(_value(joint_state, parse_field("/js.position[c]", ["/js"]), {}))
+    assert _value(joint_state, parse_field("/js.position[0]", ["/js"]), {}) == 3.0
+    assert parse_field("/other.position[0]", ["/js"]) is None

@@ -109,9 +109,7 @@ def _value(message: Any, field: Field, names: dict) -> float:
         elif kind == "index":
             value = value[int(step)]
         else:                           # a joint's name: its place in the message's own list
-            listed = getattr(parent, "name", None)
-            if listed is None:
-                listed = getattr(parent, "joint_names", None)
+            listed = _joint_names(parent, message)
             if listed is None:
                 raise KeyError(f"[{step}]")
             key = tuple(listed)
@@ -124,6 +122,18 @@ def _value(message: Any, field: Field, names: dict) -> float:
     if hasattr(value, "sec") and hasattr(value, "nanosec"):           # a stamp: seconds
         return float(value.sec) + 1e-9 * float(value.nanosec)
     return float(value)
+
+
+def _joint_names(parent: Any, message: Any) -> Any:
+    """The joint names a ``[joint]`` index looks up: the enclosing message's ``name`` (a
+    JointState) or ``joint_names``, else the whole message's (a controller state's
+    ``actual.positions[joint]``: its ``joint_names`` are at the top); None when none."""
+    for owner in (parent, message):
+        for attribute in ("name", "joint_names"):
+            listed = getattr(owner, attribute, None)
+            if isinstance(listed, (list, tuple)):
+                return listed
+    return None
 
 
 def _stamp_ns(message: Any, clock: str, received: int, topic: str, msgtype: str, path: Path) -> int:
@@ -206,7 +216,8 @@ def read_bag(path: str | Path, wanted: Collection[str], clock: str = STAMP, stri
                 if joints and np.isnan(table[field.column]).all():
                     listed = sorted({n for key in names for n in key})
                     raise InputError(f"no message of topic {topic} names the joint {joints[0]!r} of {field.column!r} "
-                                     f"(joints: {', '.join(listed)})", file=str(path))
+                                     f"(joints: {', '.join(listed) or 'none named'}; a value may be taken by its index "
+                                     "too, e.g. position[0])", file=str(path))
             out[topic] = ([clock] + [f.column for f in used], table, [int(k) + 1 for k in order])
         if stamps:                   # seconds from the first stamp: exact steps, a shared origin
             origin = min(int(s.min()) for s in stamps.values())
@@ -234,12 +245,12 @@ def _field_error(field: Field, message: Any, msgtype: str, exc: Exception) -> st
                 size = len(value) if hasattr(value, "__len__") else 0
                 return f"{field.column!r}: index {step} is outside its {size} values"
         else:
-            listed = getattr(message, "name", None) if field.steps[0][0] == "attr" else None
+            listed = _joint_names(message, message)
             if listed is not None and hasattr(value, "__len__") and len(value) < len(listed):
                 return (f"{field.column!r}: the message's {field.steps[-2][1]} has {len(value)} values for its "
                         f"{len(listed)} joints (a publisher that does not fill it): map this quantity from another "
                         "topic, or leave it out")
-            if listed is None and not hasattr(message, "joint_names"):
+            if listed is None:
                 return (f"{field.column!r}: [{step}] names a joint, and the message has no list of joint names "
                         f"there (name, joint_names)")
             return f"{field.column!r}: [{step}] cannot be read in this message ({type(exc).__name__}: {exc})"
