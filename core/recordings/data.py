@@ -641,7 +641,8 @@ def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None
             if len(pending) >= PARSE_BATCH_ROWS:
                 _convert(path, header, used, pending, done, lines, missing, bad, dates)
     except csv.Error as exc:
-        raise InputError(f"not a CSV file: {exc}", file=path, key=f"row {reader.line_num}") from None
+        raise InputError(f"not a CSV file: {exc}" if log is None else f"not a delimited text log ({log}): {exc}",
+                         file=path, key=f"row {reader.line_num}") from None
     if header is None:
         raise InputError("no header row" if log is None else f"no lines with values ({log})", file=path)
     if log is None and len(header) < 2:
