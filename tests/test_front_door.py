@@ -1,12 +1,17 @@
-"""The Python front door as the docs show it: every ``bp.NAME`` (and ``bp.NAME.ATTR``) that
+"""The Python front door as the docs show it. Every ``bp.NAME`` (and ``bp.NAME.ATTR``) that
 README.md and docs/*.md use resolves after ``import baseparams as bp`` alone, in a fresh
-interpreter (no other module imported first to make it work by accident)."""
+interpreter (no other module imported first to make it work by accident); the base matrix and
+the map from standard to base parameters; export's summary."""
 
 import json
 import pathlib
 import re
 import subprocess
 import sys
+
+import pytest
+
+from baseparams.errors import InputError
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 NAME = re.compile(r"\bbp\.([A-Za-z_][A-Za-z_0-9]*(?:\.[A-Za-z_][A-Za-z_0-9]*)*)")
@@ -38,3 +43,33 @@ def test_every_name_the_docs_use_is_reachable():
     out = subprocess.run([sys.executable, "-c", probe, json.dumps(names)], capture_output=True, text=True,
                          check=True, cwd=ROOT)
     assert json.loads(out.stdout) == [], "names the docs use that `import baseparams as bp` does not give"
+
+
+def test_standard_parameters_map_onto_the_base_parameters_an_identification_finds(tmp_path):
+    """``Solution.to_base``: the file's standard parameters mapped onto the base parameters
+    equal what identification recovers from noise-free data simulated with them (an
+    independent path: the regressor, least squares on the base columns)."""
+    import numpy as np
+    import baseparams as bp
+    from baseparams.dynamics.forces import standard_parameters
+    from baseparams.io.loader import resolve
+    mechanism = resolve("puma560")
+    solution = bp.solve("puma560", "dp")
+    truth = standard_parameters(mechanism)
+    bp.simulate("puma560", output=tmp_path / "clean.csv", samples=600)
+    fit = bp.identify("puma560", str(tmp_path / "clean.csv"), solver="dp")
+    estimates = np.array([row["estimate"] for row in fit.rows() if row["kind"] == "base"])
+    expected = solution.to_base(truth)
+    assert solution.base_matrix().shape == (solution.rank, len(solution.parameters))
+    assert np.allclose(estimates, expected, rtol=1e-6, atol=1e-8 * np.max(np.abs(expected)))
+    by_name = dict(zip(solution.parameters, truth))
+    assert np.allclose(solution.to_base(by_name), expected)
+    with pytest.raises(InputError, match="not standard"):
+        solution.to_base({"m99": 1.0})
+
+
+def test_export_prints_a_summary_and_keeps_the_module_in_source():
+    import baseparams as bp
+    exported = bp.export("pendulum", solver="dp")
+    assert "def regressor" in exported.source and "def regressor" not in str(exported)
+    assert "base parameters" in str(exported) and len(str(exported).splitlines()) == 1

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import html
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from baseparams.errors import InputError
+
 if TYPE_CHECKING:       # the heavy modules load when a verb runs, not on `import baseparams`
+    import numpy as np
     import pandas
 
     from baseparams.excite.plan import Plan
@@ -103,6 +107,35 @@ class Solution(Result):
     def legend(self) -> list[str]:
         """``phi_b01 = m1 + 0.5*mx2`` lines: what each base parameter stands for."""
         return legend_lines(self.result.base)
+
+    def base_matrix(self) -> np.ndarray:
+        """B (rank, P), float64: row i holds base parameter i's coefficients over the
+        standard parameters (``parameters``, in that order), so phi_b = B phi. Exact solvers'
+        rows are their exact values rounded once; for the exact rows use
+        ``coefficient_matrix()``."""
+        import numpy as np
+        rows = self.result.coefficient_matrix(values=True)
+        return np.array([[float(v) for v in row] for row in rows], dtype=float).reshape(len(rows), -1)
+
+    def to_base(self, standard: Mapping[str, float] | Sequence[float]) -> np.ndarray:
+        """The base parameters (rank,) of a vector of standard parameters (a simulation's
+        truth, a CAD model's inertias): by name (``{"m1": 2.0, ...}``, absent names 0) or as a
+        sequence in ``parameters`` order. Why: to compare an identification with a known
+        truth, the truth must be mapped onto what the data can determine."""
+        import numpy as np
+        names = list(self.result.parameters)
+        if isinstance(standard, Mapping):
+            unknown = sorted(set(standard) - set(names))
+            if unknown:
+                raise InputError(f"not standard parameters of {self.mechanism.name}: {', '.join(unknown[:5])}"
+                                 f"{' ...' if len(unknown) > 5 else ''} (they are {', '.join(names[:4])}, ...)")
+            phi = np.array([float(standard.get(name, 0.0)) for name in names])
+        else:
+            phi = np.asarray(standard, dtype=float).reshape(-1)
+            if len(phi) != len(names):
+                raise InputError(f"{len(phi)} values for the {len(names)} standard parameters of "
+                                 f"{self.mechanism.name}")
+        return self.base_matrix() @ phi
 
 
 def expression_text(expression: dict[str, str]) -> str:
@@ -325,7 +358,12 @@ class Export(Result):
                 "base_parameters": len(self.solution.result.base), "output": self.output}
 
     def to_text(self) -> str:
-        return self.source
+        """A summary; the module itself is ``source`` (printing 300 lines of code for
+        ``print(bp.export(...))`` told nothing)."""
+        where = f"written to {self.output}" if self.output else "in .source"
+        return (f"regressor and base_regressor of {self.solution.mechanism.name} "
+                f"({len(self.solution.result.base)} base parameters, solver {self.solution.result.solver}): "
+                f"{len(self.source.splitlines())} lines of Python, {where}")
 
 
 @dataclass
