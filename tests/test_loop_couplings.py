@@ -407,3 +407,25 @@ def test_a_body_named_like_a_tied_coordinate_is_not_called_equivalent():
     assert tied_reason(arm, mixed) is None
     counterweight = [Candidate("offset", name, ("off",), column) for name in ("insertion", "counterweight")]
     assert "coupling" in (tied_reason(arm, counterweight) or "")
+
+
+def test_effects_on_the_counterweight_and_a_passive_angle_are_identified(tmp_path):
+    """Forces on dependent coordinates of the looped arm (a viscous friction on the coupled
+    counterweight's slide, Coulomb friction on the passive pitch_top) reach the independent
+    coordinates through R^T: simulated without noise, identify gives them back."""
+    from baseparams.registry import mechanisms
+    data = tmp_path / "effects.csv"
+    result = CliRunner().invoke(main, ["simulate", "parallelogram_arm", "-o", str(data), "--samples", "1500",
+                                       "--seed", "2", "--effect", "viscous_friction:counterweight=1.5",
+                                       "--effect", "coulomb_friction:pitch_top=0.2", "--quiet"])
+    assert result.exit_code == 0, result.output + result.stderr
+    text = mechanisms()["parallelogram_arm"].item.path.read_text().replace(
+        "[coordinates]", '[[effects]]\nkind = "viscous_friction"\ncoordinate = "counterweight"\n\n'
+                         '[[effects]]\nkind = "coulomb_friction"\ncoordinate = "pitch_top"\n\n[coordinates]')
+    arm = tmp_path / "arm.toml"
+    arm.write_text(text)
+    result = CliRunner().invoke(main, ["identify", str(arm), str(data), "--format", "json"])
+    assert result.exit_code == 0, result.output + result.stderr
+    found = {(e["kind"], e["coordinate"]): e["coefficients"][0]["value"] for e in json.loads(result.stdout)["effects"]}
+    assert found[("viscous_friction", "counterweight")] == pytest.approx(1.5, rel=1e-9)
+    assert found[("coulomb_friction", "pitch_top")] == pytest.approx(0.2, rel=1e-9)
