@@ -21,6 +21,7 @@ import json
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -106,7 +107,7 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
             coordinate = entry["coordinate"]
             if not isinstance(entry["kind"], str) or not isinstance(coordinate, str):
                 raise TypeError("kind and coordinate are names")
-            values = {}
+            values: dict[str, Any] = {}               # the JSON's numbers, as held before (floats)
             for j, c in enumerate(entry["coefficients"]):
                 if c.get("value") is None:
                     continue
