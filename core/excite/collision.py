@@ -243,8 +243,8 @@ def _build(spec: SceneSpec, mechanism: Mechanism, names: tuple[str, ...], centre
                      "parents; --package-dir adds more): those links are checked by their frames' origins only")
     geometry = pin.buildGeomFromUrdfString(model, text, pin.GeometryType.COLLISION, package_dirs=list(dirs))
     for obj in geometry.geometryObjects:
-        if hasattr(obj.geometry, "buildConvexRepresentation"):
-            obj.geometry.buildConvexRepresentation(False)
+        if hasattr(obj.geometry, "buildConvexHull"):            # a mesh: its convex hull (qhull)
+            obj.geometry.buildConvexHull(True, "Qt")
             obj.geometry = obj.geometry.convex
     with_geometry = {obj.parentJoint for obj in geometry.geometryObjects}
     skeleton = []
@@ -286,7 +286,7 @@ def _build(spec: SceneSpec, mechanism: Mechanism, names: tuple[str, ...], centre
     mapping, offsets, angle_of = _mapping(model, mechanism, names)
     vertices = [_points(o.geometry) for o in objects]
     planes = [(p, g) for p in range(len(spec.planes)) for g in moving]
-    scene = Scene(spec, names, model, model.createData(), geometry, pin.GeometryData(geometry), mapping, offsets,
+    scene = Scene(spec, names, model, model.createData(), geometry, _geometry_data(geometry), mapping, offsets,
                   angle_of, vertices, moving, planes, [], np.zeros((len(objects), len(names))), skeleton, notes,
                   bool(meshes))
     scene.speed = _speed_bounds(scene)
@@ -326,9 +326,21 @@ def _build(spec: SceneSpec, mechanism: Mechanism, names: tuple[str, ...], centre
             geometry.addCollisionPair(p)
         scene.plane_items = [item for k, item in enumerate(planes) if pairs + k not in drop]
         scene.required = np.array([r for k, r in enumerate(scene.required) if k not in drop])
-        scene.gdata = pin.GeometryData(geometry)
+        scene.gdata = _geometry_data(geometry)
         scene.pair_names = [(objects[p.first].name, objects[p.second].name) for p in geometry.collisionPairs]
     return scene
+
+
+def _geometry_data(geometry: Any) -> Any:
+    """Pinocchio's geometry data with GJK tight (1e-10) and no warm start from the last call:
+    the same configuration gives the same distance whatever was computed before."""
+    import coal
+    import pinocchio as pin
+    gdata = pin.GeometryData(geometry)
+    for request in gdata.distanceRequests:
+        request.gjk_tolerance = 1e-10
+        request.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
+    return gdata
 
 
 def _disabled(spec: SceneSpec, model: Any, objects: Any, pairs: list[tuple[int, int]],
@@ -380,7 +392,7 @@ def _points(shape: Any) -> np.ndarray:
     """A geometry's points in its own frame: a hull's vertices, else its bounding box's corners
     (a box's own), a sphere of radius 0: its centre."""
     if hasattr(shape, "points") and hasattr(shape, "num_points"):
-        return np.array([np.asarray(shape.points(i)) for i in range(shape.num_points)])
+        return np.array(shape.points(), dtype=float).reshape(-1, 3)
     if type(shape).__name__ == "Sphere" and shape.radius == 0:
         return np.zeros((1, 3))
     shape.computeLocalAABB()

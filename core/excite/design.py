@@ -307,6 +307,17 @@ class Outcome:
     extra: dict = field(default_factory=dict)
 
 
+FAR = 3.0                    # a trial this many ranges or velocity limits out is not evaluated
+
+
+def far_outside(lim: Limits, q: np.ndarray, qd: np.ndarray) -> bool:
+    """A trial point far outside the position ranges or velocity limits: SLSQP's line search
+    may probe one, and a closed loop's Newton on it can take minutes and gigabytes."""
+    half = (lim.upper - lim.lower) / 2
+    centre = (lim.upper + lim.lower) / 2
+    return bool(np.any(np.abs(q - centre) > FAR * half) or np.any(np.abs(qd) > FAR * lim.velocity))
+
+
 Report = Callable[[int, float], None]
 REPORT_EVERY = 10            # iterations between two progress reports of a start
 
@@ -345,6 +356,8 @@ def _slsqp(problem: Problem, x0: np.ndarray, report: Report | None = None) -> Ou
 
     def evaluate(x: np.ndarray) -> dict[str, Any]:
         q, qd, qdd = form.motion(x, t)
+        if far_outside(lim, q, qd):        # a line search's wild trial: not worth evaluating
+            return dict(f=PENALTY, g=np.zeros_like(x), columns=None)
         try:
             columns = model.columns(q, qd, qdd, tangents=True)
         except KinematicsError:            # a closed loop that does not close, a file's limit

@@ -128,6 +128,11 @@ class ExciteJob:
                         else f"criterion {value:.4g}"
                     say(f"{self.label}: iteration {iteration}/{total}, {figure}")
             result = design.optimise(problem, x0, report)
+            if first.feasible and (not result.feasible or not result.value < first.value):
+                # the local optimiser ended no better than where it started: the start it is
+                result = design.Outcome(x0, first.value, True, result.converged,
+                                        f"{result.message} (no better than the start: the start is kept)",
+                                        result.iterations, result.evaluations)
         except BaseparamsError as exc:
             return Outcome(name, self.solver, ERROR, time.perf_counter() - start, message=str(exc))
         except Exception as exc:                                 # a bug: reported, the others go on
