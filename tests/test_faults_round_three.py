@@ -644,3 +644,22 @@ def test_a_mat_element_of_an_unknown_type_is_refused_not_a_crash(logged, tmp_pat
                           text=True, timeout=600)
     assert proc.returncode == 2, (proc.returncode, proc.stderr)
     one_error(proc.stderr, "log.mat", "cannot read as a MATLAB .mat file", "type 179")
+
+
+def test_a_validate_job_out_of_memory_is_an_error_not_an_internal_one(monkeypatch):
+    """A MemoryError in one of validate's jobs is the machine's limit: status "error" with the
+    allocation and the budget, not "internal_error" (a bug)."""
+    from baseparams import registry
+    from baseparams.orchestrate import jobs as jobs_module
+    from baseparams.orchestrate.jobs import ERROR, Job, MechanismText, run_job
+    import baseparams.solvers.run
+
+    def run_solver(*args, **kwargs):
+        raise MemoryError("Unable to allocate 3.6 GiB for an array with shape (9, 1000000, 50)")
+    monkeypatch.setattr(baseparams.solvers.run, "run_solver", run_solver)
+    path = Path(registry.mechanisms()["pendulum"].item.path)
+    outcome = run_job(Job(MechanismText.read("pendulum", path), "dp"))
+    assert outcome.status == ERROR, outcome
+    assert "out of memory: Unable to allocate 3.6 GiB" in outcome.message
+    assert "BASEPARAMS_MAX_MEMORY" in outcome.message
+    assert jobs_module.INTERNAL != outcome.status

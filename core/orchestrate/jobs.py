@@ -138,6 +138,11 @@ def run_job(job: AnyJob) -> Outcome:
         return outcome(OK, result=result.to_json())
     except BaseparamsError as exc:
         return outcome(ERROR, message=str(getattr(exc, "message", exc)))
+    except MemoryError as exc:                  # the machine's limit, not a bug (issue 46)
+        from baseparams.dynamics.trajectory import MEMORY_VARIABLE
+        return outcome(ERROR, message=f"out of memory: {str(exc).strip() or 'an allocation failed'} (set "
+                                      f"{MEMORY_VARIABLE} to the memory the machine has, so that such work is "
+                                      "refused with an estimate before it starts)")
     except Exception as exc:                    # a bug in a solver: reported, the run goes on
         return outcome(INTERNAL, message=f"{type(exc).__name__}: {exc}",
                        result={"traceback": traceback.format_exc(limit=8)})
