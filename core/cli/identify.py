@@ -103,7 +103,7 @@ def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], s
     DATA: CSV files in the project's layout (irregular stamps read as a recording) or
     recording descriptions (.toml: raw logs as robots write them, with or without a header
     row, one value a line, .npz/.mat arrays, ROS 1 and ROS 2 bags; motor-side channels, gains,
-    time stamps, filtering; docs/identification.md, `python -m pydoc
+    time stamps, filtering; `python -m pydoc
     baseparams.recordings.recording`), one or several; several runs are fitted together,
     each filtered on its own; --validate recordings are filtered with the fit's low-pass.
     NRMS is printed on the fit's band and on the unfiltered torques; a bad setup (a gain
