@@ -1,6 +1,7 @@
 """``baseparams excite``: plan the exciting motion (registered on ``main``; docs/excite.md)."""
 
 import sys
+from typing import Any
 
 import click
 
@@ -123,7 +124,7 @@ def excite(mech: str, output: str | None, check_path: str | None, solver_name: s
     """
     from baseparams.excite.run import check_plan, excite as run, output_kind
     options = options_from_text(get_solver(solver_name), extra)
-    collision_options = dict(collision=collision, collision_model=collision_model, srdf=srdf,
+    collision_options: dict[str, Any] = dict(collision=collision, collision_model=collision_model, srdf=srdf,
                              package_dirs=package_dirs, clearance=clearance, keep_out=keep_out, floor=not no_floor)
     if check_path is not None:
         if output is not None:

@@ -136,7 +136,10 @@ def check_motion(mechanism: Mechanism, problem: design.Problem, path: str, solve
                        problem.limits.assumptions(), notes)
 
 
-def read_motion(mechanism: Mechanism, path: str, names: tuple[str, ...]) -> tuple[tuple[np.ndarray, ...], list[str]]:
+Sampled = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def read_motion(mechanism: Mechanism, path: str, names: tuple[str, ...]) -> tuple[Sampled, list[str]]:
     """The motion in ``path``: a CSV (:func:`read_plan_csv`), or a recording (a description
     ``.toml`` or a CSV with ``tau_`` columns) as identify reads it."""
     if not Path(path).is_file():

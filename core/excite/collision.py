@@ -13,6 +13,7 @@ By default the base plane (z = 0 of the URDF's root frame) is a floor no moving 
 from __future__ import annotations
 
 import functools
+import importlib
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -67,8 +68,8 @@ def parse_keep_out(items: Sequence[str], floor: bool = True) -> tuple[tuple[Any,
 def available() -> str | None:
     """None when Pinocchio and coal can be imported, else the reason."""
     try:
-        import coal  # noqa: F401
-        import pinocchio  # noqa: F401
+        importlib.import_module("coal")
+        importlib.import_module("pinocchio")
     except ImportError as exc:
         return f"collision checking needs Pinocchio and coal: pip install 'baseparams[collision]' ({exc})"
     return None
@@ -228,7 +229,7 @@ def build(spec: SceneSpec, mechanism: Mechanism, names: Sequence[str], centre: n
 
 @functools.lru_cache(maxsize=8)
 def _build(spec: SceneSpec, mechanism: Mechanism, names: tuple[str, ...], centre: tuple[float, ...]) -> Scene:
-    import coal
+    coal = importlib.import_module("coal")
     import pinocchio as pin
     notes: list[str] = []
     assert spec.urdf is not None
@@ -334,8 +335,8 @@ def _build(spec: SceneSpec, mechanism: Mechanism, names: tuple[str, ...], centre
 def _geometry_data(geometry: Any) -> Any:
     """Pinocchio's geometry data with GJK tight (1e-10) and no warm start from the last call:
     the same configuration gives the same distance whatever was computed before."""
-    import coal
     import pinocchio as pin
+    coal = importlib.import_module("coal")
     gdata = pin.GeometryData(geometry)
     for request in gdata.distanceRequests:
         request.gjk_tolerance = 1e-10

@@ -116,7 +116,7 @@ def check(problem: Problem, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, safe
         "velocity": float(np.min((1 - safety) * lim.velocity - np.abs(qd))),
         "acceleration": float(np.min((1 - safety) * lim.acceleration - np.abs(qdd))),
     }
-    if jerk is not None and lim.jerk is not None and np.any(np.isfinite(lim.jerk)):
+    if jerk is not None and np.any(np.isfinite(lim.jerk)):
         margins["jerk"] = float(np.min((1 - safety) * lim.jerk - np.abs(jerk)))
     collision = None
     if problem.scene is not None and problem.scene.checks:

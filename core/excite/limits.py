@@ -37,11 +37,11 @@ class Limits:
     acceleration: np.ndarray
     torque: np.ndarray
     sources: dict = field(default_factory=dict)
-    jerk: np.ndarray | None = None
+    jerk: np.ndarray = field(default_factory=lambda: np.zeros(0))     # none given: inf for every coordinate
     velocity_margin: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.jerk is None:
+        if self.jerk.size == 0:
             self.jerk = np.full(len(self.names), np.inf)
 
     def assumptions(self) -> list[str]:
@@ -67,7 +67,7 @@ class Limits:
         return {name: {"position": [float(self.lower[k]), float(self.upper[k])],
                        "velocity": number(self.velocity[k]), "acceleration": number(self.acceleration[k]),
                        "torque": number(self.torque[k]),
-                       "jerk": number(self.jerk[k]) if self.jerk is not None else None}
+                       "jerk": number(self.jerk[k])}
                 for k, name in enumerate(self.names)}
 
 
