@@ -16,6 +16,7 @@ Checked against computations that do not use that path:
 """
 
 import json
+import re
 from fractions import Fraction
 
 import numpy as np
@@ -429,3 +430,47 @@ def test_effects_on_the_counterweight_and_a_passive_angle_are_identified(tmp_pat
     found = {(e["kind"], e["coordinate"]): e["coefficients"][0]["value"] for e in json.loads(result.stdout)["effects"]}
     assert found[("viscous_friction", "counterweight")] == pytest.approx(1.5, rel=1e-9)
     assert found[("coulomb_friction", "pitch_top")] == pytest.approx(0.2, rel=1e-9)
+
+
+# ----- an exact rank for a looped mechanism, through its tree form ------------------------------
+def _parallelogram_tree(text: str) -> str:
+    """A generated parallelogram (four_bar(parallelogram=True)) cut at its loop joint, the
+    dependent angles written as couplings of the crank: qb = -qa, qd = qa."""
+    import re
+    text = re.sub(r'\[\[joints\]\]\nname = "JC"\n(?:(?!\n\n).)*\n', "", text, flags=re.S)
+    assert "loop = true" not in text
+    return text + "".join(f'\n[[couplings]]\ncoordinate = "{c}"\nleader = "qa"\nratio = "{r}"\n'
+                          for c, r in (("qb", -1), ("qd", 1)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_an_exact_rank_for_a_parallelogram_through_its_tree_form(seed):
+    """The exact solver declines loops, but a parallelogram's tree form (couplings of ratio
+    +-1 and offset 0 between angles: tan(-theta/2) = -tan(theta/2) keeps an exact angle
+    exact) is open: its exact rank (rref over the rationals) equals the loop form's dp and
+    certified vp ranks, and the exact solver still says why for any other angle ratio."""
+    text = generate.four_bar(seed, parallelogram=True)
+    loop, tree = parse_mechanism(text), parse_mechanism(_parallelogram_tree(text))
+    solvers = registry.solvers()
+    assert solvers["exact"].item.applicable(tree) is None
+    exact = solvers["exact"].item.solve(tree)
+    ranks = [exact.rank] + [solvers[s].item.solve(loop).rank for s in ("dp", "vp")]
+    assert len(set(ranks)) == 1 and exact.certified, ranks
+    halved = parse_mechanism(_parallelogram_tree(text).replace('ratio = "-1"', 'ratio = "-1/2"'))
+    assert "rational points of the circle" in (solvers["exact"].item.applicable(halved) or "")
+
+
+def test_the_parallelogram_arm_s_rank_is_exact_through_its_tree_form():
+    from baseparams.registry import mechanisms
+    tree = parse_mechanism(_arm_tree_form(mechanisms()["parallelogram_arm"].item.path.read_text()))
+    result = registry.solvers()["exact"].item.solve(tree)
+    assert result.rank == 15 and result.certified
+
+
+def test_the_exact_solver_declines_a_unit_ratio_between_an_angle_and_a_length():
+    """Ratio 1, offset 0, but an angle following a length (or a length an angle): no rational
+    point of the circle then; the exact solver says why, as before."""
+    text = generate.serial_chain(0, bodies=3, types="RP")          # q1 R, q2 P, q3 R
+    text = re.sub(r'(, )?q3 = "[^"]*"', "", text)
+    mech = parse_mechanism(text + '\n[[couplings]]\ncoordinate = "q3"\nleader = "q2"\n')
+    assert "rational points of the circle" in (registry.solvers()["exact"].item.applicable(mech) or "")

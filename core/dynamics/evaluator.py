@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baseparams.numeric.backends import Arb, Float64, in_backend_precision
+from baseparams.numeric.backends import Arb, Float64, TanHalf, in_backend_precision
 from baseparams.errors import KinematicsError, InputError
 from baseparams.kinematics.tree import TreeKinematics
 from baseparams.kinematics.krawczyk import enclose
@@ -226,7 +226,7 @@ class Evaluator:
             q[i] = value
         if not self.mechanism.loops:
             for i, leader, ratio, offset in self._couplings():
-                q[i] = ratio * q[leader] + offset
+                q[i] = _follow(q[leader], ratio, offset, self.mechanism.coordinates[i])
             return q
         if self.backend.exact:
             raise KinematicsError("exact and symbolic arithmetic cannot solve loop closure; "
@@ -586,6 +586,18 @@ class Evaluator:
         for a, i in enumerate(dep):
             qdd[i] = qdd_dep[a]
         return Sample(q, qd, qdd, None, r, self.kin)
+
+
+def _follow(value: Any, ratio: Any, offset: Any, name: str) -> Any:
+    """A follower's position, ratio * leader + offset; for an exact angle (rational
+    tan(theta/2), the exact solver's) only where that is exact too: ratio +-1, offset 0
+    (a parallelogram's angles, a mirrored gripper finger), tan(-theta/2) = -t."""
+    if isinstance(value, TanHalf):
+        if offset == 0 and ratio in (1, -1):
+            return TanHalf(value.t if ratio == 1 else -value.t)
+        raise KinematicsError(f"{name} follows an exact angle with a ratio other than +-1 or an offset: "
+                              "its tan(theta/2) is not rational")
+    return ratio * value + offset
 
 
 def _predict(path: Sequence[tuple[float, Array, Array]], lam: float) -> Array:

@@ -45,6 +45,9 @@ def check_exact_possible(mechanism: Mechanism) -> None:
             file=mechanism.path)
     for coupling in mechanism.couplings:
         joint = mechanism.joint_of_coordinate(coupling.coordinate)
+        same_kind = mechanism.coordinate_kind(coupling.coordinate) == mechanism.coordinate_kind(coupling.leader)
+        if same_kind and coupling.offset == 0 and abs(coupling.ratio) == 1:
+            continue            # tan(-theta/2) = -tan(theta/2): an exact angle stays exact
         if "angle" in joint.type.coordinate_kinds:
             raise InputError(
                 f"the exact solver evaluates angles as rational points of the circle, and "
