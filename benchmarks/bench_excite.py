@@ -2,7 +2,14 @@
 discrimination campaign with `diagnose`, and the speed (one 6-dof start, multistart on 1
 and 2 worker processes in the same run).
 
-    python benchmarks/bench_excite.py [--parts condition,sla,separate,speed] [--data ../shared/data/tx40]
+    python benchmarks/bench_excite.py [--parts condition,sla,separate,speed,robots,never_worse] [--data ../shared/data/tx40]
+
+Issue 43 (plans a robot can run): ``--parts robots`` plans the UR5 (example-robot-data, its
+SRDF) and the TX40 at the defaults and checks the written files independently with Pinocchio
++ coal on the original meshes at ten times their sampling (lowest point above the base plane,
+smallest distance between links the SRDF leaves in, every URDF limit, efforts by RNEA),
+with the CPU seconds, the collision check's share and a yardstick measured in the same run;
+``--parts never_worse`` runs the four-bar and the SLA with every solver.
 
 Condition numbers are those identify reports (equal noise weights, unit-norm columns, on the
 base the dp solver gives for the file it is computed on); "before" is the file's own
@@ -281,6 +288,119 @@ def part_speed(args):
     print(f"  ratio 1 worker / 2 workers: {walls['1 worker (in process)'] / walls['2 worker processes']:.2f}")
 
 
+def _independent(written: Path, urdf: Path, srdf: Path | None) -> dict:
+    """Pinocchio + coal on the original meshes (not excite's hulls), ten times the written
+    file's sampling: the lowest point of any moving link (mesh vertices, else frame origins),
+    the smallest distance of the pairs the SRDF leaves in, the largest |tau| / effort and
+    |qd| / velocity limit."""
+    import pinocchio as pin
+    from baseparams.excite.collision import package_dirs
+    mechanism = load_mechanism(written)
+    spec = mechanism.trajectory
+    t = np.linspace(0, float(spec.t_end), 10 * (spec.samples - 1) + 1)
+    values = [values_at(spec.expressions[n], Float64(), t) for n in mechanism.independent]
+    q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v[k], float), t.shape) for v in values], axis=1)
+                  for k in range(3))
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    try:
+        geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION,
+                                         package_dirs=list(package_dirs(str(urdf))))
+        geometry.addAllCollisionPairs()
+        if srdf is not None:
+            pin.removeCollisionPairs(model, geometry, str(srdf))
+        gdata = pin.GeometryData(geometry)
+    except Exception:
+        geometry = None
+    lowest, nearest, effort = np.inf, np.inf, 0.0
+    for k in range(len(t)):
+        pin.framesForwardKinematics(model, data, q[k])
+        lowest = min(lowest, min(data.oMf[f].translation[2] for f in range(model.nframes)
+                                 if model.frames[f].parentJoint > 0))
+        if geometry is not None:
+            pin.updateGeometryPlacements(model, data, geometry, gdata)
+            pin.computeDistances(geometry, gdata)
+            nearest = min(nearest, min(r.min_distance for r in gdata.distanceResults))
+            for g, obj in enumerate(geometry.geometryObjects):
+                if obj.parentJoint > 0 and hasattr(obj.geometry, "vertices"):
+                    placed = np.asarray(obj.geometry.vertices()) @ gdata.oMg[g].rotation.T + gdata.oMg[g].translation
+                    lowest = min(lowest, placed[:, 2].min())
+        effort = max(effort, float(np.max(np.abs(pin.rnea(model, data, q[k], qd[k], qdd[k])) / model.effortLimit)))
+    return {"lowest": float(lowest), "nearest": float(nearest) if geometry is not None else None,
+            "effort": effort, "velocity": float(np.max(np.abs(qd) / model.velocityLimit)),
+            "position_ok": bool(np.all(q >= model.lowerPositionLimit) and np.all(q <= model.upperPositionLimit))}
+
+
+def part_robots(args):
+    """Issue 43: the default plans of the UR5 and the TX40, checked independently."""
+    import baseparams as bp
+    from baseparams.excite import collision
+    ur5 = ur5_path()
+    srdf = ur5.parents[1] / "srdf" / "ur5.srdf"
+    tx40 = Path(args.data) / "tx40_mdh_modified.urdf"
+    if not tx40.exists():
+        tx40 = ROOT / "tests" / "data" / "tx40" / "tx40_mdh_modified.urdf"
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((600, 36))
+    began = time.process_time()
+    for _ in range(200):
+        np.linalg.svd(A, compute_uv=False)
+    yardstick = time.process_time() - began
+    spent = [0.0]
+    original = collision.Scene.distances
+
+    def timed(self, *a, **k):
+        start = time.process_time()
+        try:
+            return original(self, *a, **k)
+        finally:
+            spent[0] += time.process_time() - start
+
+    collision.Scene.distances = timed
+    print("## issue 43: default plans, checked by Pinocchio + coal on the original meshes at 10x\n")
+    print("| robot | before -> after (vp) | converged | lowest point above the base plane (m) | smallest "
+          "distance between links (m) | max effort / limit | max velocity / limit | CPU s | collision share |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    try:
+        for label, urdf, extra in (("UR5 (example-robot-data, SRDF)", ur5, {"srdf": str(srdf)} if srdf.exists() else {}),
+                                   ("TX40 (no meshes: frame origins)", tx40, {})):
+            with tempfile.TemporaryDirectory() as folder:
+                out = Path(folder) / "plan.toml"
+                spent[0] = 0.0
+                start = time.process_time()
+                result = bp.excite(str(urdf), output=str(out), **extra)
+                cpu = time.process_time() - start
+                plan_ = result.plan
+                check = _independent(out, urdf, srdf if extra else None)
+            nearest = "not checked (no geometry)" if check["nearest"] is None else f"{check['nearest']:.4f}"
+            print(f"| {label} | {plan_.before.condition:.3g} -> {plan_.after.condition:.3g} | "
+                  f"{'yes' if plan_.converged else 'no'} | {check['lowest']:.4f} | {nearest} | {check['effort']:.3f} | "
+                  f"{check['velocity']:.3f} | {cpu:.1f} | {spent[0] / cpu:.0%} |")
+    finally:
+        collision.Scene.distances = original
+    print(f"\nyardstick (same run): 200 SVDs of a 600 x 36 matrix: {yardstick:.2f} CPU s\n")
+
+
+def part_never_worse(args):
+    """Issue 43: the closed loops with every solver: the returned motion is never worse than the start."""
+    import baseparams as bp
+    print("## never worse than the start (closed loops, every solver; 1 start, 60 iterations)\n")
+    print("| mechanism | solver | before | optimised | returned | improved | CPU s |")
+    print("|---|---|---|---|---|---|---|")
+    for mech in ("four_bar", "sla_suspension"):
+        for solver in ("vp", "dp", "symbolic", "exact"):
+            start = time.process_time()
+            try:
+                found = bp.excite(mech, solver=solver, starts=1, iterations=60).plan
+            except Exception as exc:                          # not applicable (exact on closed loops)
+                print(f"| {mech} | {solver} | - | - | - | {type(exc).__name__}: {str(exc)[:60]} | - |")
+                continue
+            returned = found.before if found.kept == "the file's trajectory" else found.after
+            print(f"| {mech} | {solver} | {found.before.condition:.3g} | {found.after.condition:.3g} | "
+                  f"{returned.condition:.3g} | {found.improved} | {time.process_time() - start:.1f} |")
+    print()
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--parts", default="condition,sla,separate,speed")
@@ -290,7 +410,8 @@ def main():
     parser.add_argument("--samples", type=int, default=200, help="samples of the discrimination motions")
     parser.add_argument("--margins", type=float, nargs="+", default=[0.03])
     args = parser.parse_args()
-    parts = {"condition": part_condition, "sla": part_sla, "separate": part_separate, "speed": part_speed}
+    parts = {"condition": part_condition, "sla": part_sla, "separate": part_separate, "speed": part_speed,
+             "robots": part_robots, "never_worse": part_never_worse}
     for name in args.parts.split(","):
         parts[name](args)
 
