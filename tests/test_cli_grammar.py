@@ -149,12 +149,15 @@ def test_progress_off_a_terminal_starts_after_its_delay(capsys, monkeypatch):
     assert capsys.readouterr().err == ""
 
 
-def test_excite_without_dash_o_prints_the_mechanism_file(tmp_path):
+def test_excite_without_dash_o_prints_the_report_only(tmp_path):
+    """Issue 43: no TOML on the terminal; -o chooses the writer by its suffix."""
     result = invoke("excite", "pendulum", "--iterations", "2", "--starts", "1", "--solver", "dp", "--quiet")
-    assert result.exit_code == 0, result.output
+    assert result.exit_code in (0, 1), result.output
+    assert "[trajectory]" not in result.stdout and result.stdout.startswith("pendulum:")
+    assert "starts: 1" in result.stdout
     path = tmp_path / "planned.toml"
-    path.write_text(result.stdout)
+    assert invoke("excite", "pendulum", "--iterations", "2", "--starts", "1", "--solver", "dp", "--quiet",
+                  "-o", path).exit_code in (0, 1)
     from baseparams.io.loader import load_mechanism
     planned = load_mechanism(path)
     assert planned.name == "pendulum" and planned.trajectory is not None
-    assert "starts: 1" in result.stderr

@@ -227,7 +227,7 @@ def excite(mech: MechanismLike, *, output: PathText | None = None, solver: str =
     returned (the optimised motion was not better). ``progress(done, total, label)`` follows
     the starts; ``say`` receives messages, iterations within a start included;
     ``verbose=True``: those messages on stderr (docs/excite.md)."""
-    from baseparams.excite.run import excite as run
+    from .planning import excite as run
     return run(mech, output=output, solver=solver, solver_options=solver_options, criterion=criterion,
                harmonics=harmonics, period=period, samples=samples, effects=effects, separate=separate,
                position_range=position_range, max_velocity=max_velocity, max_acceleration=max_acceleration,

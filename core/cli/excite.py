@@ -122,7 +122,7 @@ def excite(mech: str, output: str | None, check_path: str | None, solver_name: s
     start is returned) or a checked motion breaks a limit; 2 for bad input or limits no
     motion satisfies.
     """
-    from baseparams.excite.run import check_plan, excite as run, output_kind
+    from baseparams.api.planning import check_plan, excite as run, output_kind
     options = options_from_text(get_solver(solver_name), extra)
     collision_options: dict[str, Any] = dict(collision=collision, collision_model=collision_model, srdf=srdf,
                              package_dirs=package_dirs, clearance=clearance, keep_out=keep_out, floor=not no_floor)

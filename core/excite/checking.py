@@ -147,8 +147,8 @@ def read_motion(mechanism: Mechanism, path: str, names: tuple[str, ...]) -> tupl
     if Path(path).suffix.lower() == ".csv":
         t, q, qd, qdd, notes = read_plan_csv(path, names)
         return (t, q, qd, qdd), notes
-    from baseparams.api.data import read
-    data = read(mechanism, [path])
+    from baseparams.recordings.recording import read_data
+    data = read_data([path], mechanism)[0]
     m = data.motion
     return (np.asarray(m.t, float), np.asarray(m.q, float), np.asarray(m.qd, float), np.asarray(m.qdd, float)), \
         list(data.notes)

@@ -1,4 +1,5 @@
-"""``excite`` end to end (the function behind ``bp.excite`` and the verb): the options read
+"""``excite`` end to end (the functions behind ``bp.excite`` and the verb, ``--check`` too;
+the API's floor, above :mod:`baseparams.excite`): the options read
 into limits, the collision scene and the planner's settings; the plan run; the output
 written by its suffix (``.toml``: the mechanism with its ``[trajectory]``; ``.csv``: the
 motion at ``rate``)."""
@@ -17,8 +18,11 @@ import numpy as np
 from baseparams.errors import InputError
 from baseparams.model.mechanism import Mechanism
 
+from .effects import parse_effect, parse_separate
+from .results import Excitation
+from .solving import check_solver_options, get_solver, load, run_solver
+
 if TYPE_CHECKING:
-    from baseparams.api.results import Excitation
     from baseparams.excite.collision import SceneSpec
 
 OUTPUT_SUFFIXES = (".toml", ".csv")
@@ -89,12 +93,8 @@ def excite(mech: Any, *, output: Any = None, solver: str = "vp", solver_options:
            plot: Any = None, collision: bool | None = None, collision_model: str | None = None,
            srdf: str | None = None, package_dirs: Sequence[str] = (), clearance: float | None = None,
            keep_out: Sequence[str] = (), floor: bool = True, progress: Callable[[int, int, str], None] | None = None,
-           say: Callable[[str], None] | None = None, verbose: bool = False) -> "Excitation":
+           say: Callable[[str], None] | None = None, verbose: bool = False) -> Excitation:
     """See :func:`baseparams.api.excite` (the options are the verb's)."""
-    from baseparams.api.effects import parse_effect, parse_separate
-    from baseparams.api.files import _trajectory_limits
-    from baseparams.api.results import Excitation
-    from baseparams.api.solving import check_solver_options, get_solver, load, run_solver
     from baseparams.dynamics.forces import independent_names
     from baseparams.excite import plan as planner
     from baseparams.excite.collision import DEFAULT_CLEARANCE
@@ -126,6 +126,7 @@ def excite(mech: Any, *, output: Any = None, solver: str = "vp", solver_options:
             raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
         weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
     margin = VELOCITY_MARGIN if velocity_margin is None else velocity_margin
+    from .files import _trajectory_limits
     if mechanism.loops and mechanism.trajectory is not None:
         # closed loops: the file's trajectory is known to stay in the reachable range
         ranges, velocities, accelerations = _trajectory_limits(mechanism, names)
@@ -199,8 +200,6 @@ def check_plan(mech: Any, plan_path: str, *, solver: str = "vp", solver_options:
                clearance: float | None = None, keep_out: Sequence[str] = (), floor: bool = True) -> Any:
     """``excite --check``: the limits, distances and condition number of the motion in
     ``plan_path`` (:mod:`.checking`); the velocity margin is 0 here (the limit itself)."""
-    from baseparams.api.effects import parse_effect
-    from baseparams.api.solving import check_solver_options, get_solver, load, run_solver
     from baseparams.dynamics.forces import independent_names
     from baseparams.excite import plan as planner
     from baseparams.excite.checking import check_motion, read_motion
