@@ -135,6 +135,50 @@ def test_no_collision_geometry_is_said_and_the_frames_keep_off_the_floor():
     assert scene.plane_items                                  # the frames' origins against the floor
 
 
+def test_box_distance_is_the_point_to_box_distance_of_each_frame_origin():
+    """TX40 (no meshes): its links are their frames' origins; coal's distance to a keep-out box
+    equals the analytic distance from Pinocchio's placed origin to the box."""
+    import pinocchio as pin
+    from baseparams.excite.collision import parse_keep_out
+    planes, boxes = parse_keep_out(["box:0.3,0.1,0.2,0.1,0.2,0.05"], floor=False)
+    scene, names = _scene(TX40, planes=planes, boxes=boxes)
+    model = pin.buildModelFromUrdf(str(TX40))
+    data = model.createData()
+    centre, half = np.array([0.3, 0.1, 0.2]), np.array([0.1, 0.2, 0.05])
+    rng = np.random.default_rng(11)
+    for q in rng.uniform(-1.5, 1.5, (4, 6)):
+        at, _, labels = scene.distances(q[None])
+        pin.framesForwardKinematics(model, data, q)
+        for k, (a, b) in enumerate(scene.pair_names):
+            frame = model.getFrameId(a.removesuffix(" (origin)"))
+            p = data.oMf[frame].translation
+            outside = np.maximum(np.abs(p - centre) - half, 0)
+            expected = np.linalg.norm(outside) if np.any(outside > 0) else -np.min(half - np.abs(p - centre))
+            assert at[0, k] == pytest.approx(expected, abs=1e-6), (a, b)
+    assert len(scene.pair_names) >= 10
+
+
+def test_collision_required_but_unavailable_is_an_input_error(monkeypatch):
+    from baseparams.api.planning import scene_spec
+    from baseparams.errors import InputError
+    from baseparams.excite import collision
+    monkeypatch.setattr(collision, "available", lambda: "collision checking needs Pinocchio and coal")
+    mechanism = load_mechanism(TX40)
+    options = dict(collision_model=None, srdf=None, package_dirs=(), clearance=0.02, keep_out=(), floor=True)
+    with pytest.raises(InputError, match="Pinocchio"):
+        scene_spec(mechanism, collision=True, notes=[], **options)
+    notes: list[str] = []
+    assert scene_spec(mechanism, collision=None, notes=notes, **options) is None
+    assert any("not checked" in n for n in notes)
+
+
+def test_the_srdf_beside_the_urdf_is_found():
+    from baseparams.excite.collision import find_srdf
+    urdf, srdf = _ur5()
+    assert find_srdf(str(urdf)) == str(srdf)
+    assert find_srdf(str(TX40)) is None
+
+
 def test_keep_out_and_options_errors_are_exit_2(tmp_path):
     cases = [("--keep-out", "plane:0,0,0,1"), ("--keep-out", "box:0,0,0,1,-1,1"), ("--keep-out", "cube:1"),
              ("--srdf", tmp_path / "missing.srdf"), ("-o", tmp_path / "plan.txt")]

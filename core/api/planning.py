@@ -79,6 +79,11 @@ def scene_spec(mechanism: Mechanism, *, collision: bool | None, collision_model:
     if mechanism.loops:
         notes.append("closed loops: the collision check is not supported, collisions are not checked")
         return None
+    if srdf is None:
+        from baseparams.excite.collision import find_srdf
+        srdf = find_srdf(str(urdf))
+        if srdf is not None:
+            notes.append(f"the SRDF found beside the URDF is used for the disabled pairs: {srdf} (--srdf chooses another)")
     return SceneSpec(str(urdf), None if srdf is None else str(srdf), tuple(map(str, package_dirs)), float(clearance),
                      planes, boxes)
 

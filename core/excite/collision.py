@@ -75,6 +75,22 @@ def available() -> str | None:
     return None
 
 
+def find_srdf(urdf: str) -> str | None:
+    """The robot's SRDF where ROS packages keep it: beside the URDF with its stem, or in
+    ``../srdf/`` named after the URDF's stem or its robot's name; None when there is none."""
+    here = os.path.dirname(os.path.abspath(urdf))
+    stem = os.path.splitext(os.path.basename(urdf))[0]
+    try:
+        robot = ET.parse(urdf).getroot().get("name") or stem
+    except (OSError, ET.ParseError):
+        robot = stem
+    for candidate in (os.path.join(here, f"{stem}.srdf"), os.path.join(here, "..", "srdf", f"{stem}.srdf"),
+                      os.path.join(here, "..", "srdf", f"{robot}.srdf")):
+        if os.path.isfile(candidate):
+            return os.path.normpath(candidate)
+    return None
+
+
 def package_dirs(urdf: str, extra: Sequence[str] = ()) -> tuple[str, ...]:
     """Where ``package://`` meshes are looked for: the given directories, then the URDF's
     directory and its ancestors (a ROS package's layout puts the package's folder there)."""
@@ -356,7 +372,8 @@ def _disabled(spec: SceneSpec, model: Any, objects: Any, pairs: list[tuple[int, 
             raise InputError(f"cannot read the SRDF: {exc}", file=spec.srdf, key="--srdf") from None
         off = {frozenset((e.get("link1"), e.get("link2"))) for e in root.iter("disable_collisions")}
         return {(a, c) for a, c in pairs if frozenset((link_of[a], link_of[c])) in off}
-    notes.append("no SRDF (--srdf): the pairs of links joined by one joint are not checked against each other")
+    if len({objects[i].parentJoint for i in range(len(objects)) if not objects[i].name.endswith("(origin)")}) > 1:
+        notes.append("no SRDF (--srdf): the pairs of links joined by one joint are not checked against each other")
     out = set()
     for a, c in pairs:
         ja, jc = objects[a].parentJoint, objects[c].parentJoint
