@@ -37,7 +37,7 @@ from baseparams.kinematics.tree import TreeKinematics
 from baseparams.numeric.backends import Arb, Backend, Exact, Float64, Symbolic
 
 if TYPE_CHECKING:
-    from baseparams.dynamics.evaluator import ClosureStructure
+    from baseparams.dynamics.closure import ClosureStructure
     from baseparams.kinematics.tree import BodyState
     from baseparams.model.mechanism import Mechanism
     from baseparams.solvers.result import BaseParameterResult
@@ -576,7 +576,7 @@ def module_source(mechanism: Mechanism, parts: Sequence[str] = PARTS, header: st
 def _structure(mechanism: Mechanism) -> ClosureStructure:
     # the evaluator's choice of independent coordinates and closure equations; imported
     # here, not at the top, because the evaluator imports this module
-    from baseparams.dynamics.evaluator import closure_structure
+    from baseparams.dynamics.closure import closure_structure
     return closure_structure(mechanism)
 
 
