@@ -663,3 +663,45 @@ def test_a_validate_job_out_of_memory_is_an_error_not_an_internal_one(monkeypatc
     assert "out of memory: Unable to allocate 3.6 GiB" in outcome.message
     assert "BASEPARAMS_MAX_MEMORY" in outcome.message
     assert jobs_module.INTERNAL != outcome.status
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+def test_ctrl_c_while_the_local_cluster_starts_is_not_lost():
+    """While the local cluster's workers started, SIGINT was ignored (so that they would not
+    inherit Python's KeyboardInterrupt handler): a Ctrl-C then was lost and the run went on to
+    exit 0. Now it is deferred until they are up, then the cluster is stopped: exit 130, one
+    line. The signal is sent when the first worker process appears (an event); wherever it
+    lands, the answer must be the same."""
+    pytest.importorskip("distributed")
+    import os
+    import signal
+    import time
+    proc = subprocess.Popen([*CLI, "validate", "--all", "--scheduler", "local", "--workers", "2", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for _ in range(60000):                      # bounded (10 min): a process of the cluster is up
+            if _children(proc.pid) or proc.poll() is not None:
+                break
+            time.sleep(0.01)
+        os.kill(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, (proc.returncode, err)
+    assert err.strip() == "interrupted", err
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                text = (entry / "stat").read_text()
+            except OSError:
+                continue
+            fields = text[text.rindex(")") + 2:].split()
+            if fields[1] == str(pid) and fields[0] != "Z":
+                out.append(int(entry.name))
+    return out

@@ -306,11 +306,19 @@ class DaskCluster:
             raise InputError("--scheduler needs Dask: pip install 'baseparams[distributed]'") from None
         self._log_level = _quiet_dask_logs()
         if address == "local":
-            # the workers inherit both: Ctrl-C is this process's to handle, and their warnings
-            # (a task cancelled when the run stops) are not the user's to read
-            with _sigint_ignored(), _environment(DASK_LOGGING__DISTRIBUTED="error"):
-                self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
-                                            dashboard_address=None)
+            # the workers inherit both: Ctrl-C is this process's to handle, and their log lines
+            # (a task cancelled when the run stops, a heartbeat to a scheduler closing under them)
+            # are not the user's to read: the runner reports every job's outcome
+            try:
+                with _sigint_deferred() as received, _environment(DASK_LOGGING__DISTRIBUTED="critical"):
+                    self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
+                                                dashboard_address=None)
+                if received:
+                    raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                self._close_cluster()           # Ctrl-C while it started: its processes go too
+                _restore_dask_logs(self._log_level)
+                raise
             address = self.cluster.scheduler_address
         try:
             self.client = _bounded(lambda: Client(address, timeout=f"{connect_s}s"), connect_s + 2)
@@ -320,6 +328,10 @@ class DaskCluster:
             _restore_dask_logs(self._log_level)
             raise InputError(f"no Dask scheduler answered at {address} ({exc}): is it the address of a "
                              f"running Dask scheduler?", key="--scheduler") from None
+        except KeyboardInterrupt:
+            self._close_cluster()               # Ctrl-C while connecting: the cluster started here goes
+            _restore_dask_logs(self._log_level)
+            raise
         except Exception as exc:      # noqa: BLE001 -- any answer no scheduler gives (issue 46)
             # a peer that answers garbage: Dask read a frame length of 3.07 EiB (MemoryError), a
             # dimension (ValueError), ... -- not a scheduler, whatever the error it provoked
@@ -397,12 +409,18 @@ class DaskCluster:
         return None
 
     def close(self) -> None:
-        try:
-            _bounded(lambda: self.client.close(timeout=5), 10)
-        except Exception:
-            pass                              # a scheduler already gone: nothing to close
-        self._close_cluster()
-        _restore_dask_logs(self._log_level)
+        """Close the client and a cluster started here; a Ctrl-C meanwhile is acted on once both
+        are closed (an interrupted close left the cluster to Dask's exit hook, which printed the
+        workers' tracebacks after ``interrupted``)."""
+        with _sigint_deferred(inherit=False) as received:
+            try:
+                _bounded(lambda: self.client.close(timeout=5), 10)
+            except Exception:
+                pass                              # a scheduler already gone: nothing to close
+            self._close_cluster()
+            _restore_dask_logs(self._log_level)
+        if received:
+            raise KeyboardInterrupt
 
     def _close_cluster(self) -> None:
         cluster = self.cluster
@@ -462,6 +480,34 @@ def _environment(**values: str) -> Iterator[None]:
                 os.environ.pop(name, None)
             else:
                 os.environ[name] = old
+
+
+@contextlib.contextmanager
+def _sigint_deferred(inherit: bool = True) -> Iterator[list[int]]:
+    """SIGINT blocked in this thread while worker processes are started, and recorded (the
+    list yielded) rather than lost: the workers inherit the blocked mask (fork and exec keep
+    it), so Ctrl-C in the terminal reaches none of them, and a Ctrl-C meanwhile is acted on
+    once they are up (the caller stops them and raises KeyboardInterrupt). Why (issue 46):
+    with SIGINT ignored (:func:`_sigint_ignored`) a Ctrl-C during the cluster's start was lost
+    and the run went on to exit 0. Elsewhere than the main thread, or without
+    ``pthread_sigmask``: :func:`_sigint_ignored` when processes start (``inherit``), else
+    nothing is deferred."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        with _sigint_ignored() if inherit else contextlib.nullcontext():
+            yield []
+        return
+    received: list[int] = []
+
+    def record(signum: int, frame: Any) -> None:
+        received.append(signum)
+
+    previous = signal.signal(signal.SIGINT, record)
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield received
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})     # one pending: recorded now
+        signal.signal(signal.SIGINT, previous)
 
 
 class _Failed:
