@@ -177,12 +177,16 @@ def _without_load_friction(side: _Side, f: int, keep: np.ndarray) -> _Side:
     return dataclasses.replace(side, shared=side.shared[:, :, columns])
 
 
-def _load_friction_kept(base: _Side, given: Given | None, parameters: int, f: int) -> np.ndarray:
+def _load_friction_kept(base: _Side, given: Given | None, parameters: int, f: int
+                        ) -> tuple[np.ndarray, tuple[float, np.ndarray, np.ndarray]]:
     """Which coordinates' load friction (the shared columns' last ``f``) the baseline
-    determines as a gear's (f,), from the shared fit with every one of them."""
-    _, _, fit = _shared_fit(base, given, parameters)
+    determines as a gear's (f,), from the shared fit with every one of them; and where the
+    fit without the others starts (its delay, coefficients and weights)."""
+    delay, theta, fit = _shared_fit(base, given, parameters)
     mu, std = fit.coefficients[-f - 1:-1], fit.std[-f - 1:-1]       # the delay's step column is last
-    return (mu > LOAD_Z * std) & (mu >= LOAD_MIN) & (mu < LOAD_MAX)
+    keep = (mu > LOAD_Z * std) & (mu >= LOAD_MIN) & (mu < LOAD_MAX)
+    columns = np.concatenate([np.ones(len(theta) - f, bool), keep])
+    return keep, (delay, theta[columns], fit.weights)
 
 
 def pair(baseline: np.ndarray, changed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -320,22 +324,28 @@ def _physical_text(entry: dict) -> None:
         entry["centre_of_mass"] = [float(v) / float(m) for v in firsts]
 
 
-def _shared_fit(base: _Side, given: Given | None, parameters: int) -> tuple[float, np.ndarray, LinearFit]:
+def _shared_fit(base: _Side, given: Given | None, parameters: int,
+                start: tuple[float, np.ndarray, np.ndarray] | None = None) -> tuple[float, np.ndarray, LinearFit]:
     """(delay, coefficients, the last step's fit): the shared model fitted to the baseline, a delay between the
     positions and the torques included (a filter's or a bus's lag is the robot's, on both
     sides): Gauss-Newton on the delay, the model's columns shifted exactly (cubic) at each
     step and the rigid bodies' torque's derivative the step's column (a friction's jumps made
-    spikes of its derivative that pulled the delay to half its value)."""
+    spikes of its derivative that pulled the delay to half its value). ``start``: (delay,
+    coefficients, weights) to start from (a fit of nearly these columns: one step is enough)."""
     rigid = slice(0, 0 if given is not None else parameters)
-    delay = 0.0
     step_size = max(float(np.median(np.diff(base.data.t))), 1e-12) if len(base.data.t) > 1 else 1.0
-    fit = WeightedLinearModel(base.shared, base.tau - base.known).fit()
-    theta = fit.coefficients
+    if start is None:
+        delay = 0.0
+        fit = WeightedLinearModel(base.shared, base.tau - base.known).fit()
+        theta, weights = fit.coefficients, fit.weights
+    else:
+        delay, theta, weights = start
     for _ in range(DELAY_ITERATIONS):     # each step's model from the one before (converged: the same)
         shared, known = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
         lag = -time_derivative(shifted(base.rigid, base.data, delay) + shared[:, :, rigid] @ theta[rigid], base.data)
         fit = WeightedLinearModel(np.concatenate([shared, lag[:, :, None]], axis=-1), base.tau - known).fit(
-            start=fit.weights)
+            start=weights)
+        weights = fit.weights
         theta, step = fit.coefficients[:-1], float(fit.coefficients[-1])
         delay += step
         if abs(step) <= DELAY_TOLERANCE * step_size:
@@ -388,9 +398,11 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     # the load friction only between runs of one motion: on another the shared model
     # extrapolates, and a mu fitted to one half of the real TX40 recording (0.4 on joint 3,
     # standing in for what the model lacks) made an 85 % "gain change" on joint 5 of the other
-    loaded = _load_friction_kept(base, given, len(mechanism.parameters), f) if paired else np.zeros(f, bool)
+    loaded, start = np.zeros(f, bool), None
+    if paired:
+        loaded, start = _load_friction_kept(base, given, len(mechanism.parameters), f)
     base, other = _without_load_friction(base, f, loaded), _without_load_friction(other, f, loaded)
-    delay, theta, _ = _shared_fit(base, given, len(mechanism.parameters))
+    delay, theta, _ = _shared_fit(base, given, len(mechanism.parameters), start)
     shared_base, known_base = shifted(base.shared, base.data, delay), shifted(base.known, base.data, delay)
     shared_other, known_other = shifted(other.shared, other.data, delay), shifted(other.known, other.data, delay)
     y_base, y_other = base.tau - known_base, other.tau - known_other
