@@ -350,3 +350,14 @@ def test_tx40_default_plan_runs_on_the_robot(tmp_path):
     _independent_checks(out, TX40, None, TX40)
     assert any("no collision geometry" in n for n in data["notes"])
     assert data["after"]["condition_number"] <= 1.5 * 2.20
+
+
+def test_check_reads_a_recording_description_run_by_run():
+    """The TX40's real recording (two runs) through its description: its joint_1 peaks at 5.04
+    rad/s against the URDF's 5.009: a check that fails, exit 1."""
+    result = _run("excite", TX40, "--check", DATA / "tx40" / "recording.toml", "--format", "json", "--quiet")
+    assert result.exit_code == 1, result.output
+    data = json.loads(result.stdout)
+    assert data["margins"]["velocity"] < 0 and data["margins"]["position"] > 0
+    assert data["peaks"]["joint_1"]["qd_peak"] > 5.009
+    assert any("2 runs" in n for n in data["notes"])

@@ -6,6 +6,7 @@ would report on it. Exit 1 when something does not hold."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -115,6 +116,38 @@ def check_motion(mechanism: Mechanism, problem: design.Problem, path: str, solve
                  motion: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], notes: list[str]) -> MotionCheck:
     """The figures of the sampled ``motion`` (t, q, qd, qdd) under ``problem``'s limits and scene."""
     t, q, qd, qdd = motion
+    pieces = np.split(np.arange(len(t)), np.nonzero(np.diff(t) <= 0)[0] + 1)   # runs, each on its own clock
+    if len(pieces) > 1:
+        notes.append(f"{len(pieces)} runs (the time starts again): each is checked on its own, between its samples")
+    whole = design.check(dataclasses.replace(problem, scene=None), q, qd, qdd)
+    margins = dict(whole.margins)
+    collision, nearest = None, np.inf
+    for rows in pieces:
+        part = _piece(problem, t[rows], q[rows], qd[rows], qdd[rows], notes)
+        for key, value in part.margins.items():
+            margins[key] = min(margins.get(key, np.inf), value)
+        if part.collision is not None and part.margins["collision"] < nearest:
+            collision, nearest = part.collision, part.margins["collision"]
+    bad = [k for k, v in margins.items() if v < 0]
+    result = dataclasses.replace(whole, margins=margins, feasible=not bad and whole.feasible, collision=collision,
+                                 reason=f"outside the {', '.join(bad)} limits" if bad else whole.reason)
+    peaks = {name: {"q_min": float(q[:, k].min()), "q_max": float(q[:, k].max()),
+                    "qd_peak": float(np.abs(qd[:, k]).max()), "qdd_peak": float(np.abs(qdd[:, k]).max())}
+             for k, name in enumerate(problem.limits.names)}
+    if result.margins.get("torque") is not None and problem.model.phi is not None:
+        notes.append("torques: the model's inverse dynamics (K phi) with the mechanism file's inertial parameters")
+    duration = sum(float(t[rows][-1] - t[rows][0]) for rows in pieces)
+    return MotionCheck(mechanism.name, str(path), solver, len(t), duration, problem, result, peaks,
+                       problem.limits.assumptions(), notes)
+
+
+Sampled = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _piece(problem: design.Problem, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+           notes: list[str]) -> design.Check:
+    """One run's margins: jerk by differences, distances between samples through the cubic
+    through its positions and velocities (a controller's interpolation)."""
     jerk = np.gradient(qdd, t, axis=0) if len(t) > 2 else None
     between = None
     if problem.scene is not None and len(t) > 1:
@@ -123,20 +156,12 @@ def check_motion(mechanism: Mechanism, problem: design.Problem, path: str, solve
 
         def between(times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             return spline(times), spline(times, 1), spline(times, 2)
-        notes.append("between samples the motion is taken as the cubic through the samples' positions and "
-                     "velocities (a controller's interpolation), sampled densely where the speed bound alone "
-                     "does not show the clearance")
-    result = design.check(problem, q, qd, qdd, jerk=jerk, times=t, motion=between)
-    peaks = {name: {"q_min": float(q[:, k].min()), "q_max": float(q[:, k].max()),
-                    "qd_peak": float(np.abs(qd[:, k]).max()), "qdd_peak": float(np.abs(qdd[:, k]).max())}
-             for k, name in enumerate(problem.limits.names)}
-    if result.margins.get("torque") is not None and problem.model.phi is not None:
-        notes.append("torques: the model's inverse dynamics (K phi) with the mechanism file's inertial parameters")
-    return MotionCheck(mechanism.name, str(path), solver, len(t), float(t[-1] - t[0]), problem, result, peaks,
-                       problem.limits.assumptions(), notes)
-
-
-Sampled = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+        text = ("between samples the motion is taken as the cubic through the samples' positions and "
+                "velocities (a controller's interpolation), sampled densely where the speed bound alone "
+                "does not show the clearance")
+        if text not in notes:
+            notes.append(text)
+    return design.check(problem, q, qd, qdd, jerk=jerk, times=t if len(t) > 1 else None, motion=between)
 
 
 def read_motion(mechanism: Mechanism, path: str, names: tuple[str, ...]) -> tuple[Sampled, list[str]]:

@@ -22,8 +22,9 @@ def plot_plan(plan: Plan, path: str | Path, fmt: str | None = None) -> Path:
         for j, name in enumerate(p.form.names):
             line, = ax.plot(t, values[:, j], lw=0.9, label=name)
             lo, hi = (lim.lower[j], lim.upper[j]) if bound is None else (-bound[j], bound[j])
-            ax.axhline(lo, color=line.get_color(), lw=0.5, ls=":")
-            ax.axhline(hi, color=line.get_color(), lw=0.5, ls=":")
+            if np.isfinite(lo) and np.isfinite(hi):          # no acceleration limit given: no line
+                ax.axhline(lo, color=line.get_color(), lw=0.5, ls=":")
+                ax.axhline(hi, color=line.get_color(), lw=0.5, ls=":")
         ax.set_title(f"{title} (dotted: limits)", fontsize=9)
         ax.set_xlabel("t (s)", fontsize=8)
         ax.tick_params(labelsize=7)
