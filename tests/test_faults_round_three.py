@@ -705,3 +705,14 @@ def _children(pid: int) -> list[int]:
             if fields[1] == str(pid) and fields[0] != "Z":
                 out.append(int(entry.name))
     return out
+
+
+def test_a_column_name_given_twice_in_an_array_log_is_refused(logged, tmp_path):
+    """As a CSV header naming a column twice is refused ("appears twice"): a .npz variable
+    named "q[0]" beside a two-dimensional q gives the column q[0] twice; used, it is refused
+    rather than one of them taken silently."""
+    _, t, q, tau = logged
+    np.savez(tmp_path / "log.npz", t=t, q=q.T, tau=tau, **{"q[0]": q[:, 1]})
+    code, out, err = run("identify", "planar_2r", describe(tmp_path, "log.npz"), "--quiet")
+    assert code == 2 and out == ""
+    one_error(err, "log.npz", "column 'q[0]' appears twice")

@@ -22,6 +22,7 @@ import re
 import struct
 import zipfile
 import zlib
+from collections import Counter
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass, replace
 from math import prod
@@ -92,6 +93,10 @@ def read_arrays(path: str, wanted: Collection[str] | None = None, dates: Collect
             raise InputError(f"cannot read as {kind} file: {exc or type(exc).__name__}", file=path) from None
         raise
     del variables
+    twice = sorted(n for n, k in Counter(names).items() if k > 1 and (wanted is None or n in wanted))
+    if twice:                       # a variable named "q[0]" beside a 2-D q: which one is meant?
+        raise InputError(f"column {twice[0]!r} appears twice (a variable of that name, and a channel of "
+                         f"{_variable_of(twice[0])!r}): rename one", file=path)
     chosen = [n for n in names if n in loaded and (wanted is None or n in wanted)]
     lengths = {n: len(loaded[n]) for n in chosen}
     if len(set(lengths.values())) > 1:
