@@ -13,6 +13,8 @@ the speed figure: CPU seconds of one diagnosis between recordings against one ``
 of the changed runs (the shared effects on every coordinate) in the same process.
 
     python benchmarks/bench_diagnose_change.py [--seeds 20] [--samples 5000] [--mechanism puma560]
+    python benchmarks/bench_diagnose_change.py --mechanism tests/data/urdf/ur5.urdf --samples 1000 \
+        --payload-mass 0.48 --load-friction 0.1 --quantum 0.01 --noise ar1 --seeds 6 --scenarios payload
 """
 
 import argparse
@@ -29,7 +31,22 @@ from baseparams.recordings.simulate import simulate_change
 from baseparams.io.loader import resolve
 
 
-def judge(result, truth, scenario: str, last: str) -> tuple[bool, bool, bool]:
+def rigidly_joined(mechanism, label: int) -> set[str]:
+    """The names of ``label``'s body and of the bodies fixed to it (a payload on a tool frame
+    is a payload on the link it is fixed to: their columns are the same)."""
+    from baseparams.diagnose.derived import body_name
+    group, grew = {label}, True
+    while grew:
+        grew = False
+        for joint in mechanism.joints:
+            if not joint.coordinates and (joint.parent in group) != (joint.child in group):
+                group |= {joint.parent, joint.child}
+                grew = True
+    moving = {b.label for b in mechanism.bodies}
+    return {body_name(mechanism, b) for b in group if b in moving}
+
+
+def judge(result, truth, scenario: str, last: set[str]) -> tuple[bool, bool, bool]:
     """(the right names and nothing else, and for a payload its mass within 5 % too, and
     within 2 of its own std: whether the std is honest, whatever the noise allows)."""
     names = [(e["kind"], e["coordinate"]) for e in result.changes]
@@ -39,7 +56,7 @@ def judge(result, truth, scenario: str, last: str) -> tuple[bool, bool, bool]:
     if scenario == "friction":
         ok = names == [("viscous_friction", truth["friction_drift"]["coordinate"])] and not result.ambiguous
         return ok, ok, ok
-    if names not in ([("body", last)], [("mass", last)]) or result.ambiguous:
+    if len(names) != 1 or names[0][0] not in ("body", "mass") or names[0][1] not in last or result.ambiguous:
         return False, False, False
     m = result.changes[0]["coefficients"]["m"]
     true = truth["payload"]["mass"]
@@ -55,13 +72,20 @@ def main() -> None:
     parser.add_argument("--mechanism", default="puma560")
     parser.add_argument("--noise", nargs="+", default=["white", "ar1", "lowpass"])
     parser.add_argument("--payloads", nargs="+", type=float, default=[0.05, 0.1, 0.25, 0.5])
+    parser.add_argument("--payload-mass", type=float, default=None,
+                        help="one payload in kg instead of --payloads (a last body of no mass)")
+    parser.add_argument("--load-friction", type=float, default=0.0, help="gear load friction mu, common to both runs")
+    parser.add_argument("--quantum", type=float, default=0.0, help="torques rounded to this step (N m)")
+    parser.add_argument("--scenarios", nargs="+", default=["nothing", "payload", "friction"])
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     mechanism = resolve(args.mechanism)
-    from baseparams.diagnose.derived import body_name
-    last = body_name(mechanism, mechanism.bodies[-1].label)
-    scenarios = [("nothing", {})] + [(f"payload {p:g}", {"payload": p}) for p in args.payloads] + \
-        [("friction", {"friction_drift": 0.1, "drift_coordinate": 1})]
+    last = rigidly_joined(mechanism, mechanism.bodies[-1].label)
+    payloads = [(f"payload {p:g}", {"payload": p}) for p in args.payloads] if args.payload_mass is None else \
+        [(f"payload {args.payload_mass:g} kg", {"payload_mass": args.payload_mass})]
+    scenarios = [("nothing", {})] * ("nothing" in args.scenarios) + payloads * ("payload" in args.scenarios) + \
+        [("friction", {"friction_drift": 0.1, "drift_coordinate": 1})] * ("friction" in args.scenarios)
+    common = {"load_friction": args.load_friction, "quantum": args.quantum}
     print(f"{args.mechanism}, {args.samples} samples per run, {args.seeds} seeds per cell")
     print(f"{'scenario':<14} {'noise':<8} {'names':>7} {'+mass':>7} {'+2 std':>7} {'lines':>6} {'CPU s':>7}  wrong names")
     for name, change in scenarios:
@@ -69,7 +93,7 @@ def main() -> None:
             named, right, honest, lines, wrong, cpu = 0, 0, 0, [], [], []
             for seed in range(args.seeds):
                 before, after, truth = simulate_change(mechanism, samples=args.samples, seed=seed, noise=noise,
-                                                       **change)
+                                                       **change, **common)
                 start = time.process_time()
                 result = diagnose_change(mechanism, before, after)
                 spent = time.process_time() - start
@@ -85,7 +109,8 @@ def main() -> None:
             print(f"{name:<14} {noise:<8} {named:>3}/{args.seeds:<3} {right:>3}/{args.seeds:<3} "
                   f"{honest:>3}/{args.seeds:<3} {int(np.median(lines)):>6} "
                   f"{np.median(cpu):>7.2f}  {'; '.join(wrong[:4])}", flush=True)
-    speed(mechanism, args.samples)
+    if args.payload_mass is None:
+        speed(mechanism, args.samples)
 
 
 def speed(mechanism, samples: int, repeats: int = 3) -> None:
