@@ -238,6 +238,10 @@ def test_check_reports_a_plan_and_refuses_one_too_fast(tmp_path):
     bad = _run("excite", UR5_PLAIN, "--check", fast, "--format", "json", "--quiet")
     assert bad.exit_code == 1
     assert json.loads(bad.stdout)["margins"]["velocity"] < 0
+    written = tmp_path / "plan.toml"
+    assert _run("excite", UR5_PLAIN, "-o", written, *QUICK).exit_code in (0, 1)
+    again = _run("excite", UR5_PLAIN, "--check", written, "--format", "json", "--quiet")
+    assert again.exit_code == 0 and json.loads(again.stdout)["samples"] == 10 * (20 - 1) + 1
     broken = tmp_path / "broken.csv"
     broken.write_text("t,q_nothing\n0,1\n1,2\n")
     refused = _run("excite", UR5_PLAIN, "--check", broken, "--quiet")

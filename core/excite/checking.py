@@ -164,14 +164,46 @@ def _piece(problem: design.Problem, t: np.ndarray, q: np.ndarray, qd: np.ndarray
     return design.check(problem, q, qd, qdd, jerk=jerk, times=t if len(t) > 1 else None, motion=between)
 
 
+def _is_recording(path: str) -> bool:
+    """A recording description (``[recording]`` or ``[[runs]]``), not a mechanism file."""
+    import tomllib
+    try:
+        with open(path, "rb") as handle:
+            keys = tomllib.load(handle).keys()
+    except (OSError, tomllib.TOMLDecodeError):
+        return True                                    # the recording reader says what is wrong
+    return "recording" in keys or "runs" in keys
+
+
+def planned_motion(path: str, names: tuple[str, ...]) -> tuple[Sampled, list[str]]:
+    """A mechanism file's ``[trajectory]`` (a written plan) at ten times its samples, from its
+    own expressions."""
+    from baseparams.dynamics.trajectory import values_at
+    from baseparams.io.loader import load_mechanism
+    from baseparams.numeric.backends import Float64
+    spec = load_mechanism(path).trajectory
+    if spec is None:
+        raise InputError("a mechanism file without a [trajectory]: nothing to check", file=path, key="trajectory")
+    missing = [n for n in names if n not in spec.expressions]
+    if missing:
+        raise InputError(f"no trajectory for {', '.join(missing)}", file=path, key="trajectory")
+    t = np.linspace(float(spec.t_start), float(spec.t_end), 10 * (spec.samples - 1) + 1)
+    values = [values_at(spec.expressions[n], Float64(), t) for n in names]
+    q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v[k], float), t.shape) for v in values], axis=1)
+                  for k in range(3))
+    return (t, q, qd, qdd), [f"the file's [trajectory] at ten times its {spec.samples} samples"]
+
+
 def read_motion(mechanism: Mechanism, path: str, names: tuple[str, ...]) -> tuple[Sampled, list[str]]:
-    """The motion in ``path``: a CSV (:func:`read_plan_csv`), or a recording (a description
-    ``.toml`` or a CSV with ``tau_`` columns) as identify reads it."""
+    """The motion in ``path``: a CSV (:func:`read_plan_csv`), a mechanism file's
+    ``[trajectory]`` (a written plan), or a recording description as identify reads it."""
     if not Path(path).is_file():
         raise InputError("no such file", file=path, key="--check")
     if Path(path).suffix.lower() == ".csv":
         t, q, qd, qdd, notes = read_plan_csv(path, names)
         return (t, q, qd, qdd), notes
+    if Path(path).suffix.lower() == ".toml" and not _is_recording(path):
+        return planned_motion(path, names)
     from baseparams.recordings.recording import read_data
     data = read_data([path], mechanism)[0]
     m = data.motion
