@@ -116,8 +116,8 @@ def _diagnosed_against(folder: Path, urdf: Path, loaded: Path, seed: int):
 
 
 def test_friction_on_every_joint_of_a_urdf_arm_is_named_through_a_recording(tmp_path):
-    """A 7-joint arm from its URDF (the iiwa14: its joints' damping is known viscous friction)
-    with Coulomb friction hidden on every joint (1.1 to 2.9 N m; noise 0.3 N m), logged at
+    """A 7-joint arm from its URDF (the iiwa14: its joints' damping, held with --urdf-dynamics,
+    is known viscous friction) with Coulomb friction hidden on every joint (1.1 to 2.9 N m; noise 0.3 N m), logged at
     2 kHz and read through a recording (default filter and decimation): the seven named with
     their values within 2 %, nothing else."""
     urdf = str(Path(__file__).parent / "data" / "urdf" / "iiwa14.urdf")
@@ -130,7 +130,8 @@ def test_friction_on_every_joint_of_a_urdf_arm_is_named_through_a_recording(tmp_
                                   "--seed", "3", *hidden])
     assert result.exit_code == 0, result.output
     _joint_side_recording(tmp_path, joints)
-    result = runner.invoke(main, ["diagnose", urdf, str(tmp_path / "rec.toml"), "--format", "json", "--quiet"])
+    result = runner.invoke(main, ["diagnose", urdf, str(tmp_path / "rec.toml"), "--urdf-dynamics", "--format", "json",
+                                  "--quiet"])
     report = json.loads(result.stdout)
     named = {(e["kind"], e["coordinate"]): e["coefficients"]["fc"]["value"] for e in report["effects"]}
     assert set(named) == {("coulomb_friction", j) for j in joints}

@@ -262,7 +262,7 @@ def _physical(identification: Any, mechanism: "Mechanism", base: Any) -> None:
 def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None = None,
              candidates: Sequence[str] | None = None, alpha: float = 0.05, folds: int = 5,
              holdout: float = 0.0, max_steps: int | None = None, write: PathText | None = None,
-             baseline: DataPaths | None = None,
+             baseline: DataPaths | None = None, urdf_dynamics: bool = False,
              progress: Progress | None = None) -> "Diagnosed | ChangeDiagnosed":
     """Name the effects ``mech``'s model misses on measured ``data``: the model is fitted
     (or held as given: ``params``, a mechanism file with the robot's inertias or an
@@ -272,19 +272,24 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
 
     ``baseline``: runs of the same robot before a change; then what changed between them
     and ``data`` is named instead (:func:`diagnose_change`). ``params`` may be the result of
-    :func:`identify` itself (or its JSON dict) wherever a file's path is taken."""
+    :func:`identify` itself (or its JSON dict) wherever a file's path is taken.
+    ``urdf_dynamics``: hold a URDF's ``<dynamics damping friction>`` as known effects (by
+    default they are set aside: placeholders are common, and the diagnosis finds friction
+    itself)."""
     _check_result(params)
     if params is not None and result_json(params) is not None:
         with result_file(params, "identify-result.json") as path:
             return diagnose(mech, data, params=path, candidates=candidates, alpha=alpha, folds=folds,
-                            holdout=holdout, max_steps=max_steps, write=write, baseline=baseline, progress=progress)
+                            holdout=holdout, max_steps=max_steps, write=write, baseline=baseline,
+                            urdf_dynamics=urdf_dynamics, progress=progress)
     if baseline is not None:
         refused = [name for name, value in (("candidates", candidates), ("holdout", holdout),
                                             ("max_steps", max_steps), ("write", write)) if value]
         if refused or folds != 5:
             raise InputError("between recordings the change candidates are fixed and nothing is written: "
                              f"{', '.join(refused or ['folds'])} cannot be used with a baseline", key="--baseline")
-        return diagnose_change(mech, data, baseline, params=params, alpha=alpha, progress=progress)
+        return diagnose_change(mech, data, baseline, params=params, alpha=alpha, urdf_dynamics=urdf_dynamics,
+                               progress=progress)
     from dataclasses import replace
 
     from baseparams.diagnose.workflow import check_writable, diagnose_data, write_fixed
@@ -293,7 +298,7 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
 
     from .results import Diagnosed
     paths = _paths(data)
-    mechanism = load(mech)
+    mechanism, set_aside = _without_urdf_dynamics(load(mech), urdf_dynamics)
     if write:
         check_writable(mechanism, write)          # before the run, not after it
     given = None
@@ -313,6 +318,7 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
                            folds=folds, holdout=holdout, max_steps=max_steps, given=given)
     if replaced:
         result.notes.append(f"--params {params}: its identified values replace the model's own {', '.join(replaced)}")
+    result.notes.extend(set_aside)
     written = None
     if write:
         existing = {(e.kind, e.coordinate) for e in mechanism.effects}
@@ -333,6 +339,31 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
     return Diagnosed(result, written, coordinate_kinds(mechanism))
 
 
+# the effects a URDF reader makes of <dynamics damping friction>
+URDF_DYNAMICS = ("viscous_friction", "coulomb_friction")
+
+
+def _without_urdf_dynamics(mechanism: "Mechanism", hold: bool) -> tuple["Mechanism", list[str]]:
+    """``mechanism`` without the known frictions its URDF's ``<dynamics>`` gave (unless
+    ``hold``), and the note saying so. Why: robot URDFs carry placeholders (TIAGo: damping on
+    every joint); held as known, the diagnosis started from a gap of 22 and spent its names
+    "correcting" them (torso viscous -990.7)."""
+    from dataclasses import replace
+    from baseparams.diagnose.candidates import known_effect
+    path = str(mechanism.path or "")
+    if hold or not path.lower().endswith(".urdf"):
+        return mechanism, []
+    gone = [e for e in mechanism.effects if e.kind in URDF_DYNAMICS and known_effect(e)]
+    if not gone:
+        return mechanism, []
+    kept = tuple(e for e in mechanism.effects if e not in gone)
+    joints = sorted({e.coordinate for e in gone})
+    note = (f"{Path(path).name}: its <dynamics> damping and friction on {len(joints)} joint(s) "
+            f"({', '.join(joints[:4])}{' ...' if len(joints) > 4 else ''}) are not held as known (URDFs often carry "
+            "placeholders); the diagnosis finds friction itself. --urdf-dynamics holds them")
+    return replace(mechanism, effects=kept), [note]
+
+
 def _value_of(entry: dict, coefficient: str) -> float:
     """A named effect's estimated coefficient (its report entry)."""
     return float(entry["coefficients"][coefficient]["value"])
@@ -345,17 +376,20 @@ def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
 
 
 def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths, *, params: ResultLike | None = None,
-                    alpha: float = 0.05, progress: Progress | None = None) -> "ChangeDiagnosed":
+                    alpha: float = 0.05, urdf_dynamics: bool = False,
+                    progress: Progress | None = None) -> "ChangeDiagnosed":
     """What changed between the ``baseline`` runs and the ``changed`` runs of one robot (a
     payload, a gain, a friction, a delay): one model shared by both (fitted on the baseline,
     or ``params`` held as given), what both lack cancelled between samples in the same
     state, the change's candidates tested on the changed runs only
     (:mod:`baseparams.diagnose.change`). ``result.closed``: nothing changed, or the named
-    changes explain the difference. ``params``: a path, or :func:`identify`'s result itself."""
+    changes explain the difference. ``params``: a path, or :func:`identify`'s result itself.
+    ``urdf_dynamics``: as for :func:`diagnose`."""
     _check_result(params)
     if params is not None and result_json(params) is not None:
         with result_file(params, "identify-result.json") as path:
-            return diagnose_change(mech, changed, baseline, params=path, alpha=alpha, progress=progress)
+            return diagnose_change(mech, changed, baseline, params=path, alpha=alpha, urdf_dynamics=urdf_dynamics,
+                                   progress=progress)
     from dataclasses import replace
 
     from baseparams.diagnose.change import diagnose_change as run
@@ -367,7 +401,7 @@ def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths
     changed_paths, baseline_paths = _paths(changed), _paths(baseline)
     if not baseline_paths:
         raise InputError("give at least one baseline run", key="--baseline")
-    mechanism = load(mech)
+    mechanism, set_aside = _without_urdf_dynamics(load(mech), urdf_dynamics)
     given = None
     if params:
         given = given_parameters(mechanism, str(params))
@@ -384,5 +418,6 @@ def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths
                          "runs': describe both alike", key="--baseline")
     _say(progress, f"testing changes on {after.count} samples against {before.count}")
     result = run(mechanism_after, before, after, given=given, alpha=alpha)
+    result.notes.extend(set_aside)
     result.notes = [f"baseline: {n}" for n in before.notes] + [f"changed: {n}" for n in after.notes] + result.notes
     return ChangeDiagnosed(result, coordinate_kinds(mechanism_after))

@@ -34,6 +34,9 @@ if TYPE_CHECKING:
                    "`identify` (its effects replace the model's own; a change within its covariance is "
                    "its own error). Bodies (once per rigid body), payloads and torque gains become "
                    "candidates.")
+@click.option("--urdf-dynamics", is_flag=True, default=False,
+              help="Hold a URDF MECH's <dynamics damping friction> as known effects [default: set aside with "
+                   "a note, as URDFs often carry placeholders; the diagnosis finds friction itself].")
 @click.option("--candidates", "selection", multiple=True, metavar="KIND[:PLACE]",
               help="Candidate effects to test (repeatable); KIND alone: on every place it acts on "
                    "(delay alone: the recording's one delay; delay:COORD one drive's own) "
@@ -61,7 +64,7 @@ if TYPE_CHECKING:
 @format_option
 @quiet_option()
 def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], params_source: str | None,
-             selection: tuple[str, ...],
+             urdf_dynamics: bool, selection: tuple[str, ...],
              alpha: float, folds: int, holdout: float, max_steps: int | None, plot_path: str | None,
              write_path: str | None, verbose: bool, output: str | None, fmt: str, quiet: bool) -> None:
     """Find where MECH's model and measured DATA disagree and name the missing effect.
@@ -96,7 +99,7 @@ def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], 
     with Progress("diagnose", steps=2 + bool(baseline) + bool(plot_path), quiet=quiet) as progress:
         result = run(mechanism, list(data_paths), params=params_source, candidates=list(selection) or None,
                      alpha=alpha, folds=folds, holdout=holdout, max_steps=max_steps, write=write_path,
-                     baseline=list(baseline) or None, progress=progress)
+                     baseline=list(baseline) or None, urdf_dynamics=urdf_dynamics, progress=progress)
         if plot_path:
             progress("plotting")
             if isinstance(result, ChangeDiagnosed):
