@@ -81,6 +81,9 @@ class Identification:
     impossible: tuple[Flag, ...] = ()
     # a bad setup said with its numbers (unknown gains at or below zero, an ill-conditioned fit)
     warnings: tuple[str, ...] = ()
+    # RMS residual / the measured force's standard deviation (its mean removed): beside nrms,
+    # whose RMS holds a gravity-loaded joint's mean torque (the TIAGo torso read 0.002)
+    nrms_sd: np.ndarray | None = None
 
     @property
     def std(self) -> np.ndarray:
@@ -144,6 +147,7 @@ class Identification:
             "condition_number": _finite(self.condition_number),
             "noise_sd": dict(zip(self.coordinates, map(float, self.noise_sd))),
             "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
+            "nrms_sd": None if self.nrms_sd is None else dict(zip(self.coordinates, map(float, self.nrms_sd))),
             "dof": self.dof,
             "base_model_error": float(self.base_model_error),
             "residual_variance": float(self.residual_variance),
@@ -181,9 +185,10 @@ class Identification:
             rel = self.relative_std[k]
             lines.append(f"  {name:<{width}}  {self.estimates[k]:>13.6g}  {self.std[k]:>10.3g}  "
                          + (f"{rel:>8.3g}" if math.isfinite(rel) else f"{'-':>8}"))
-        lines.append("  per coordinate: noise SD (weight) / NRMS residual")
-        for c, sd, nrms in zip(self.coordinates, self.noise_sd, self.nrms):
-            lines.append(f"    {c}: {sd:.4g} / {nrms:.4g}")
+        lines.append("  per coordinate: noise SD (weight) / NRMS residual (of the RMS force; of its SD)")
+        of_sd = self.nrms_sd if self.nrms_sd is not None else [math.nan] * len(self.coordinates)
+        for c, sd, nrms, q in zip(self.coordinates, self.noise_sd, self.nrms, of_sd):
+            lines.append(f"    {c}: {sd:.4g} / {nrms:.4g}" + (f"; {q:.4g}" if math.isfinite(q) else ""))
         lines += [f"  note: {n}" for n in self.notes]
         lines += impossible_lines(self.impossible, "  ")
         return "\n".join(lines)
@@ -303,9 +308,11 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     estimates, covariance, sigma = fit.coefficients, fit.covariance, 1.0 / fit.weights
     variance, condition = fit.scale_variance, fit.condition_number
     final = y - (stacked @ estimates).reshape(n, f)
-    measured_rms = np.sqrt(np.mean(measured_forces(data, names, estimates) ** 2, axis=0))
+    forces = measured_forces(data, names, estimates)
+    measured_rms, measured_sd = np.sqrt(np.mean(forces ** 2, axis=0)), np.std(forces, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         nrms = np.where(measured_rms > 0, np.sqrt(np.mean(final ** 2, axis=0)) / measured_rms, 0.0)
+        nrms_sd = np.where(measured_sd > 0, np.sqrt(np.mean(final ** 2, axis=0)) / measured_sd, np.inf)
     coefficients = {name: (spec.kind, c) for spec in effects for c, name in zip(
         registry.effects()[spec.kind].item.coefficients,
         registry.effects()[spec.kind].item.coefficient_names(spec.coordinate))}
@@ -319,7 +326,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                           residual=final, condition_number=condition, samples=n, dof=n * f - p,
                           residual_variance=variance, notes=tuple(notes), absorbed=absorbed,
                           base_model_error=outside, impossible=tuple(flags),
-                          warnings=tuple(setup_warnings(names, kinds, estimates, covariance, condition)))
+                          warnings=tuple(setup_warnings(names, kinds, estimates, covariance, condition)),
+                          nrms_sd=nrms_sd)
 
 
 def setup_warnings(names: Sequence[str], kinds: Sequence[str], estimates: np.ndarray, covariance: np.ndarray,
@@ -454,6 +462,15 @@ class Prediction:
             return np.where(size > 0, self.rms / size, 0.0)
 
     @property
+    def nrms_sd(self) -> np.ndarray:
+        """RMS error / the measured force's standard deviation (its mean over the measured rows
+        removed): a gravity-loaded joint's mean torque does not make it look better."""
+        mean = self._mean(self.measured)
+        sd = np.sqrt(self._mean((self.measured - mean) ** 2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(sd > 0, self.rms / sd, np.inf)
+
+    @property
     def overall_rms(self) -> float:
         error = (self.measured - self.predicted) ** 2
         if self.rows is not None and self.rows.any():
@@ -467,7 +484,7 @@ class Prediction:
             return {c: None if c in undefined else float(v) for c, v in zip(self.coordinates, values)}
         return {"data": self.data, "samples": int(len(self.t)),
                 "rms": dict(zip(self.coordinates, map(float, self.rms))),
-                "nrms": ratios(self.nrms),
+                "nrms": ratios(self.nrms), "nrms_sd": ratios(self.nrms_sd),
                 "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {}) \
             | ({"nrms_undefined": list(undefined)} if undefined else {}) \
             | ({"nrms_unfiltered": ratios(self.nrms_unfiltered)} if self.nrms_unfiltered is not None else {})
@@ -479,7 +496,8 @@ class Prediction:
                   f"    {c}: RMS {r:.4g} / NRMS undefined (the measured force is 0 in every sample: a dead "
                   "channel?)" if c in self.undefined else
                   f"    {c}: RMS {r:.4g} / NRMS {q:.4g}" + (f" (unfiltered {u:.4g})" if u is not None else "")
-                  for c, r, q, u in zip(self.coordinates, self.rms, self.nrms, raw)]
+                  + (f", of the SD {d:.4g}" if np.isfinite(d) else "")
+                  for c, r, q, u, d in zip(self.coordinates, self.rms, self.nrms, raw, self.nrms_sd)]
         return "\n".join(lines)
 
 
