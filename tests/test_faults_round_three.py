@@ -451,6 +451,7 @@ def test_a_verb_that_needs_dash_o_says_so_before_any_work(verb):
     (["solve", "pendulum", "--samples", "1"], ["--samples: 1 is not in the range"]),
     (["plot", "mechanism", "pendulum", "-o", "x.png", "--image-format", "jpg"], ["--image-format: 'jpg'"]),
     (["show"], ["Missing argument 'MECH'"]),
+    (["solve", "pendulum", "--format"], ["Option '--format' requires an argument"]),
 ])
 def test_a_bad_option_value_is_one_error_line(args, words):
     """Issue 46: a bad --format gave click's three lines (usage, hint, error). A bad or missing

@@ -75,6 +75,8 @@ class Group(click.Group):
             raise UserError(getattr(exc, "message", str(exc))) from None
         except click.BadParameter as exc:
             raise UserError(bad_parameter(exc)) from None
+        except click.BadOptionUsage as exc:       # an option without its value: "--format" at the end
+            raise UserError(exc.format_message().rstrip(".")) from None
         except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
         except MemoryError as exc:
