@@ -37,8 +37,9 @@ def _module_name(path: pathlib.Path) -> str:
     return ".".join(["baseparams", *parts])
 
 
-def _runtime_imports(tree: ast.AST) -> list[tuple[str, int]]:
-    """(imported module or name, line) of every import the module runs."""
+def _runtime_imports(tree: ast.AST, package: str = "baseparams") -> list[tuple[str, int]]:
+    """(imported module or name, line) of every import the module runs; relative imports
+    resolved against ``package`` (the module's own package)."""
     found: list[tuple[str, int]] = []
 
     class Visitor(ast.NodeVisitor):
@@ -55,9 +56,14 @@ def _runtime_imports(tree: ast.AST) -> list[tuple[str, int]]:
             found.extend((alias.name, node.lineno) for alias in node.names)
 
         def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
-            if node.module and node.level == 0:
-                found.append((node.module, node.lineno))
-                found.extend((f"{node.module}.{alias.name}", node.lineno) for alias in node.names)
+            module = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                anchor = ".".join(parts[:len(parts) - node.level + 1])
+                module = f"{anchor}.{module}" if module else anchor
+            if module:
+                found.append((module, node.lineno))
+                found.extend((f"{module}.{alias.name}", node.lineno) for alias in node.names)
 
     Visitor().visit(tree)
     return found
@@ -69,7 +75,8 @@ def _graph() -> dict[str, dict[str, int]]:
     graph: dict[str, dict[str, int]] = {}
     for name, path in modules.items():
         edges: dict[str, int] = {}
-        for target, line in _runtime_imports(ast.parse(path.read_text(), str(path))):
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for target, line in _runtime_imports(ast.parse(path.read_text(), str(path)), package):
             if target in modules and target not in (name, "baseparams"):
                 edges.setdefault(target, line)
         graph[name] = edges
@@ -130,8 +137,11 @@ def test_no_import_circle():
 
 
 def test_the_walk_sees_upward_and_circular_imports(tmp_path):
-    """The checks can fail: a function-level import counts, a TYPE_CHECKING one does not."""
+    """The checks can fail: a function-level import counts, a TYPE_CHECKING one does not, a
+    relative one is resolved."""
     tree = ast.parse("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from baseparams.cli import x\n"
-                     "def f():\n    from baseparams.api.data import y\n")
-    found = [name for name, _ in _runtime_imports(tree)]
+                     "def f():\n    from baseparams.api.data import y\n    from .results import Z\n"
+                     "    from .. import errors\n")
+    found = [name for name, _ in _runtime_imports(tree, "baseparams.api")]
     assert "baseparams.api.data" in found and "baseparams.cli" not in found
+    assert "baseparams.api.results" in found and "baseparams.errors" in found

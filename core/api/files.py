@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
 from pathlib import Path
@@ -243,23 +242,3 @@ def _is_number(text: str) -> bool:
         return float(text) == float(text)
     except ValueError:
         return False
-
-
-def _trajectory_limits(mechanism: Mechanism, names: Sequence[str]) -> tuple[str | None, str | None, str | None]:
-    """Closed loops: the position range, peak velocity and peak acceleration of the file's
-    trajectory (its positions are known to close), as option texts."""
-    import numpy as np
-
-    from baseparams.recordings.simulate import trajectory_motion
-    motion = trajectory_motion(mechanism)
-    lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)
-    ranges = ",".join(f"{n}={float(a)!r}:{float(b)!r}" for n, a, b in zip(names, lo, hi) if a < b) or None
-    peaks = [",".join(f"{n}={_up(v)!r}" for n, v in zip(names, np.max(np.abs(values), axis=0)) if v > 0)
-             or None for values in (motion.qd, motion.qdd)]
-    return ranges, peaks[0], peaks[1]
-
-
-def _up(value: float) -> float:
-    """``value`` rounded up to two significant digits."""
-    scale = 10.0 ** (math.floor(math.log10(value)) - 1)
-    return math.ceil(value / scale - 1e-9) * scale

@@ -131,7 +131,6 @@ def excite(mech: Any, *, output: Any = None, solver: str = "vp", solver_options:
             raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
         weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
     margin = VELOCITY_MARGIN if velocity_margin is None else velocity_margin
-    from .files import _trajectory_limits
     if mechanism.loops and mechanism.trajectory is not None:
         # closed loops: the file's trajectory is known to stay in the reachable range
         ranges, velocities, accelerations = _trajectory_limits(mechanism, names)
@@ -235,3 +234,23 @@ def check_plan(mech: Any, plan_path: str, *, solver: str = "vp", solver_options:
     if problem.scene is not None:
         scene_notes += problem.scene.notes
     return check_motion(mechanism, problem, str(plan_path), chosen.name, motion, scene_notes + notes)
+
+
+def _trajectory_limits(mechanism: Mechanism, names: Sequence[str]) -> tuple[str | None, str | None, str | None]:
+    """Closed loops: the position range, peak velocity and peak acceleration of the file's
+    trajectory (its positions are known to close), as option texts."""
+    import numpy as np
+
+    from baseparams.recordings.simulate import trajectory_motion
+    motion = trajectory_motion(mechanism)
+    lo, hi = motion.q.min(axis=0), motion.q.max(axis=0)
+    ranges = ",".join(f"{n}={float(a)!r}:{float(b)!r}" for n, a, b in zip(names, lo, hi) if a < b) or None
+    peaks = [",".join(f"{n}={_up(v)!r}" for n, v in zip(names, np.max(np.abs(values), axis=0)) if v > 0)
+             or None for values in (motion.qd, motion.qdd)]
+    return ranges, peaks[0], peaks[1]
+
+
+def _up(value: float) -> float:
+    """``value`` rounded up to two significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(value)) - 1)
+    return math.ceil(value / scale - 1e-9) * scale
