@@ -389,6 +389,8 @@ def test_diagnose_reports_tied_candidates_as_equivalent(tmp_path):
         assert abs(e["value"] - 0.3) < 0.015
     text = CliRunner().invoke(main, ["diagnose", "parallelogram_arm", str(data)]).stdout
     assert "wider range" not in text and ("equivalent:" in text or "viscous_friction" in text)
+    if groups and not report["effects"]:        # the verdict's "explained" is not contradicted
+        assert "named effects: none alone; the gap is closed by one effect of each ambiguous group" in text
 
 
 def test_a_body_named_like_a_tied_coordinate_is_not_called_equivalent():

@@ -66,7 +66,7 @@ def _head(result: "Diagnosis") -> list[str]:
 def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     """The whole report (``--verbose``)."""
     lines = _head(result)
-    lines.append("named effects:" if result.effects else "named effects: none")
+    lines.append("named effects:" if result.effects else _none_named(result))
     for e in result.effects:
         shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
         lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}{_payload_text(e)}  "
@@ -237,7 +237,7 @@ def short_text(result: "Diagnosis", written: str | None = None, kinds: Mapping[s
         if e < len(effects):
             lines.append(f"  and {len(effects) - e} more, smaller (--verbose lists every named effect)")
     else:
-        lines.append("named effects: none")
+        lines.append(_none_named(result))
     for group in ambiguous[:a]:
         lines.append(_ambiguous_line(group))
     if a < len(ambiguous):
@@ -249,6 +249,16 @@ def short_text(result: "Diagnosis", written: str | None = None, kinds: Mapping[s
     lines += [f"note: {' '.join(n.splitlines())}" for n in notes[:shown_notes]]      # one line each
     lines += end
     return "\n".join(lines)
+
+
+def _none_named(result: "Diagnosis") -> str:
+    """The line for no named effect: with ambiguous groups, what explains the gap is one
+    effect of each group, the data cannot tell which (a verdict "explained" beside "named
+    effects: none" read as a contradiction)."""
+    if result.ambiguous:
+        return ("named effects: none alone; the gap is closed by one effect of each ambiguous group below "
+                "(the data cannot tell which)")
+    return "named effects: none"
 
 
 def _fit_lists(effects: int, ambiguous: int, room: int) -> tuple[int, int]:
