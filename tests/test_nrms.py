@@ -1,5 +1,6 @@
 """NRMS relative to the torque's standard deviation beside its RMS (issue 48): a
-gravity-loaded joint's mean torque sits in its RMS and made a fit look 2.6 times better."""
+gravity-loaded joint's mean torque sits in its RMS and made a fit look 2.6 times better.
+And the verbose report's residual lines."""
 
 import numpy as np
 
@@ -25,3 +26,16 @@ def test_identify_reports_both(tmp_path):
     fit = bp.identify("planar_2r", str(tmp_path / "run.csv"), solver="dp").to_json()
     assert set(fit["nrms_sd"]) == set(fit["nrms"])
     assert all(fit["nrms_sd"][c] >= fit["nrms"][c] for c in fit["nrms"])      # SD <= RMS
+
+
+def test_verbose_report_of_a_coordinate_without_a_predictability_test(tmp_path):
+    """A coordinate whose predictability was not tested (None in the JSON, here the SLA's
+    theta2 on 200 noise-free samples) is left out of the verbose line: --verbose exited 3."""
+    from click.testing import CliRunner
+    from baseparams.cli import main
+    data = tmp_path / "sla.csv"
+    assert CliRunner().invoke(main, ["simulate", "sla_suspension", "--effect", "viscous_friction:theta1=0.5",
+                                     "--seed", "3", "-o", str(data), "--quiet"]).exit_code == 0
+    result = CliRunner().invoke(main, ["diagnose", "sla_suspension", str(data), "--verbose"])
+    assert result.exit_code in (0, 1), result.stderr
+    assert "predictable from the motion (the verdict's test, Holm p): theta1" in result.stdout

@@ -93,7 +93,7 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     predictable = un.get("predictable") or {}
     if predictable:
         lines.append("predictable from the motion (the verdict's test, Holm p): " + ", ".join(
-            f"{c} {t['pvalue_holm']:.2g}" for c, t in predictable.items() if t.get("pvalue_holm") is not None))
+            f"{c} {t['pvalue_holm']:.2g}" for c, t in predictable.items() if t and t.get("pvalue_holm") is not None))
     if un.get("significant_candidates_left"):
         lines.append(f"the search stopped at --max-steps {un['max_steps']} with candidates still "
                      "significant: the named effects are incomplete")
