@@ -444,7 +444,9 @@ def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping
     worst = max(common["per_coordinate"].items(), key=lambda kv: kv[1], default=("", 0.0))
     lines.append(f"what the model lacks in both: NRMS {common['nrms']:.3g} (largest {worst[0]} {worst[1]:.3g}); "
                  + ("it cancels between paired samples" if common["cancelled"] else "not cancelled (other motions)")
-                 + (f"; shared delay {1e3 * common['delay']:.3g} ms" if common.get("delay") else ""))
+                 + (f"; shared delay {1e3 * common['delay']:.3g} ms" if common.get("delay") else "")
+                 + ("; gear load friction mu " + ", ".join(f"{c} {mu:.2g}" for c, mu in common["load_friction"].items())
+                    if common.get("load_friction") else ""))
     if result.verdict in ("partly explained", "unexplained"):
         per = gap["per_coordinate"]
         where = sorted(per, key=lambda c: -per[c]["after"])[:3]
