@@ -2,9 +2,9 @@
 
     python examples/identify_recording.py [MECH DATA...]
 
-Without arguments: the Staubli TX40 of examples/tx40/recording.toml (raw motor logs, gear
-ratios, the coupled wrist), whose logs and URDF sit in the project's shared/ folder beside
-this checkout. MECH is a registered name, a TOML or a URDF file; DATA are CSV files or
+Without arguments: the Staubli TX40 of examples/data/tx40 (raw motor logs, gear ratios,
+the coupled wrist; every 10th row of the real 5 kHz recording, carried in the project with its
+attribution). MECH is a registered name, a TOML or a URDF file; DATA are CSV files or
 recording descriptions (.toml). Takes about 20 s of CPU on the TX40.
 """
 
@@ -14,17 +14,14 @@ from pathlib import Path
 import baseparams as bp
 
 HERE = Path(__file__).resolve().parent
-TX40 = HERE.parent.parent / "shared" / "data" / "tx40" / "tx40_mdh_modified.urdf"
+TX40 = HERE / "data" / "tx40"
 
 
 def main() -> int:
     if len(sys.argv) > 2:
         mech, data = sys.argv[1], sys.argv[2:]
     else:
-        mech, data = TX40, [HERE / "tx40" / "recording.toml"]
-        if not TX40.is_file():
-            print(f"{TX40} is missing: give MECH DATA... (e.g. a URDF and a recording)", file=sys.stderr)
-            return 2
+        mech, data = TX40 / "tx40_mdh_modified.urdf", [TX40 / "recording.toml"]
     # base parameters and friction on every joint, weighted least squares
     fit = bp.identify(mech, data, effects=["viscous_friction:*", "coulomb_friction:*"], solver="dp")
     print(fit.to_text())
