@@ -717,3 +717,24 @@ def test_a_column_name_given_twice_in_an_array_log_is_refused(logged, tmp_path):
     code, out, err = run("identify", "planar_2r", describe(tmp_path, "log.npz"), "--quiet")
     assert code == 2 and out == ""
     one_error(err, "log.npz", "column 'q[0]' appears twice")
+
+
+def test_a_local_cluster_beside_another_prints_nothing_of_dask():
+    """Two runs at once (or a notebook's cluster): the second's scheduler found its HTTP port
+    8787 taken and Dask warned on stderr ("Port 8787 is already in use ..."). The port is any
+    free one now. The test holds 127.0.0.1:8787 itself (when it is free) and lets it go."""
+    pytest.importorskip("distributed")
+    import socket
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8787))
+        holder.listen(1)
+    except OSError:
+        pass                                        # taken already: the same situation
+    try:
+        proc = subprocess.run([*CLI, "validate", "pendulum", "--scheduler", "local", "--quiet"],
+                              capture_output=True, text=True, timeout=600)
+    finally:
+        holder.close()
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "", proc.stderr

@@ -311,8 +311,11 @@ class DaskCluster:
             # are not the user's to read: the runner reports every job's outcome
             try:
                 with _sigint_deferred() as received, _environment(DASK_LOGGING__DISTRIBUTED="critical"):
+                    # no dashboard, and the scheduler's HTTP server on any free port: on its default
+                    # (8787, taken by another cluster or a notebook's) Dask warned on stderr
                     self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
-                                                dashboard_address=None)
+                                                dashboard_address=None,
+                                                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
                 if received:
                     raise KeyboardInterrupt
             except KeyboardInterrupt:
