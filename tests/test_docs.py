@@ -403,3 +403,241 @@ def test_help_text_checker():
 
 def test_help_texts_cite_only_urls_or_installed_files():
     assert uninstalled_citations(help_texts()) == []
+
+
+# ----- every Python block and every command block runs (issue 45, item 4) -------------------------
+# A block is a fence: ```python, or a command fence (console, bash, sh, shell or plain) with a
+# line that runs ``baseparams`` or ``python`` (after ``$ `` and ``VAR=value`` assignments).
+# Each runs in a fresh copy of the project's examples/, tests/data and docs/ (cwd at the copy's
+# root; no ``../shared`` beside it) with ``baseparams`` and ``python`` this interpreter:
+# - python: the block's text on stdin of a fresh interpreter (cwd on sys.path, as in a REPL); it
+#   must exit 0;
+# - a command fence with ``$ `` lines: each ``$`` command (continuations joined) in one bash
+#   session, exiting with the code its comment prints (``# exit 2``; 0 when none), and the lines
+#   printed below it found in its stdout as for console blocks (``...`` ends a prefix; timings
+#   skipped);
+# - a command fence without ``$``: the block is a bash script, run with ``set -e``.
+# Console blocks whose ``$`` lines are all ``baseparams`` run through ``test_console_examples_run``
+# above (in-process, faster); they are not run twice.
+# A block that cannot run as written (placeholders, a synopsis, a benchmark, data outside the
+# project) carries ``<!-- not run: reason -->`` on the line just above its fence; an unmarked
+# block that fails is a failure reported as ``file:line``.
+NOT_RUN_RE = re.compile(r"^<!--\s*not run:\s*(.+?)\s*-->\s*$")
+COMMAND_RE = re.compile(r"^(?:\$ )?(?:[A-Z_]+=\S+ )*(baseparams|python)\b")
+
+
+@dataclass
+class Block:
+    """One fenced block of a markdown file: where it starts (the fence's line, 1-based)."""
+    source: str
+    line: int
+    language: str
+    body: str
+    not_run: str | None = None
+
+    @property
+    def id(self) -> str:
+        return f"{self.source}:{self.line}"
+
+    @property
+    def kind(self) -> str | None:
+        """'python', 'console' (run by test_console_examples_run), 'commands' (``$`` lines),
+        'script' (a bash script), or None: nothing to run."""
+        if self.language == "python":
+            return "python"
+        if self.language not in COMMAND_LANGUAGES:
+            return None
+        lines = [raw.strip() for raw in self.body.splitlines()]
+        if not any(COMMAND_RE.match(line) for line in lines):
+            return None
+        dollars = [line[2:] for line in lines if line.startswith("$ ")]
+        if dollars:
+            if self.language == "console" and all(baseparams_invocations(d) for d in dollars):
+                return "console"
+            return "commands"
+        return "script"
+
+
+def blocks(text: str, source: str = "") -> list[Block]:
+    out = []
+    for m in FENCE_RE.finditer(text):
+        line = text.count("\n", 0, m.start()) + 1
+        before = text[:m.start()].rstrip("\n").rsplit("\n", 1)[-1]
+        marked = NOT_RUN_RE.match(before.strip())
+        out.append(Block(source, line, m.group(1), m.group(2), marked.group(1) if marked else None))
+    return out
+
+
+def runnable_blocks(text: str, source: str = "") -> list[Block]:
+    return [b for b in blocks(text, source) if b.kind is not None]
+
+
+def block_commands(block: Block) -> list[Example]:
+    """The ``$`` commands of a block, with their expected exit code and printed lines
+    (``Example.line`` is the command as bash gets it; ``source`` its ``file:line``)."""
+    examples: list[Example] = []
+    current, pending, start = None, None, 0
+    for k, raw in enumerate(block.body.splitlines()):
+        if pending is not None:
+            pending += " " + raw.strip()
+        elif raw.startswith("$ "):
+            pending, start = raw[2:].strip(), k
+        else:
+            if current is not None and raw.strip():
+                current.output.append(raw)
+            continue
+        if pending.endswith("\\"):
+            pending = pending[:-1].rstrip()
+            continue
+        code = EXIT_RE.search(pending)
+        current = Example(f"{block.source}:{block.line + 1 + start}", pending, [], int(code.group(1)) if code else 0)
+        examples.append(current)
+        pending = None
+    return examples
+
+
+def block_script(block: Block) -> tuple[str, list[Example]]:
+    """The bash script that runs a block's commands, each one's stdout, stderr and exit code
+    to ``.doc_out_K``, ``.doc_err_K``, ``.doc_rc_K`` (a script block: the block itself, set -e)."""
+    if block.kind == "script":
+        return "set -e\n" + block.body, []
+    commands = block_commands(block)
+    parts = []
+    for k, example in enumerate(commands):
+        parts.append(f"{{ {example.line}\n}} > .doc_out_{k} 2> .doc_err_{k}\necho $? > .doc_rc_{k}\n")
+    return "".join(parts), commands
+
+
+DOC_COPY = ("examples", "tests/data", "docs")
+
+
+@pytest.fixture(scope="session")
+def project_template(tmp_path_factory) -> Path:
+    """The project files the docs' commands read, copied away from ``../shared``, and ``bin/``
+    with ``baseparams`` and ``python`` running this interpreter."""
+    import shutil
+    import sys
+    base = tmp_path_factory.mktemp("docs_template")
+    for part in DOC_COPY:
+        shutil.copytree(ROOT / part, base / "project" / part,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.png"))
+    bin_dir = base / "bin"
+    bin_dir.mkdir()
+    for name, command in (("baseparams", f'"{sys.executable}" -m baseparams'), ("python", f'"{sys.executable}"')):
+        (bin_dir / name).write_text(f'#!/bin/sh\nexec {command} "$@"\n')
+        (bin_dir / name).chmod(0o755)
+    return base
+
+
+def run_block(block: Block, template: Path, tmp_path: Path) -> list[str]:
+    """Run one block in a fresh copy of the project; the problems found, each with file:line."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    project = tmp_path / "project"
+    shutil.copytree(template / "project", project)
+    env = dict(os.environ, PATH=f"{template / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}", MPLBACKEND="Agg",
+               PYTHONPATH="")
+    env.pop("PYTHONSTARTUP", None)
+    if block.kind == "python":
+        done = subprocess.run([sys.executable, "-"], input=block.body, cwd=project, env=env,
+                              capture_output=True, text=True, timeout=1800)
+        if done.returncode != 0:
+            return [f"{block.id}: python block exited {done.returncode}:\n{done.stderr[-3000:]}"]
+        return []
+    script, commands = block_script(block)
+    done = subprocess.run(["bash", "-c", script], cwd=project, env=env, capture_output=True, text=True,
+                          timeout=1800)
+    if block.kind == "script":
+        if done.returncode != 0:
+            return [f"{block.id}: script exited {done.returncode}:\n{done.stdout[-1500:]}\n{done.stderr[-3000:]}"]
+        return []
+    problems = []
+    for k, example in enumerate(commands):
+        code = int((project / f".doc_rc_{k}").read_text())
+        stdout = (project / f".doc_out_{k}").read_text()
+        stderr = (project / f".doc_err_{k}").read_text()
+        if code != example.code:
+            problems.append(f"{example.source}: {example.line!r} exited {code}, not {example.code}:\n{stderr[-3000:]}")
+        elif missing := output_problems(example, stdout):
+            problems.append(f"{example.source}: {example.line!r}: lines not printed: {missing}\n"
+                            f"--- stdout ---\n{stdout[-3000:]}")
+    return problems
+
+
+BLOCKS = [block for doc in DOCS for block in runnable_blocks(doc.read_text(encoding="utf-8"), doc.name)]
+# Blocks that took more than 6 s (wall seconds with `-m "slow or not slow" --durations=0` on the
+# shared 2-core machine, load about 2), keyed by file and the start of the block's first line so
+# that edits above a block do not move it; they run with ``-m slow``. The others add about 30 s.
+SLOW_BLOCKS: dict[tuple[str, str], float] = {
+    ("README.md", "$ baseparams excite examples/data/tx40/"): 39.7,
+    ("identification.md", "$ baseparams simulate sla_suspension -o sla.csv --effect spring"): 11.9,
+    ("README.md", "$ baseparams simulate sla_suspension -o sla.csv --samples 2000"): 10.1,
+    ("urdf.md", "baseparams show tests/data/urdf/gripper_arm.urdf"): 9.9,
+    ("diagnosis.md", "baseparams simulate sla_suspension -o sla.csv --samples 2000"): 7.7,
+    ("README.md", "$ baseparams solve tests/data/urdf/ur5.urdf --solver dp"): 7.3,
+    ("performance.md", "baseparams export puma560 --to python"): 7.2,
+}
+
+
+def _slow(block: Block) -> bool:
+    first = block.body.strip().splitlines()[0].strip()
+    return any(block.source == source and first.startswith(start) for source, start in SLOW_BLOCKS)
+
+
+def _block_params():
+    out = []
+    for block in BLOCKS:
+        if block.kind == "console":
+            continue
+        marks = []
+        if block.not_run:
+            marks.append(pytest.mark.skip(reason=f"not run: {block.not_run}"))
+        elif _slow(block):
+            marks.append(pytest.mark.slow)
+        out.append(pytest.param(block, id=block.id, marks=marks))
+    return out
+
+
+@pytest.mark.parametrize("block", _block_params())
+def test_doc_blocks_run(block, project_template, tmp_path):
+    problems = run_block(block, project_template, tmp_path)
+    assert not problems, "\n".join(problems)
+
+
+def test_block_finder_on_a_sample():
+    text = ("```python\nprint(1)\n```\n\n<!-- not run: a placeholder -->\n```\n$ baseparams solve robot.urdf\n```\n"
+            "```\nerror: x\n```\n```bash\nE=1\npython -c 'print(2)'\n```\n"
+            "```console\n$ baseparams list\n$ python x.py   # exit 1\nout\n```\n")
+    found = runnable_blocks(text, "x.md")
+    assert [(b.line, b.kind, b.not_run) for b in found] == [
+        (1, "python", None), (6, "commands", "a placeholder"), (12, "script", None), (16, "commands", None)]
+    commands = block_commands(found[3])
+    assert [(c.source, c.line, c.code, c.output) for c in commands] == [
+        ("x.md:17", "baseparams list", 0, []), ("x.md:18", "python x.py   # exit 1", 1, ["out"])]
+
+
+def test_block_runner_fails_on_a_wrong_block(project_template, tmp_path):
+    """An unmarked block that fails is a failure naming its file and line."""
+    bad = Block("x.md", 7, "", "$ baseparams solve pendulum --solver dp\npendulum: dp solver, 10 parameters, rank 4\n")
+    [problem] = run_block(bad, project_template, tmp_path / "a")
+    assert problem.startswith("x.md:8: 'baseparams solve pendulum --solver dp': lines not printed")
+    good = Block("x.md", 7, "", "$ baseparams solve pendulum --solver dp\npendulum: dp solver, 10 parameters, rank 3\n")
+    assert run_block(good, project_template, tmp_path / "b") == []
+    crash = Block("x.md", 1, "python", "import baseparams as bp\nbp.solve('no_such_mechanism')\n")
+    [problem] = run_block(crash, project_template, tmp_path / "c")
+    assert problem.startswith("x.md:1: python block exited 1") and "no_such_mechanism" in problem
+    assert not Path(tmp_path / "c" / "shared").exists()
+
+
+def test_every_block_runs_or_says_why():
+    """The census: the blocks that run, and the marked ones each with a reason."""
+    kinds = [b.kind for b in BLOCKS]
+    assert kinds.count("python") >= 10 and kinds.count("commands") + kinds.count("script") >= 10
+    assert all(b.not_run.strip() for b in BLOCKS if b.not_run)
+    for source, start in SLOW_BLOCKS:               # a stale key would silently run a block by default
+        assert sum(b.source == source and b.body.strip().startswith(start) for b in BLOCKS) == 1, (source, start)
+    # a console block with a command that is not baseparams runs as a command block
+    assert all(b.kind != "console" or all(baseparams_invocations(e.line) for e in console_examples(
+        f"```console\n{b.body}```\n")) for b in BLOCKS)
