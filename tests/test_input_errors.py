@@ -225,12 +225,15 @@ def test_a_long_number_is_not_echoed_whole(tmp_path):
 
 
 def test_sample_memory_is_estimated_and_refused_before_allocating(tmp_path, monkeypatch):
-    """The estimate and how to raise the limit; raising it lets the same run through."""
+    """The estimate and how to raise the limit; raising it lets the same run through. (dp
+    builds W in row blocks within the limit instead, since issue 47: tests/test_full_size.py.)"""
     monkeypatch.setenv("BASEPARAMS_MAX_MEMORY", "1M")
-    result = CliRunner().invoke(main, ["solve", "pendulum", "--solver", "dp", "--samples", "5000"])
+    result = CliRunner().invoke(main, ["solve", "pendulum", "--solver", "vp", "--samples", "5000"])
     assert result.exit_code == 2
     assert "5,000 samples need about 19 MiB of working memory" in result.stderr
     assert "above the limit of 1 MiB" in result.stderr and "BASEPARAMS_MAX_MEMORY" in result.stderr
+    result = CliRunner().invoke(main, ["solve", "pendulum", "--solver", "dp", "--samples", "5000"])
+    assert result.exit_code == 0 and "row blocks" in result.output, result.output
     monkeypatch.setenv("BASEPARAMS_MAX_MEMORY", "1G")
     result = CliRunner().invoke(main, ["solve", "pendulum", "--solver", "dp", "--samples", "5000"])
     assert result.exit_code == 0, result.output

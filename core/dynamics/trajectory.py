@@ -77,13 +77,37 @@ def memory_limit() -> int:
     return int(float(match[1]) * _UNITS[match[2].upper()])
 
 
-def check_sample_count(mechanism: Mechanism, samples: int, key: str | None = "trajectory.samples") -> None:
+def blocked_bytes(mechanism: Mechanism, samples: int) -> int:
+    """Estimated peak working memory (bytes) of the float64 stage built in row blocks of
+    ``samples`` samples each (:meth:`Trajectory.pieces`, compressed into W's triangular
+    factor as they come: :func:`baseparams.numeric.linalg.triangular_factor`): one block's
+    kinematics and regressor (the 2 n p term of :func:`float64_bytes`), the block and its
+    stacking under R (4 f p), and R with its SVD (8 p^2, whatever the sample count)."""
+    n = len(mechanism.coordinates)
+    f = len(mechanism.independent) or n
+    p = len(mechanism.parameters) + 4 * len(mechanism.effects)
+    return int(samples) * 8 * (400 + 2 * n * p + 4 * f * p) + 8 * 8 * p * p
+
+
+def samples_per_block(mechanism: Mechanism) -> int:
+    """The most samples a row block may have for :func:`blocked_bytes` to stay within
+    :func:`memory_limit`; 0 when not even one sample fits (R alone is above the limit)."""
+    limit, fixed = memory_limit(), blocked_bytes(mechanism, 0)
+    per = blocked_bytes(mechanism, 1) - fixed
+    return max(0, (limit - fixed) // per)
+
+
+def check_sample_count(mechanism: Mechanism, samples: int, key: str | None = "trajectory.samples",
+                       memory: bool = True) -> None:
     """Refuse (InputError) a sample count above MAX_SAMPLES or whose estimated float64 memory
     exceeds :func:`memory_limit`, before anything is allocated; the message gives the
-    estimate and how to raise the limit."""
+    estimate and how to raise the limit. ``memory=False``: the count only (a caller that
+    builds W in row blocks within the limit checks its own memory)."""
     if not 2 <= samples <= MAX_SAMPLES:
         raise InputError(f"{samples} samples: from 2 to {MAX_SAMPLES:,} are accepted",
                          file=mechanism.path, key=key)
+    if not memory:
+        return
     need, limit = float64_bytes(mechanism, samples), memory_limit()
     if need > limit:
         f = len(mechanism.independent) or len(mechanism.coordinates)
@@ -110,13 +134,16 @@ class Trajectory:
 
     @classmethod
     def default(cls, mechanism: Mechanism, samples: int | None = None, t_start: Fraction | str | int | None = None,
-                t_end: Fraction | str | int | None = None) -> Trajectory:
+                t_end: Fraction | str | int | None = None, memory: bool = True) -> Trajectory:
+        """The mechanism file's trajectory (``samples`` overrides its count). ``memory=False``:
+        no refusal by the float64 memory estimate (:func:`check_sample_count`), for a caller
+        that builds W in row blocks (:meth:`pieces`)."""
         spec = mechanism.trajectory
         if spec is None:
             raise InputError("the mechanism file has no [trajectory] section", file=mechanism.path,
                              key="trajectory")
         n = samples or spec.samples
-        check_sample_count(mechanism, n, None if samples else "trajectory.samples")
+        check_sample_count(mechanism, n, None if samples else "trajectory.samples", memory=memory)
         t0 = spec.t_start if t_start is None else Fraction(t_start)
         t1 = spec.t_end if t_end is None else Fraction(t_end)
         return cls(dict(spec.expressions), even_times(t0, t1, n))
@@ -145,6 +172,12 @@ class Trajectory:
                 raise KinematicsError(f"{name} or its derivatives are not finite at t = {float(bad[0]):.6g} s")
         z, zd, zdd = ([v[k] for v in values] for k in range(3))
         return z, zd, zdd
+
+    def pieces(self, samples: int) -> list[Trajectory]:
+        """The same trajectory cut into consecutive pieces of at most ``samples`` samples: W
+        over the pieces, stacked in order, is W over the whole (rows are sample-major)."""
+        step = max(1, int(samples))
+        return [Trajectory(self.expressions, self.times[k:k + step]) for k in range(0, len(self.times), step)]
 
     # ----- a source of states (baseparams.dynamics.observation.States) -----------------
     @property

@@ -3,7 +3,7 @@ the exact power-of-two column scaling rule, a greedy column choice and an SVD th
 stop where LAPACK's divide and conquer fails to converge."""
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -91,3 +91,20 @@ def svd(a: np.ndarray, full_matrices: bool = True,
     u, s, vt = (np.stack(x) for x in zip(*parts))
     lead = a.shape[:-2]
     return u.reshape(*lead, *u.shape[1:]), s.reshape(*lead, -1), vt.reshape(*lead, *vt.shape[1:])
+
+
+def triangular_factor(blocks: Iterable[np.ndarray], columns: int) -> tuple[np.ndarray, int]:
+    """(R, rows): the triangular factor of the matrix the row ``blocks`` stack into, and its
+    row count, without ever holding that matrix: each block is stacked under the R so far
+    and factored again (Householder QR, backward stable column by column). ``R^T R = W^T W``
+    and ``R = Q^T W``: R has W's singular values and right singular vectors, its column
+    norms are W's, so Gautier's method on R is Gautier's method on W in
+    ``(columns + block rows) x columns`` memory instead of ``rows x columns``.
+    R is ``min(rows, columns) x columns``."""
+    R = np.zeros((0, columns))
+    rows = 0
+    for block in blocks:
+        block = np.asarray(block, dtype=float)
+        rows += block.shape[0]
+        R = np.linalg.qr(np.vstack([R, block]), mode="r")
+    return R, rows

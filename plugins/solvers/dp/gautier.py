@@ -79,16 +79,21 @@ class DPResult:
 
 
 def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
-               columns: Sequence[str] | None = None) -> DPResult:
+               columns: Sequence[str] | None = None, rows: int | None = None) -> DPResult:
     """Gautier's method on a float64 observation matrix ``W`` (rows x parameters).
 
     ``rank``: force the rank (to study what DP gives at a rank known from elsewhere);
     by default the tolerance decides. ``columns``: the parameters' names, for messages.
+    ``rows``: W is the triangular factor R (``R^T R = W^T W``,
+    :func:`baseparams.numeric.linalg.triangular_factor`) of an observation matrix of this
+    many rows: the same singular values, right singular vectors and column norms, so the
+    same analysis; the row count enters the tolerances as W's would.
     Raises :class:`KinematicsError` if W is not finite or the SVD fails.
     """
     W = np.asarray(W, dtype=float)
-    rows, n = W.shape
-    _check_finite(W, columns)
+    n = W.shape[1]
+    rows = W.shape[0] if rows is None else int(rows)
+    check_finite(W, columns)
     norms = _column_norms(W)
     col_tol = max(rows, n) * EPS * (norms.max() if n else 0.0)
     zero_columns = [j for j in range(n) if norms[j] <= col_tol]
@@ -105,7 +110,7 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
     s_max = s_full[0] if n else 0.0
     tol = max(rows, n) * EPS * s_max
     r_tol = numerical_rank(singular_values=s_full, tol=max(rows, n) * EPS)     # s_i > tol
-    lifted = _lifted_by_scaling(W, s_full, vt, s_col, r_tol) if scale and rank is None else 0
+    lifted = _lifted_by_scaling(W, s_full, vt, s_col, r_tol, rows) if scale and rank is None else 0
     warnings = []
     lifted_columns = []
     if lifted:
@@ -168,10 +173,12 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
                     clear, err, cond22, warnings, lifted, lifted_columns)
 
 
-def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.ndarray, r_tol: int) -> int:
+def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.ndarray, r_tol: int,
+                       rows: int) -> int:
     """How many of the trailing singular directions counted in the scaled W are below the
-    unscaled tolerance in the parameters' own units (see the module doc)."""
-    rows, n = W.shape
+    unscaled tolerance in the parameters' own units (see the module doc); ``rows``: W's
+    row count (W may be its triangular factor)."""
+    n = W.shape[1]
     if not r_tol:
         return 0
     big = float(np.max(np.abs(W))) if W.size else 0.0
@@ -191,7 +198,7 @@ def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.n
     return lifted
 
 
-def _check_finite(W: np.ndarray, columns: Sequence[str] | None) -> None:
+def check_finite(W: np.ndarray, columns: Sequence[str] | None) -> None:
     """Refuse a W with NaN or infinite entries, naming the columns (parameters) and rows hit."""
     finite = np.isfinite(W)
     if finite.all():

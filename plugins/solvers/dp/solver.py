@@ -11,17 +11,19 @@ from flint import arb
 
 from baseparams.dynamics.excitation import random_batch
 from baseparams.dynamics.observation import observation_matrix
-from baseparams.dynamics.trajectory import Trajectory
+from baseparams.dynamics.trajectory import (Trajectory, check_sample_count, float64_bytes, memory_limit,
+                                            samples_per_block)
 from baseparams.errors import InputError, KinematicsError
 from baseparams.numeric.backends import Float64
 from baseparams.numeric.certify import decimal_string
+from baseparams.numeric.linalg import triangular_factor
 from baseparams.model.mechanism import Mechanism
 from baseparams.solvers.protocol import (MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
                                          parameter_count)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
 from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
 
-from .gautier import EPS, DPResult, dp_gautier
+from .gautier import EPS, DPResult, check_finite, dp_gautier
 
 CHECK_SEED = 7919          # seed of the independent excitation batch
 
@@ -57,19 +59,22 @@ class DoublePrecisionSolver:
         by :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
         warnings: list[str] = []
-        trajectory = Trajectory.default(mechanism, samples=samples)
-        W, info = cast(tuple[np.ndarray, dict[str, Any]], observation_matrix(mechanism, Float64(), trajectory))
-        say(progress, f"dp: W is {W.shape[0]} x {W.shape[1]} ({info['samples']} samples); SVD")
-        if rank is not None and rank > min(W.shape):
+        trajectory = Trajectory.default(mechanism, samples=samples, memory=False)
+        W, rows, info = observation(mechanism, trajectory, progress)
+        shape = (rows, W.shape[1])
+        say(progress, f"dp: W is {rows} x {W.shape[1]} ({info['samples']} samples"
+            + (f", in {_blocks_text(info['blocks'])}" if info.get("blocks") else "") + "); SVD")
+        if rank is not None and rank > min(shape):
             # W's row count depends on the samples: known only now (the option's declared
             # maximum, the parameter count, was checked before W was built)
-            raise InputError(f"solver {self.name!r}: option 'rank' must be at most {min(W.shape)} (W is "
-                             f"{W.shape[0]} x {W.shape[1]}: its rank cannot be higher), got {rank}")
-        res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters)
-        check, stacked, both = self._excitation_check(mechanism, trajectory, W, res, scale, rank, seed)
+            raise InputError(f"solver {self.name!r}: option 'rank' must be at most {min(shape)} (W is "
+                             f"{rows} x {W.shape[1]}: its rank cannot be higher), got {rank}")
+        res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters, rows=rows)
+        check, stacked, both = self._excitation_check(mechanism, trajectory, W, rows, res, scale, rank, seed)
         if check.get("raised") and stacked is not None and both is not None:
             warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
             W, res = stacked, both
+            rows += int(check["rows"])
         elif check.get("error"):
             warnings.append(f"no excitation check: {check['error']}")
         elif check.get("rank_with_batch", res.rank) < res.rank:
@@ -109,8 +114,11 @@ class DoublePrecisionSolver:
         r = res.rank
         gap_ratio = float(res.ratios.max()) if res.ratios.size else None
         summary = [
-            f"W: {W.shape[0]} x {W.shape[1]} ({info['samples']} samples"
-            + (f" + {check['states']} random states" if check.get("raised") else "") + "); columns "
+            f"W: {rows} x {W.shape[1]} ({info['samples']} samples"
+            + (f" + {check['states']} random states" if check.get("raised") else "")
+            + (f"; above the memory limit as one matrix: built in {_blocks_text(info['blocks'])} of at most "
+               f"{info['block_samples']} samples, folded into W's triangular factor R (R^T R = W^T W)"
+               if info.get("blocks") else "") + "); columns "
             + ("scaled by powers of two near their norms" if scale else "not scaled"),
             f"rank {r} by the tolerance max(shape)*eps*s_max = {_g(res.tolerance)}",
             (f"s_{r} = {_g(s[r - 1])}, s_{r + 1} = {_g(s[r]) if r < len(s) else '-'}; largest gap "
@@ -142,7 +150,11 @@ class DoublePrecisionSolver:
             "largest_dropped_scaled": largest_dropped,
             "untrusted": untrusted,
             "excitation_check": check,
-            "samples": info["samples"], "rows": int(W.shape[0]),
+            "samples": info["samples"], "rows": int(rows),
+            "row_blocks": ({"blocks": info["blocks"], "samples_per_block": info["block_samples"],
+                            "reason": "W over the default samples is above the memory limit: built in row "
+                                      "blocks, each compressed into W's triangular factor as it comes"}
+                           if info.get("blocks") else None),
         }
         diagnostics = Diagnostics(summary=summary, rank_tolerance=float(res.tolerance), details=details)
         return BaseParameterResult(
@@ -153,9 +165,11 @@ class DoublePrecisionSolver:
             coefficients=decimal_coefficients(base))
 
     @staticmethod
-    def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, res: DPResult, scale: bool,
-                          rank: int | None, seed: int) -> tuple[dict[str, Any], np.ndarray | None, DPResult | None]:
-        """dp on W stacked with an independent random batch: (diagnostics, stacked W, its DPResult)."""
+    def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, W_rows: int, res: DPResult,
+                          scale: bool, rank: int | None,
+                          seed: int) -> tuple[dict[str, Any], np.ndarray | None, DPResult | None]:
+        """dp on W stacked with an independent random batch: (diagnostics, stacked W, its
+        DPResult). W may be the triangular factor of ``W_rows`` rows: then so is the stack."""
         if rank is not None:
             return {"skipped": "rank forced"}, None, None
         batch = random_batch(mechanism, trajectory, seed)
@@ -163,10 +177,47 @@ class DoublePrecisionSolver:
             rows = cast(np.ndarray, observation_matrix(mechanism, Float64(), cast(Any, batch))[0])
         except KinematicsError as exc:
             return {"seed": seed, "states": batch.states, "error": str(exc)}, None, None
-        stacked = np.vstack([W, rows])
-        both = dp_gautier(stacked, scale=scale)
+        if W.shape[0] == W_rows:
+            stacked = np.vstack([W, rows])
+        else:
+            stacked = triangular_factor([W, rows], W.shape[1])[0]
+        both = dp_gautier(stacked, scale=scale, rows=W_rows + rows.shape[0])
         return ({"seed": seed, "states": batch.states, "rows": int(rows.shape[0]), "rank": res.rank,
                  "rank_with_batch": both.rank, "raised": both.rank > res.rank}, stacked, both)
+
+
+def observation(mechanism: Mechanism, trajectory: Trajectory,
+                progress: Progress | None = None) -> tuple[np.ndarray, int, dict[str, Any]]:
+    """(W or its triangular factor R, W's row count, info). W itself when its float64 stage
+    fits the memory limit (:func:`~baseparams.dynamics.trajectory.float64_bytes`); else W
+    is built in row blocks that fit, each folded into R as it comes (``R^T R = W^T W``: the
+    same singular values, right singular vectors and column norms, hence the same base
+    parameters), so the default samples give an answer instead of a refusal; info then
+    says ``blocks`` and ``block_samples``. Refused only when not one sample fits."""
+    count = len(trajectory.times)
+    if float64_bytes(mechanism, count) <= memory_limit():
+        W, info = cast(tuple[np.ndarray, dict[str, Any]], observation_matrix(mechanism, Float64(), trajectory))
+        return W, int(W.shape[0]), info
+    per = samples_per_block(mechanism)
+    if per < 1:
+        check_sample_count(mechanism, count, None)        # raises, with the estimate and the advice
+    pieces = trajectory.pieces(min(per, count))
+    say(progress, f"dp: W over {count} samples is above the memory limit as one matrix: built in "
+                  f"{_blocks_text(len(pieces))} of at most {min(per, count)} samples, folded into its "
+                  f"triangular factor")
+
+    def blocks() -> Any:
+        for piece in pieces:
+            block = cast(np.ndarray, observation_matrix(mechanism, Float64(), piece)[0])
+            check_finite(block, mechanism.parameters)
+            yield block
+
+    R, rows = triangular_factor(blocks(), len(mechanism.parameters))
+    return R, rows, {"samples": count, "blocks": len(pieces), "block_samples": min(per, count)}
+
+
+def _blocks_text(count: int) -> str:
+    return "1 row block" if count == 1 else f"{count} row blocks"
 
 
 def _dp_check_line(check: dict[str, Any]) -> str:

@@ -78,6 +78,26 @@ def default_samples(mechanism: Mechanism) -> int | None:
     return max(MIN_SAMPLES, math.ceil(per * params / f))
 
 
+def _width(mechanism: Mechanism) -> int:
+    return max(1, len(mechanism.independent) or len(mechanism.coordinates))
+
+
+def samples_in_budget(mechanism: Mechanism, steps: Sequence[int]) -> int | None:
+    """The most samples whose W in balls at ``steps`` fits the memory limit, when that still
+    gives as many rows per parameter as :func:`default_samples` asks of a long trajectory
+    (4, or 3 beyond certify.FAST_DECISIONS_ABOVE parameters) and MIN_SAMPLES samples; else
+    None (the default samples are then refused with the estimate). Fewer rows are safe for
+    the certificate: the rank is proven on whatever W is built, and a W too short for the
+    mechanism's rank fails the independent random batch, which then joins W."""
+    f, params = _width(mechanism), len(mechanism.parameters)
+    per = LARGE_ROWS_PER_PARAMETER if params > certify.FAST_DECISIONS_ABOVE else ROWS_PER_PARAMETER
+    per_sample = ball_bytes(f, params, steps)
+    fitted = int(memory_limit() // per_sample) if per_sample else None
+    if fitted is None or fitted < MIN_SAMPLES or fitted * f < per * params:
+        return None
+    return fitted
+
+
 def _digits_of(beta: arb_mat) -> list[list[float]]:
     """Per entry of beta (rows of lists): the digits its ball proves (radius_digits)."""
     cols = beta.ncols()
@@ -316,12 +336,23 @@ class VariablePrecisionSolver:
         """Certified base parameters; the options as declared in ``options`` (checked by
         :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
-        trajectory = Trajectory.default(mechanism, samples=samples or default_samples(mechanism))
         params = mechanism.parameters
         warnings, notes = [], []
+        budget_note: str | None = None
         steps = [int(digits)] if digits else [int(d) for d in ladder]
-        rows, cols = len(trajectory.times) * max(1, len(mechanism.independent) or len(mechanism.coordinates)), len(params)
         first = steps[:2]          # the least the ladder needs: two precisions that agree
+        chosen = samples or default_samples(mechanism)
+        if not samples and chosen:
+            fitted = samples_in_budget(mechanism, first)
+            if fitted is not None and fitted < chosen:
+                notes.append(f"{chosen} samples (the default) would need about "
+                             f"{size_text(ball_bytes(chosen * _width(mechanism), len(params), first))} in balls, above "
+                             f"the memory limit of {size_text(memory_limit())}: {fitted} samples "
+                             f"({fitted * _width(mechanism):,} rows for {len(params)} parameters) chosen to fit")
+                say(progress, "vp: " + notes[-1])
+                budget_note, chosen = notes[-1], fitted
+        trajectory = Trajectory.default(mechanism, samples=chosen)
+        rows, cols = len(trajectory.times) * _width(mechanism), len(params)
         check_memory(ball_bytes(rows, cols, first), f"vp: W ({rows:,} x {cols}) in balls at "
                      f"{', '.join(map(str, first))} digits", "use fewer samples (--samples or -O samples), "
                      "or fix the precision (--digits)", file=mechanism.path)
@@ -406,6 +437,8 @@ class VariablePrecisionSolver:
              f"(kept parameters: {a.pivoting} order)" if printed else
              f"no coefficient of beta printed (kept parameters: {a.pivoting} order)"),
         ]
+        if budget_note:
+            summary.append(budget_note)
         if recovery.get("attempted"):
             summary.append("exact rationals: " + (
                 f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "

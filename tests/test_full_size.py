@@ -1,0 +1,140 @@
+"""Robots at full size (issue 47): no memory refusal at the default settings.
+
+dp builds W in row blocks folded into its triangular factor R (``R^T R = W^T W``) when W
+over the default samples is above the memory limit; vp lowers its default samples to what
+fits in balls. Checked here on small generated mechanisms with a small
+``BASEPARAMS_MAX_MEMORY`` forcing those paths, against the unforced result; the robots
+themselves (TIAGo dual, PR2) behind the slow marker, against Pinocchio's rank."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from baseparams.dynamics.trajectory import MEMORY_VARIABLE, blocked_bytes, float64_bytes, samples_per_block
+from baseparams.errors import InputError
+from baseparams.io.loader import parse_mechanism
+from baseparams.model import generate
+from baseparams.numeric.linalg import triangular_factor
+from baseparams.orchestrate.checks import largest_principal_angle_sine
+from baseparams.plugins.solvers.vp import solver as vp_solver
+from baseparams.solvers.run import run_solver
+
+
+def rows_of(result: dict) -> np.ndarray:
+    """The printed base expressions as a matrix (rank x parameters)."""
+    index = {p: j for j, p in enumerate(result["parameters"])}
+    B = np.zeros((len(result["base"]), len(index)))
+    for i, row in enumerate(result["base"]):
+        for name, text in row["expression"].items():
+            B[i, index[name]] = float(text)
+    return B
+
+
+def test_triangular_factor_is_w_in_gram_and_spectrum():
+    rng = np.random.default_rng(1)
+    W = rng.standard_normal((230, 17)) * np.exp2(rng.integers(-20, 20, 17))
+    W[:, 3] = 0.0
+    R, rows = triangular_factor((W[k:k + 40] for k in range(0, 230, 40)), 17)
+    assert rows == 230 and R.shape == (17, 17)
+    assert np.allclose(np.abs(R).sum(axis=0) > 0, np.abs(W).sum(axis=0) > 0)
+    assert not R[:, 3].any()                                  # a zero column stays exactly zero
+    s, sr = np.linalg.svd(W, compute_uv=False), np.linalg.svd(R, compute_uv=False)
+    assert np.max(np.abs(s - sr)) <= 1e-13 * s[0]
+    assert np.allclose(np.linalg.norm(R, axis=0), np.linalg.norm(W, axis=0), rtol=1e-14, atol=0)
+    few, count = triangular_factor([W[:5], W[5:9]], 17)          # fewer rows than columns
+    assert count == 9 and few.shape == (9, 17)
+    assert np.allclose(few.T @ few, W[:9].T @ W[:9], atol=1e-12 * np.abs(W[:9]).max() ** 2)
+
+
+@pytest.fixture
+def tree():
+    return parse_mechanism(generate.tree(3, bodies=8), "tree8.toml")
+
+
+def test_dp_in_row_blocks_equals_dp_on_w(tree, monkeypatch):
+    whole = run_solver("dp", tree).to_json()
+    assert whole["diagnostics"]["row_blocks"] is None
+    assert float64_bytes(tree, 100) > blocked_bytes(tree, 7)
+    monkeypatch.setenv(MEMORY_VARIABLE, str(blocked_bytes(tree, 7)))
+    assert samples_per_block(tree) == 7
+    blocked = run_solver("dp", tree).to_json()
+    blocks = blocked["diagnostics"]["row_blocks"]
+    assert blocks["blocks"] == 15 and blocks["samples_per_block"] == 7
+    assert blocked["diagnostics"]["rows"] == whole["diagnostics"]["rows"] == 800
+    assert blocked["rank"] == whole["rank"] == 24
+    s, sb = (np.array([float(v) for v in r["singular_values"]]) for r in (whole, blocked))
+    assert np.max(np.abs(s - sb)) <= 1e-13 * s[0]
+    # the same base parameters (the eliminated columns may differ where pivoting ties exactly)
+    assert largest_principal_angle_sine(rows_of(whole), rows_of(blocked)) < 1e-9
+    assert not blocked["warnings"]
+
+
+def test_dp_refuses_only_when_one_sample_does_not_fit(tree, monkeypatch):
+    monkeypatch.setenv(MEMORY_VARIABLE, str(blocked_bytes(tree, 1) - 1))
+    with pytest.raises(InputError, match="above the limit"):
+        run_solver("dp", tree)
+
+
+def test_vp_default_samples_fit_the_budget(monkeypatch):
+    mech = parse_mechanism(generate.serial_chain(4, bodies=3, samples=55), "chain3.toml")
+    options = {"recover": False}
+    whole = run_solver("vp", mech, options).to_json()
+    steps = list(vp_solver.LADDER[:2])
+    samples = vp_solver.default_samples(mech)
+    f = len(mech.independent)
+    need = vp_solver.ball_bytes(samples * f, len(mech.parameters), steps)
+    fitted = (len(mech.parameters) * 4 + f - 1) // f                  # 4 rows per parameter
+    assert fitted < samples
+    monkeypatch.setenv(MEMORY_VARIABLE, str(vp_solver.ball_bytes(fitted * f, len(mech.parameters), steps)))
+    assert need > vp_solver.memory_limit()
+    assert vp_solver.samples_in_budget(mech, steps) == fitted
+    small = run_solver("vp", mech, options).to_json()
+    assert small["rank"] == whole["rank"] and small["certified"] and whole["certified"]
+    assert any("chosen to fit" in line for line in small["diagnostics"]["summary"])
+    assert largest_principal_angle_sine(rows_of(whole), rows_of(small)) < 1e-9
+    # below 4 rows per parameter (what vp's default asks of a long trajectory): refused, with
+    # the estimate, as before
+    monkeypatch.setenv(MEMORY_VARIABLE, str(vp_solver.ball_bytes((fitted - 1) * f, len(mech.parameters), steps)))
+    assert vp_solver.samples_in_budget(mech, steps) is None
+    with pytest.raises(InputError, match="above the limit"):
+        run_solver("vp", mech, options)
+    # samples the user gives are never lowered: refused
+    monkeypatch.setenv(MEMORY_VARIABLE, str(vp_solver.ball_bytes(fitted * f, len(mech.parameters), steps)))
+    with pytest.raises(InputError, match="above the limit"):
+        run_solver("vp", mech, {**options, "samples": samples})
+
+
+# ----- the robots of issue 47, at the default settings --------------------------------------
+sys.path.insert(0, str(Path(__file__).parent))
+from urdf_reference import example_robot_data, robot_id  # noqa: E402
+
+
+def robot(name: str) -> Path:
+    found = [p for p in example_robot_data() if robot_id(p) == name]
+    if not found:
+        pytest.skip("example-robot-data (pip install example-robot-data) is not installed")
+    return found[0]
+
+
+@pytest.mark.slow
+def test_tiago_dual_dp_at_the_defaults_gives_pinocchios_rank(monkeypatch):
+    pytest.importorskip("pinocchio")
+    from urdf_reference import Reference
+    from baseparams.io.loader import load_mechanism
+    monkeypatch.delenv(MEMORY_VARIABLE, raising=False)
+    path = robot("tiago_description/tiago_dual")
+    mech = load_mechanism(path)
+    assert float64_bytes(mech, mech.trajectory.samples) > vp_solver.memory_limit()    # refused before
+    result = run_solver("dp", mech).to_json()
+    assert result["rank"] == Reference(path).rank()[0] == 639
+    assert result["diagnostics"]["row_blocks"]
+
+
+@pytest.mark.slow
+def test_pr2_vp_at_the_defaults_is_certified(monkeypatch):
+    from baseparams.io.loader import load_mechanism
+    monkeypatch.delenv(MEMORY_VARIABLE, raising=False)
+    result = run_solver("vp", load_mechanism(robot("pr2_description/pr2")), {"recover": False}).to_json()
+    assert result["rank"] == 138 and result["certified"]
