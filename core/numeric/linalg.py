@@ -101,10 +101,10 @@ def triangular_factor(blocks: Iterable[np.ndarray], columns: int) -> tuple[np.nd
     norms are W's, so Gautier's method on R is Gautier's method on W in
     ``(columns + block rows) x columns`` memory instead of ``rows x columns``.
     R is ``min(rows, columns) x columns``."""
-    R = np.zeros((0, columns))
+    R: np.ndarray = np.zeros((0, columns))
     rows = 0
     for block in blocks:
         block = np.asarray(block, dtype=float)
         rows += block.shape[0]
-        R = np.linalg.qr(np.vstack([R, block]), mode="r")
+        R = np.asarray(np.linalg.qr(np.vstack([R, block]), mode="r"))
     return R, rows
