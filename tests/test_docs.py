@@ -15,7 +15,12 @@ What is checked, for every markdown file:
   Rule for the default run: a console command runs there when it took at most 3 s in-process
   on the 2-core machine (``SLOW`` below lists the others with their measured time; they run
   with ``-m slow``), so that all of them together add about 12 s to the default run. Synopses
-  with placeholders (``MECH``, ``[--digits D]``) go in ```` ```text ```` blocks, not console ones. The command runs in-process through click's CliRunner, in a temporary folder.
+  with placeholders (``MECH``, ``[--digits D]``) go in ```` ```text ```` blocks, not console ones. The command runs in-process through click's CliRunner, in a temporary folder;
+- every other block that runs something (issue 45, item 4): every ```` ```python ```` block and
+  every command fence (bash, console, plain) with a ``baseparams ...`` or ``python ...`` line,
+  in a fresh copy of examples/, tests/data and docs/ with no ``../shared`` beside it; a block
+  that cannot run as written says why in ``<!-- not run: reason -->`` just above its fence, and
+  an unmarked block that fails is reported as ``file:line`` (``test_doc_blocks_run`` below).
 
 And the command line's own help (every option's help and every command's docstring) cites
 only URLs or files the wheel installs: docs/ is not installed.
@@ -25,8 +30,12 @@ from __future__ import annotations
 
 import glob
 import importlib
+import os
 import re
 import shlex
+import shutil
+import subprocess
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -515,8 +524,6 @@ DOC_COPY = ("examples", "tests/data", "docs")
 def project_template(tmp_path_factory) -> Path:
     """The project files the docs' commands read, copied away from ``../shared``, and ``bin/``
     with ``baseparams`` and ``python`` running this interpreter."""
-    import shutil
-    import sys
     base = tmp_path_factory.mktemp("docs_template")
     for part in DOC_COPY:
         shutil.copytree(ROOT / part, base / "project" / part,
@@ -531,10 +538,6 @@ def project_template(tmp_path_factory) -> Path:
 
 def run_block(block: Block, template: Path, tmp_path: Path) -> list[str]:
     """Run one block in a fresh copy of the project; the problems found, each with file:line."""
-    import os
-    import shutil
-    import subprocess
-    import sys
     project = tmp_path / "project"
     shutil.copytree(template / "project", project)
     env = dict(os.environ, PATH=f"{template / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}", MPLBACKEND="Agg",
