@@ -246,6 +246,7 @@ class Example:
     args: list[str]
     code: int
     output: list[str] = field(default_factory=list)
+    at: int = 0                                          # the line in the file (1-based)
 
     @property
     def id(self) -> str:
@@ -258,13 +259,15 @@ def console_examples(text: str, source: str = "") -> list[Example]:
         if m.group(1) != "console":
             continue
         current = None
-        for raw in m.group(2).splitlines():
+        first = text.count("\n", 0, m.start()) + 2
+        for k, raw in enumerate(m.group(2).splitlines()):
             if raw.startswith("$ "):
                 current = None
                 invocations = baseparams_invocations(raw[2:])
                 if invocations:
                     code = EXIT_RE.search(raw)
-                    current = Example(source, raw[2:].strip(), invocations[0], int(code.group(1)) if code else 0)
+                    current = Example(source, raw[2:].strip(), invocations[0], int(code.group(1)) if code else 0,
+                                      at=first + k)
                     examples.append(current)
             elif current is not None and raw.strip():
                 current.output.append(raw)
@@ -373,8 +376,9 @@ def _command(example: Example) -> str:
 def test_console_examples_run(example, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = CliRunner().invoke(main, example.args)
-    assert result.exit_code == example.code, (result.stdout[-2000:], result.stderr[-2000:])
-    assert output_problems(example, result.stdout) == []
+    where = f"{example.source}:{example.at}"
+    assert result.exit_code == example.code, (where, result.stdout[-2000:], result.stderr[-2000:])
+    assert output_problems(example, result.stdout) == [], where
 
 
 def test_there_are_console_examples():
