@@ -26,6 +26,7 @@ from baseparams.solvers.support import base_rows, decimal_coefficients, raised_w
 from .gautier import EPS, DPResult, check_finite, dp_gautier
 
 CHECK_SEED = 7919          # seed of the independent excitation batch
+MAX_DIGITS = 17            # significant digits that tell float64 values apart
 
 
 def _g(x: float, digits: int = 3) -> str:
@@ -75,6 +76,14 @@ class DoublePrecisionSolver:
             warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
             W, res = stacked, both
             rows += int(check["rows"])
+        elif stacked is not None and both is not None and both.rank == res.rank:
+            # the same rank: beta, its column scaling and its error estimate from W and the
+            # random states together, not from one trajectory (one that barely excites a
+            # direction shrinks its columns and s_r, and the coefficients printed in its units
+            # are then far less accurate on any other data than it estimates: issue 47)
+            check["beta_from_both"] = True
+            W, res = stacked, both
+            rows += int(check["rows"])
         elif check.get("error"):
             warnings.append(f"no excitation check: {check['error']}")
         elif check.get("rank_with_batch", res.rank) < res.rank:
@@ -86,7 +95,11 @@ class DoublePrecisionSolver:
         warnings += res.warnings
         params = mechanism.parameters
         noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)
-        most = int(min(16, math.floor(-math.log10(noise))))
+        # each row's printed coefficients share its error: every one rounded (or dropped) to
+        # within noise / sqrt(nonzero coefficients of the row) in scaled units, so the printed
+        # row is within the estimate of the computed one, however many coefficients it has
+        # (rounding each to the estimate itself let hundreds of errors add up: issue 47)
+        nonzero = np.count_nonzero(res.beta, axis=1) if res.beta.size else np.zeros(res.rank, dtype=int)
         dropped, largest_dropped, untrusted = 0, 0.0, []
 
         def coefficient(a: int, b: int) -> str | None:
@@ -94,15 +107,12 @@ class DoublePrecisionSolver:
             value, scaled = float(res.beta[a, b]), abs(float(res.beta_s[a, b]))
             if value == 0.0:
                 return None
-            if scaled <= noise:
+            quantum = noise / math.sqrt(max(1, int(nonzero[a])))
+            if scaled <= quantum / 2:
                 dropped += 1
                 largest_dropped = max(largest_dropped, scaled)
                 return None
-            digits = min(most, math.floor(math.log10(scaled / noise)))
-            if digits < 1:
-                untrusted.append({"base": a, "parameter": params[res.eliminated[b]], "value": repr(value),
-                                  "estimated_error": repr(noise / scaled * abs(value))})
-                return None
+            digits = min(MAX_DIGITS, max(1, math.floor(math.log10(scaled)) - math.floor(math.log10(quantum)) + 1))
             return decimal_string(arb(value), digits)
 
         base = base_rows(params, res.kept, res.eliminated, coefficient)
@@ -125,8 +135,11 @@ class DoublePrecisionSolver:
              f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
              + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
             f"beta: estimated error {_g(res.error_estimate, 2)} (first order, scaled units), cond(V22) = "
-            f"{_g(res.v22_condition)}; coefficients printed with the digits above it; {dropped} below it "
-            f"(largest {_g(largest_dropped, 2)}) are not shown",
+            f"{_g(res.v22_condition)}" + ("; W and the random states together"
+                                          if check.get("beta_from_both") else "")
+            + f"; each row's coefficients printed down to its share of it (the estimate / sqrt(the row's "
+            f"nonzero coefficients)); {dropped} below half that share (largest {_g(largest_dropped, 2)}) are not "
+            f"shown",
             _dp_check_line(check),
         ]
         if res.zero_columns:
