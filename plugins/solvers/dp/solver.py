@@ -201,8 +201,9 @@ class DoublePrecisionSolver:
 
 def observation(mechanism: Mechanism, trajectory: Trajectory,
                 progress: Progress | None = None) -> tuple[np.ndarray, int, dict[str, Any]]:
-    """(W or its triangular factor R, W's row count, info). W itself when its float64 stage
-    fits the memory limit (:func:`~baseparams.dynamics.trajectory.float64_bytes`); else W
+    """(W or its triangular factor R, W's row count, info). W's R (W itself when it is not
+    taller than wide) when its float64 stage fits the memory limit
+    (:func:`~baseparams.dynamics.trajectory.float64_bytes`); else W
     is built in row blocks that fit, each folded into R as it comes (``R^T R = W^T W``: the
     same singular values, right singular vectors and column norms, hence the same base
     parameters), so the default samples give an answer instead of a refusal; info then
@@ -210,7 +211,13 @@ def observation(mechanism: Mechanism, trajectory: Trajectory,
     count = len(trajectory.times)
     if float64_bytes(mechanism, count) <= memory_limit():
         W, info = cast(tuple[np.ndarray, dict[str, Any]], observation_matrix(mechanism, Float64(), trajectory))
-        return W, int(W.shape[0]), info
+        if W.shape[0] <= W.shape[1]:
+            return W, int(W.shape[0]), info
+        # a tall W: its triangular factor (one QR, which LAPACK's SVD of a tall matrix starts
+        # with anyway) is all the analysis needs, without the SVD's rows x columns U; the
+        # random batch then joins R, not W (about 2.5x less CPU on a 32-joint humanoid)
+        check_finite(W, mechanism.parameters)
+        return triangular_factor([W], W.shape[1])[0], int(W.shape[0]), info
     per = samples_per_block(mechanism)
     if per < 1:
         check_sample_count(mechanism, count, None)        # raises, with the estimate and the advice
