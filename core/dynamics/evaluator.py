@@ -17,6 +17,7 @@ from fractions import Fraction
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from flint import arb
 
 from baseparams.numeric.backends import Arb, Float64, TanHalf, in_backend_precision
 from baseparams.errors import KinematicsError
@@ -99,11 +100,13 @@ def project(r: Rows, k_tree: Rows, zero: Any, columns: Sequence[Sequence[int]] |
             row: list[Any] = [None] * len(k_tree[0])
             for k, rk in enumerate(r):
                 coeff = rk[j]
-                if isinstance(coeff, int) and coeff == 0:
-                    continue
+                if isinstance(coeff, int) and coeff == 0 or type(coeff) is arb and coeff.is_zero():
+                    continue        # an exact zero adds nothing (a tree's R in balls is mostly arb 0)
+                unit = type(coeff) is arb and coeff.is_exact() and abs(coeff) == 1
                 kr = k_tree[k]
                 for c in columns[k]:
-                    term = coeff * kr[c]
+                    # times an exact +-1 ball: the entry itself (exact), without a multiplication
+                    term = (kr[c] if coeff > 0 else -kr[c]) if unit else coeff * kr[c]
                     row[c] = term if row[c] is None else row[c] + term
             out.append([zero if v is None else v for v in row])
         return out

@@ -1,0 +1,196 @@
+"""Robots at full size (issue 47): dp and vp CPU seconds beside a FIGAROH-like yardstick
+measured in the same run, the defaults' memory (no refusal), and how accurate the printed dp
+expressions are.
+
+    pip install example-robot-data pin
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp] [--sections speed memory accuracy]
+
+speed: per robot, interleaved ``--repeats`` times in this process (medians, CPU s of
+``time.process_time``): dp, vp (Talos only; it is long), and the yardstick: what FIGAROH
+does for base parameters, Pinocchio's joint-torque regressor stacked over as many random
+states as dp's W has samples and one QR with column pivoting (scipy), its rank by the
+tolerance ``max(shape) eps |R_11|``; FIGAROH itself is not run (not installed here). The
+ratio is solver / yardstick. The robot is loaded once, outside the timings.
+
+memory: the defaults of issue 47's refusals, each solve in a child process: rank, whether
+certified, the child's whole-process CPU s and peak RSS.
+
+accuracy: the sine of the largest principal angle between the printed dp base expressions'
+row space and W at three independent random batches (columns scaled to unit norm,
+tests/test_full_size.py), beside dp's estimate, dp's unrounded beta, and the rule before
+issue 47 (each coefficient to the trajectory-only estimate) applied to the trajectory's beta.
+"""
+
+import argparse
+import math
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))                      # tests/ is not a package
+
+from urdf_reference import Reference, example_robot_data, robot_id  # noqa: E402
+
+SPEED = ("tiago_description/tiago", "talos_data/talos_full_v2")
+VP = ("talos_data/talos_full_v2",)
+MEMORY = (("tiago_description/tiago_dual", "dp"), ("pr2_description/pr2", "vp"))
+ACCURACY = ("romeo_description/romeo", "romeo_description/romeo_laas_small", "pr2_description/pr2")
+
+
+def paths() -> dict[str, Path]:
+    found = {robot_id(p): p for p in example_robot_data()}
+    if not found:
+        sys.exit("example-robot-data is not installed (pip install example-robot-data)")
+    return found
+
+
+def cpu(function):
+    start = time.process_time()
+    out = function()
+    return out, time.process_time() - start
+
+
+def yardstick(ref: Reference, states: int) -> int:
+    """FIGAROH's way: the stacked Pinocchio regressor and a pivoted QR; the rank."""
+    import scipy.linalg
+    w = ref.stacked_regressor(states, seed=3)
+    _, r, _ = scipy.linalg.qr(w, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    return int(np.sum(d > max(w.shape) * np.finfo(float).eps * d[0]))
+
+
+def speed(found: dict[str, Path], repeats: int, with_vp: bool) -> None:
+    from baseparams.io.loader import load_mechanism
+    from baseparams.solvers.run import run_solver
+    print("| robot | params | yardstick rank | dp rank | vp rank | yardstick s | dp s | dp / yardstick | vp s | "
+          "vp / yardstick |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in SPEED:
+        mech, ref = load_mechanism(found[name]), Reference(found[name])
+        states = mech.trajectory.samples
+        times: dict[str, list[float]] = {"y": [], "dp": [], "vp": []}
+        ranks: dict[str, object] = {}
+        for _ in range(repeats):
+            ranks["y"], t = cpu(lambda: yardstick(ref, states))
+            times["y"].append(t)
+            result, t = cpu(lambda: run_solver("dp", mech))
+            ranks["dp"] = result.rank
+            times["dp"].append(t)
+            if with_vp and name in VP:
+                result, t = cpu(lambda: run_solver("vp", mech))
+                ranks["vp"] = f"{result.rank}" + ("" if result.certified else " (not certified)")
+                times["vp"].append(t)
+        y, dp = statistics.median(times["y"]), statistics.median(times["dp"])
+        vp = statistics.median(times["vp"]) if times["vp"] else None
+        print(f"| {name} | {len(mech.parameters)} | {ranks['y']} | {ranks['dp']} | {ranks.get('vp', '-')} | "
+              f"{y:.2f} | {dp:.2f} | {dp / y:.2f}x | {'-' if vp is None else f'{vp:.1f}'} | "
+              f"{'-' if vp is None else f'{vp / y:.1f}x'} |", flush=True)
+
+
+CHILD = """
+import json, resource, sys, time
+from baseparams.io.loader import load_mechanism
+from baseparams.solvers.run import run_solver
+r = run_solver(sys.argv[2], load_mechanism(sys.argv[1]), {"recover": False} if sys.argv[2] == "vp" else {})
+print(json.dumps({"rank": r.rank, "certified": r.certified, "summary": r.diagnostics.summary}))
+"""
+
+
+def memory(found: dict[str, Path]) -> None:
+    import json
+    print("| robot | solver | rank | certified | whole-process CPU s | peak RSS MB | how |")
+    print("|---|---|---|---|---|---|---|")
+    for name, solver in MEMORY:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        proc = subprocess.run([sys.executable, "-c", CHILD, str(found[name]), solver], capture_output=True, text=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if proc.returncode:
+            print(f"| {name} | {solver} | refused: {proc.stderr.strip().splitlines()[-1][:100]} |||||")
+            continue
+        out = json.loads(proc.stdout.strip().splitlines()[-1])
+        how = next((line for line in out["summary"] if "memory limit" in line), "")
+        print(f"| {name} | {solver} | {out['rank']} | {out['certified']} | "
+              f"{after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime:.1f} | "
+              f"{after.ru_maxrss / 1024:.0f} | {how[:140]} |", flush=True)
+
+
+def old_rule_rows(g, n: int) -> np.ndarray:
+    """The printed rows by the rule before issue 47: each coefficient to
+    floor(log10(|beta_s| / estimate)) digits, dropped at or below the estimate."""
+    noise = max(g.error_estimate, np.finfo(float).eps)
+    most = int(min(16, math.floor(-math.log10(noise))))
+    B = np.zeros((g.rank, n))
+    for a, i in enumerate(g.kept):
+        B[a, i] = 1.0
+        for b, j in enumerate(g.eliminated):
+            value, scaled = g.beta[a, b], abs(g.beta_s[a, b])
+            if value == 0 or scaled <= noise:
+                continue
+            digits = min(most, math.floor(math.log10(scaled / noise)))
+            if digits >= 1:
+                B[a, j] = float(f"{value:.{digits}g}")
+    return B
+
+
+def unrounded_rows(g, n: int) -> np.ndarray:
+    B = np.zeros((g.rank, n))
+    for a, i in enumerate(g.kept):
+        B[a, i] = 1.0
+        B[a, g.eliminated] = g.beta[a]
+    return B
+
+
+def accuracy(found: dict[str, Path]) -> None:
+    from test_full_size import reference_w, row_space_angle, rows_of
+
+    from baseparams.dynamics.excitation import random_batch
+    from baseparams.dynamics.observation import observation_matrix
+    from baseparams.dynamics.trajectory import Trajectory
+    from baseparams.io.loader import load_mechanism
+    from baseparams.numeric.backends import Float64
+    from baseparams.plugins.solvers.dp.gautier import dp_gautier
+    from baseparams.solvers.run import run_solver
+    print("| robot | rank | printed | dp's estimate | printed / estimate | unrounded (W + batch) | "
+          "before: printed | before: estimate (W alone) | before: unrounded (W alone) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in ACCURACY:
+        mech = load_mechanism(found[name])
+        result = run_solver("dp", mech).to_json()
+        W = reference_w(mech)
+        n = len(mech.parameters)
+        trajectory = Trajectory.default(mech, memory=False)
+        W0 = observation_matrix(mech, Float64(), trajectory)[0]
+        alone = dp_gautier(W0)
+        both = dp_gautier(np.vstack([W0, observation_matrix(mech, Float64(), random_batch(mech, trajectory, 7919))[0]]))
+        printed, estimate = row_space_angle(rows_of(result), W), result["diagnostics"]["beta_error_estimate"]
+        print(f"| {name} | {result['rank']} | {printed:.2g} | {estimate:.2g} | {printed / estimate:.2g} | "
+              f"{row_space_angle(unrounded_rows(both, n), W):.2g} | "
+              f"{row_space_angle(old_rule_rows(alone, n), W):.2g} | {alone.error_estimate:.2g} | "
+              f"{row_space_angle(unrounded_rows(alone, n), W):.2g} |", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-vp", action="store_true", help="no vp in the speed section")
+    parser.add_argument("--sections", nargs="*", default=("speed", "memory", "accuracy"))
+    args = parser.parse_args()
+    found = paths()
+    if "speed" in args.sections:
+        speed(found, args.repeats, not args.no_vp)
+    if "memory" in args.sections:
+        print()
+        memory(found)
+    if "accuracy" in args.sections:
+        print()
+        accuracy(found)
+
+
+if __name__ == "__main__":
+    main()
