@@ -74,8 +74,8 @@ def main() -> None:
             continue
         mech = read_urdf(path, floating_base=floating).mechanism
         (rank, gap), t_pin = cpu(ref.rank)
-        # 129 bodies at the default 200 samples would need 2.6 GiB (dp refuses above 2 GiB): 100
-        result, t_dp = cpu(lambda: dp.solve(mech, **({"samples": 100} if len(mech.bodies) > 100 else {})))
+        # at the defaults: dp builds a W above the memory limit in row blocks (issue 47)
+        result, t_dp = cpu(lambda: dp.solve(mech))
         error, _ = torque_check(ref, mech)
         vp_rank, t_vp = "-", None
         if len(mech.bodies) <= args.vp_bodies or name in ALWAYS_VP:
