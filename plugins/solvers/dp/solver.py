@@ -21,7 +21,7 @@ from baseparams.model.mechanism import Mechanism
 from baseparams.solvers.protocol import (MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
                                          parameter_count)
 from baseparams.solvers.result import BaseParameterResult, Diagnostics
-from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say, untrusted_warning
+from baseparams.solvers.support import base_rows, decimal_coefficients, raised_warning, say
 
 from .gautier import EPS, DPResult, check_finite, dp_gautier
 
@@ -100,7 +100,8 @@ class DoublePrecisionSolver:
         # row is within the estimate of the computed one, however many coefficients it has
         # (rounding each to the estimate itself let hundreds of errors add up: issue 47)
         nonzero = np.count_nonzero(res.beta, axis=1) if res.beta.size else np.zeros(res.rank, dtype=int)
-        dropped, largest_dropped, untrusted = 0, 0.0, []
+        dropped, largest_dropped = 0, 0.0
+        untrusted: list[dict[str, Any]] = []     # stays empty: every coefficient above q / 2 has a digit
 
         def coefficient(a: int, b: int) -> str | None:
             nonlocal dropped, largest_dropped
@@ -116,10 +117,6 @@ class DoublePrecisionSolver:
             return decimal_string(arb(value), digits)
 
         base = base_rows(params, res.kept, res.eliminated, coefficient)
-        for item in untrusted:
-            item["base"] = base[item["base"]]["name"]
-        if untrusted:
-            warnings.append(untrusted_warning(untrusted))
         s = res.singular_values
         r = res.rank
         gap_ratio = float(res.ratios.max()) if res.ratios.size else None
