@@ -200,3 +200,20 @@ def test_printed_dp_expressions_on_robots_are_as_accurate_as_the_solve(name, mon
     estimate = result["diagnostics"]["beta_error_estimate"]
     angle = row_space_angle(rows_of(result), reference_w(mech))
     assert angle <= 10 * estimate and angle < 1e-6, (angle, estimate)
+
+
+def test_gautier_on_the_triangular_factor_is_gautier_on_w(tree):
+    """dp analyses a tall W through R (R^T R = W^T W): the same rank, singular values, kept
+    parameters and beta as the SVD of W itself, with W's row count in the tolerances."""
+    from baseparams.dynamics.observation import observation_matrix
+    from baseparams.dynamics.trajectory import Trajectory
+    from baseparams.numeric.backends import Float64
+    from baseparams.plugins.solvers.dp.gautier import dp_gautier
+    W = observation_matrix(tree, Float64(), Trajectory.default(tree))[0]
+    R, rows = triangular_factor([W], W.shape[1])
+    a, b = dp_gautier(W), dp_gautier(R, rows=rows)
+    assert a.rank == b.rank == 24 and a.tolerance == pytest.approx(b.tolerance, rel=1e-12)
+    assert a.zero_columns == b.zero_columns and np.array_equal(a.scale, b.scale)
+    assert np.max(np.abs(a.singular_values - b.singular_values)) <= 1e-13 * a.singular_values[0]
+    Ba, Bb = (np.hstack([np.eye(g.rank), g.beta_s])[:, np.argsort(g.kept + g.eliminated)] for g in (a, b))
+    assert largest_principal_angle_sine(Ba, Bb) < 1e-10
