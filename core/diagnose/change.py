@@ -5,11 +5,12 @@ gain, its friction, an offset, a delay), are fitted with one model: the inertial
 parameters (with ``--params`` the given simulation), the mechanism's own effects, viscous
 and Coulomb friction, an offset and a gear's load friction on every coordinate, and one
 delay between positions and torques, fitted to the baseline runs. The load friction
-mu |tau| sign(qd) is computed from each side's own measured torque: a payload's torque
-passes through the same gearbox, so the friction it adds is the shared model's, not a
-change (a 0.48 kg payload on a simulated UR5 with mu 0.1 was named with friction changes on
-three joints without it). Its residual on both sides holds what the model
-always lacked, and on the changed side the change as well.
+mu |tau| sign(qd) is computed from each side's own measured torque, and kept where the runs
+are paired and the baseline determines it as a gear's (:data:`LOAD_MIN` to :data:`LOAD_MAX`):
+a payload's torque passes through the same gearbox, so the friction it adds is the shared
+model's, not a change (a 0.48 kg payload on a simulated UR5 with mu 0.1 was named with
+friction changes on three joints without it). Its residual on both sides holds what the
+model always lacked, and on the changed side the change as well.
 
 What the model lacks in both cancels by pairing: each changed sample is paired with the
 baseline sample in the nearest state (positions and speeds, each scaled by its
