@@ -21,7 +21,7 @@ from baseparams.dynamics.trajectory import observation_matrix
 from baseparams.dynamics.transfers import transfer_generators
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
-from baseparams.io.formats import Reader
+from baseparams.formats import Reader
 from baseparams.io.loader import check_mobility, load_mechanism, parse_mechanism, readers_by_suffix, resolve
 from baseparams.model import generate
 from baseparams.model.builder import MechanismBuilder, name_problem
