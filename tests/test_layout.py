@@ -144,6 +144,12 @@ FOR_ANY_SOLVER = {
     "baseparams.solvers.support.exact_coefficients": "the exact counterpart of decimal_coefficients",
     "baseparams.solvers.support.seconds_text": "the time counterpart of size_text (estimates of long work)",
     "baseparams.dynamics.observation.evaluate_states": "the evaluated samples behind W, for any analysis",
+    "baseparams.numeric.linalg.triangular_factor": "W's R folded block by block: any solver's analysis of a W "
+                                                   "too tall for memory",
+    "baseparams.dynamics.trajectory.samples_per_block": "how many samples of W fit the memory budget at once, "
+                                                        "for any solver building W in blocks",
+    "baseparams.solvers.support.untrusted_warning": "the warning for values printed beyond their trusted digits, "
+                                                    "for any solver that rounds what it prints",
 }
 
 

@@ -17,7 +17,6 @@ from fractions import Fraction
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from flint import arb
 
 from baseparams.numeric.backends import Arb, Float64, TanHalf, in_backend_precision
 from baseparams.errors import KinematicsError
@@ -100,13 +99,11 @@ def project(r: Rows, k_tree: Rows, zero: Any, columns: Sequence[Sequence[int]] |
             row: list[Any] = [None] * len(k_tree[0])
             for k, rk in enumerate(r):
                 coeff = rk[j]
-                if isinstance(coeff, int) and coeff == 0 or type(coeff) is arb and coeff.is_zero():
-                    continue        # an exact zero adds nothing (a tree's R in balls is mostly arb 0)
-                unit = type(coeff) is arb and coeff.is_exact() and abs(coeff) == 1
+                if isinstance(coeff, int) and coeff == 0:
+                    continue
                 kr = k_tree[k]
                 for c in columns[k]:
-                    # times an exact +-1 ball: the entry itself (exact), without a multiplication
-                    term = (kr[c] if coeff > 0 else -kr[c]) if unit else coeff * kr[c]
+                    term = coeff * kr[c]
                     row[c] = term if row[c] is None else row[c] + term
             out.append([zero if v is None else v for v in row])
         return out
