@@ -1,5 +1,6 @@
 """``baseparams excite``: plan the exciting motion (registered on ``main``; docs/excite.md)."""
 
+import re
 import sys
 from typing import Any
 
@@ -123,6 +124,7 @@ def excite(mech: str, output: str | None, check_path: str | None, solver_name: s
     motion satisfies.
     """
     from baseparams.api.planning import check_plan, excite as run, output_kind
+    check_noise(noise)
     options = options_from_text(get_solver(solver_name), extra)
     collision_options: dict[str, Any] = dict(collision=collision, collision_model=collision_model, srdf=srdf,
                              package_dirs=package_dirs, clearance=clearance, keep_out=keep_out, floor=not no_floor)
@@ -153,3 +155,23 @@ def excite(mech: str, output: str | None, check_path: str | None, solver_name: s
                    "(see the notes)", err=True)
         sys.exit(1)
     sys.exit(0)
+
+
+
+NOISE_RANGE = (1e-100, 1e100)       # rows are weighted by 1/SD: only the SDs' ratios matter
+_SD = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+
+
+def check_noise(text: str | None) -> None:
+    """Each ``--noise`` SD an ASCII number from 1e-100 to 1e100 (InputError naming the option).
+    Why (issue 46): 1e-320 made 1/SD infinite, every start failed on NaN, and the message
+    advised widening the limits."""
+    if text is None:
+        return
+    for item in text.split(","):
+        item = item.strip()
+        value = float(item) if _SD.fullmatch(item) else float("nan")
+        if not NOISE_RANGE[0] <= value <= NOISE_RANGE[1]:
+            raise InputError(f"{item!r}: each SD is a number from {NOISE_RANGE[0]:g} to {NOISE_RANGE[1]:g} (the rows "
+                             "are weighted by 1/SD, so only their ratios matter: scale them into that range)",
+                             key="--noise")

@@ -12,6 +12,7 @@ range keeps the range the user gives, or +-pi (angles) / +-0.5 m (lengths), stat
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,6 +78,12 @@ def drive_limits(mechanism: Mechanism) -> dict[str, dict[str, float]]:
     return {name: dict(values) for joint in mechanism.joints for name, values in joint.drive_limits.items()}
 
 
+# option text numbers: ASCII digits, one sign, point and exponent (float() takes '1_0', Arabic-Indic
+# digits, 'inf' and 'nan'); limits beyond MAX_LIMIT are no limits a motion is planned against
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+MAX_LIMIT = 1e9
+
+
 def parse_values(text: str | None, names: tuple, option: str, pair: bool = False) -> dict:
     """``V`` (every coordinate) or ``COORD=V,COORD=V``; with ``pair`` each V is ``LO:HI``.
     Returns {coordinate: value}; InputError naming the option otherwise."""
@@ -84,20 +91,35 @@ def parse_values(text: str | None, names: tuple, option: str, pair: bool = False
         return {}
     out = {}
 
+    def number(text: str) -> float:
+        """A number as option text is written (ASCII digits, sign, point, exponent: float()
+        alone took '1_0' as 10, docs/cli.md), within MAX_LIMIT (1e308 overflowed to inf in the
+        random starts: OverflowError)."""
+        text = text.strip()
+        if not _NUMBER.fullmatch(text):
+            raise ValueError
+        v = float(text)
+        if not math.isfinite(v) or abs(v) > MAX_LIMIT:
+            raise OverflowError
+        return v
+
     def value(raw: str, where: str) -> float | tuple[float, float]:
         try:
             if pair:
-                lo, hi = (float(v) for v in raw.split(":"))
-                if not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi:
+                lo, hi = (number(v) for v in raw.split(":"))
+                if lo >= hi:
                     raise ValueError
                 return (lo, hi)
-            v = float(raw)
-            if not math.isfinite(v) or v <= 0:
+            v = number(raw)
+            if v <= 0:
                 raise ValueError
             return v
+        except OverflowError:
+            raise InputError(f"{raw!r} is beyond any physical limit (at most {MAX_LIMIT:g} in magnitude; leave "
+                             f"{option} out for none)", key=option) from None
         except ValueError:
             form = "LO:HI with LO < HI" if pair else "a positive number"
-            raise InputError(f"{raw!r} is not {form}", key=option) from None
+            raise InputError(f"{raw!r} is not {form} (ASCII digits, sign, point and exponent)", key=option) from None
 
     items = [s.strip() for s in text.split(",") if s.strip()]
     if not items:

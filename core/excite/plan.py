@@ -318,6 +318,9 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
             if not feasible:
                 if x is not None:
                     break
+                if not results:         # no start ran to its end: the limits are not the cause (issue 46)
+                    raise InputError(f"no start of the optimisation ran to its end ({'; '.join(failures)}): "
+                                     "not a matter of the limits", file=mechanism.path, key="--starts")
                 reasons = "; ".join(failures) or "every start ended outside the limits"
                 raise InputError(f"no motion inside the limits was found ({reasons}): widen the limits "
                                  "(--max-velocity, --max-acceleration, --max-torque, --position-range, "
@@ -502,18 +505,81 @@ def _drop_inseparable(problem: design.Problem) -> tuple[design.Problem, list]:
     return dataclasses.replace(problem, model=new_model, separate=separate), [names[k] for k in sorted(dependent)]
 
 
+CSV_CHUNK = 50_000          # rows computed and written at a time
+CSV_BYTES_PER_VALUE = 25    # "%.17g" and a comma, at most about
+
+
 def write_csv(path: str | Path, mechanism: Mechanism, plan_: Plan, rate: float) -> int:
     """q, qd, qdd of every coordinate at ``rate`` Hz over one period (simulate's layout
-    without tau); returns the number of rows."""
-    t, q, qd, qdd = motion_at(mechanism, plan_, rate)
-    count = len(t)
+    without tau); returns the number of rows. The rows are computed and written CSV_CHUNK at a
+    time, after the file's estimated size is checked against the free disk space and the
+    file-size limit. Why (issue 46): --period 10000 --rate 100000 (10^9 rows) was built whole
+    in memory, a MemoryError at 7.45 GiB; --period 100 reached 3.5 GB before it."""
+    start, count = _sample_times(mechanism, plan_, rate)
     names = plan_.problem.form.names
     header = ["t"] + [f"{k}_{c}" for c in names for k in ("q", "qd", "qdd")]
-    columns = [t] + [a[:, j] for j in range(len(names)) for a in (q, qd, qdd)]
-    from baseparams.io.atomic import atomic_write
-    body = "\n".join(",".join(f"{v:.17g}" for v in row) for row in zip(*columns))
-    atomic_write(path, ",".join(header) + "\n" + body + "\n", "the motion CSV")
+    _check_csv_size(path, count, len(header), rate)
+    from baseparams.io.atomic import atomic_path
+    with atomic_path(path, "the motion CSV") as temporary:
+        with open(temporary, "w", encoding="utf-8", newline="") as out:
+            out.write(",".join(header) + "\n")
+            for first in range(0, count, CSV_CHUNK):
+                t = start + np.arange(first, min(first + CSV_CHUNK, count)) / rate
+                q, qd, qdd = _motion(mechanism, plan_, t)
+                columns = [t - start] + [a[:, j] for j in range(len(names)) for a in (q, qd, qdd)]
+                out.write("".join(",".join(f"{v:.17g}" for v in row) + "\n" for row in zip(*columns)))
     return count
+
+
+def _check_csv_size(path: str | Path, rows: int, columns: int, rate: float) -> None:
+    """Refuse (InputError, with the estimate) a CSV larger than the folder's free space or the
+    process's file-size limit, before a row is computed."""
+    import shutil
+    need = (rows + 1) * columns * CSV_BYTES_PER_VALUE
+    folder = Path(path).resolve().parent
+    limits = []
+    try:
+        limits.append((shutil.disk_usage(folder).free, f"the free space in {folder}"))
+    except OSError:
+        pass
+    try:
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if soft != resource.RLIM_INFINITY:
+            limits.append((soft, "the file-size limit (ulimit -f)"))
+    except (ImportError, OSError, ValueError):
+        pass
+    for limit, what in limits:
+        if need > limit:
+            raise InputError(f"{rows:,} rows of {columns} columns at {rate:g} Hz: about {need / 1e9:.3g} GB of CSV, "
+                             f"more than {what} ({limit / 1e9:.3g} GB): lower --rate or --period",
+                             file=str(path))
+
+
+def _sample_times(mechanism: Mechanism, plan_: Plan, rate: float) -> tuple[float, int]:
+    """(the first time, the number of rows) of the motion at ``rate`` Hz over one period."""
+    if plan_.kept == "the file's trajectory":
+        spec = mechanism.trajectory
+        assert spec is not None
+        start, end = float(spec.t_start), float(spec.t_end)
+        return start, int(math.floor((end - start) * rate + 1e-9)) + 1
+    return 0.0, int(math.floor(plan_.problem.form.period * rate + 1e-9)) + 1
+
+
+def _motion(mechanism: Mechanism, plan_: Plan, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, qd, qdd) of the returned motion at the times ``t`` (the file's own trajectory's
+    expressions when the plan keeps it)."""
+    if plan_.kept == "the file's trajectory":
+        from baseparams.dynamics.trajectory import values_at
+        from baseparams.numeric.backends import Float64
+        spec = mechanism.trajectory
+        assert spec is not None
+        values = [values_at(spec.expressions[name], Float64(), t) for name in plan_.problem.form.names]
+        q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v[k], float), t.shape) for v in values], axis=1)
+                      for k in range(3))
+        return q, qd, qdd
+    q, qd, qdd = plan_.problem.form.motion(plan_.x, t)
+    return q, qd, qdd
 
 
 def with_trajectory(mechanism: Mechanism, plan_: Plan) -> Mechanism:
@@ -526,19 +592,10 @@ def with_trajectory(mechanism: Mechanism, plan_: Plan) -> Mechanism:
 
 def motion_at(mechanism: Mechanism, plan_: Plan, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, q, qd, qdd) of the returned motion at ``rate`` Hz over one period (the file's own
-    trajectory's expressions when the plan keeps it)."""
-    if plan_.kept == "the file's trajectory":
-        from baseparams.dynamics.trajectory import values_at
-        from baseparams.numeric.backends import Float64
-        spec = mechanism.trajectory
-        assert spec is not None
-        start, end = float(spec.t_start), float(spec.t_end)
-        t = start + np.arange(int(math.floor((end - start) * rate + 1e-9)) + 1) / rate
-        values = [values_at(spec.expressions[name], Float64(), t) for name in plan_.problem.form.names]
-        q, qd, qdd = (np.stack([np.broadcast_to(np.asarray(v[k], float), t.shape) for v in values], axis=1)
-                      for k in range(3))
-        return t - start, q, qd, qdd
-    period = plan_.problem.form.period
-    t = np.arange(int(math.floor(period * rate + 1e-9)) + 1) / rate
-    q, qd, qdd = plan_.problem.form.motion(plan_.x, t)
-    return t, q, qd, qdd
+    trajectory's expressions when the plan keeps it), t from 0."""
+    start, count = _sample_times(mechanism, plan_, rate)
+    t = start + np.arange(count) / rate
+    q, qd, qdd = _motion(mechanism, plan_, t)
+    return t - start, q, qd, qdd
+
+
