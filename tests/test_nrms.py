@@ -39,3 +39,13 @@ def test_verbose_report_of_a_coordinate_without_a_predictability_test(tmp_path):
     result = CliRunner().invoke(main, ["diagnose", "sla_suspension", str(data), "--verbose"])
     assert result.exit_code in (0, 1), result.stderr
     assert "predictable from the motion (the verdict's test, Holm p): theta1" in result.stdout
+
+
+def test_a_constant_force_has_no_nrms_of_its_sd_and_the_json_stays_json(tmp_path):
+    """A force without spread (constant) has no NRMS of its SD: null, never Infinity (which
+    is not JSON)."""
+    import json
+    t = np.linspace(0.0, 1.0, 101)
+    p = Prediction("x", ("a",), t, np.full((101, 1), 3.0), np.full((101, 1), 3.1))
+    text = json.dumps(p.to_json(), allow_nan=False)
+    assert json.loads(text)["nrms_sd"] == {"a": None}

@@ -147,7 +147,8 @@ class Identification:
             "condition_number": _finite(self.condition_number),
             "noise_sd": dict(zip(self.coordinates, map(float, self.noise_sd))),
             "nrms": dict(zip(self.coordinates, map(float, self.nrms))),
-            "nrms_sd": None if self.nrms_sd is None else dict(zip(self.coordinates, map(float, self.nrms_sd))),
+            "nrms_sd": None if self.nrms_sd is None else {c: float(v) if math.isfinite(v) else None
+                                                          for c, v in zip(self.coordinates, self.nrms_sd)},
             "dof": self.dof,
             "base_model_error": float(self.base_model_error),
             "residual_variance": float(self.residual_variance),
@@ -484,7 +485,8 @@ class Prediction:
             return {c: None if c in undefined else float(v) for c, v in zip(self.coordinates, values)}
         return {"data": self.data, "samples": int(len(self.t)),
                 "rms": dict(zip(self.coordinates, map(float, self.rms))),
-                "nrms": ratios(self.nrms), "nrms_sd": ratios(self.nrms_sd),
+                "nrms": ratios(self.nrms),
+                "nrms_sd": {c: v if v is not None and math.isfinite(v) else None for c, v in ratios(self.nrms_sd).items()},
                 "rms_overall": self.overall_rms} | ({"unmeasured": list(self.unmeasured)} if self.unmeasured else {}) \
             | ({"nrms_undefined": list(undefined)} if undefined else {}) \
             | ({"nrms_unfiltered": ratios(self.nrms_unfiltered)} if self.nrms_unfiltered is not None else {})
