@@ -13,7 +13,7 @@ CORE = pathlib.Path(__file__).resolve().parents[1] / "core"
 
 # Floors, lowest first: a package may import its own floor's packages and any lower floor's.
 FLOORS: list[set[str]] = [
-    {"errors"},
+    {"errors", "lazy"},
     {"hookspecs", "formats", "registry"},       # the plugin door: joint types, readers, solvers by name
     {"numeric"},
     {"model"},

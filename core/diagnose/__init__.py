@@ -7,11 +7,9 @@
 
 The top room of the numerical core: imports identify, recordings and the layers below.
 """
-from importlib import import_module
-from typing import Any
+from baseparams.lazy import public_names
 
-# public name -> its module; imported on first use so that reading a CSV does not load the
-# whole room (PEP 562)
+# public name -> its module, imported on first use
 _PUBLIC = {
     "diagnose_data": "workflow",
     "Diagnosis": "workflow",
@@ -22,8 +20,4 @@ _PUBLIC = {
 }
 __all__ = sorted(_PUBLIC)
 
-
-def __getattr__(name: str) -> Any:
-    if name in _PUBLIC:
-        return getattr(import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = public_names(__name__, _PUBLIC)

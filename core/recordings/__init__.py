@@ -12,11 +12,9 @@
 
 Imports only the layers below it (model, dynamics, io, numeric), never identify or diagnose.
 """
-from importlib import import_module
-from typing import Any
+from baseparams.lazy import public_names
 
-# public name -> its module; imported on first use so that reading a CSV does not load the
-# whole room (PEP 562)
+# public name -> its module, imported on first use
 _PUBLIC = {
     "MeasuredData": "data",
     "read_measured": "data",
@@ -31,8 +29,4 @@ _PUBLIC = {
 }
 __all__ = sorted(_PUBLIC)
 
-
-def __getattr__(name: str) -> Any:
-    if name in _PUBLIC:
-        return getattr(import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = public_names(__name__, _PUBLIC)
