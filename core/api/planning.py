@@ -124,12 +124,7 @@ def excite(mech: Any, *, output: Any = None, solver: str = "vp", solver_options:
         spec = parse_effect(effect, mechanism, values=False)
         parsed_effects.append((spec.kind, spec.coordinate))
     pairs = parse_separate(separate, mechanism) if separate else ()
-    weights = None
-    if noise is not None:
-        sd = [float(v) for v in noise.split(",")] if all(_is_number(v) for v in noise.split(",")) else None
-        if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
-            raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
-        weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
+    weights = _noise_weights(noise, names)
     margin = VELOCITY_MARGIN if velocity_margin is None else velocity_margin
     if mechanism.loops and mechanism.trajectory is not None:
         # closed loops: the file's trajectory is known to stay in the reachable range
@@ -221,12 +216,7 @@ def check_plan(mech: Any, plan_path: str, *, solver: str = "vp", solver_options:
     scene = scene_spec(mechanism, collision=collision, collision_model=collision_model, srdf=srdf,
                        package_dirs=package_dirs, clearance=DEFAULT_CLEARANCE if clearance is None else clearance,
                        keep_out=keep_out, floor=floor, notes=scene_notes)
-    weights = None
-    if noise is not None:
-        sd = [float(v) for v in noise.split(",")] if all(_is_number(v) for v in noise.split(",")) else None
-        if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
-            raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
-        weights = tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
+    weights = _noise_weights(noise, names)
     parsed = tuple((s.kind, s.coordinate) for s in (parse_effect(e, mechanism, values=False) for e in effects))
     base = BaseModel.from_result(run_solver(chosen, mechanism, solver_options), mechanism)
     settings = planner.Settings(effects=parsed, weights=weights, scene=scene)
@@ -254,3 +244,13 @@ def _up(value: float) -> float:
     """``value`` rounded up to two significant digits."""
     scale = 10.0 ** (math.floor(math.log10(value)) - 1)
     return math.ceil(value / scale - 1e-9) * scale
+
+
+def _noise_weights(noise: str | None, names: Sequence[str]) -> tuple[float, ...] | None:
+    """The criterion's row weights 1/SD from ``--noise`` (one SD, or one per coordinate)."""
+    if noise is None:
+        return None
+    sd = [float(v) for v in noise.split(",")] if all(_is_number(v) for v in noise.split(",")) else None
+    if sd is None or any(v <= 0 for v in sd) or len(sd) not in (1, len(names)):
+        raise InputError(f"expected one positive SD or {len(names)} ({', '.join(names)})", key="--noise")
+    return tuple(1 / v for v in (sd * len(names) if len(sd) == 1 else sd))
