@@ -166,8 +166,8 @@ def coloured_noise(rng: np.random.Generator, shape: tuple[int, int], kind: str) 
 def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: int = 0, noise: str = "ar1",
                     noise_level: float = 0.01, payload: float = 0.0, friction_drift: float = 0.0,
                     drift_coordinate: int = 0, common_errors: bool = True, random_inertia: bool = False,
-                    payload_mass: float | None = None, load_friction: float = 0.0, quantum: float = 0.0
-                    ) -> tuple[MeasuredData, MeasuredData, dict]:
+                    payload_mass: float | None = None, load_friction: float = 0.0, quantum: float = 0.0,
+                    payload_body: int | None = None) -> tuple[MeasuredData, MeasuredData, dict]:
     """(baseline, changed, truth): two recordings of the default trajectory, the second after
     a change, for the proof of ``diagnose --baseline``. ``payload``: a rigid point load of this
     fraction of the last body's mass, at a random point within 5 cm of its frame's origin;
@@ -179,7 +179,9 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
     RMS torque. ``payload_mass``: the payload in kg instead (a last body of no mass, a tool
     frame, has none to scale). ``load_friction``: gear friction mu |tau| sign(qd) on every
     coordinate, common to both runs, so a payload's torque changes it too (as on a real
-    gearbox). ``quantum``: torques rounded to this step (N m), as a drive reports them."""
+    gearbox). ``quantum``: torques rounded to this step (N m), as a drive reports them.
+    ``payload_body``: the index (0-based, file order) of the body that carries the payload
+    instead of the last (a parallelogram's link, issue 49)."""
     rng = np.random.default_rng(seed)
     coordinates = independent_names(mechanism)
     motion = trajectory_motion(mechanism, samples)
@@ -202,7 +204,7 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
         return np.concatenate([np.repeat(x[:1], k, axis=0), x[:len(x) - k]]) if k else x
 
     change = np.zeros_like(phi)
-    last = len(mechanism.bodies) - 1
+    last = len(mechanism.bodies) - 1 if payload_body is None else payload_body
     mass = payload * phi[10 * last] if payload_mass is None else payload_mass
     direction = rng.standard_normal(3)
     centre = direction / np.linalg.norm(direction) * 0.05 * rng.uniform() ** (1 / 3)
