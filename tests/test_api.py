@@ -85,7 +85,7 @@ def test_solve_json_is_the_cli_json(name, solver):
 
 
 def test_solve_result_views():
-    solution = bp.solve("planar_2r", "exact", samples=20)
+    solution = bp.solve("planar_2r", "exact", solver_options={"samples": 20})
     assert solution.rank == 6 and solution.certified                # attributes of the solver's result
     frame = solution.to_frame()
     assert list(frame.columns) == ["name", "expression"] and len(frame) == solution.rank
@@ -93,7 +93,7 @@ def test_solve_result_views():
     assert "rank 6" in solution._repr_markdown_() and "phi_b01" in solution._repr_html_()
     assert str(solution) == solution.to_text()
     with pytest.raises(InputError, match="has no option 'nope'"):
-        bp.solve("pendulum", "dp", nope=1)
+        bp.solve("pendulum", "dp", solver_options={"nope": 1})
     with pytest.raises(InputError, match="unknown solver 'nope'"):
         bp.solve("pendulum", "nope")
 
@@ -209,3 +209,21 @@ def test_an_inaccurate_physical_fit_is_said_in_the_text_not_leaked(recording, mo
     assert "UserWarning" not in result.stderr and "may be inaccurate" not in result.stderr
     fit = bp.identify("planar_2r", recording, solver="dp", physical=True).to_json()["physical_fit"]
     assert fit["status"] == "optimal_inaccurate" and fit["warnings"][0].startswith("Solution may be inaccurate.")
+
+
+def test_solver_options_one_way_and_the_old_keywords_deprecated(tmp_path):
+    """Issue 45: solver_options={...} on every function; solve/export's **options still read
+    with a DeprecationWarning, and the two ways give the same result."""
+    new = bp.solve("planar_2r", "exact", solver_options={"samples": 20, "seed": 5})
+    with pytest.warns(DeprecationWarning, match="solver_options"):
+        old = bp.solve("planar_2r", "exact", samples=20, seed=5)
+    assert _untimed(old.to_json()) == _untimed(new.to_json())
+    with pytest.raises(InputError, match="seed given both"):
+        with pytest.warns(DeprecationWarning):
+            bp.solve("planar_2r", "exact", solver_options={"seed": 5}, seed=6)
+    exported = bp.export("pendulum", solver="exact", solver_options={"seed": 2})
+    with pytest.warns(DeprecationWarning, match="export"):
+        again = bp.export("pendulum", solver="exact", seed=2)
+    assert again.source == exported.source
+    with pytest.raises(InputError, match="has no option 'nope'"):
+        bp.export("pendulum", solver="dp", solver_options={"nope": 1})

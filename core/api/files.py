@@ -15,7 +15,8 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.model.mechanism import Mechanism
 
-from .solving import DEFAULT_SOLVER, MechanismLike, Progress, check_solver_options, get_solver, load, run_solver
+from .solving import (DEFAULT_SOLVER, MechanismLike, Progress, check_solver_options, chosen_options, get_solver, load,
+                      run_solver)
 
 if TYPE_CHECKING:
     from baseparams.formats import Writer
@@ -162,20 +163,24 @@ def convert(mech: MechanismLike, output: PathText, *, merge_fixed: bool = False,
 
 # ----- export ----------------------------------------------------------------------------
 def export(mech: MechanismLike, *, to: str = "python", output: PathText | None = None,
-           solver: str = DEFAULT_SOLVER, common: Mapping[str, Any] | None = None, **options: Any) -> "Export":
+           solver: str = DEFAULT_SOLVER, solver_options: Mapping[str, Any] | None = None,
+           common: Mapping[str, Any] | None = None, progress: Progress | None = None, **options: Any) -> "Export":
     """``mech``'s regressor as a standalone numpy module: ``regressor(q, qd, qdd)`` and
-    ``base_regressor`` (the columns of ``solver``'s base parameters; ``options`` are the
-    solver's; ``common``: ``samples``/``digits``/``seed`` for the solvers that declare them). Written to ``output`` (atomically) when given; ``.source`` holds the text."""
+    ``base_regressor`` (the columns of ``solver``'s base parameters; ``solver_options`` are the
+    solver's, as keyword arguments deprecated; ``common``: ``samples``/``digits``/``seed`` for
+    the solvers that declare them; ``progress``: the solver's messages). Written to ``output``
+    (atomically) when given; ``.source`` holds the text."""
     from baseparams.dynamics.codegen import export_source
     from baseparams.io.atomic import atomic_write
 
     from .results import Export, Solution
     if to != "python":
         raise InputError(f"unknown export target {to!r}; known: python", key="--to")
+    options = chosen_options(solver_options, options, "export")
     chosen = get_solver(solver)
     check_solver_options(chosen, options, common)
     mechanism = load(mech)
-    result = run_solver(chosen, mechanism, options, common=common)
+    result = run_solver(chosen, mechanism, options, common=common, progress=progress)
     source = export_source(mechanism, result)
     if output is not None:
         atomic_write(output, source)            # a full disk or a kill keeps the old module whole

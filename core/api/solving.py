@@ -69,17 +69,38 @@ def run_solver(solver: "Solver", mechanism: "Mechanism", options: Mapping[str, A
     return run(solver, mechanism, options, common=common, progress=progress)
 
 
-def solve(mech: MechanismLike, solver: str = DEFAULT_SOLVER, *, progress: Progress | None = None,
-          common: Mapping[str, Any] | None = None, **options: Any) -> "Solution":
+def chosen_options(solver_options: Mapping[str, Any] | None, old: Mapping[str, Any], function: str) -> dict[str, Any]:
+    """The solver options of a front-door function: ``solver_options={...}``, the one way every
+    function takes them (``identify``, ``excite`` and ``export`` alike), and the keyword
+    arguments ``solve``/``export`` took before it (``bp.solve(m, "vp", digits=40)``), still
+    read with a DeprecationWarning. Why one way: the keywords of a function such as
+    ``identify`` (``samples``? ``seed``?) would collide with a solver's option names."""
+    options = dict(solver_options or {})
+    if old:
+        import warnings
+        warnings.warn(f"{function}(..., {', '.join(f'{k}=...' for k in old)}): solver options as keyword "
+                      f"arguments are deprecated; pass solver_options={{...}}", DeprecationWarning, stacklevel=3)
+        both = sorted(set(old) & set(options))
+        if both:
+            raise InputError(f"{', '.join(both)} given both in solver_options and as a keyword argument; give one")
+        options.update(old)
+    return options
+
+
+def solve(mech: MechanismLike, solver: str = DEFAULT_SOLVER, *, solver_options: Mapping[str, Any] | None = None,
+          progress: Progress | None = None, common: Mapping[str, Any] | None = None, **options: Any) -> "Solution":
     """The base inertial parameters of ``mech`` (a registered name, a file or a Mechanism)
-    by the registered ``solver``; ``options`` are the solver's declared options
-    (``digits=30``, ``samples=200``, ``seed=3`` ...; ``baseparams plugins`` lists them).
+    by the registered ``solver``; ``solver_options`` are the solver's declared options
+    (``{"digits": 30, "samples": 200, "seed": 3}`` ...; ``baseparams plugins`` lists them;
+    given as keyword arguments they are deprecated). ``common``: ``digits``/``samples``/``seed``
+    offered to any solver, passed to those that declare them (the command line's ``--digits``).
 
     >>> import baseparams as bp
     >>> bp.solve("pendulum", "dp").rank
     3
     """
     from .results import Solution
+    options = chosen_options(solver_options, options, "solve")
     chosen = get_solver(solver)
     check_solver_options(chosen, options, common)  # the option's own range, before reading the file
     mechanism = load(mech)
