@@ -161,3 +161,93 @@ def test_excite_without_dash_o_prints_the_report_only(tmp_path):
     from baseparams.io.loader import load_mechanism
     planned = load_mechanism(path)
     assert planned.name == "pendulum" and planned.trajectory is not None
+
+
+# ----- the grammar on every verb where it means something (issue 45 item 5) ------------------
+def _verbs():
+    verbs = {name: command for name, command in main.commands.items() if name != "plot"}
+    verbs.update({f"plot {name}": command for name, command in main.commands["plot"].commands.items()})
+    return verbs
+
+
+def _flags(command) -> set[str]:
+    """The options a verb shows (a hidden one is a deprecated spelling still read)."""
+    return {flag for param in command.params if not getattr(param, "hidden", False) for flag in param.opts}
+
+
+# Where each shared option means something. A verb not listed for an option has no work it
+# would change: diagnose runs no solver (its inertial model is the regressor's column space,
+# the same for every solver), only validate's jobs and excite's starts split into workers,
+# and list, show, plugins and convert show no progress.
+GRAMMAR = {
+    "--solver": {"solve", "identify", "export", "excite", "report", "validate", "plot singular-values"},
+    "-O": {"solve", "identify", "export", "excite", "report"},
+    "--workers": {"validate", "excite"},
+    "--scheduler": {"validate", "excite"},
+    "--quiet": {"solve", "export", "simulate", "identify", "diagnose", "validate", "excite", "plot singular-values"},
+    "--format": {"list", "show", "plugins", "solve", "validate", "simulate", "identify", "diagnose", "excite",
+                 "report"},
+    "-o": set(_verbs()),
+}
+
+
+@pytest.mark.parametrize("flag", sorted(GRAMMAR))
+def test_each_shared_option_is_on_the_verbs_where_it_means_something(flag):
+    having = {name for name, command in _verbs().items() if flag in _flags(command)}
+    assert having == GRAMMAR[flag]
+
+
+@pytest.mark.parametrize("flag", ["--workers", "--scheduler", "--quiet", "-O", "--solver"])
+def test_a_shared_option_is_declared_once(flag):
+    """The same type, range and metavar wherever the option is (core/cli/options.py); --solver
+    is repeatable on the verbs that run several solvers."""
+    def shape(command):
+        [param] = [p for p in command.params if flag in p.opts]
+        kind = param.type
+        return (type(kind).__name__, getattr(kind, "min", None), getattr(kind, "max", None), param.metavar,
+                getattr(param, "is_flag", None))
+    shapes = {shape(command) for command in _verbs().values() if flag in _flags(command)}
+    assert len(shapes) == 1, shapes
+
+
+@pytest.mark.parametrize("verb", [["validate", "pendulum", "--solver", "dp"],
+                                  ["excite", "pendulum", "--iterations", "1", "--starts", "1"]])
+@pytest.mark.parametrize("bad", ["0", "257", "two"])
+def test_workers_out_of_range_is_one_error_line(verb, bad):
+    assert "--workers" in error_line(invoke(*verb, "--workers", bad))
+
+
+def test_solve_quiet_drops_the_solvers_progress_and_keeps_the_result():
+    loud = invoke("solve", "pendulum", "--solver", "vp")
+    quiet = invoke("solve", "pendulum", "--solver", "vp", "--quiet")
+    assert loud.exit_code == quiet.exit_code == 0
+    assert any(line.startswith("vp:") for line in loud.stderr.splitlines())
+    assert quiet.stderr == "" and quiet.stdout.splitlines()[:4] == loud.stdout.splitlines()[:4]
+
+
+def test_export_writes_python_without_to(tmp_path):
+    plain = invoke("export", "pendulum", "--solver", "dp", "--quiet")
+    named = invoke("export", "pendulum", "--solver", "dp", "--to", "python", "--quiet")
+    assert plain.exit_code == named.exit_code == 0 and plain.stdout == named.stdout
+    assert "def base_regressor(" in plain.stdout and plain.stderr == ""
+    loud = invoke("export", "pendulum", "--solver", "dp")
+    assert any(line.startswith("dp:") for line in loud.stderr.splitlines())
+    assert "--to" in error_line(invoke("export", "pendulum", "--to", "c"))
+
+
+def test_report_takes_solver_options():
+    named = invoke("report", "pendulum", "--no-certify")
+    given = invoke("report", "pendulum", "-O", "certify=false")
+    assert named.exit_code == given.exit_code == 0 and named.stdout == given.stdout
+    assert "3 base parameters (not checked)" in given.stdout
+    assert "has no option 'nope'" in error_line(invoke("report", "pendulum", "-O", "nope=1"))
+    line = error_line(invoke("report", "pendulum", "--no-certify", "-O", "certify=false"))
+    assert "--no-certify" in line and "give one" in line
+
+
+def test_plot_singular_values_quiet(tmp_path):
+    loud = invoke("plot", "singular-values", "pendulum", "-o", tmp_path / "a.png", "--solver", "vp")
+    quiet = invoke("plot", "singular-values", "pendulum", "-o", tmp_path / "b.png", "--solver", "vp", "--quiet")
+    assert loud.exit_code == quiet.exit_code == 0
+    assert any(line.startswith("vp:") for line in loud.stderr.splitlines())
+    assert not any(line.startswith("vp:") for line in quiet.stderr.splitlines())

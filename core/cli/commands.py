@@ -26,9 +26,9 @@ import click
 from baseparams import __version__
 from baseparams import registry
 from baseparams.api.solving import get_solver, load as api_load, run_solver
-from baseparams.cli.options import (emit, write_output, image_format_option, output_option, samples_option,
-                                    seed_option, solver_option, solver_options_option, solvers_option,
-                                    chosen_solvers)
+from baseparams.cli.options import (emit, write_output, format_option, image_format_option, output_option,
+                                    quiet_option, samples_option, seed_option, solver_option, solver_options_option,
+                                    solvers_option, chosen_solvers)
 from baseparams.errors import BaseparamsError
 from baseparams.solvers.protocol import Capabilities, Solver, check_options, describe_solver, options_from_text
 from baseparams.solvers.run import solver_options
@@ -162,12 +162,6 @@ def interrupt_signals() -> Iterator[None]:
             signal.signal(number, handler)
 
 
-def format_option(function: F) -> F:
-    """``--format text|json`` (default text)."""
-    return click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text",
-                        show_default=True, help="Output format: readable text or one JSON object.")(function)
-
-
 def load(mech: str, warn: bool = True) -> "Mechanism":
     """A registered mechanism name or a path to a mechanism file -> Mechanism; its
     warnings (``Mechanism.warnings``) go to stderr unless ``warn`` is false."""
@@ -203,7 +197,7 @@ def main(debug: bool) -> None:
 
 # ----- list ---------------------------------------------------------------------
 @main.command("list")
-@format_option
+@format_option()
 @output_option()
 def list_mechanisms(fmt: str, output: str | None) -> None:
     """List the registered mechanisms.
@@ -294,7 +288,7 @@ def describe_text(info: dict[str, Any]) -> str:
 
 @main.command()
 @click.argument("mech", metavar="MECH")
-@format_option
+@format_option()
 @output_option()
 def show(mech: str, fmt: str, output: str | None) -> None:
     """Show a mechanism's bodies, joints, coordinates and parameters.
@@ -314,7 +308,7 @@ def show(mech: str, fmt: str, output: str | None) -> None:
 
 # ----- plugins ------------------------------------------------------------------
 @main.command()
-@format_option
+@format_option()
 @output_option()
 def plugins(fmt: str, output: str | None) -> None:
     """List the installed plugins and the distributions providing them.
@@ -428,22 +422,25 @@ def given_options(solver: Solver, extra: tuple[str, ...], **named: Any) -> tuple
 @samples_option(help="Samples of the exciting trajectory (or random states, for exact) [default: the mechanism file's].")
 @seed_option(help="Seed of the solver's random states (solvers that declare a seed option).", default=None)
 @solver_options_option()
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True,
-              help="Output format: readable text, one JSON object, or CSV (name,expression: one row per "
-                   "base parameter, coefficients as the solver wrote them).")
+@format_option("text", "json", "csv",
+               help="Output format: readable text, one JSON object, or CSV (name,expression: one row per "
+                    "base parameter, coefficients as the text and JSON write them).")
 @output_option()
+@quiet_option()
 def solve(mech: str, solver_name: str, digits: int | None, samples: int | None, seed: int | None,
-          extra: tuple[str, ...], fmt: str, output: str | None) -> None:
+          extra: tuple[str, ...], fmt: str, output: str | None, quiet: bool) -> None:
     """Base inertial parameters of MECH: rank, kept and grouped parameters, and the
     base parameter expressions phi_b = phi_1 + beta phi_2.
 
-    Progress and warnings (e.g. no clear ridge in the singular values) go to stderr.
+    Progress (the solver's own lines; --quiet: none) and warnings (e.g. no clear ridge in the
+    singular values) go to stderr.
     Numeric coefficients carry only the digits the solver trusts. A solver that does not
     take MECH (exact on a closed loop) says why: `not applicable: <reason>`, exit code 2.
     """
     from baseparams.api import solve as api_solve
     given, common = given_options(get_solver(solver_name), extra, digits=digits, samples=samples, seed=seed)
-    solution = api_solve(load(mech), solver_name, progress=_progress, common=common, **given)
+    solution = api_solve(load(mech), solver_name, solver_options=given, common=common,
+                         progress=None if quiet else _progress)
     for warning in solution.result.warnings:
         click.echo(f"warning: {warning}", err=True)
     if fmt == "csv":
@@ -514,8 +511,10 @@ def plot_mechanism(mech: str, output: str, instants: int, image_format: str | No
 @samples_option()
 @image_format_option()
 @old_image_format()
+@quiet_option()
 def plot_singular_values(mech: str, output: str, solver_names: tuple[str, ...], old_solvers: str | None,
-                         digits: int, samples: int | None, image_format: str | None, old_format: str | None) -> None:
+                         digits: int, samples: int | None, image_format: str | None, old_format: str | None,
+                         quiet: bool) -> None:
     """Singular values of the (column-scaled) observation matrix of MECH, one series per
     solver on one log scale, with each solver's rank marked: the seed paper's figure of
     DP (*) against VP (+)."""
@@ -528,7 +527,7 @@ def plot_singular_values(mech: str, output: str, solver_names: tuple[str, ...], 
         wanted = {"digits": digits, "recover": False, "samples": samples}
         declared = {o.name for o in solver.options}
         options = check_options(solver, {k: v for k, v in wanted.items() if k in declared and v is not None})
-        result = run_solver(solver, mechanism, options, progress=_progress)
+        result = run_solver(solver, mechanism, options, progress=None if quiet else _progress)
         if not result.singular_values:
             raise UserError(f"solver {name!r} gives no singular values to plot")
         results.append(result)
@@ -540,14 +539,15 @@ def plot_singular_values(mech: str, output: str, solver_names: tuple[str, ...], 
 @main.command()
 @click.argument("mech", metavar="MECH")
 @solver_option(help="A registered solver that gives a derivation (its capabilities say so).", default="symbolic")
-@click.option("--format", "fmt", type=click.Choice(["text", "markdown", "latex"]), default="text",
-              show_default=True, help="Rendering of the derivation.")
+@solver_options_option()
+@format_option("text", "markdown", "latex", help="Rendering of the derivation.")
 @click.option("--keep", default="", help="Parameters never to eliminate (comma separated).")
 @click.option("--eliminate-first", "first", default="",
               help="Parameters to eliminate whenever a transfer allows it (comma separated).")
 @click.option("--no-certify", is_flag=True, help="Skip the ball-arithmetic rank check (faster).")
 @output_option()
-def report(mech: str, solver_name: str, fmt: str, keep: str, first: str, no_certify: bool, output: str | None) -> None:
+def report(mech: str, solver_name: str, extra: tuple[str, ...], fmt: str, keep: str, first: str, no_certify: bool,
+           output: str | None) -> None:
     """Derive MECH's base parameters by multipole transfers and print the derivation.
 
     Like the seed paper's Tabs. 4-5 and appendix: parameters without effect (per body and
@@ -555,7 +555,8 @@ def report(mech: str, solver_name: str, fmt: str, keep: str, first: str, no_cert
     values, the base parameters and how the rank was checked (`python -m pydoc
     baseparams.plugins.solvers.symbolic`). Any
     solver whose capabilities include a derivation may be chosen (built in: symbolic);
-    --keep, --eliminate-first and --no-certify are passed as its options of those names.
+    --keep, --eliminate-first and --no-certify are passed as its options of those names
+    (keep, eliminate_first, certify), -O NAME=VALUE any option it declares.
     """
     from baseparams.cli.report import render
     solver = get_solver(solver_name)
@@ -564,13 +565,13 @@ def report(mech: str, solver_name: str, fmt: str, keep: str, first: str, no_cert
                 if isinstance(r.item, Solver) and r.item.capabilities.derivation]
         raise UserError(f"solver {solver_name!r} gives no derivation; solvers that do: "
                         f"{', '.join(able) or '(none)'}")
-    given: dict[str, Any] = {}
-    if keep:
-        given["keep"] = keep
-    if first:
-        given["eliminate_first"] = first
-    if no_certify:
-        given["certify"] = False
+    given = options_from_text(solver, extra)
+    for flag, name, value in (("--keep", "keep", keep or None), ("--eliminate-first", "eliminate_first", first or None),
+                              ("--no-certify", "certify", False if no_certify else None)):
+        if value is not None:
+            if name in given:
+                raise UserError(f"{flag} and -O {name}=... both given; give one")
+            given[name] = value
     check_options(solver, given)
     result = run_solver(solver, load(mech), given)
     if result.diagnostics.derivation is None:

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 import click
 
 from baseparams.api.render import diagnosis_text as render_text
-from baseparams.cli.commands import emit, format_option, load, main
-from baseparams.cli.options import Progress, output_option, quiet_option
+from baseparams.cli.commands import emit, load, main
+from baseparams.cli.options import Progress, format_option, output_option, quiet_option
 from baseparams.cli.plots import _figure, _save
 
 # The statistics (scipy.signal, scipy.stats, statsmodels: slow imports) are imported by
@@ -61,7 +61,7 @@ if TYPE_CHECKING:
                    "effect on one line with its unit, where the gap remains and counts of the rest). "
                    "JSON holds everything either way.")
 @output_option(help="Write the report (text, or JSON with --format json) to FILE instead of standard output.")
-@format_option
+@format_option()
 @quiet_option()
 def diagnose(mech: str, data_paths: tuple[str, ...], baseline: tuple[str, ...], params_source: str | None,
              urdf_dynamics: bool, selection: tuple[str, ...],

@@ -7,9 +7,10 @@ from typing import Any
 import click
 
 from baseparams.api.effects import parse_separate  # noqa: F401  (its home moved; kept importable)
-from baseparams.cli.commands import emit, format_option, get_solver, load, main
-from baseparams.cli.options import (Progress, output_option, quiet_option, samples_option, seed_option,
-                                    solver_option, solver_options_option)
+from baseparams.cli.commands import emit, get_solver, load, main
+from baseparams.cli.options import (Progress, format_option, output_option, quiet_option, samples_option,
+                                    scheduler_option, seed_option, solver_option, solver_options_option,
+                                    workers_option)
 from baseparams.errors import InputError
 from baseparams.solvers.protocol import options_from_text
 
@@ -81,10 +82,8 @@ from baseparams.solvers.protocol import options_from_text
                    "[default: equal weights].")
 @click.option("--starts", type=click.IntRange(1, 1000), default=2, show_default=True,
               help="Random starts of the optimisation (the best feasible result is kept).")
-@click.option("--workers", type=click.IntRange(1, 256), default=None,
-              help="Run the starts in this many local worker processes.")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="Run the starts on a Dask scheduler (tcp://host:8786, or 'local').")
+@workers_option(help="Run the starts in this many local worker processes.")
+@scheduler_option(help="Run the starts on a Dask scheduler (tcp://host:8786, or 'local').")
 @click.option("--iterations", type=click.IntRange(1, 100000), default=200, show_default=True,
               help="Iterations of each local optimisation.")
 @seed_option(help="Seed of the first start (start k uses seed + k).")
@@ -97,7 +96,7 @@ from baseparams.solvers.protocol import options_from_text
 @click.option("--plot", "plot_path", default=None, type=click.Path(dir_okay=False),
               help="Plot of the motion and the singular values (png, pdf or svg).")
 @quiet_option()
-@format_option
+@format_option()
 def excite(mech: str, output: str | None, check_path: str | None, solver_name: str, extra: tuple[str, ...],
            criterion: str, harmonics: int, period: float, samples: int, effects: tuple[str, ...],
            separate: str | None, position_range: str | None, max_velocity: str | None,

@@ -9,8 +9,8 @@ import click
 
 from baseparams.api.data import same_file
 from baseparams.api.effects import parse_effect, parse_effects  # noqa: F401  (their home moved; kept importable)
-from baseparams.cli.commands import emit, format_option, get_solver, load, main
-from baseparams.cli.options import (Progress, output_option, quiet_option, samples_option, seed_option,
+from baseparams.cli.commands import emit, get_solver, load, main
+from baseparams.cli.options import (Progress, format_option, output_option, quiet_option, samples_option, seed_option,
                                     solver_option, solver_options_option)
 from baseparams.errors import InputError
 from baseparams.solvers.protocol import options_from_text
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
               help="Random physically consistent bodies instead of the file's inertias.")
 @click.option("--no-derivatives", is_flag=True,
               help="Write only t, q and tau (identify then estimates qd and qdd).")
-@format_option
+@format_option()
 @quiet_option()
 def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str, seed: int, samples: int | None,
              truth: str | None, random_inertia: bool, no_derivatives: bool, fmt: str, quiet: bool) -> None:
@@ -93,7 +93,7 @@ def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, metavar="FILE",
               help="Measured and predicted forces per coordinate, fit and --validate data (png, pdf, svg).")
 @output_option(help="Write the result (text, or JSON with --format json) to FILE instead of standard output.")
-@format_option
+@format_option()
 @quiet_option()
 def identify(mech: str, data_paths: tuple[str, ...], effects: tuple[str, ...], solver_name: str,
              extra: tuple[str, ...], validate_paths: tuple[str, ...], physical: bool, plot_path: str | None,

@@ -80,9 +80,34 @@ def seed_option(help: str = "Seed of the random numbers.", default: int | None =
                         show_default=default is not None, help=help + " 0 to 2^32 - 1.")
 
 
+def format_option(*choices: str, help: str = "Output format: readable text or one JSON object.") -> Decorator:
+    """``--format``: text (the default) or one JSON object, or a verb's own ``choices``
+    (``solve``: text, json, csv; ``report``: text, markdown, latex). Never an image format
+    (plots take ``--image-format``)."""
+    return click.option("--format", "fmt", type=click.Choice(list(choices or ("text", "json"))), default="text",
+                        show_default=True, help=help)
+
+
+MAX_WORKERS = 256
+
+
+def workers_option(help: str = "Run the jobs in this many local worker processes.") -> Decorator:
+    """``--workers N``: 1 to 256 local processes, on the verbs whose work splits into
+    independent jobs (``validate``: mechanism x solver; ``excite``: the starts)."""
+    return click.option("--workers", type=click.IntRange(1, MAX_WORKERS), default=None, metavar="N",
+                        help=help + f" 1 to {MAX_WORKERS} [default: in this process].")
+
+
+def scheduler_option(help: str = "Run the jobs on a Dask scheduler (tcp://host:8786), or 'local' for a "
+                                 "LocalCluster of --workers processes; needs pip install 'baseparams[distributed]'.") \
+        -> Decorator:
+    """``--scheduler ADDRESS``: beside ``--workers`` wherever it is."""
+    return click.option("--scheduler", default=None, metavar="ADDRESS", help=help)
+
+
 def quiet_option() -> Decorator:
-    """``--quiet``: no progress on stderr."""
-    return click.option("--quiet", is_flag=True, help="No progress display on stderr.")
+    """``--quiet``: no progress on stderr (warnings and errors are still printed)."""
+    return click.option("--quiet", is_flag=True, help="No progress display on stderr (warnings are still printed).")
 
 
 def image_format_option() -> Decorator:

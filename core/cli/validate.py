@@ -10,7 +10,8 @@ from typing import Any
 
 from baseparams import registry
 from baseparams.cli.commands import emit, main
-from baseparams.cli.options import Progress, chosen_solvers, output_option, quiet_option, solvers_option, write_output
+from baseparams.cli.options import (Progress, chosen_solvers, format_option, output_option, quiet_option, scheduler_option,
+                                    solvers_option, workers_option, write_output)
 
 
 MAX_TIMEOUT_S = 1e7         # about 116 days: past SIGALRM's and the OS timers' range otherwise
@@ -39,14 +40,11 @@ class Seconds(click.ParamType):
 @click.argument("mechs", nargs=-1, metavar="[MECH ...]")
 @click.option("--all", "everything", is_flag=True, help="Every registered mechanism.")
 @solvers_option(help="A solver to run [default: every registered solver].")
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "markdown"]), default="text",
-              show_default=True, help="Report format.")
+@format_option("text", "json", "markdown", help="Report format.")
 @output_option(help="Write the report to FILE instead of standard output.")
-@click.option("--workers", type=click.IntRange(1, 256), default=None,
-              help="Run jobs in this many local worker processes (with --scheduler local: Dask workers).")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="A Dask scheduler (tcp://host:8786), or 'local' for a LocalCluster of --workers "
-                   "processes; needs pip install 'baseparams[distributed]'.")
+@workers_option(help="Run the jobs (mechanism x solver) in this many local worker processes (with --scheduler "
+                     "local: Dask workers).")
+@scheduler_option()
 @click.option("--timeout", type=Seconds(), default=None, metavar="S", help="Seconds one job may take (0.1 to 10^7); a job past it is reported as "
                                       "timed out.")
 @quiet_option()
