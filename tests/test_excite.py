@@ -39,8 +39,12 @@ def _run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
-def _base(mechanism, solver="dp"):
-    return BaseModel.from_result(registry.solvers()[solver].item.solve(mechanism), mechanism)
+def _base(mechanism, solver="dp", **options):
+    return BaseModel.from_result(registry.solvers()[solver].item.solve(mechanism, **options), mechanism)
+
+
+def _qr_base(mechanism):
+    return _base(mechanism, pivoting="qr")
 
 
 def _central(function, x, h=1e-6):
@@ -245,9 +249,11 @@ def test_excite_ur5_halves_the_condition_number_within_the_limits(tmp_path):
     _limits_hold(written, limits)
     # identify on data simulated along the written motion reports the same condition number
     base = _base(written)
-    simulated, _ = simulate(written, noise_sd=1e-3, seed=1)
+    # (noise-free: identify's noise weights, estimated from 40 samples' residuals, move the
+    # figure by 5-9 % with noise_sd=1e-3, by the base chosen)
+    simulated, _ = simulate(written, noise_sd=0.0, seed=1)
     fitted = identify(written, simulated, base=base)
-    assert fitted.condition_number == pytest.approx(data["after"]["condition_number"], rel=0.05)
+    assert fitted.condition_number == pytest.approx(data["after"]["condition_number"], rel=1e-6)
     rows = table.read_text().splitlines()
     assert rows[0].startswith("t,q_shoulder_pan_joint,qd_shoulder_pan_joint,qdd_shoulder_pan_joint")
     assert len(rows) == 1 + 501
@@ -262,8 +268,12 @@ def test_excite_on_generated_chains_beats_their_trajectory(tmp_path, seed):
     mechanism = load_mechanism(path)
     limits = limits_of(mechanism, velocity="2", acceleration="8")
     settings = Settings(harmonics=3, samples=40, maxiter=60)
-    found = plan(mechanism, MechanismText.read("chain", path), _base(mechanism), limits, settings, starts=1,
-                 rebase=_base)
+    # on dp's QR-pivoted base, on which this test was written: the condition number depends on
+    # the base, and on seed 6's natural one (m1 kept: cond(V22) 62 against 2.7; vp's and, since
+    # issue 45, dp's) the plan stays at 130 from 1 or 3 starts and 60 or 150 iterations, where
+    # random states give 68 (reported in issue 45)
+    found = plan(mechanism, MechanismText.read("chain", path), _qr_base(mechanism), limits, settings, starts=1,
+                 rebase=_qr_base)
     assert found.finer.feasible
     assert found.after.condition < found.before.condition or found.before.condition < 3
     assert found.after.condition <= 1.5 * found.random_states.condition

@@ -181,7 +181,7 @@ def test_cli_says_not_applicable_and_exits_2():
 
 def test_cli_unknown_and_wrong_options_exit_2():
     result = run("solve", "pendulum", "--solver", "dp", "-O", "colour=red", code=2)
-    assert "'colour'" in result.stderr and "samples, scale, rank, seed" in result.stderr
+    assert "'colour'" in result.stderr and "samples, scale, rank, seed, pivoting" in result.stderr
     result = run("solve", "pendulum", "--solver", "vp", "-O", "recover=perhaps", code=2)
     assert "'recover'" in result.stderr and "true or false" in result.stderr
     result = run("solve", "pendulum", "--solver", "dp", "--samples", "50", "-O", "samples=60", code=2)

@@ -32,9 +32,17 @@ Choices made here, all reported in the result's diagnostics:
   level of a double-precision SVD). The ridge is *clear* when the largest ratio is at
   least ``RIDGE_RATIO`` (1e3) and falls exactly at the tolerance cut; anything else is a
   warning, because the rank then depends on the tolerance, not on the mechanism.
-- **Permutation.** QR with column pivoting (Businger-Golub) on ``V2^T`` picks the n-r
-  parameters whose rows of V2 are the most independent: they are eliminated, which
-  makes ``V22`` as well conditioned as a greedy choice can.
+- **Permutation.** By default (``pivoting="natural"``, since issue 45) the kept parameters
+  are the leftmost independent columns of W, the choice vp, exact and symbolic make, so that
+  every solver gives the same base parameters under the same names: the columns of ``V1^T``
+  (W's row space) are taken left to right, each kept when its part outside the kept ones'
+  span is above ``NATURAL_FLOOR``. Should that choice make ``V22`` worse conditioned than
+  ``NATURAL_CONDITION`` times QR pivoting's (beta's error estimate grows with it), or find
+  too few columns (a nearly dependent column in the way), the pivoted choice is taken, and
+  a note says so. ``pivoting="qr"``: QR with
+  column pivoting (Businger-Golub) on ``V2^T`` picks the n-r parameters whose rows of V2 are
+  the most independent: they are eliminated, which makes ``V22`` as well conditioned as a
+  greedy choice can.
 - **Economy SVD.** Only ``S`` and ``V`` are used, so a tall W (rows >= n) gets the thin
   SVD: memory ``rows x n``, not ``rows x rows`` (100,000 samples of a pendulum would
   otherwise ask for 74.5 GiB). A wide W (rows < n) needs the full ``V`` (n x n), and then
@@ -55,6 +63,9 @@ from baseparams.numeric.rank import numerical_rank
 
 RIDGE_RATIO = 1e3
 EPS = np.finfo(float).eps
+NATURAL_FLOOR = 1e-6        # a column of V1^T outside the kept ones' span by less is dependent
+NATURAL_CONDITION = 100     # cond(V22) the natural choice may cost (two digits), relative to QR pivoting's
+NATURAL_BLOCK = 64          # columns projected together (one matrix product per block)
 
 
 @dataclass
@@ -76,10 +87,12 @@ class DPResult:
     warnings: list = field(default_factory=list)
     lifted: int = 0              # directions the scaling lifted above the tolerance, not counted
     lifted_columns: list = field(default_factory=list)   # the columns that carry them most
+    kept_note: str = ""          # why the kept parameters are not the leftmost independent ones
 
 
 def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
-               columns: Sequence[str] | None = None, rows: int | None = None) -> DPResult:
+               columns: Sequence[str] | None = None, rows: int | None = None,
+               pivoting: str = "natural") -> DPResult:
     """Gautier's method on a float64 observation matrix ``W`` (rows x parameters).
 
     ``rank``: force the rank (to study what DP gives at a rank known from elsewhere);
@@ -88,7 +101,8 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
     :func:`baseparams.numeric.linalg.triangular_factor`) of an observation matrix of this
     many rows: the same singular values, right singular vectors and column norms, so the
     same analysis; the row count enters the tolerances as W's would.
-    Raises :class:`KinematicsError` if W is not finite or the SVD fails.
+    ``pivoting``: ``"natural"`` (the leftmost independent columns kept) or ``"qr"`` (see the
+    module doc). Raises :class:`KinematicsError` if W is not finite or the SVD fails.
     """
     W = np.asarray(W, dtype=float)
     n = W.shape[1]
@@ -147,10 +161,10 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
         warnings.append(f"rank forced to {rank}; the tolerance gives {r_tol}")
 
     v = vt.T
-    v2 = v[:, r:]
-    eliminated = sorted(pivoted_qr_columns(v2.T, n - r)) if r < n else []
-    kept = [j for j in range(n) if j not in set(eliminated)]
+    notes: list[str] = []
+    kept, eliminated, cond22 = _kept_columns(v, r, pivoting, notes)
     if eliminated:
+        v2 = v[:, r:]
         v21, v22 = v2[kept, :], v2[eliminated, :]
         try:
             beta_s = -np.linalg.solve(v22.T, v21.T).T
@@ -159,10 +173,8 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
                 f"the block V22 of the null space is singular in double precision: the "
                 f"{n - r} parameters to eliminate cannot be chosen (rank {r} of {n}"
                 + (", forced" if rank is not None else "") + ")") from None
-        cond22 = float(np.linalg.cond(v22))
     else:
         beta_s = np.zeros((r, 0))
-        cond22 = 1.0
     beta = beta_s * s_col[eliminated][None, :] / s_col[kept][:, None] if eliminated else beta_s
     noise = max(s_full[r] if r < n else 0.0, floor)      # the observed noise level
     err = noise / s_full[r - 1] * cond22 if r else 0.0
@@ -170,7 +182,66 @@ def dp_gautier(W: np.ndarray, scale: bool = True, rank: int | None = None,
         warnings.append(f"beta is uncertain: estimated relative error {err:.2g} "
                         f"(s_{r + 1} = {noise:.3g} / s_{r} = {s_full[r - 1]:.3g} x cond(V22) = {cond22:.3g})")
     return DPResult(r, kept, eliminated, beta, beta_s, s_full, tol, s_col, zero_columns, ratios, largest,
-                    clear, err, cond22, warnings, lifted, lifted_columns)
+                    clear, err, cond22, warnings, lifted, lifted_columns, "".join(notes))
+
+
+def _kept_columns(v: np.ndarray, r: int, pivoting: str, notes: list[str]) -> tuple[list[int], list[int], float]:
+    """(kept, eliminated, cond(V22)) for rank ``r`` from the full V (columns: right singular
+    vectors): the leftmost independent columns (``"natural"``, falling back to QR pivoting
+    when that costs conditioning) or QR pivoting's (``"qr"``)."""
+    n = v.shape[0]
+    if r >= n:
+        return list(range(n)), [], 1.0
+    v2 = v[:, r:]
+
+    def split(kept: list[int]) -> tuple[list[int], list[int], float]:
+        chosen = set(kept)
+        eliminated = [j for j in range(n) if j not in chosen]
+        v22 = v2[eliminated, :]
+        return kept, eliminated, float(np.linalg.cond(v22)) if eliminated else 1.0
+
+    pivoted = None
+    if pivoting == "natural":
+        natural = _leftmost_independent(v[:, :r].T)
+        if len(natural) == r:
+            result = split(natural)
+            pivoted = split(sorted(set(range(n)) - set(pivoted_qr_columns(v2.T, n - r))))
+            if result[2] <= NATURAL_CONDITION * pivoted[2]:
+                return result
+            why = f"makes cond(V22) {result[2]:.3g} where QR pivoting gives {pivoted[2]:.3g}"
+        else:
+            why = f"finds {len(natural)} of {r} columns above {NATURAL_FLOOR:g}"
+        notes.append(f"kept parameters by QR pivoting: the leftmost independent ones (vp's, exact's) {why}, "
+                     f"so these base parameters are other combinations than theirs")
+    return pivoted or split(sorted(set(range(n)) - set(pivoted_qr_columns(v2.T, n - r))))
+
+
+def _leftmost_independent(a: np.ndarray) -> list[int]:
+    """Indices of the leftmost columns of ``a`` (r x n, orthonormal rows) that are
+    independent: each kept when its part outside the kept columns' span has a norm above
+    ``NATURAL_FLOOR`` (Gram-Schmidt, twice, by blocks of columns)."""
+    r, n = a.shape
+    basis = np.zeros((r, 0))
+    kept: list[int] = []
+    for start in range(0, n, NATURAL_BLOCK):
+        if len(kept) == r:
+            break
+        block = a[:, start:start + NATURAL_BLOCK].copy()
+        for _ in range(2):
+            block -= basis @ (basis.T @ block)
+        new: list[np.ndarray] = []
+        for k in range(block.shape[1]):
+            x = block[:, k]
+            for _ in range(2):
+                for q in new:
+                    x = x - q * (q @ x)
+            size = float(np.linalg.norm(x))
+            if size > NATURAL_FLOOR and len(kept) < r:
+                new.append(x / size)
+                kept.append(start + k)
+        if new:
+            basis = np.hstack([basis, np.array(new).T])
+    return kept
 
 
 def _lifted_by_scaling(W: np.ndarray, s: np.ndarray, vt: np.ndarray, s_col: np.ndarray, r_tol: int,

@@ -48,6 +48,8 @@ class DoublePrecisionSolver:
                      "the excitation check is skipped)", minimum=1, maximum=parameter_count,
                      maximum_text="the number of parameters"),
         SolverOption("seed", int, CHECK_SEED, "seed of the independent random batch", minimum=0, maximum=MAX_SEED),
+        SolverOption("pivoting", str, "natural", "the kept parameters: the leftmost independent columns "
+                     "(natural, as vp, exact and symbolic) or QR column pivoting's", choices=("natural", "qr")),
     )
 
     def applicable(self, mechanism: Mechanism) -> str | None:
@@ -55,7 +57,8 @@ class DoublePrecisionSolver:
         return None
 
     def solve(self, mechanism: Mechanism, *, progress: Progress | None = None, samples: int | None = None,
-              scale: bool = True, rank: int | None = None, seed: int = CHECK_SEED) -> BaseParameterResult:
+              scale: bool = True, rank: int | None = None, seed: int = CHECK_SEED,
+              pivoting: str = "natural") -> BaseParameterResult:
         """The base parameters in float64; the options as declared in ``options`` (checked
         by :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
@@ -70,8 +73,9 @@ class DoublePrecisionSolver:
             # maximum, the parameter count, was checked before W was built)
             raise InputError(f"solver {self.name!r}: option 'rank' must be at most {min(shape)} (W is "
                              f"{rows} x {W.shape[1]}: its rank cannot be higher), got {rank}")
-        res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters, rows=rows)
-        check, stacked, both = self._excitation_check(mechanism, trajectory, W, rows, res, scale, rank, seed)
+        res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters, rows=rows, pivoting=pivoting)
+        check, stacked, both = self._excitation_check(mechanism, trajectory, W, rows, res, scale, rank, seed,
+                                                      pivoting)
         if check.get("raised") and stacked is not None and both is not None:
             warnings.append(raised_warning(mechanism, res.rank, both.rank, check["states"], double_precision=True))
             W, res = stacked, both
@@ -113,7 +117,11 @@ class DoublePrecisionSolver:
                 dropped += 1
                 largest_dropped = max(largest_dropped, scaled)
                 return None
-            digits = min(MAX_DIGITS, max(1, math.floor(math.log10(scaled)) - math.floor(math.log10(quantum)) + 1))
+            # the digits down to the quantum in the printed value's own units (scaled and
+            # unscaled values may sit in different decades: counting them on the scaled
+            # value printed a digit more than trusted, 0.59999999999999976 for 3/5)
+            unit = quantum * abs(value) / scaled
+            digits = min(MAX_DIGITS, max(1, math.floor(math.log10(abs(value))) - math.floor(math.log10(unit)) + 1))
             return decimal_string(arb(value), digits)
 
         base = base_rows(params, res.kept, res.eliminated, coefficient)
@@ -139,6 +147,8 @@ class DoublePrecisionSolver:
             f"shown",
             _dp_check_line(check),
         ]
+        natural = "natural order (the leftmost independent columns, as vp and exact)"
+        summary.append(res.kept_note or "kept parameters: " + (natural if pivoting == "natural" else "QR column pivoting"))
         if res.zero_columns:
             summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
                            + " ".join(params[j] for j in res.zero_columns))
@@ -146,6 +156,7 @@ class DoublePrecisionSolver:
             "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
                                "(exact in binary); beta scaled back") if scale else "none",
             "numerically_zero_columns": [params[j] for j in res.zero_columns],
+            "pivoting": pivoting if not res.kept_note else "qr",
             "lifted_by_scaling": {"directions": int(res.lifted), "columns": list(res.lifted_columns)},
             "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
             "ridge": {"clear": bool(res.clear_ridge), "criterion":
@@ -176,8 +187,8 @@ class DoublePrecisionSolver:
 
     @staticmethod
     def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, W_rows: int, res: DPResult,
-                          scale: bool, rank: int | None,
-                          seed: int) -> tuple[dict[str, Any], np.ndarray | None, DPResult | None]:
+                          scale: bool, rank: int | None, seed: int,
+                          pivoting: str = "natural") -> tuple[dict[str, Any], np.ndarray | None, DPResult | None]:
         """dp on W stacked with an independent random batch: (diagnostics, stacked W, its
         DPResult). W may be the triangular factor of ``W_rows`` rows: then so is the stack."""
         if rank is not None:
@@ -191,7 +202,7 @@ class DoublePrecisionSolver:
             stacked = np.vstack([W, rows])
         else:
             stacked = triangular_factor([W, rows], W.shape[1])[0]
-        both = dp_gautier(stacked, scale=scale, rows=W_rows + rows.shape[0])
+        both = dp_gautier(stacked, scale=scale, rows=W_rows + rows.shape[0], pivoting=pivoting)
         return ({"seed": seed, "states": batch.states, "rows": int(rows.shape[0]), "rank": res.rank,
                  "rank_with_batch": both.rank, "raised": both.rank > res.rank}, stacked, both)
 
