@@ -300,12 +300,12 @@ def test_decimal_coefficients_carry_digits_an_exact_solver_confirms(name, option
     for kept, (_, row) in _by_kept(r).items():
         assert truth[kept][kept] == 1
         for p, c in list(row.items())[1:]:
-            assert c.digits == significant_digits(c.text) and c.digits >= 1
             true = truth[kept][p]
-            assert abs(Fraction(c.text) - true) <= (2 if name == "dp" else 1) * _ulp(c.text, c.digits)
-            if c.exact:             # vp's recovered rationals: exact's rationals
-                assert name == "vp" and c.value == true
+            if c.exact:             # vp's recovered rationals: exact's rationals, written exactly (issue 45)
+                assert name == "vp" and c.value == true == Fraction(c.text) and c.digits >= 1
             else:
+                assert c.digits == significant_digits(c.text) and c.digits >= 1
+                assert abs(Fraction(c.text) - true) <= (2 if name == "dp" else 1) * _ulp(c.text, c.digits)
                 assert c.value == Fraction(c.text)
             checked += 1
     assert checked == 2                                     # e.g. m2 in mx1's and Izz1's rows

@@ -100,12 +100,13 @@ class Solution(Result):
         return "\n".join(lines)
 
     def rows(self) -> list[dict[str, Any]]:
-        """One row per base parameter: its name and its expression (as ``solve --format csv``
-        writes it: every digit the solver wrote)."""
+        """One row per base parameter: its name and its expression (as the text and ``solve
+        --format csv`` write it)."""
         return [{"name": b["name"], "expression": expression_text(b["expression"])} for b in self.result.base]
 
     def legend(self) -> list[str]:
-        """``phi_b01 = m1 + 0.5*mx2`` lines: what each base parameter stands for."""
+        """``phi_b01 = m1 + 0.5*mx2`` lines: what each base parameter stands for (the digits of
+        ``str()``, ``to_json()`` and ``to_frame()``)."""
         return legend_lines(self.result.base)
 
     def base_matrix(self) -> np.ndarray:
@@ -138,32 +139,17 @@ class Solution(Result):
         return self.base_matrix() @ phi
 
 
-def expression_text(expression: dict[str, str]) -> str:
-    """``m2 + 0.5*mx3 - (L**2)*Izz1``: a base parameter's expression with every digit the
-    solver wrote (symbolic coefficients in parentheses)."""
-    terms = []
-    for param, coeff in expression.items():
-        text = str(coeff).strip()
-        if _plain_number(text):
-            sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
-        else:                               # an expression keeps its own signs
-            sign, body = "+", f"({text})"
-        terms.append((sign, param if body == "1" else f"{body}*{param}"))
-    return " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ") or "0"
+def expression_text(expression: Mapping[str, object]) -> str:
+    """:func:`baseparams.solvers.result.expression_text`, the one rendering of a base
+    parameter (kept importable here)."""
+    from baseparams.solvers.result import expression_text as text
+    return text(expression)
 
 
-def _plain_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
-
-
-def legend_lines(base: list[dict[str, Any]], max_digits: int = 6) -> list[str]:
-    """Each base parameter's expression, one line each, with ``max_digits`` per coefficient."""
-    from baseparams.solvers.result import format_expression
-    return [f"{b['name']} = {format_expression(b['expression'], max_digits)}" for b in base]
+def legend_lines(base: list[dict[str, Any]]) -> list[str]:
+    """``phi_b01 = m1 + 0.5*mx2``: each base parameter's expression, one line each, with the
+    digits of the text, JSON and frames."""
+    return [f"{b['name']} = {expression_text(b['expression'])}" for b in base]
 
 
 # ----- simulate ------------------------------------------------------------------------

@@ -3,11 +3,16 @@
 A base-parameter result is the splitting phi = (phi_1, phi_2) (``kept`` and
 ``eliminated``) with ``phi_b = phi_1 + beta phi_2``. Each base parameter is stored twice:
 
-- as text (``base``: parameter -> coefficient string, the JSON layout): decimal digits the
-  solver trusts (numeric solvers), an exact rational ("625/251"), or a sympy expression in
-  the geometry symbols (symbolic solver, with exact values in ``expression_values``);
+- as text (``base``: parameter -> coefficient string, the JSON layout), rendered once by
+  :func:`coefficient_text` when the result is made: an exact value as its exact string
+  ("1", "0.20898125", "625/251"), a sympy expression in the geometry symbols as written
+  (symbolic solver, with exact values in ``expression_values``), any other as a decimal
+  with exactly the digits the solver trusts (dp, vp without recovered rationals);
 - as data (``coefficients``, same layout): a :class:`Coefficient` per entry, its value a
   Fraction (exact, or the printed decimal) with the digits the solver trusts.
+
+Every output (text, JSON, frames, CSV, legends, generated modules) prints those strings,
+combined by :func:`expression_text`: the same digits everywhere (issue 45).
 
 ``diagnostics`` is a :class:`Diagnostics`: typed fields that several solvers share (a
 rank tolerance, proven bounds around the ridge, the certificate, the summary lines the
@@ -17,6 +22,7 @@ JSON key ``diagnostics`` (the derivation excepted).
 Comparing two results (same base parameters?) is :mod:`baseparams.solvers.compare`'s job.
 """
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -25,6 +31,8 @@ from typing import Any
 
 import mpmath
 import sympy
+
+from baseparams.model.expressions import exact_text
 
 # Keys of the result's JSON object, emitted by every solver (null where they do not apply:
 # digits and singular_values for dp/exact/symbolic, expression_values for all but symbolic).
@@ -164,6 +172,11 @@ class BaseParameterResult:
             self.diagnostics = Diagnostics.from_dict(self.diagnostics or {})
         if self.coefficients is None:
             self.coefficients = coefficient_rows(self.base, lambda p, t: Coefficient.of_text(t, self.geometry))
+        self.coefficients = [{p: dataclasses.replace(c, text=coefficient_text(c)) for p, c in row.items()}
+                             for row in self.coefficients]
+        self.base = rendered_base(self.base, self.coefficients)
+        if self.expression_values is not None:
+            self.expression_values = [{p: value_text(t) for p, t in row.items()} for row in self.expression_values]
 
     @property
     def derivation(self) -> Any:
@@ -194,13 +207,13 @@ class BaseParameterResult:
         out["elapsed_s"] = round(self.elapsed_s, 3)
         return out
 
-    def to_text(self, max_digits: int = 8) -> str:
+    def to_text(self) -> str:
         lines = [f"{self.mechanism}: {self.solver} solver, {len(self.parameters)} parameters, "
                  f"rank {self.rank}" + (" (certified)" if self.certified else "")
                  + (" (upper bound)" if self.rank_is_upper_bound else "")
                  + (f", {self.digits} digits" if self.digits else "")]
         for b in self.base:
-            lines.append(f"  {b['name']} = {format_expression(b['expression'], max_digits)}")
+            lines.append(f"  {b['name']} = {expression_text(b['expression'])}")
         if self.eliminated:
             lines.append(f"  eliminated ({len(self.eliminated)}): {' '.join(self.eliminated)}")
         for w in self.warnings:
@@ -228,6 +241,49 @@ def coefficient_rows(base: list[dict[str, Any]],
                           else entry(param, text))
         rows.append(row)
     return rows
+
+
+def coefficient_text(coefficient: Coefficient) -> str:
+    """The one rendering of a coefficient (text, JSON, frames, CSV, legends): an exact value
+    as its exact string (a decimal where it has one, "0.20898125", else "625/251"), whatever
+    digits the solver printed it with; a symbolic expression as written; any other as the
+    solver's decimal, with exactly the digits it trusts. Why: vp's rationals, confirmed at
+    twice the digits, printed as "1.00000000000000000000000000000" in JSON and "1" in text,
+    and the text cut every decimal at 6 or 8 digits (issue 45)."""
+    if coefficient.exact and isinstance(coefficient.value, Fraction) and _is_plain_number(coefficient.text):
+        return exact_text(coefficient.value)
+    return str(coefficient.text)
+
+
+def value_text(text: object) -> str:
+    """An exact value's string ("1/2" -> "0.5", "625/251" stays): :func:`exact_text` of a
+    plain number, anything else as it is."""
+    return exact_text(Fraction(str(text).strip())) if _is_plain_number(text) else str(text)
+
+
+def rendered_base(base: list[dict[str, Any]], coefficients: list[dict[str, Coefficient]]) -> list[dict[str, Any]]:
+    """``base`` with every coefficient's text that of its data, rendered by
+    :func:`coefficient_text` (an entry the data does not hold keeps its text)."""
+    out = []
+    for b, row in zip(base, coefficients):
+        expression = {p: coefficient_text(row[p]) if p in row else str(t) for p, t in b["expression"].items()}
+        out.append({**b, "expression": expression})
+    return out + [dict(b) for b in base[len(coefficients):]]
+
+
+def expression_text(expression: Mapping[str, object]) -> str:
+    """``m2 + 0.5*mx3 - 625/251*Iyy1 + (L**2)*Izz1``: a base parameter from its rendered
+    coefficients, each with all its digits (symbolic ones in parentheses); the one form of
+    the text, legends, frames and CSV."""
+    terms = []
+    for param, coeff in expression.items():
+        text = str(coeff).strip()
+        if _is_plain_number(text):
+            sign, body = ("-" if text.startswith("-") else "+"), text.lstrip("+-")
+        else:                               # an expression keeps its own signs
+            sign, body = "+", f"({text})"
+        terms.append((sign, param if body == "1" else f"{body}*{param}"))
+    return " ".join(f"{s} {t}" for s, t in terms).lstrip("+ ") or "0"
 
 
 def significant_digits(text: str) -> int:
@@ -267,31 +323,9 @@ def format_number(value: Fraction | mpmath.mpf | float, max_digits: int = 8) -> 
         return mpmath.nstr(mpmath.mpf(value), max_digits)
 
 
-def format_expression(expression: Mapping[str, object], max_digits: int = 8) -> str:
-    parts = []
-    for param, coeff in expression.items():
-        # symbolic coefficients (geometry symbols) are printed as they are, never evaluated
-        symbolic = isinstance(coeff, str) and not _is_plain_number(coeff)
-        if not symbolic:
-            num = parse_coefficient(coeff)
-            sign = "-" if num < 0 else "+"
-            mag = abs(num)
-            text = param if mag == 1 else f"{format_number(mag, max_digits)}*{param}"
-        else:
-            sign, text = "+", f"({coeff})*{param}"
-        parts.append((sign, text))
-    if not parts:
-        return "0"
-    first_sign, first = parts[0]
-    out = ("-" if first_sign == "-" else "") + first
-    for sign, text in parts[1:]:
-        out += f" {sign} {text}"
-    return out
-
-
 def _is_plain_number(text: object) -> bool:
     try:
-        Fraction(str(text))
+        Fraction(str(text).strip())
         return True
-    except ValueError:
+    except (ValueError, ZeroDivisionError):
         return False
