@@ -313,16 +313,6 @@ def parse_coefficient(text: object, geometry: Mapping[str, str] | None = None) -
         return mpmath.mpf(str(sympy.N(expr, 50)))
 
 
-def format_number(value: Fraction | mpmath.mpf | float, max_digits: int = 8) -> str:
-    """Short decimal for text tables (at its own precision: mpmath's global one is not read)."""
-    if isinstance(value, Fraction) and value.denominator == 1:
-        return str(value.numerator)
-    with mpmath.workdps(max(15, max_digits + 5)):
-        if isinstance(value, Fraction):
-            value = mpmath.mpf(value.numerator) / value.denominator
-        return mpmath.nstr(mpmath.mpf(value), max_digits)
-
-
 def _is_plain_number(text: object) -> bool:
     try:
         Fraction(str(text).strip())
