@@ -131,15 +131,15 @@ def test_the_first_bad_field_is_named_by_row_then_column_in_any_batch(monkeypatc
     first bad field in the file's order (row, then column), and a row with the wrong number of
     fields after it comes first, as it did when every row was read before any number."""
     from baseparams.errors import InputError
-    from baseparams.recordings import data as data_module
+    from baseparams.recordings import delimited
     text = "t,a,b\n" + "".join(f"{k},{k},{k}\n" for k in range(20))
     rows = text.splitlines()
     rows[9], rows[6] = "8,x,8", "5,5,y"                     # b on line 7 before a on line 10
     for batch in (1, 4, 1000):
-        monkeypatch.setattr(data_module, "PARSE_BATCH_ROWS", batch)
+        monkeypatch.setattr(delimited, "PARSE_BATCH_ROWS", batch)
         with pytest.raises(InputError) as error:
-            data_module.read_columns("f.csv", "\n".join(rows) + "\n")
+            delimited.read_columns("f.csv", "\n".join(rows) + "\n")
         assert error.value.key == "row 7, column b", (batch, error.value.key)
         with pytest.raises(InputError) as error:
-            data_module.read_columns("f.csv", "\n".join(rows + ["1,2"]) + "\n")
+            delimited.read_columns("f.csv", "\n".join(rows + ["1,2"]) + "\n")
         assert error.value.key == "row 22" and "2 fields" in str(error.value)

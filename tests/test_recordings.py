@@ -675,7 +675,7 @@ def test_a_logs_columns_no_channel_uses_are_not_read(tmp_path, monkeypatch):
     RTDE log: robot mode, safety status): they are not read, so their content is no error
     and costs no memory; the columns used come back exactly, parsed in batches of rows; a
     bad field in a used column still names its row and column, in whichever batch."""
-    from baseparams.recordings import data as data_module
+    from baseparams.recordings import delimited
     mech = parse_mechanism(_chain(11))
     phi = random_physical_inertia(mech, np.random.default_rng(11))
     t = np.arange(0, 4, 1 / RATE)
@@ -686,11 +686,11 @@ def test_a_logs_columns_no_channel_uses_are_not_read(tmp_path, monkeypatch):
     (tmp_path / "log.csv").write_text("\n".join(lines) + "\n")
     (tmp_path / "rec.toml").write_text('[recording]\ntime = "t"\n[[runs]]\nfile = "log.csv"\n' + CHANNELS_ABC)
     whole, _ = read_recording(tmp_path / "rec.toml", mech)
-    monkeypatch.setattr(data_module, "PARSE_BATCH_ROWS", 7)
+    monkeypatch.setattr(delimited, "PARSE_BATCH_ROWS", 7)
     batched, model = read_recording(tmp_path / "rec.toml", mech)
     assert np.array_equal(batched.motion.q, whole.motion.q) and np.array_equal(batched.tau, whole.tau)
     # the columns read are the columns written, to the last bit (before any filtering)
-    header, values, rows = data_module.read_columns("log.csv", (tmp_path / "log.csv").read_text(),
+    header, values, rows = delimited.read_columns("log.csv", (tmp_path / "log.csv").read_text(),
                                                     wanted={"t", "a", "z"})
     assert header[-1] == "comment" and set(values) == {"t", "a", "z"} and rows[:2] == [2, 3]
     assert np.array_equal(values["a"], motion.q[:, 0]) and np.array_equal(values["z"], tau[:, 2])

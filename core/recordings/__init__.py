@@ -1,7 +1,11 @@
 """Reading logs into measured data: the one room every reader lives in.
 
-- :mod:`.recording`: recording descriptions (TOML) mapping raw logs onto the model;
-- :mod:`.data`: the project's CSV layout, :class:`MeasuredData`, filters and derivatives;
+- :mod:`.description`: recording descriptions (TOML) mapping raw logs onto the model, read and checked;
+- :mod:`.recording`: a description's runs read into measured data (channels mapped, samples checked);
+- :mod:`.filtering`: a run's uniform piece low-passed, differentiated, torques and columns filtered alike;
+- :mod:`.data`: :class:`MeasuredData` and its segments; the project's CSV layout read and written;
+- :mod:`.delimited`: delimited text logs as named columns of numbers, within the memory budget;
+- :mod:`.smoothing`: the positions' bandwidth and Savitzky-Golay differentiation;
 - :mod:`.tables`: a description's text logs (a header row, ``names`` for none, ``stacked`` for one value a line);
 - :mod:`.bags`: ROS 1 and ROS 2 bags as tables, a topic each on its own clock (the ``ros`` extra);
 - :mod:`.clocks`: a run's tables on one clock (time, rows and window, files on their own clocks, gaps);
@@ -22,8 +26,8 @@ _PUBLIC = {
     "concatenate": "data",
     "read_recording": "recording",
     "read_data": "recording",
-    "read_description": "recording",
-    "is_description": "recording",
+    "read_description": "description",
+    "is_description": "description",
     "simulate": "simulate",
     "simulate_change": "simulate",
 }

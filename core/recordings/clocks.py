@@ -20,11 +20,11 @@ from scipy.interpolate import CubicSpline
 
 from baseparams.errors import InputError
 from baseparams.recordings.bags import STAMP
-from baseparams.recordings.data import MIN_SAMPLES
+from baseparams.recordings.smoothing import MIN_SAMPLES
 from baseparams.recordings.values import _number
 
 if TYPE_CHECKING:
-    from baseparams.recordings.recording import Channel, Description
+    from baseparams.recordings.description import Channel, Description
 
 # A time step longer than this many median steps splits a run (a gap in the log).
 GAP_STEPS = 10.0

@@ -1,4 +1,6 @@
-"""Measured data: the CSV layout of docs/design.md, read with every error named, and written back.
+"""Measured data: :class:`MeasuredData` and its segments (the fit's rows, filtered and
+decimated alike), and the CSV layout of docs/design.md, read with every error named, and
+written back. The text is parsed by :mod:`.delimited`, derivatives estimated by :mod:`.smoothing`.
 
 Layout: a header row, then one sample a row. Columns (any order): ``t`` (s); for each
 independent coordinate ``c`` of the mechanism ``q_c``, optional ``qd_c`` and ``qdd_c``, and
@@ -6,76 +8,34 @@ independent coordinate ``c`` of the mechanism ``q_c``, optional ``qd_c`` and ``q
 named by their line in the file (the header is row 1), as a spreadsheet numbers them.
 
 Velocities and accelerations that the file does not give are estimated by Savitzky-Golay
-smoothing differentiation (:func:`savgol_derivatives`), which needs uniform sampling: a file
+smoothing differentiation (:func:`.smoothing.savgol_derivatives`), which needs uniform sampling: a file
 whose time steps vary by more than :data:`UNIFORM_TOLERANCE` must give ``qd_c`` and ``qdd_c``.
 The positions must close the mechanism's loops and respect its coordinate limits: the first
 sample that does not is named by its row and time.
 """
 
-import csv
 import io
-import math
 import os
 import re
-import warnings
-from operator import itemgetter
-from collections.abc import Callable, Collection, Iterator, Sequence
-from typing import Any
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter, sosfiltfilt
+from scipy.signal import sosfiltfilt
 
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import InputError, KinematicsError
 from baseparams.io.atomic import atomic_write  # noqa: F401  (re-exported: one atomic writer)
 from baseparams.dynamics.forces import Motion, evaluate, independent_names
 from baseparams.model.mechanism import Mechanism
-from baseparams.recordings.budget import PARSE_BYTES_PER_BYTE, read_budget
 from baseparams.numeric.backends import Float64
+# the text reader and the differentiation have their own modules; these names are read from here too
+from baseparams.recordings.delimited import MAX_MAGNITUDE, NUMBER, _read_text, read_columns  # noqa: F401
+from baseparams.recordings.smoothing import MIN_SAMPLES, SG_ORDER, bandwidth, savgol_derivatives, savgol_window  # noqa: F401
 
-# Savitzky-Golay differentiation: polynomial order, and the least number of samples it needs.
-SG_ORDER = 4
-MIN_SAMPLES = 2 * SG_ORDER + 1
 # Relative spread of the time steps up to which sampling counts as uniform (SG needs it).
 UNIFORM_TOLERANCE = 1e-3
-# The smoothing window's largest relative error on the second derivative of a sinusoid at
-# the positions' bandwidth (see savgol_window).
-SG_BIAS = 1e-3
-# Bandwidth: the frequency below which this fraction of the (detrended) positions' power lies.
-BANDWIDTH_POWER = 0.9999
-# A coordinate with half its power above this fraction of the Nyquist frequency does not move
-# beyond its noise (white noise has half its power above 0.5): its bandwidth is the noise's.
-STILL_BAND = 0.25
-# The noise floor of a spectrum: the median power above half the Nyquist frequency; a bin
-# counts as motion when its power exceeds this many times the floor (a bin of white noise
-# does with probability exp(-NOISE_MARGIN ln 2), 1e-9). Why: an encoder's noise (1e-6 rad)
-# under a trapezoid or a ramp holds more than 1e-4 of the power, so the bandwidth was the
-# noise's (150-500 Hz on a real Kinova log) and nothing was filtered.
-NOISE_MARGIN = 30.0
-# A coordinate whose range is below this fraction of the largest range of the coordinates
-# given (a joint held by its brake that deflects, a locked joint's encoder ticks) does not move.
-STILL_RANGE = 1e-3
-# The bandwidth is at most these multiples of the frequencies below which 90 % and 99 % of
-# the power above the noise lies. A smooth motion meets its 99.99 % well inside them (a
-# sinusoid: at once; a trapezoid, power falling as f^-6: at 1.6 and 2.5 times its
-# fundamental for 90 and 99 %, 6.3 for 99.99 %); a real arm's last 1 % is its vibration and
-# the loop's jitter, up to 100 Hz on a Kinova's trapezoid (bandwidth 51 Hz, 2.9 with them).
-BULK_90, BULK_99 = 10.0, 4.0
-READ_CHUNK = 1 << 20
-# |value| above this is refused as out of range: the fit squares and sums the columns, and
-# 1e150 squared is still finite where 1e300 is not.
-MAX_MAGNITUDE = 1e150
-# A number as the project's CSV takes it: ASCII digits, one optional sign, point and exponent
-# (Python's float() also reads 1_0 as 10 and other scripts' digits).
-NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
-# The characters of NUMBERs, spaces (and NaN's, where values may be missing): a batch of fields
-# made of these alone that float() takes is a batch of NUMBERs between spaces (float takes no
-# other string of them), checked at once; rows are parsed per batch (bounded memory for the fields' strings).
-NUMBER_CHARACTERS = b"0123456789+-.eE \t"
-MISSING_CHARACTERS = NUMBER_CHARACTERS + b"nNaA"
-PARSE_BATCH_ROWS = 1 << 13
 # Model rows evaluated at once when the model's columns are built for a fit (bounded memory
 # on long recordings), and how far beyond its kept rows a chunk reaches: this many times the
 # rows a segment drops at its ends (each 3 periods of the cut-off), so the zero-phase
@@ -525,271 +485,6 @@ def _first_unreachable(mechanism: Mechanism, motion: Motion) -> tuple[int, str] 
     return None if message is None else (lo, message)
 
 
-def _read_text(path: str, what: str = "a CSV file") -> str:
-    """The file's text, read in chunks up to :func:`read_budget` (a device such as /dev/zero
-    or an endless pipe is refused once past it, never read whole). ``what`` the file should
-    be, in messages: a log a description names is not the project's CSV layout."""
-    budget = read_budget()
-    try:
-        size = os.path.getsize(path)
-        if size > budget:
-            raise InputError(_too_large(size, budget), file=path)
-        chunks, total = [], 0
-        with open(path, "rb") as fh:
-            while True:
-                chunk = fh.read(READ_CHUNK)
-                if not chunk:
-                    break
-                if b"\x00" in chunk:
-                    raise InputError(f"binary file (it contains NUL bytes): not {what}", file=path)
-                total += len(chunk)
-                if total > budget:
-                    raise InputError(_too_large(total, budget, more=True), file=path)
-                chunks.append(chunk)
-        raw = b"".join(chunks)
-    except IsADirectoryError:
-        raise InputError(f"is a directory, not {what}", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", file=path) from None
-    if not raw.strip():
-        raise InputError("empty file: a CSV file with a header row and samples is needed" if what == "a CSV file"
-                         else f"empty file: {what} with samples is needed", file=path)
-    if b"\x00" in raw:
-        raise InputError(f"binary file (it contains NUL bytes): not {what}", file=path)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"not a text file (byte {exc.start} is not UTF-8): not {what}", file=path) from None
-    return text
-
-
-def _too_large(size: int, budget: int, more: bool = False) -> str:
-    from baseparams.dynamics.trajectory import MEMORY_VARIABLE
-    return (f"{'more than ' if more else ''}{size:,} bytes: reading it would take about "
-            f"{PARSE_BYTES_PER_BYTE} times that in memory, above the limit for a data file of {budget:,} "
-            f"bytes; split it into runs or files, decimate it, or raise {MEMORY_VARIABLE}")
-
-
-DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": " ", " ": " "}
-
-
-def read_columns(path: str, text: str, delimiter: str = ",", comment: str | None = None,
-                 wanted: Collection[str] | None = None, missing: bool = False,
-                 on_header: Callable[[list[str]], None] | None = None, dates: Collection[str] = (),
-                 names: Sequence[str] | None = None, log: str | None = None
-                 ) -> tuple[list[str], dict[str, np.ndarray], list[int]]:
-    """(header, values, lines) of a delimited text: the header's names, the columns in
-    ``wanted`` (None: all) that the header has as float64 by name, and each data row's line.
-    Blank lines (and lines starting with ``comment``) are skipped. ``delimiter``: ",", ";",
-    "\t", " " (any run of spaces and tabs: loggers that align columns) or "auto" (the
-    header's first of these). A field of a wanted column that is not a finite number names
-    its row and column (``missing``: an empty or NaN field is NaN, for the caller to leave
-    out); the other columns are not read; ``dates``: columns of ISO 8601 dates and times
-    (``2024-05-01 12:00:00.123``), read as int64 nanoseconds since 1970 (UTC, or the logger's
-    local time without an offset). ``on_header``: checks the header once the rows'
-    structure is known (the errors come in the order: a row's field count, the header, the
-    first bad number, whichever batch holds it). Why columns by name, row by row: a robot's
-    log has many columns a description does not use (a UR's RTDE log 100 and more, some of
-    them text), and its rows kept as strings took 30 times the file's size in memory.
-
-    ``names``: a file without a header row (a controller's export), its columns named in
-    order (pandas' ``names=``): every line is a sample. ``log``: where a recording
-    description names this file (its messages then speak of the description, never of the
-    project's CSV layout); a column it uses (``wanted``) that the header has twice is an error."""
-    if delimiter == "auto":
-        head = next((line for line in _lines(text)
-                     if line.strip() and not (comment and line.lstrip().startswith(comment))), "")
-        delimiter = next((d for d in (",", ";", "\t") if d in head), " " if " " in head.strip() else ",")
-    if delimiter == " ":
-        reader: Any = _Whitespace(text)
-    else:                                  # line by line: a StringIO holds 4 bytes a character
-        reader = csv.reader(_lines(text), strict=True, delimiter=delimiter)
-    header: list[str] | None = None
-    header_line, lines = 0, []
-    used: list[int] = []
-    pending: list[list[str]] = []              # the rows not yet converted, whole
-    done: list[list[np.ndarray]] = []
-    bad: list[InputError] = []                 # the first bad number, raised after the header's checks
-    if names is not None:                      # no header row: the columns named by the description
-        header = list(names)
-        used = [k for k, name in enumerate(header) if wanted is None or name in wanted]
-        done = [[] for _ in used]
-    try:
-        for fields in reader:
-            if not fields or (not fields[0].strip() and not "".join(fields).strip()):
-                continue                                          # a blank line
-            if comment and fields[0].lstrip().startswith(comment):
-                continue
-            if header is None:
-                header = [f.strip() for f in fields]
-                header_line = reader.line_num
-                used = [k for k, name in enumerate(header) if wanted is None or name in wanted]
-                done = [[] for _ in used]
-                continue
-            if len(fields) != len(header):
-                if names is not None:
-                    raise InputError(f"{len(fields)} fields, the description names {len(header)} columns "
-                                     f"({log}: names = [{', '.join(header[:4])}{', ...' if len(header) > 4 else ''}])",
-                                     file=path, key=f"row {reader.line_num}")
-                raise InputError(f"{len(fields)} fields, the header has {len(header)}: "
-                                 + ("not a CSV file with this header" if log is None else
-                                    f"not a table with this header ({log}; a file without a header row: give its "
-                                    "columns' names in the description, names = [...])"),
-                                 file=path, key=f"row {reader.line_num}")
-            lines.append(reader.line_num)
-            pending.append(fields)
-            if len(pending) >= PARSE_BATCH_ROWS:
-                _convert(path, header, used, pending, done, lines, missing, bad, dates)
-    except csv.Error as exc:
-        raise InputError(f"not a CSV file: {exc}" if log is None else f"not a delimited text log ({log}): {exc}",
-                         file=path, key=f"row {reader.line_num}") from None
-    if header is None:
-        raise InputError("no header row" if log is None else f"no lines with values ({log})", file=path)
-    if log is None and len(header) < 2:
-        raise InputError(f"the header {','.join(header)!r} has one column: not a comma-separated "
-                         "file with columns t, q_<coordinate>, tau_<coordinate>", file=path,
-                         key=f"row {header_line}")
-    if not lines:
-        raise InputError("a header but no samples" if names is None else "no samples", file=path)
-    if log is not None and wanted is not None:  # a column used twice: which one is meant?
-        for name in sorted(set(wanted) & set(header)):
-            where = [k + 1 for k, n in enumerate(header) if n == name]
-            if len(where) > 1:
-                raise InputError(f"column {name!r} appears twice (columns {where[0]} and {where[1]}), and the "
-                                 f"description uses it ({log}): rename one in the file's header, or name the "
-                                 "columns in the description (names = [...])", file=path,
-                                 key="header" if names is None else None)
-    if on_header is not None:
-        on_header(header)
-    _convert(path, header, used, pending, done, lines, missing, bad, dates)
-    if bad:
-        raise bad[0]
-    values: dict[str, np.ndarray] = {}
-    for k, parts in zip(used, done):
-        values.setdefault(header[k], np.concatenate(parts) if parts else np.zeros(0))
-    return header, values, lines
-
-
-def _convert(path: str, header: list[str], used: list[int], pending: list[list[str]],
-             done: list[list[np.ndarray]], lines: list[int], missing: bool, bad: list[InputError],
-             dates: Collection[str] = ()) -> None:
-    """The used fields of the pending rows as numbers (appended to ``done``; ``pending``
-    emptied): a column's batch is checked against NUMBER at once and converted by ``float``; a
-    batch that fails is gone through field by field to name the first bad field's row and column."""
-    if not pending or not used or bad:         # after a bad number only the rows' structure is read
-        pending.clear()
-        return
-    first = len(lines) - len(pending)
-    rows = map(itemgetter(*used), pending) if len(used) > 1 else ((row[used[0]],) for row in pending)
-    allowed = MISSING_CHARACTERS if missing else NUMBER_CHARACTERS
-    errors: list[tuple[int, InputError]] = []
-    for k, fields, parts in zip(used, zip(*rows), done):
-        values = None
-        if header[k] in dates:
-            checked = _datetimes(path, header[k], fields, lines[first:])
-            if isinstance(checked, tuple):
-                errors.append(checked)
-            else:
-                parts.append(checked)
-            continue
-        try:                                       # float() takes the spaces around a field
-            if not "".join(fields).encode("ascii").translate(None, allowed):
-                values = np.array(list(map(float, fields)) if not (missing and "" in fields) else
-                                  [float(f) if f else math.nan for f in fields])
-        except (UnicodeEncodeError, ValueError):   # not ASCII, or a field float() does not take
-            values = None
-        if values is not None and not np.all(np.abs(values[~np.isnan(values)]) <= MAX_MAGNITUDE):
-            values = None
-        if values is None:
-            checked = _checked(path, header[k], [f.strip() for f in fields], lines[first:], missing)
-            if isinstance(checked, tuple):      # the batch's first bad field by row, then column
-                errors.append(checked)
-                continue
-            values = checked
-        parts.append(values)
-    if errors:
-        bad.append(min(errors, key=lambda e: e[0])[1])
-    pending.clear()
-
-
-def _datetimes(path: str, name: str, fields: Sequence[str], lines: list[int]
-               ) -> np.ndarray | tuple[int, InputError]:
-    """ISO 8601 dates and times as nanoseconds since 1970 (int64: exact; seconds since 1970 in
-    a float are rounded to 0.24 us), a trailing Z (UTC) allowed; or the first field that is not one: its index and the
-    InputError naming its row and column."""
-    stamps = [f.strip().removesuffix("Z") for f in fields]
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")          # numpy warns on a time zone offset
-            ns = np.array(stamps, dtype="datetime64[ns]")
-        if not np.isnat(ns).any():
-            return ns.astype(np.int64)
-    except (ValueError, UserWarning, DeprecationWarning):
-        pass
-    for i, stamp in enumerate(stamps):
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                bad = np.isnat(np.datetime64(stamp, "ns"))
-        except (ValueError, UserWarning, DeprecationWarning):
-            bad = True
-        if bad:
-            shown = stamp if len(stamp) <= 40 else stamp[:37] + "..."
-            return i, InputError(f"{shown!r} is not a date and time (ISO 8601, e.g. 2024-05-01 12:00:00.123, "
-                                 "UTC with Z or local without an offset)", file=path, key=f"row {lines[i]}, column {name}")
-    raise AssertionError("a batch numpy refused has a field it refuses")      # pragma: no cover
-
-
-def _checked(path: str, name: str, fields: list[str], lines: list[int], missing: bool
-             ) -> np.ndarray | tuple[int, InputError]:
-    """Stripped fields as float64, field by field; or the first that is not a finite number
-    in range: its index and the InputError naming its row and column."""
-    out = np.empty(len(fields))
-    match = NUMBER.fullmatch
-    for i, (line, stripped) in enumerate(zip(lines, fields)):
-        if missing and (not stripped or stripped.lower().lstrip("+-") == "nan"):
-            out[i] = np.nan
-            continue
-        value = float(stripped) if match(stripped) else None
-        if value is None or not abs(value) <= MAX_MAGNITUDE:
-            shown = stripped if len(stripped) <= 40 else stripped[:37] + "..."
-            if value is not None:
-                reason = "is not finite" if not math.isfinite(value) else \
-                    f"is out of range (|value| > {MAX_MAGNITUDE:g})"
-            elif stripped.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-                reason = "is not finite"
-            else:
-                reason = "is not a number (ASCII digits, sign, point and exponent only)"
-                if re.match(r"\d{4}-\d\d-\d\d", stripped):
-                    reason += "; a date and time: a recording reads them with time_unit = \"iso\""
-            return i, InputError(f"{shown!r} {reason}", file=path, key=f"row {line}, column {name}")
-        out[i] = value
-    return out
-
-
-def _lines(text: str) -> Iterator[str]:
-    """The text's lines with their ends, one at a time (no list of them all); lines end at
-    "\n" ("\r\n" included), or at "\r" in a text that has no "\n"."""
-    start, end_of_line = 0, "\n" if "\n" in text or "\r" not in text else "\r"
-    while start < len(text):
-        end = text.find(end_of_line, start)
-        end = len(text) if end < 0 else end + 1
-        yield text[start:end]
-        start = end
-
-
-class _Whitespace:
-    """Rows split at runs of spaces and tabs, with csv.reader's ``line_num``."""
-
-    def __init__(self, text: str):
-        self.text = text
-        self.line_num = 0
-
-    def __iter__(self) -> Iterator[list[str]]:
-        for self.line_num, line in enumerate(_lines(self.text), start=1):
-            yield line.split()
-
-
 def _columns(path: str, header: list[str], coordinates: tuple[str, ...]) -> tuple[dict[str, int], list[str]]:
     """Column index by name; missing, empty and duplicate names are errors, unknown ones notes."""
     for k, name in enumerate(header):
@@ -843,112 +538,6 @@ def _uniform_step(path: str, t: np.ndarray, rows: list[int], estimated: tuple[st
                          f"{', '.join(kind + '_<coordinate>' for kind in estimated)}",
                          file=path, key=f"row {rows[k]}, column t")
     return step
-
-
-# ----- smoothing differentiation ----------------------------------------------------------
-def bandwidth(q: np.ndarray, step: float) -> float:
-    """The positions' bandwidth (Hz): the frequency below which a fraction BANDWIDTH_POWER of
-    their power lies (detrended, Blackman-tapered so the ends leak no power to high
-    frequencies; the largest over the coordinates that move); 0 for constant positions.
-
-    Only the spectrum above the noise is counted: the bins whose power exceeds NOISE_MARGIN
-    times the noise floor (the median power above half the Nyquist frequency); and the
-    bandwidth is at most BULK_90 and BULK_99 times the frequencies below which 90 and 99 %
-    of that power lies (a smooth motion's 99.99 % lies well within them). Why: on a
-    ramp, a trapezoid or a single-joint motion the encoder's noise holds more than 1e-4 of
-    the power, and the bandwidth came out at 60-500 Hz on a real Kinova log (nothing was
-    filtered; a prediction's RMS was 46 N m). On clean data the floor is rounding and the
-    bandwidth is as before.
-
-    A coordinate that does not move (constant; a range below STILL_RANGE times the largest
-    range of the coordinates; no bin above the noise) or not beyond its noise (a locked
-    joint's encoder jitter: a flat spectrum, half its power above STILL_BAND times the
-    Nyquist frequency) is left out, unless no coordinate moves. Why: one still Panda finger
-    made the bandwidth 12 Hz instead of 0.5, the filter kept 121 Hz and the decimation 3
-    instead of 70: every other joint's residual was 3.5 times its noise level, and diagnose
-    took 28 s instead of 5."""
-    n = q.shape[0]
-    moving, still = 0.0, 0.0
-    frequencies = np.fft.rfftfreq(n, step)
-    columns = np.atleast_2d(np.asarray(q, float).T)
-    ranges = np.array([np.ptp(c) if np.isfinite(c).all() else 0.0 for c in columns])
-    largest = float(ranges.max(initial=0.0))
-    for column, size in zip(columns, ranges):
-        if size == 0:
-            continue
-        detrended = column - np.polyval(np.polyfit(np.arange(n), column, 1), np.arange(n))
-        power = np.abs(np.fft.rfft(detrended * np.blackman(n))) ** 2     # tapered: no leakage
-        if power.sum() <= 0:
-            continue
-        cumulative = np.cumsum(power) / power.sum()
-        band = float(frequencies[min(int(np.searchsorted(cumulative, BANDWIDTH_POWER)), len(power) - 1)])
-        half = float(frequencies[min(int(np.searchsorted(cumulative, 0.5)), len(power) - 1)])
-        signal = _above_noise(power)
-        if half > STILL_BAND * frequencies[-1] or not signal.any() or size < STILL_RANGE * largest:
-            still = max(still, band)
-            continue
-        above = np.cumsum(np.where(signal, power, 0.0))
-        above /= above[-1]
-
-        def at(share: float) -> float:
-            return float(frequencies[min(int(np.searchsorted(above, share)), len(power) - 1)])
-        band = min(band, at(BANDWIDTH_POWER), BULK_90 * at(0.9), BULK_99 * at(0.99))
-        moving = max(moving, band)
-    return moving if moving > 0 else still
-
-
-def _above_noise(power: np.ndarray) -> np.ndarray:
-    """Which bins of a power spectrum (DC first) rise above its noise: power over NOISE_MARGIN
-    times the median of the bins above half the Nyquist frequency (all True below 16 bins)."""
-    if len(power) < 16:
-        return np.ones(len(power), dtype=bool)
-    floor = float(np.median(power[len(power) // 2:]))
-    signal = power > NOISE_MARGIN * floor
-    signal[0] = False                         # the mean (detrended away): not motion
-    return signal
-
-
-def savgol_window(q: np.ndarray, step: float) -> int:
-    """The Savitzky-Golay window (odd number of samples) for positions ``q`` (N, f).
-
-    The positions' bandwidth f_b is the frequency below which a fraction BANDWIDTH_POWER of
-    their power lies (detrended, Blackman-tapered so the ends leak no power to high
-    frequencies; largest over the coordinates). The window is the longest whose second
-    derivative of a sinusoid at f_b is off by at most SG_BIAS (relative): the signal passes
-    almost untouched, and everything above it, noise included, is smoothed as much as that
-    allows. At least SG_ORDER + 1 samples (odd), at most N/10 (read_measured drops half a
-    window at each end, where the derivatives would be extrapolated).
-    """
-    n = q.shape[0]
-    fb = bandwidth(q, step)
-    smallest = (SG_ORDER + 2) // 2                        # half-widths: window = 2 half + 1
-    largest = max(smallest, (n // 10 - 1) // 2)
-    if fb <= 0:
-        return 2 * smallest + 1
-    omega = 2 * np.pi * fb * step                          # radians per sample
-
-    def bias(half: int) -> float:
-        c = savgol_coeffs(2 * half + 1, SG_ORDER, deriv=2, use="dot")
-        response = np.sum(c * np.exp(1j * omega * np.arange(-half, half + 1)))
-        return float(abs(response / -(omega ** 2) - 1))
-
-    if bias(smallest) > SG_BIAS:
-        return 2 * smallest + 1
-    lo, hi = smallest, largest                               # bias grows with the window
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        lo, hi = (mid, hi) if bias(mid) <= SG_BIAS else (lo, mid - 1)
-    return 2 * lo + 1
-
-
-def savgol_derivatives(q: np.ndarray, step: float, window: int | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """(qd, qdd) of uniformly sampled positions ``q`` (N, f) by Savitzky-Golay differentiation
-    (order SG_ORDER; ends fitted by the polynomial of the end window, scipy's mode 'interp')."""
-    window = savgol_window(q, step) if window is None else window
-    d1 = savgol_filter(q, window, SG_ORDER, deriv=1, delta=step, axis=0, mode="interp")
-    d2 = savgol_filter(q, window, SG_ORDER, deriv=2, delta=step, axis=0, mode="interp")
-    return d1, d2
 
 
 # ----- writing ----------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from baseparams.dynamics.forces import independent_names
 from baseparams.model.mechanism import Mechanism
-from baseparams.recordings.data import _read_text, read_columns
+from baseparams.recordings.delimited import _read_text, read_columns
 
 
 def implied_description(path: str | os.PathLike, mechanism: Mechanism) -> dict:

@@ -19,7 +19,8 @@ mechanism's independent coordinates:
    filtered and differentiated once), then torques and model columns alike filtered and
    decimated (Gautier's parallel filtering, :class:`~.data.Segment`), each run on its own.
 
-Logs are read as tables of named columns by :mod:`.tables` (text: a header row, or
+The description is read and checked by :mod:`.description`, each uniform piece filtered by
+:mod:`.filtering`. Logs are read as tables of named columns by :mod:`.tables` (text: a header row, or
 ``names``, or ``stacked``), :mod:`.arrays` (``.npz``, ``.mat``) and :mod:`.bags` (ROS bags,
 a table per topic on its own clock).
 
@@ -27,342 +28,33 @@ Nothing here rewrites a raw file; every error names the description or the log, 
 or the row and column, and the reason.
 """
 
-import math
 import os
-import tomllib
 from dataclasses import dataclass, replace
-from decimal import Decimal
-from fnmatch import fnmatchcase
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-import sympy
-from scipy.interpolate import CubicSpline
-from scipy.signal import butter, sosfiltfilt
 
+from baseparams.dynamics.forces import drive_rows, independent_names
 from baseparams.errors import InputError
-from baseparams.recordings.bags import STAMP, is_bag
-from baseparams.recordings.clocks import (TIME_UNITS, _merged_rows, _on_one_clock, _owner, _selected, _times,
-                                          _uniform_pieces)
-from baseparams.recordings.implied import implied_description, implied_note
-from baseparams.recordings.values import _exact, _number
-from baseparams.recordings.tables import LOG, as_table, log_files, read_run_tables
-from baseparams.recordings.data import (MAX_MAGNITUDE, MIN_SAMPLES, STILL_RANGE, UNIFORM_TOLERANCE, MeasuredData, NonUniform, Segment,
-                                      _read_text, bandwidth, concatenate, kinematics)
-from baseparams.dynamics.forces import Motion, drive_rows, independent_names
-from baseparams.io.schema import INTEGER, STRING, VALUE, Array, ArrayOfTables, Map, Table, _Validator
-from baseparams.model.builder import MechanismBuilder
-from baseparams.model.held import hold
 from baseparams.model.mechanism import Mechanism
+from baseparams.recordings.clocks import _merged_rows, _on_one_clock, _owner, _selected, _times, _uniform_pieces
+from baseparams.recordings.data import MAX_MAGNITUDE, MeasuredData, NonUniform, concatenate, kinematics
+from baseparams.recordings.description import (Channel, Description, _payload, describe, holds,  # noqa: F401
+                                               is_description, read_description)
+from baseparams.recordings.filtering import _filtered, _still, auto_cutoff
+from baseparams.recordings.implied import implied_description, implied_note
+from baseparams.recordings.tables import log_files, read_run_tables
+from baseparams.recordings.values import _number
 
-# Default filter: the positions' cut-off is this multiple of their bandwidth (Gautier's rule
-# of thumb: 5 to 10 times the dynamics' band keeps the derivatives' phase and amplitude).
-CUTOFF_PER_BANDWIDTH = 10.0
-BUTTERWORTH_ORDER = 4
-# The parallel filter's cut-off sits at this fraction of the decimated Nyquist frequency.
-DECIMATION_BAND = 0.8
-# Rows dropped at each end of a segment: this many periods of the cut-off (filter transients).
-EDGE_PERIODS = 3.0
-UNITS = {"position": {"rad": 1.0, "deg": math.pi / 180, "rev": 2 * math.pi, "m": 1.0, "mm": 1e-3},
-         "velocity": {"rad/s": 1.0, "deg/s": math.pi / 180, "rpm": 2 * math.pi / 60, "m/s": 1.0, "mm/s": 1e-3},
-         "acceleration": {"rad/s2": 1.0, "deg/s2": math.pi / 180, "m/s2": 1.0, "mm/s2": 1e-3},
-         "torque": {"N m": 1.0, "Nm": 1.0, "N": 1.0, "kN": 1e3, "mN m": 1e-3, "mNm": 1e-3, "N mm": 1e-3,
-                    "A": 1.0, "mA": 1e-3}}
-QUANTITIES = ("position", "velocity", "acceleration", "torque")
-DESCRIPTION = "a recording description (TOML)"
 GRID_TOLERANCE = 1e-3              # of a step: values on a grid (quantum)
 GRID_DIVISORS = 10                 # the step tried: the smallest gap over 1 .. this
-VELOCITY_MISMATCH = 0.05          # measured velocity vs the positions' derivative: a note above this
 QUANTUM_RELEVANT = 1e-6            # a grid finer than this times a channel's RMS is not quantisation
 # A torque channel exactly 0 in at least this share of a run's rows, or one value in all of
 # them, carries no signal (a dead sensor, a channel the logger did not fill): refused, or left
 # out of the run (skip, dead = "skip"). Why: a column of zeros was fitted as measured: "noise
 # SD 1e-100", NRMS 0, and a TIAGo's three wrists at 0 in 85-87 % of rows named "gains" of -0.99.
 DEAD_SHARE = 0.8
-NO_CHANNEL = ("none", "")          # [torque] COORD = "none": the coordinate has no torque channel
-DEAD_POLICIES = ("refuse", "skip")
-SLOW_BAND = 0.1                    # Hz: a motion slower than this over a whole log: a time unit wrong?
-PATTERN_CHARACTERS = "*?["
-
-CHANNEL = Table({"column": (STRING, True), "scale": (VALUE, False), "offset": (VALUE, False),
-                 "unit": (STRING, False), "gain": (VALUE, False)})
-SCHEMA = Table({
-    "recording": (Table({"name": (STRING, False), "time": (STRING, False), "time_unit": (STRING, False),
-                         "rate": (VALUE, False), "step": (VALUE, False), "delimiter": (STRING, False),
-                         "comment": (STRING, False), "dead": (STRING, False),
-                         "gravity": (Array(VALUE, 3, what="[gx, gy, gz] in the base's axes, m/s^2"), False)}),
-                  False),
-    "runs": (ArrayOfTables(Table({
-        "name": (STRING, False), "file": (LOG, False), "files": (Map(LOG), False),
-        "window": (Array(VALUE, 2, what="[start, end] in seconds"), False),
-        "rows": (Array(INTEGER, 2, what="[first, last] rows of the log, the header being row 1"), False),
-        "skip": (Array(STRING, what="a list of torque channels ([torque] keys) left out of this run"), False),
-        "payload": (Table({"body": (VALUE, True), "mass": (VALUE, True), "com": (Array(VALUE, 3), False),
-                           "inertia": (Array(VALUE, 6, what="a list of 6 numbers (Ixx, Ixy, Ixz, Iyy, "
-                                                              "Iyz, Izz) about the centre of mass"), False)}),
-                    False),
-    }), min_length=1), True),
-    "motors": (ArrayOfTables(Table({"name": (STRING, True), "ratios": (Map(VALUE), True)})), False),
-    "position": (Map(CHANNEL), True),
-    "velocity": (Map(CHANNEL), False),
-    "acceleration": (Map(CHANNEL), False),
-    "torque": (Map(CHANNEL), True),
-    "zero": (Map(VALUE), False),
-    "held": (Map(VALUE), False),
-    "filter": (Table({"cutoff": (VALUE, False), "order": (INTEGER, False), "decimate": (INTEGER, False)}),
-               False),
-})
-"""The description's tables (docs/identification.md); a channel may also be a plain string,
-the column."""
-
-
-@dataclass(frozen=True)
-class Channel:
-    quantity: str
-    coordinate: str              # a joint coordinate or a motor
-    file: str | None             # the run's file alias (None: the run's only file)
-    column: str
-    scale: float
-    offset: float
-    key: str
-    unknown_gain: bool = False   # a current whose gain the fit identifies (a payload run fixes it)
-    absent: bool = False         # [torque] COORD = "none": no channel; the coordinate's force is not fitted
-
-
-@dataclass(frozen=True)
-class Description:
-    path: str
-    data: dict
-    channels: dict               # quantity -> [Channel]
-    mechanism: Mechanism         # with the description's motors added
-
-
-# ----- the description ---------------------------------------------------------------------
-def is_description(path: str | os.PathLike) -> bool:
-    """A data argument names a recording description (TOML, ``FILE.toml#RUN,RUN`` for some of
-    its runs), not a CSV log."""
-    return Path(str(path).partition("#")[0]).suffix.lower() == ".toml"
-
-
-def holds(path: str | os.PathLike) -> bool:
-    """Whether the recording description at ``path`` has a ``[held]`` table with entries
-    (False for a CSV log, or a description that cannot be read: reading it says why)."""
-    if not is_description(path):
-        return False
-    try:
-        data = tomllib.loads(_read_text(str(path).partition("#")[0], DESCRIPTION), parse_float=Decimal)
-    except (InputError, tomllib.TOMLDecodeError):
-        return False
-    return isinstance(data.get("held"), dict) and bool(data["held"])
-
-
-def read_description(path: str | os.PathLike, mechanism: Mechanism) -> Description:
-    """The description at ``path``, checked against ``mechanism`` (its motors added)."""
-    path = str(path)
-    text = _read_text(path, DESCRIPTION)
-    try:
-        data = tomllib.loads(text, parse_float=Decimal)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"malformed TOML: {exc}", file=path) from None
-    return describe(data, path, mechanism)
-
-
-def describe(data: dict, path: str, mechanism: Mechanism) -> Description:
-    """A description's parsed TOML ``data`` (numbers as Decimal), checked against
-    ``mechanism``; ``path``: where it stands (logs are relative to its folder; messages name it).
-    One home for a description written by a user and one implied by a log's layout
-    (:mod:`.implied`)."""
-    for quantity in QUANTITIES:                # a plain string is the column
-        table = data.get(quantity)
-        if isinstance(table, dict):
-            data[quantity] = {k: {"column": v} if isinstance(v, str) else v for k, v in table.items()}
-    _plain_paths_as_tables(data)
-    _Validator(path).check(SCHEMA, data, "")
-    _bag_clock(data, path)
-    mechanism = _with_motors(mechanism, data.get("motors", []), path)
-    held = _held_values(data, mechanism, path)
-    mechanism = hold(mechanism, held, file=path)
-    if "gravity" in data.get("recording", {}):          # the robot mounted otherwise than its model
-        mechanism = replace(mechanism, gravity=tuple(
-            sympy.Rational(g.numerator, g.denominator) for g in
-            (_exact(v, path, f"recording.gravity[{k}]") for k, v in enumerate(data["recording"]["gravity"]))))
-    if held and not independent_names(mechanism):
-        raise InputError("every coordinate is held: nothing moves in this recording to fit", file=path,
-                         key="held")
-    channels = {q: [_channel(q, name, spec, mechanism, path) for name, spec in data.get(q, {}).items()]
-                for q in QUANTITIES}
-    for quantity in ("position", "torque"):
-        if not channels[quantity]:
-            raise InputError(f"no {quantity} channels: give one per independent coordinate "
-                             f"({', '.join(independent_names(mechanism))}), or hold a joint that does not move "
-                             "in [held]", file=path, key=quantity)
-    if channels["acceleration"] and not channels["velocity"]:
-        raise InputError("acceleration channels need velocity channels too", file=path, key="acceleration")
-    for name in data.get("zero", {}):
-        if name not in independent_names(mechanism):
-            raise InputError(f"{name!r} is not an independent coordinate of {mechanism.name} "
-                             f"({', '.join(independent_names(mechanism))})", file=path, key=f"zero.{name}")
-    _check_time_source(data.get("recording", {}), path)
-    return Description(path, data, channels, mechanism)
-
-
-def _plain_paths_as_tables(data: dict) -> None:
-    """Each run's ``file`` and ``files`` entries as tables (``{ path = ... }``), so that a
-    path and a headerless or stacked log (``{ path, names, stacked }``) are checked alike."""
-    runs = data.get("runs")
-    if not isinstance(runs, list):
-        return
-    for run in runs:
-        if not isinstance(run, dict):
-            continue
-        if "file" in run:
-            run["file"] = as_table(run["file"])
-        if isinstance(run.get("files"), dict):
-            run["files"] = {alias: as_table(entry) for alias, entry in run["files"].items()}
-
-
-def _bag_clock(data: dict, path: str) -> None:
-    """A description whose every log is a ROS bag and that gives no clock reads the messages'
-    stamps (``time = "header.stamp"``); a bag's clock is in seconds, so ``time_unit`` is refused."""
-    entries = [entry["path"] for run in data["runs"] for entry in
-               ([run["file"]] if "file" in run else list(run.get("files", {}).values()))]
-    head = data.setdefault("recording", {})
-    bags = [is_bag(Path(path).parent / p) for p in entries]
-    if bags and all(bags) and not any(k in head for k in ("time", "rate", "step")):
-        head["time"] = STAMP
-    if any(bags) and "time_unit" in head:
-        raise InputError("a ROS bag's clock is read in seconds (time = \"header.stamp\" or \"log_time\"): leave "
-                         "time_unit out", file=path, key="recording.time_unit")
-
-
-def _held_values(data: dict, mechanism: Mechanism, path: str) -> dict[str, Fraction]:
-    """``[held]``'s coordinates and values: ``COORD = value``, or a pattern (``"hand_*" = 0``,
-    ``"*" = 0``: fnmatch's ``*``, ``?``, ``[...]``) for every independent coordinate it matches
-    that has no channel of its own or through a motor. A coordinate named by itself takes its
-    own value; two patterns giving one coordinate different values are an error. Why: a robot's
-    model can have dozens of joints its log does not have (a TIAGo's hand, head and wheels: 40
-    joints beside the 8 logged), each of which had to be listed by name."""
-    given = data.get("held", {})
-    channelled: set[str] = set()
-    for quantity in QUANTITIES:
-        for name in data.get(quantity, {}):
-            channelled.add(name)
-            channelled.update(c for m in mechanism.motors if m.name == name for c, _ in m.ratios)
-    held = {name: _exact(value, path, f"held.{name}") for name, value in given.items()
-            if not any(ch in name for ch in PATTERN_CHARACTERS)}
-    for quantity in QUANTITIES:
-        for name in data.get(quantity, {}):
-            if name in held:
-                raise InputError(f"{name!r} is held ([held]): it has no {quantity} channel", file=path,
-                                 key=f"{quantity}.{name}")
-    by_pattern: dict[str, tuple[str, Fraction]] = {}
-    for pattern, value in given.items():
-        if not any(ch in pattern for ch in PATTERN_CHARACTERS):
-            continue
-        exact = _exact(value, path, f"held.{pattern}")
-        matched = [c for c in independent_names(mechanism) if fnmatchcase(c, pattern) and c not in channelled]
-        if not matched and pattern.strip("*") == "":
-            continue        # "*": every coordinate without a channel, which may be none (a run that logs them all)
-        if not matched:
-            raise InputError(f"the pattern {pattern!r} matches no coordinate without a channel "
-                             f"(coordinates: {', '.join(independent_names(mechanism))})", file=path,
-                             key=f"held.{pattern}")
-        for coordinate in matched:
-            if coordinate in held and coordinate not in by_pattern:
-                continue                                    # named by itself: its own value
-            if coordinate in by_pattern and by_pattern[coordinate][1] != exact:
-                raise InputError(f"{coordinate!r} is matched by {by_pattern[coordinate][0]!r} and {pattern!r} "
-                                 "with different values: hold it by name", file=path, key=f"held.{pattern}")
-            by_pattern[coordinate] = (pattern, exact)
-            held[coordinate] = exact
-    return held
-
-
-def _with_motors(mechanism: Mechanism, motors: list, path: str) -> Mechanism:
-    """``mechanism`` with the description's ``[[motors]]`` (the drive chain, when the
-    mechanism file has none: a URDF without transmissions), checked by the builder's rules."""
-    if not motors:
-        return mechanism
-    builder = MechanismBuilder(mechanism.name, path)
-    added = []
-    for i, spec in enumerate(motors):
-        key = f"motors[{i}]"
-        if spec["name"] in mechanism.coordinates:
-            raise InputError(f"{spec['name']!r} is a joint coordinate: a motor needs its own name",
-                             file=path, key=f"{key}.name")
-        motor = builder.motor(spec["name"], spec["ratios"], key=key)
-        if spec["name"] in mechanism.motor_names:
-            if mechanism.motor(spec["name"]) != motor:
-                raise InputError(f"motor {spec['name']!r} is in the mechanism with other ratios", file=path,
-                                 key=f"{key}.ratios")
-            continue
-        for coordinate, _ in motor.ratios:
-            if coordinate not in mechanism.coordinates:
-                raise InputError(f"{coordinate!r} is not a joint coordinate of {mechanism.name} "
-                                 f"({', '.join(mechanism.coordinates)})", file=path,
-                                 key=f"{key}.ratios.{coordinate}")
-        added.append(motor)
-    return replace(mechanism, motors=tuple(mechanism.motors) + tuple(added))
-
-
-def _channel(quantity: str, name: str, spec: dict, mechanism: Mechanism, path: str) -> Channel:
-    key = f"{quantity}.{name}"
-    if name not in mechanism.coordinates and name not in mechanism.motor_names:
-        motors = f"; motors: {', '.join(mechanism.motor_names)}" if mechanism.motors else \
-            "; declare motors in [[motors]] for motor-side channels"
-        raise InputError(f"{name!r} is not a joint coordinate or a motor of {mechanism.name} "
-                         f"(coordinates: {', '.join(mechanism.coordinates)}{motors})", file=path, key=key)
-    if spec["column"].strip().lower() in NO_CHANNEL:
-        if quantity != "torque" or set(spec) != {"column"}:
-            raise InputError(f"{spec['column']!r}: only a torque channel may be absent (its coordinate's force is "
-                             "then left out of the fit while its motion drives the others)", file=path, key=key)
-        return Channel(quantity, name, None, "", 1.0, 0.0, key, absent=True)
-    scale = _number(spec.get("scale", 1), path, f"{key}.scale")
-    if "unit" in spec:
-        units = UNITS[quantity]
-        if spec["unit"] not in units:
-            raise InputError(f"unknown unit {spec['unit']!r}; known: {', '.join(units)}", file=path,
-                             key=f"{key}.unit")
-        scale *= units[spec["unit"]]
-    unknown = spec.get("gain") == "unknown"
-    if "gain" in spec:
-        if quantity != "torque":
-            raise InputError("a gain converts a current to a torque: torque channels only", file=path,
-                             key=f"{key}.gain")
-        if not unknown:
-            scale *= _number(spec["gain"], path, f"{key}.gain")
-    if scale == 0:
-        raise InputError("a scale (or gain) of 0 would erase the channel", file=path, key=key)
-    file, _, column = spec["column"].rpartition(":")
-    if not column:
-        raise InputError(f"{spec['column']!r}: expected COLUMN or FILE:COLUMN", file=path, key=f"{key}.column")
-    return Channel(quantity, name, file or None, column, scale,
-                   _number(spec.get("offset", 0), path, f"{key}.offset"), key, unknown)
-
-
-def _check_time_source(head: dict, path: str) -> None:
-    given = [k for k in ("time", "rate", "step") if k in head]
-    if head.get("time_unit") == "samples":
-        if "time" not in head or len(given) != 2:
-            raise InputError("time_unit = \"samples\" (a time column counting samples) needs the time column and "
-                             "one of rate (Hz) or step (s)" + (f"; found {', '.join(given)}" if given else ""),
-                             file=path, key="recording.time_unit")
-        given = ["time"]
-    if len(given) != 1:
-        raise InputError("give exactly one of time (a column), rate (Hz) or step (s)"
-                         + (f"; found {', '.join(given)}" if given else "")
-                         + ("; a time column that counts samples: time_unit = \"samples\" with the rate"
-                            if "time" in given else ""), file=path, key="recording")
-    if "time_unit" in head and head["time_unit"] not in TIME_UNITS:
-        raise InputError(f"unknown time unit {head['time_unit']!r}; known: {', '.join(TIME_UNITS)}",
-                         file=path, key="recording.time_unit")
-    for k in ("rate", "step"):
-        if k in head and not _number(head[k], path, f"recording.{k}") > 0:
-            raise InputError("must be positive", file=path, key=f"recording.{k}")
-    if head.get("dead", "refuse") not in DEAD_POLICIES:
-        raise InputError(f"{head['dead']!r}: one of {', '.join(DEAD_POLICIES)} (a torque channel without signal "
-                         "is refused, or left out of its run with a note)", file=path, key="recording.dead")
 
 
 # ----- reading a description ---------------------------------------------------------------
@@ -481,13 +173,84 @@ def constant_torques(data: MeasuredData) -> list[str]:
 
 
 def _read_run(description: Description, index: int, run: dict, fit_filter: dict | None = None) -> MeasuredData:
+    """One run of a description: its logs on one clock, the channels mapped to the independent
+    coordinates, samples without a value left out, each uniform piece filtered; the run's
+    known payload and the channels it leaves out kept with it."""
     path, key = description.path, f"runs[{index}]"
     mechanism = description.mechanism
     coordinates = independent_names(mechanism)
+    skipped = _skipped(description, run, key)
+    clock = _run_clock(description, run, key)
+    channels = _RunChannels(description, clock, skipped, key)
+    q = channels.mapped("position")
+    assert q is not None                  # the description requires positions
+    for coordinate, value in description.data.get("zero", {}).items():
+        q[:, coordinates.index(coordinate)] += _number(value, path, f"zero.{coordinate}")
+    qd, qdd = channels.mapped("velocity"), channels.mapped("acceleration")
+    forces = channels.mapped("torque", transpose=True)
+    assert forces is not None             # ... and torques
+    gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
+    motor_side = any(c.coordinate in mechanism.motor_names for chans in description.channels.values() for c in chans)
+    notes = clock.notes + channels.wrap_notes + channels.quantised_notes + ([_drive_note(description)] if motor_side
+                                                                             else [])
+    t, rows, (q, qd, qdd, forces), present_notes = _present(clock.t, clock.rows, (q, qd, qdd, forces))
+    assert q is not None and forces is not None
+    notes += present_notes
+    pieces, split_notes = _uniform_pieces(t, clock.t_file, rows, path)
+    notes += split_notes
+    name = clock.name
+    (raw_torques, torque_map), = channels.torque_channels      # channels without signal: refused, or left out
+    chans = description.channels["torque"]
+    notes += _dead_channels(raw_torques, chans, skipped, description, name, key)
+    out = [k for k, c in enumerate(chans) if c.absent or c.coordinate in skipped]
+    unmeasured = np.any(torque_map[out] != 0, axis=0) if out else np.zeros(len(coordinates), dtype=bool)
+    if unmeasured.all():
+        raise InputError(f"no torque is measured in run {name!r}: every channel is left out "
+                         f"({', '.join(c.coordinate for c in chans)})", file=path, key=key)
+    if unmeasured.any():
+        forces[:, unmeasured, :] = 0.0
+    still, still_note = _still(q, mechanism, coordinates, name)
+    notes += still_note
+    settings = _filter_settings(description, fit_filter, pieces, t, q, still)
+    parts = _filtered_pieces(pieces, t, q, qd, qdd, forces, settings, path, coordinates, still, notes)
+    if not parts:
+        raise InputError(f"every piece of run {name!r} between gaps is too short for its filter", file=path,
+                         key=key)
+    payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
+    if unmeasured.any():
+        left = [c for c, u in zip(coordinates, unmeasured) if u]
+        notes.append(f"no measured force on {', '.join(left)} in run {name!r} (a channel left out): those rows are "
+                     "not fitted, and the motion still drives the other coordinates")
+        parts = [replace(p, segments=tuple(replace(s, skip=tuple(int(j) for j in np.flatnonzero(unmeasured)))
+                                           for s in p.segments)) for p in parts]
+    data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads, gain_names)
+    data.runs = (name,)
+    data.quanta = channels.quanta if channels.quanta.any() else None
+    return data
+
+
+@dataclass
+class _RunClock:
+    """A run's tables on one clock: the times ``t`` (and the file they came from), each
+    sample's row in the log, the tables by file alias, the files' paths and how the
+    files group into clocks, the run's name and what reading said."""
+    name: str
+    t: np.ndarray
+    t_file: str
+    rows: list
+    tables: dict
+    files: dict
+    groups: dict
+    folder: Path
+    notes: list[str]
+
+
+def _run_clock(description: Description, run: dict, key: str) -> _RunClock:
+    """The run's logs read as tables, merged and put on one clock, cut to its window or rows."""
+    path = description.path
     folder = Path(path).parent
     head = description.data.get("recording", {})
     logs = log_files(run, path, key)
-    skipped = _skipped(description, run, key)
     tables, files, groups = read_run_tables(description, logs, folder)
     tables, merged_notes = _merged_rows(head, tables, files, description, groups)
     tables, clock_notes = _on_one_clock(head, tables, files, description, folder, groups)
@@ -502,15 +265,35 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
     t, t_file = _times(head, tables, files, path, groups)
     rows = next(iter(tables.values()))[2]
     t, rows, tables = _selected(run, t, rows, tables, head, path, key)
+    return _RunClock(name, t, t_file, rows, tables, files, groups, folder, clock_notes)
 
-    def values(channel: Channel) -> np.ndarray:
-        if channel.absent or (channel.quantity == "torque" and channel.coordinate in skipped):
+
+class _RunChannels:
+    """A run's channels as the model's quantities: each channel scaled and shifted, angles
+    logged modulo a turn unwrapped, positions (velocities, accelerations) mapped to the
+    independent coordinates through the drive chain and torques by its transpose; what
+    mapping found (unwrapped angles, quantised torques) kept as notes."""
+
+    def __init__(self, description: Description, clock: _RunClock, skipped: set[str], key: str) -> None:
+        self.description, self.clock, self.skipped, self.key = description, clock, skipped, key
+        self.coordinates = independent_names(description.mechanism)
+        self.wrap_notes: list[str] = []
+        self.quantised_notes: list[str] = []
+        self.torque_channels: list = []       # (raw, map) of the torque channels, for the dead-channel check
+        self.quanta = np.zeros(len(self.coordinates))
+
+    def values(self, channel: Channel) -> np.ndarray:
+        """One channel's column, scaled and shifted (zeros for a torque left out)."""
+        clock, path = self.clock, self.description.path
+        tables, files, t = clock.tables, clock.files, clock.t
+        if channel.absent or (channel.quantity == "torque" and channel.coordinate in self.skipped):
             return np.zeros(len(t))                    # a torque left out: zero, its coordinates masked
-        alias = None if channel.file is None and None in tables else _owner(tables, groups, channel, path, key)
+        alias = None if channel.file is None and None in tables else _owner(tables, clock.groups, channel, path,
+                                                                            self.key)
         header, table, _ = tables[alias]
         if channel.column not in header:
             raise InputError(f"no column {channel.column!r} (columns: {', '.join(header)})",
-                             file=str(folder / files[alias]), key="header")
+                             file=str(clock.folder / files[alias]), key="header")
         with np.errstate(all="ignore"):
             out = channel.scale * table[channel.column] + channel.offset
         if not np.all(np.abs(out[~np.isnan(out)]) <= MAX_MAGNITUDE):
@@ -518,61 +301,53 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
                              f"the range |value| <= {MAX_MAGNITUDE:g}", file=path, key=channel.key)
         return out
 
-    wrap_notes: list[str] = []
-    quantised_notes: list[str] = []
-    torque_channels: list = []            # (raw, map) of the torque channels, for the dead-channel check
-    quanta = np.zeros(len(coordinates))
-
-    def mapped(quantity: str, transpose: bool = False) -> np.ndarray | None:
-        chans = description.channels[quantity]
+    def mapped(self, quantity: str, transpose: bool = False) -> np.ndarray | None:
+        """The ``quantity``'s channels on the independent coordinates (N, f); torques
+        (``transpose``) as (N, f, 1 + unknown gains): the known forces, then each channel
+        with an unknown gain as the force it makes per unit gain. None without channels."""
+        mechanism, coordinates, rows = self.description.mechanism, self.coordinates, self.clock.rows
+        chans = self.description.channels[quantity]
         if not chans:
             return None
         names = [c.coordinate for c in chans]
-        matrix = _independent_rows(mechanism, names, coordinates, path, quantity)
-        raw = np.stack([values(c) for c in chans], axis=1)
+        matrix = _independent_rows(mechanism, names, coordinates, self.description.path, quantity)
+        raw = np.stack([self.values(c) for c in chans], axis=1)
         if quantity == "position":                      # an angle logged modulo a turn
             for k, channel in enumerate(chans):
                 if mechanism.is_angle(channel.coordinate):
                     raw[:, k], jumps = _unwrapped(raw[:, k])
                     if jumps.size:
-                        wrap_notes.append(f"{channel.coordinate}: {jumps.size} jump(s) of a turn unwrapped (an angle "
-                                          f"logged modulo 2 pi; first at row {rows[int(jumps[0])]})")
+                        self.wrap_notes.append(f"{channel.coordinate}: {jumps.size} jump(s) of a turn unwrapped (an "
+                                               f"angle logged modulo 2 pi; first at row {rows[int(jumps[0])]})")
         if transpose:                                    # tau = N^T tau_channels; with unknown gains
-            torque_channels.append((raw, matrix))
+            self.torque_channels.append((raw, matrix))
             known = np.array([not c.unknown_gain for c in chans])   # each such channel's own column
             steps = np.array([quantum(raw[:, k]) if known[k] else 0.0 for k in range(len(chans))])
             size = np.array([np.sqrt(np.mean(c[np.isfinite(c)] ** 2)) if np.isfinite(c).any() else 0.0
                              for c in raw.T])
             steps[steps < QUANTUM_RELEVANT * size] = 0.0     # a value printed to many digits: not rounding
-            quanta[:] = np.abs(matrix).T @ steps
+            self.quanta[:] = np.abs(matrix).T @ steps
             if steps.any():
-                quantised_notes.append("quantised torque channels, their values on a grid of (in the model's "
-                                       "units): " + ", ".join(f"{chans[k].coordinate} {steps[k]:.4g}"
-                                                              for k in np.flatnonzero(steps)))
+                self.quantised_notes.append("quantised torque channels, their values on a grid of (in the model's "
+                                            "units): " + ", ".join(f"{chans[k].coordinate} {steps[k]:.4g}"
+                                                                   for k in np.flatnonzero(steps)))
             forces = [(raw * known) @ matrix] + [raw[:, k:k + 1] * matrix[k] for k in np.nonzero(~known)[0]]
             return np.stack(forces, axis=2)              # (N, f, 1 + unknown gains)
         return np.linalg.solve(matrix, raw.T).T
 
-    q = mapped("position")
-    assert q is not None                  # the description requires positions
-    for coordinate, value in description.data.get("zero", {}).items():
-        q[:, coordinates.index(coordinate)] += _number(value, path, f"zero.{coordinate}")
-    qd, qdd, forces = mapped("velocity"), mapped("acceleration"), mapped("torque", transpose=True)
-    assert forces is not None             # ... and torques
-    gain_names = tuple(f"gain_{c.coordinate}" for c in description.channels["torque"] if c.unknown_gain)
-    notes = clock_notes + wrap_notes + quantised_notes + ([_drive_note(description)] if any(c.coordinate in mechanism.motor_names
-                                                             for chans in description.channels.values()
-                                                             for c in chans) else [])
-    # samples with a missing value (an empty or NaN field) in a channel used are left out; the
-    # steps around them are resampled, or the run split where GAP_STEPS or more are missing
-    present = np.all([np.all(np.isfinite(a.reshape(len(t), -1)), axis=1)
-                      for a in (q, qd, qdd, forces) if a is not None], axis=0)
+
+def _present(t: np.ndarray, rows: list, arrays: tuple) -> tuple[np.ndarray, list, tuple, list[str]]:
+    """(t, rows, arrays, notes) without the samples that cannot be used: a missing value (an
+    empty or NaN field) in a channel used, or a stamp equal to the sample before's (a logger
+    that wrote it twice, a clock coarser than its rate: a step of zero cannot be
+    differentiated). ``arrays``: q, qd, qdd, forces (None where not given). The steps around
+    the samples left out are resampled, or the run split where GAP_STEPS or more are missing."""
+    notes = []
+    present = np.all([np.all(np.isfinite(a.reshape(len(t), -1)), axis=1) for a in arrays if a is not None], axis=0)
     if not present.all():
         lost = np.nonzero(~present)[0]
         notes.append(f"{lost.size} sample(s) with a missing value (an empty or NaN field) in a channel used "
                      f"left out (first at row {rows[int(lost[0])]})")
-    # a sample stamped with the time of the one before (a logger that wrote it twice, or a
-    # clock coarser than its rate) is left out: a step of zero cannot be differentiated
     kept = np.flatnonzero(present)
     repeated = kept[1:][np.diff(t[kept]) == 0]
     if repeated.size:
@@ -581,23 +356,15 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
                      f"(first at row {rows[int(repeated[0])]})")
     if not present.all():
         t, rows = t[present], [line for line, keep in zip(rows, present) if keep]
-        q, forces = q[present], forces[present]
-        qd = None if qd is None else qd[present]
-        qdd = None if qdd is None else qdd[present]
-    pieces, split_notes = _uniform_pieces(t, t_file, rows, path)
-    notes += split_notes
-    (raw_torques, torque_map), = torque_channels       # channels without signal: refused, or left out
-    chans = description.channels["torque"]
-    notes += _dead_channels(raw_torques, chans, skipped, description, name, key)
-    out = [k for k, c in enumerate(chans) if c.absent or c.coordinate in skipped]
-    unmeasured = np.any(torque_map[out] != 0, axis=0) if out else np.zeros(len(coordinates), dtype=bool)
-    if unmeasured.all():
-        raise InputError(f"no torque is measured in run {name!r}: every channel is left out "
-                         f"({', '.join(c.coordinate for c in chans)})", file=path, key=key)
-    if unmeasured.any():
-        forces[:, unmeasured, :] = 0.0
-    still, still_note = _still(q, mechanism, coordinates, name)
-    notes += still_note
+        arrays = tuple(None if a is None else a[present] for a in arrays)
+    return t, rows, arrays, notes
+
+
+def _filter_settings(description: Description, fit_filter: dict | None, pieces: list, t: np.ndarray,
+                     q: np.ndarray, still: np.ndarray) -> dict:
+    """The run's filter: the description's ``[filter]``; a validation run's the fit's
+    (``fit_filter``, never decimated); a run split at gaps one cut-off for all its pieces,
+    the longest piece's."""
     settings = dict(description.data.get("filter", {}))
     if fit_filter:                         # a validation run: filtered as the fit's data were
         settings.update(cutoff=fit_filter["cutoff"], order=fit_filter["order"], fit=True,
@@ -608,6 +375,14 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
         signal = q[a:b][:, ~still if not still.all() else slice(None)]     # never a measured velocity's noise
         settings["cutoff"], how = auto_cutoff(signal, float(np.median(np.diff(t[a:b]))), "positions")
         settings["how"] = how + " on the run's longest piece"
+    return settings
+
+
+def _filtered_pieces(pieces: list, t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None,
+                     forces: np.ndarray, settings: dict, path: str, coordinates: tuple[str, ...],
+                     still: np.ndarray, notes: list[str]) -> list[MeasuredData]:
+    """Each uniform piece filtered (:func:`.filtering._filtered`); a piece too short for the
+    filter dropped with a note when the run has others; the first piece's notes said once."""
     parts: list[MeasuredData] = []
     for a, b in pieces:
         try:
@@ -622,20 +397,7 @@ def _read_run(description: Description, index: int, run: dict, fit_filter: dict 
         if not parts:
             notes += part_notes
         parts.append(part)
-    if not parts:
-        raise InputError(f"every piece of run {name!r} between gaps is too short for its filter", file=path,
-                         key=key)
-    payloads = _payload(run.get("payload"), mechanism, path, f"{key}.payload")
-    if unmeasured.any():
-        left = [c for c, u in zip(coordinates, unmeasured) if u]
-        notes.append(f"no measured force on {', '.join(left)} in run {name!r} (a channel left out): those rows are "
-                     "not fitted, and the motion still drives the other coordinates")
-        parts = [replace(p, segments=tuple(replace(s, skip=tuple(int(j) for j in np.flatnonzero(unmeasured)))
-                                           for s in p.segments)) for p in parts]
-    data = _joined(parts, coordinates, f"{path}: {name}", notes, payloads, gain_names)
-    data.runs = (name,)
-    data.quanta = quanta if quanta.any() else None
-    return data
+    return parts
 
 
 def _skipped(description: Description, run: dict, key: str) -> set[str]:
@@ -756,165 +518,6 @@ def _ratio(value: Fraction) -> str:
     return str(value.numerator) if value.denominator == 1 else f"{float(value):g}"
 
 
-def auto_cutoff(signal: np.ndarray, step: float, what: str) -> tuple[float, str]:
-    """The default cut-off (Hz) for ``signal`` sampled every ``step`` s, and how it was chosen:
-    CUTOFF_PER_BANDWIDTH times its bandwidth (:func:`.data.bandwidth`: the spectrum above the
-    noise), at most DECIMATION_BAND times Nyquist. A motion slower than SLOW_BAND over the
-    whole log is said: a time column in the wrong unit (a sample index read as seconds)?"""
-    fs = 1 / step
-    band = bandwidth(signal, step)
-    cutoff = min(CUTOFF_PER_BANDWIDTH * band if band > 0 else fs, DECIMATION_BAND * fs / 2)
-    how = f"{CUTOFF_PER_BANDWIDTH:g} x the {what}' bandwidth {band:.3g} Hz"
-    if cutoff < CUTOFF_PER_BANDWIDTH * band:
-        how += f", capped at {DECIMATION_BAND:g} x the Nyquist frequency"
-    if 0 < band < SLOW_BAND:
-        how += (f"; a motion slower than {SLOW_BAND:g} Hz over the whole log, sampled at {fs:.4g} Hz: is the time "
-                "in the right unit (a sample index read as seconds: time_unit = \"samples\" with the rate)?")
-    return cutoff, how
-
-
-def _still(q: np.ndarray, mechanism: Mechanism, coordinates: tuple[str, ...], run: str
-           ) -> tuple[np.ndarray, list[str]]:
-    """(which coordinates do not move in this run, a note): a range of 0, or below STILL_RANGE
-    times the largest range of the coordinates of its kind (angles, lengths), unless none
-    moves. Their velocity and acceleration are then exactly 0 (:func:`_filtered`), so an
-    effect of theirs has no column in this run. Why: a joint the log holds still (a Kinova's
-    single-joint trapezoid) had a velocity of rounding noise, 1e-17 rad/s after the filter,
-    and its viscous friction came out at -1.4e18 +- 1.4e17 with exit 0; a joint deflecting
-    0.2 mrad under its brake got -109 +- 50."""
-    finite = np.where(np.isfinite(q), q, np.nan)
-    ranges = np.nan_to_num(np.nanmax(finite, axis=0) - np.nanmin(finite, axis=0)) if len(q) else np.zeros(q.shape[1])
-    angle = np.array([mechanism.is_angle(c) for c in coordinates], dtype=bool)
-    still = np.zeros(len(coordinates), dtype=bool)
-    for kind in (angle, ~angle):
-        if kind.any() and ranges[kind].max() > 0:
-            still |= kind & (ranges < STILL_RANGE * ranges[kind].max())
-    if not still.any():
-        return still, []
-    unit = {True: "rad", False: "m"}
-    shown = ", ".join(f"{c} ({ranges[j]:.3g} {unit[bool(angle[j])]})" for j, c in enumerate(coordinates) if still[j])
-    return still, [f"held still in run {run!r} (a range below {STILL_RANGE:g} of the largest): {shown}; their "
-                   "velocities and accelerations taken as 0, so no effect of theirs (friction) is fitted from "
-                   "this run"]
-
-
-def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None, tau: np.ndarray,
-              settings: dict, path: str, coordinates: tuple[str, ...] = (), still: np.ndarray | None = None
-              ) -> tuple[MeasuredData, list[str]]:
-    """One uniform piece: resampled if irregular, positions filtered and differentiated, the
-    parallel filter and decimation planned (:class:`Segment`); the ``still`` coordinates
-    (:func:`_still`) with velocity and acceleration exactly 0."""
-    notes = []
-    steps = np.diff(t)
-    step = float(np.median(steps))
-    own_times = None                      # irregular stamps: the samples' own times
-    if np.any(np.abs(steps - step) > UNIFORM_TOLERANCE * step):
-        grid = t[0] + step * np.arange(int(math.floor((t[-1] - t[0]) / step + 1e-9)) + 1)
-        notes.append(f"irregular time steps ({steps.min() * 1e3:.4g} to {steps.max() * 1e3:.4g} ms): positions "
-                     f"and velocities resampled to a uniform {step * 1e3:.4g} ms grid (cubic) to be filtered and "
-                     "differentiated, then taken back to each sample's own time; the torques are not "
-                     "resampled (the model is evaluated where they were measured)")
-        own_times = t
-        q = CubicSpline(t, q, axis=0)(grid)
-        qd = None if qd is None else CubicSpline(t, qd, axis=0)(grid)
-        qdd = None if qdd is None else CubicSpline(t, qdd, axis=0)(grid)
-        t = grid
-    fs = 1 / step
-    order = int(settings.get("order", BUTTERWORTH_ORDER))
-    if not 1 <= order <= 12:
-        raise InputError(f"order {order}: between 1 and 12", file=path, key="filter.order")
-    if "cutoff" in settings:
-        cutoff = _number(settings["cutoff"], path, "filter.cutoff")
-        how = settings.get("how", "as set")
-        if settings.get("fit") and cutoff >= DECIMATION_BAND * fs / 2:     # the fit's, above this log's band
-            cutoff = DECIMATION_BAND * fs / 2
-            how += f", capped at {DECIMATION_BAND:g} x this log's Nyquist frequency"
-    else:
-        # from the positions, even beside a measured velocity: a velocity's noise (a Panda's, differentiated
-        # by its controller) set the cut-off at 33 Hz and nothing was filtered (NRMS 0.83 against 0.080)
-        moving = slice(None) if still is None or still.all() else ~still
-        cutoff, how = auto_cutoff(q[:, moving], step, "positions")
-    if not 0 < cutoff < 0.5 * fs:
-        raise InputError(f"cut-off {cutoff:.4g} Hz: must lie between 0 and the Nyquist frequency "
-                         f"{0.5 * fs:.4g} Hz", file=path, key="filter.cutoff")
-    if "decimate" in settings:
-        factor = int(settings["decimate"])
-        if factor < 1:
-            raise InputError("must be at least 1", file=path, key="filter.decimate")
-    else:
-        factor = max(1, int(DECIMATION_BAND * fs / (2 * cutoff)))
-    sos = butter(order, cutoff, fs=fs, output="sos")
-    parallel = butter(order, min(cutoff, DECIMATION_BAND * fs / (2 * factor)) if factor > 1 else cutoff,
-                      fs=fs, output="sos")
-    edge = int(math.ceil(EDGE_PERIODS * fs / cutoff))
-    if len(t) - 2 * edge < MIN_SAMPLES * factor:
-        raise InputError(f"{len(t)} samples at {fs:.4g} Hz: too short for a {cutoff:.3g} Hz filter "
-                         f"(it drops {edge} at each end) and decimation by {factor}", file=path)
-    if qd is None:
-        qf = sosfiltfilt(sos, q, axis=0)
-        qd = np.gradient(qf, step, axis=0)
-        qdd = np.gradient(qd, step, axis=0)
-        estimated: tuple[str, ...] = ("qd", "qdd")
-        what = "positions"
-    else:
-        qf = sosfiltfilt(sos, q, axis=0)
-        qd = sosfiltfilt(sos, qd, axis=0)
-        estimated = ("qdd",) if qdd is None else ()
-        qdd = np.gradient(qd, step, axis=0) if qdd is None else sosfiltfilt(sos, qdd, axis=0)
-        what = "measured velocities" + ("" if estimated else " and accelerations")
-        notes += _velocity_check(qf, qd, step, edge, coordinates, still)
-    if own_times is not None:             # the filtered motion at the samples' own times
-        qf, qd, qdd = (CubicSpline(t, x, axis=0)(own_times) for x in (qf, qd, qdd))
-        t = own_times
-    if still is not None and still.any():
-        qd, qdd = qd.copy(), qdd.copy()
-        qd[:, still] = 0.0
-        qdd[:, still] = 0.0
-    kept = len(range(edge, len(t) - edge, factor))
-    notes.append(f"{what} low-passed at {cutoff:.4g} Hz ({how}; Butterworth order {order}, zero-phase)"
-                 + (f", {' and '.join(estimated)} by central differences" if estimated else "")
-                 + f"; torques and model columns filtered alike and decimated by {factor} "
-                 f"({fs:.4g} -> {fs / factor:.4g} Hz; {edge} samples dropped at each end): {kept} samples")
-    segment = Segment(0, len(t), 0, parallel, factor, edge)
-    data = MeasuredData(Motion(t, qf, qd, qdd), segment.reduce(tau), (), None, (), estimated,
-                        segments=(segment,), unfiltered=tau[segment.kept()],
-                        filters=({"cutoff": float(cutoff), "order": order},))
-    return data, notes
-
-
-def _velocity_check(q: np.ndarray, qd: np.ndarray, step: float, edge: int, names: tuple[str, ...],
-                    still: np.ndarray | None = None) -> list[str]:
-    """A note when measured velocities are not the positions' derivative (both filtered alike;
-    the filter's transients at the ends left out): their RMS difference over VELOCITY_MISMATCH
-    of the derivative's on a coordinate, with the lag (up to 1 s) that aligns them best.
-    Why: a controller often logs a filtered velocity (the TIAGo's lags its positions by 0.2 s),
-    which then stood in the model's velocity terms without a word."""
-    inside = slice(edge, len(q) - edge) if len(q) > 2 * edge + 2 else slice(None)
-    derivative, measured = np.gradient(q, step, axis=0)[inside], qd[inside]
-    found = []
-    for j in range(q.shape[1]):
-        if still is not None and still[j]:              # a joint held still: noise against noise
-            continue
-        size = float(np.sqrt(np.mean(derivative[:, j] ** 2)))
-        miss = float(np.sqrt(np.mean((measured[:, j] - derivative[:, j]) ** 2))) / size if size > 0 else 0.0
-        if miss <= VELOCITY_MISMATCH:
-            continue
-        longest = min(len(measured) // 4, int(round(1.0 / step)))
-        errors = {k: float(np.sqrt(np.mean((measured[max(k, 0):len(measured) + min(k, 0), j]
-                                            - derivative[max(-k, 0):len(measured) - max(k, 0), j]) ** 2))) / size
-                  for k in range(-longest, longest + 1)}
-        lag = min(errors, key=errors.__getitem__)
-        name = names[j] if j < len(names) else f"coordinate {j + 1}"
-        found.append(f"{name} {100 * miss:.0f} %" + (f" ({'lags' if lag > 0 else 'leads'} by "
-                                                    f"{abs(lag) * step * 1e3:.4g} ms: {100 * errors[lag]:.0f} % "
-                                                    "once aligned)" if lag else ""))
-    if not found:
-        return []
-    return ["measured velocities differ from the positions' derivative (RMS, of the derivative's): "
-            + ", ".join(found) + ": filtered or delayed velocities? Without [velocity] the velocities are derived "
-            "from the positions"]
-
-
 def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: list[str], payloads: list,
             gain_names: tuple[str, ...]) -> MeasuredData:
     """The pieces of one run as one MeasuredData; ``tau`` of each piece holds the known
@@ -931,34 +534,3 @@ def _joined(parts: list[MeasuredData], coordinates: tuple, path: str, notes: lis
                         payloads=tuple((0, label, phi) for label, phi in payloads),
                         gain_names=gain_names, gain_columns=joined.gain_columns,
                         unfiltered=joined.unfiltered, unfiltered_gains=joined.unfiltered_gains, filters=filters)
-
-
-def _payload(spec: dict | None, mechanism: Mechanism, path: str, key: str) -> list[tuple[int, np.ndarray]]:
-    """A known load fixed to a body: its ten parameters about the body's origin, in body axes
-    (mass, centre of mass in the body frame, inertia about the centre of mass)."""
-    if spec is None:
-        return []
-    body = spec["body"]
-    labels = {b.name: b.label for b in mechanism.bodies if b.name}
-    if isinstance(body, str) and body in labels:
-        label = labels[body]
-    elif isinstance(body, int) and not isinstance(body, bool) and body in mechanism.body_labels:
-        label = body
-    else:
-        raise InputError(f"no body {body!r} in {mechanism.name} (bodies: "
-                         f"{', '.join(b.name or str(b.label) for b in mechanism.bodies)})", file=path,
-                         key=f"{key}.body")
-    mass = _number(spec["mass"], path, f"{key}.mass")
-    if mass <= 0:
-        raise InputError("a payload's mass must be positive", file=path, key=f"{key}.mass")
-    c = np.array([_number(v, path, f"{key}.com[{i}]") for i, v in enumerate(spec.get("com", [0, 0, 0]))])
-    i6 = [_number(v, path, f"{key}.inertia[{i}]") for i, v in enumerate(spec.get("inertia", [0] * 6))]
-    inertia = np.array([[i6[0], i6[1], i6[2]], [i6[1], i6[3], i6[4]], [i6[2], i6[4], i6[5]]])
-    eigen = np.linalg.eigvalsh(inertia)
-    if eigen[0] < -1e-12 * max(1.0, abs(eigen[-1])) or eigen[-1] > eigen[0] + eigen[1] + 1e-12 * max(1, eigen[-1]):
-        raise InputError("the payload's inertia about its centre of mass is not a mass distribution's "
-                         "(positive, triangle inequality)", file=path, key=f"{key}.inertia")
-    at_origin = inertia + mass * (c @ c * np.eye(3) - np.outer(c, c))
-    phi = np.array([mass, *(mass * c), at_origin[0, 0], at_origin[0, 1], at_origin[0, 2],
-                    at_origin[1, 1], at_origin[1, 2], at_origin[2, 2]])
-    return [(label, phi)]

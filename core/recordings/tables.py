@@ -27,11 +27,11 @@ from baseparams.errors import InputError
 from baseparams.io.schema import BOOLEAN, STRING, Array, Table
 from baseparams.recordings.arrays import is_array_file, read_arrays
 from baseparams.recordings.bags import STAMP, is_bag, read_bag
-from baseparams.recordings.data import (DELIMITERS, MAX_MAGNITUDE, MISSING_CHARACTERS, NUMBER, _checked, _lines,
-                                         _read_text, read_columns)
+from baseparams.recordings.delimited import (DELIMITERS, MAX_MAGNITUDE, MISSING_CHARACTERS, NUMBER, _checked, _lines,
+                                              _read_text, read_columns)
 
 if TYPE_CHECKING:
-    from baseparams.recordings.recording import Description
+    from baseparams.recordings.description import Description
 
 LOG = Table({"path": (STRING, True),
              "names": (Array(STRING, min_length=1, what="a list of the columns' names, in order"), False),
