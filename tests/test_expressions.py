@@ -16,15 +16,18 @@ from baseparams.model.expressions import (ExpressionError, exact_text, parse_dec
                                           to_fraction)
 
 NAMES = ("L", "D12", "D13")
-FAST = 2.0          # seconds: every refusal must come long before any real work
+# CPU seconds (time.process_time: this process's work, whatever else runs on the machine; a
+# wall-clock bound breaks on a loaded machine, issue 46): every refusal must come long before
+# any real work (a big power or factorial is minutes).
+FAST = 2.0
 
 
 def refused(text, *, names=NAMES, time_mode=False):
     """The message of the ExpressionError ``text`` raises, checking it came quickly."""
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(ExpressionError) as info:
         parse_expression(text, names, time=time_mode)
-    assert time.perf_counter() - start < FAST
+    assert time.process_time() - start < FAST
     return str(info.value)
 
 
@@ -134,8 +137,10 @@ def test_to_fraction_reports_division_by_zero_after_substitution():
 
 # ----- properties ------------------------------------------------------------------
 
-# derandomized and without an example database: the same examples on every run, no files left
-PROPERTY = settings(max_examples=300, deadline=2000, derandomize=True, database=None,
+# derandomized and without an example database: the same examples on every run, no files left;
+# no deadline (hypothesis's is wall time, which a loaded machine stretches: issue 46), the parser's
+# speed is bounded in CPU time where it matters (FAST)
+PROPERTY = settings(max_examples=300, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -163,7 +168,7 @@ TOKENS = st.sampled_from(["1", "0", "2.5", "1e3", "1e-3", "9" * 40, "1e300", "L"
 @given(st.one_of(st.text(max_size=60), st.lists(TOKENS, max_size=40).map("".join)), st.booleans())
 def test_any_text_parses_or_raises_expression_error(text, time_mode):
     """No other exception and no hang, whatever the text."""
-    start = time.perf_counter()
+    start = time.process_time()
     try:
         value = parse_expression(text, NAMES, time=time_mode)
     except ExpressionError as exc:
@@ -172,7 +177,7 @@ def test_any_text_parses_or_raises_expression_error(text, time_mode):
         assert isinstance(value, sympy.Basic)
         if value.is_Rational and value != 0:
             assert Fraction(1, 10 ** 300) <= abs(Fraction(int(value.p), int(value.q))) <= Fraction(10) ** 301
-    assert time.perf_counter() - start < FAST
+    assert time.process_time() - start < FAST
 
 
 def _arithmetic():

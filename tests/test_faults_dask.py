@@ -122,20 +122,23 @@ def test_scheduler_addresses_parse(address, want):
 
 @pytest.mark.parametrize("address", ["not a url", "tcp://127.0.0.1:99999"])
 def test_the_cli_says_exit_2_for_a_bad_address(address):
-    start = time.monotonic()
+    """Refused as text, before any connection (the message says which check); the timeout
+    is only a backstop against a hang (no wall-clock bound: issue 46, a loaded machine)."""
     proc = subprocess.run([*CLI, "validate", "pendulum", "--scheduler", address, "--quiet"],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and proc.stderr.startswith("error: --scheduler: "), proc.stderr
-    assert proc.stderr.count("\n") == 1 and time.monotonic() - start < 30
+    assert proc.stderr.count("\n") == 1
 
 
 def test_a_refused_port_is_exit_2_at_once():
+    """At once: "cannot reach" is the runner's own TCP probe's message, said before Dask is
+    imported (Dask's retries end in "no Dask scheduler answered" after CONNECT_S); so the
+    message, not a wall-clock bound that a loaded machine breaks (issue 46), tells the path."""
     address = f"tcp://{LOOPBACK}:{free_port()}"
-    start = time.monotonic()
     proc = subprocess.run([*CLI, "validate", "pendulum", "--scheduler", address, "--quiet"],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and "cannot reach the Dask scheduler" in proc.stderr, proc.stderr
-    assert time.monotonic() - start < 15
+    assert "no Dask scheduler answered" not in proc.stderr
 
 
 # ----- peers that are not Dask schedulers ------------------------------------------------------------
@@ -191,13 +194,16 @@ def not_a_scheduler(request):
 
 
 CONNECT = textwrap.dedent("""
-    import sys
+    import sys, time
+    import dask.distributed
     from baseparams.errors import InputError
     from baseparams.orchestrate.runners import DaskCluster
+    start = time.monotonic()
     try:
         DaskCluster(sys.argv[1], connect_s=2.0)
     except InputError as exc:
         print(exc.message)
+    print(f"{time.monotonic() - start:.3f} s")
 """)
 
 
@@ -205,11 +211,15 @@ def test_a_peer_that_is_no_scheduler_is_refused_within_the_deadline(not_a_schedu
     """In a child process: the abandoned handshake thread may hold Dask's shared event loop,
     which is of no consequence to the CLI (it exits with 2) but would be to later tests.
     The child must also exit promptly, with the thread still waiting."""
-    start = time.monotonic()
     proc = subprocess.run([sys.executable, "-c", CONNECT, not_a_scheduler], capture_output=True, text=True,
-                          timeout=60)
+                          timeout=300)
     assert "no Dask scheduler answered" in proc.stdout, (proc.stdout, proc.stderr)
-    assert proc.returncode == 0 and time.monotonic() - start < 15
+    # the connection's own time, timed in the child after its imports (a loaded machine slows
+    # the interpreter's start by many seconds, issue 46): the deadline (2 s, and 2 s of grace
+    # for the handshake) and the probe, with room for a busy machine; the runner's wait without
+    # a deadline was Dask's own, 30 s and more
+    seconds = float(proc.stdout.splitlines()[-1].split()[0])
+    assert proc.returncode == 0 and seconds < 2.0 + 2 + 5.0 + 10, proc.stdout
 
 
 @pytest.mark.slow
@@ -236,7 +246,7 @@ def test_a_cluster_without_workers_reports_every_job_lost(cluster):
     todo = jobs()
     start = time.monotonic()
     outcomes = runner.run(todo, timeout=None)            # was: never returned, timeout or not
-    assert time.monotonic() - start < 3.0 + 20
+    assert time.monotonic() - start < 3.0 + 120          # returned (generous: a loaded machine, issue 46)
     assert [o.status for o in outcomes] == [LOST] * len(todo)
     assert [(o.mechanism, o.solver) for o in outcomes] == [(j.mechanism.name, j.solver) for j in todo]
     assert all("no worker" in o.message for o in outcomes), [o.message for o in outcomes]
@@ -249,7 +259,7 @@ def test_a_cluster_without_scheduler_reports_every_job_lost(cluster):
     todo = jobs()
     start = time.monotonic()
     outcomes = runner.run(todo, timeout=None)            # was: internal error ClosedClientError
-    assert time.monotonic() - start < 3.0 + 30
+    assert time.monotonic() - start < 3.0 + 120          # returned (generous: a loaded machine, issue 46)
     assert [o.status for o in outcomes] == [LOST] * len(todo)
 
 

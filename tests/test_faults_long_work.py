@@ -27,22 +27,22 @@ def test_exact_prints_its_estimate_first():
 
 
 def test_exact_with_a_million_states_is_refused_up_front_under_a_small_budget():
-    start = time.monotonic()
+    start = time.process_time()             # CPU spent before refusing (wall time is the machine's load)
     result = cli("solve", "pendulum", "--solver", "exact", "--samples", "1000000",
                  env={"BASEPARAMS_MAX_MEMORY": "100M"})
     assert result.exit_code == 2 and result.stdout == ""
     assert "needs about 9" in result.stderr and "above the limit of 100 MiB" in result.stderr
-    assert "BASEPARAMS_MAX_MEMORY" in result.stderr and time.monotonic() - start < 10
+    assert "BASEPARAMS_MAX_MEMORY" in result.stderr and time.process_time() - start < 10
 
 
 def test_vp_on_a_100_body_chain_is_refused_up_front(tmp_path):
     path = tmp_path / "chain100.toml"
     path.write_text(serial_chain(1, bodies=100, types="R"))
-    start = time.monotonic()
+    start = time.process_time()             # CPU spent before refusing (wall time is the machine's load)
     result = cli("solve", str(path), "--solver", "vp")
     assert result.exit_code == 2, result.output
     assert "vp: W (3,000 x 1000) in balls" in result.stderr and "above the limit of 2.0 GiB" in result.stderr
-    assert time.monotonic() - start < 30
+    assert time.process_time() - start < 30
 
 
 def test_vp_prints_its_estimate_and_runs_within_the_budget():

@@ -22,7 +22,12 @@ from baseparams.orchestrate import runners
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
 
-GONE_WITHIN_S = 2.0
+# How long a worker may outlive its parent's end before the test fails: it ends within
+# milliseconds alone, but a loaded machine (issue 46, load 8-12 on 2 cores) delays a process's
+# exit by seconds; the bound only limits how long a failure takes to show (wait_gone returns
+# as soon as they are gone). The same for validate's own exit after a signal.
+GONE_WITHIN_S = 60.0
+EXIT_WITHIN_S = 120
 VALIDATE = [sys.executable, "-m", "baseparams.cli", "validate", "--all", "--workers", "2", "--quiet"]
 
 
@@ -89,7 +94,7 @@ def test_sigterm_and_sighup_stop_the_workers_and_say_interrupted(signum):
     proc, workers = start_with_workers()
     try:
         os.kill(proc.pid, signum)
-        out, err = proc.communicate(timeout=20)
+        out, err = proc.communicate(timeout=EXIT_WITHIN_S)
         left = wait_gone(workers)
     finally:
         _cleanup(workers)
@@ -103,7 +108,7 @@ def test_sigkill_to_validate_takes_its_workers_along():
     proc, workers = start_with_workers()
     try:
         proc.kill()
-        proc.communicate(timeout=20)
+        proc.communicate(timeout=EXIT_WITHIN_S)
         left = wait_gone(workers)
     finally:
         _cleanup(workers)
@@ -115,7 +120,7 @@ def test_ctrl_c_gives_one_line_and_exit_130():
     proc, workers = start_with_workers()
     try:
         os.killpg(proc.pid, signal.SIGINT)
-        out, err = proc.communicate(timeout=20)
+        out, err = proc.communicate(timeout=EXIT_WITHIN_S)
         left = wait_gone(workers)
     finally:
         _cleanup(workers)
@@ -126,11 +131,22 @@ def test_ctrl_c_gives_one_line_and_exit_130():
 
 
 def test_ctrl_c_in_process_is_exit_130_too():
-    proc = subprocess.Popen([sys.executable, "-m", "baseparams.cli", "validate", "--all", "--quiet"],
+    """Ctrl-C once the jobs run: the first progress line says they do (no sleep that a loaded
+    machine outlasts while still importing, issue 46); the line's job has ended and the next
+    one runs. Everything after it on stderr is the one line."""
+    proc = subprocess.Popen([sys.executable, "-m", "baseparams.cli", "validate", "--all"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    time.sleep(3.0)                                       # past start-up, inside a job
-    os.killpg(proc.pid, signal.SIGINT)
-    out, err = proc.communicate(timeout=20)
+    try:
+        assert select.select([proc.stderr], [], [], 300)[0], "validate never said a job ended"
+        first = proc.stderr.readline()
+        assert first.startswith("validate ["), first          # inside the run of jobs
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    err = "\n".join(line for line in err.splitlines() if not line.startswith("validate [")) + "\n"
     assert proc.returncode == 130 and err == "interrupted\n", (proc.returncode, err)
 
 
@@ -140,10 +156,11 @@ def test_a_worker_whose_parent_is_gone_exits_by_itself():
     code = ("import os, sys, time\n"
             "from baseparams.orchestrate.runners import die_with_parent\n"
             "die_with_parent(os.getppid() + 1 if os.getppid() != 1 else 2)\n"
-            "time.sleep(30)\n")
-    start = time.monotonic()
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=30)
-    assert proc.returncode == 1 and time.monotonic() - start < 10
+            "time.sleep(3000)\n")
+    # exit 1 is die_with_parent's (a sleep to its end exits 0, long after the bound); no wall
+    # clock bound on a start-up that a loaded machine slows (issue 46)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
 
 
 def test_the_watchdog_notices_a_parent_that_dies_later():

@@ -162,7 +162,7 @@ def test_ulimit_f_keeps_the_old_file(tmp_path, args, name):
     target = tmp_path / name
     target.write_text(OLD)
     argv = [sys.executable, "-m", "baseparams.cli", *[a.replace("{out}", str(target)) for a in args]]
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120, preexec_fn=_limit_file_size)
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600, preexec_fn=_limit_file_size)
     assert proc.returncode == 2, proc.stderr
     assert "cannot write" in proc.stderr and "File too large" in proc.stderr
     assert "Traceback" not in proc.stderr
@@ -197,7 +197,7 @@ def test_sigkill_mid_write_leaves_the_old_file(tmp_path, args, name):
     target = tmp_path / name
     target.write_text(OLD)
     argv = [sys.executable, "-c", KILL_MID_WRITE, *[a.replace("{out}", str(target)) for a in args]]
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert proc.returncode == -signal.SIGKILL, proc.stderr        # it really died mid-write
     assert target.read_text() == OLD
     partial = [tmp_path / n for n in leftovers(tmp_path)]

@@ -116,7 +116,7 @@ def test_every_case_is_refused_or_accepted_as_labelled_in_process(mechanism):
 
 LOADER = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                   suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
-LOAD_SECONDS = 5.0
+LOAD_SECONDS = 5.0      # CPU seconds (process_time): a loaded machine slows the wall clock, not the work (issue 46)
 BASES = [path.read_text(encoding="utf-8") for name, path in sorted(fuzz_corpus.mechanism_files().items())
          if name in ("pendulum", "four_bar", "planar_2r")]
 ASSIGNMENT = re.compile(r"^(\s*)([A-Za-z_][A-Za-z0-9_]*)(\s*=\s*)(.*)$")
@@ -164,14 +164,14 @@ def _check_message(message: str, path: str) -> None:
 
 
 def _load(text: str, path: str = "fuzz.toml"):
-    start = time.perf_counter()
+    start = time.process_time()
     try:
         mech = parse_mechanism(text, path)
         check_trajectory(mech)
     except InputError as exc:
         _check_message(exc.message, path)
         mech = None
-    assert time.perf_counter() - start < LOAD_SECONDS
+    assert time.process_time() - start < LOAD_SECONDS
     return mech
 
 
@@ -231,9 +231,9 @@ def test_the_json_schema_agrees_with_the_validator():
 def _run_command_case(case, env=None):
     from click.testing import CliRunner
     from baseparams.cli.commands import main
-    start = time.perf_counter()
+    start = time.process_time()           # CPU, not wall: the bound holds on a loaded machine (issue 46)
     result = CliRunner(env=env).invoke(main, list(case.args))
-    seconds = time.perf_counter() - start
+    seconds = time.process_time() - start
     assert result.exception is None or isinstance(result.exception, SystemExit), \
         f"{case.name}: {type(result.exception).__name__}: {result.exception}"
     assert result.exit_code in (0, 2), f"{case.name}: exit {result.exit_code}: {result.output[-300:]}"

@@ -193,7 +193,7 @@ def test_real_process_prints_no_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(text, encoding="utf-8")
     proc = subprocess.run([sys.executable, "-m", "baseparams.cli", "show", str(path)],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert proc.stderr.startswith(f"error: {path}: {key}: unknown joint type")
