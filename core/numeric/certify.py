@@ -48,16 +48,26 @@ when the Cholesky factor of G_KK is well conditioned (else as above), the rows o
 earlier precision tried first, and the least-squares refinement of B skipped when the
 residual is dominated by the balls' radii (and kept only when it lowers the bound). No
 claim changes: each is still verified in ball arithmetic as in 2.
+
+Beyond FAST_DECISIONS_ABOVE parameters with natural pivoting (issue 47) the leftmost basis
+K and the rows R are first chosen in float64 (:mod:`baseparams.numeric.decide`, no G at
+all), and the next precision reuses that choice. Besides the claims of 2, the analysis then
+proves that the decisions at D digits would have been the same, with 3 decades to spare
+(:func:`_analyse_float`): every kept column's pivot >= sigma_r_lower^2, every eliminated
+column within a proven distance of the kept columns on its left, and s_{r+1} <= tail_bound
+below the noise threshold. When any of these fails, the decisions are made at D digits as
+above (Talos: 4.0 -> 1.2 s at 30 digits, 6.2 -> 2.3 s at 60, the same rank, K and beta).
 """
 
 import math
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from flint import acb_mat, arb, arb_mat, arf, ctx
 
+from baseparams.numeric import decide
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
@@ -65,6 +75,8 @@ SPECTRUM_IN_ARB_UP_TO = 80  # parameters: approximate spectra by an eig at D dig
 FAST_DECISIONS_ABOVE = 80  # parameters: beyond, the cheaper decisions (module docstring)
 FLOAT_BITS = 53           # precision of the helpers whose result is a float or an integer
 GRID_EXTRA_BITS = 32      # grids (_on_grid) 32 bits finer than the working precision
+FLOAT_BASIS_RELATIVE = 10 ** -7.5  # float64 leftmost basis: a column's distance over sqrt(max G_jj) (30 digits' 10^(-D/4))
+MARGIN_DECADES = 3        # float64 decisions: proven to agree with the working precision's by this much
 LOG10_2 = math.log10(2)
 
 
@@ -86,6 +98,7 @@ class BallAnalysis:
     singular_values: list[str]    # approximate singular values of Ws, largest first
     refined: arb_mat | None = None  # exact (midpoint) B used for tail_bound
     notes: list[str] = field(default_factory=list)
+    decided: str = "ball"         # "float64": K and R chosen by numeric.decide, proven below
     rows: list[int] = field(default_factory=list)  # the rows R of the square block Ws_RK
     _residual: tuple[arb_mat, arb_mat] | None = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
 
@@ -475,12 +488,14 @@ def analyse(W: arb_mat, digits: int, kept: Sequence[int] | None = None, pivoting
     FAST_DECISIONS_ABOVE columns).
     """
     hint = None if earlier is None else (list(earlier.kept), list(earlier.rows))
+    reuse = hint if earlier is not None and earlier.decided == "float64" else None
     with ctx.workdps(digits):
-        return _analyse(W, digits, kept, pivoting, approximate_spectrum, hint)
+        return _analyse(W, digits, kept, pivoting, approximate_spectrum, hint, reuse)
 
 
 def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str, approximate_spectrum: bool,
-             hint: tuple[list[int], list[int]] | None = None) -> BallAnalysis:
+             hint: tuple[list[int], list[int]] | None = None,
+             reuse: tuple[list[int], list[int]] | None = None) -> BallAnalysis:
     m, n = W.nrows(), W.ncols()
     entries = W.entries()
     mids = _float_mids(entries, m, n) if m else None
@@ -489,6 +504,10 @@ def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str,
     # the scaled midpoints in float64 (for choices and the approximate spectrum only)
     scaled64 = np.ldexp(mids, -np.array(exponents, dtype=int)) if mids is not None else np.zeros((0, n))
     del entries, mids
+    if kept is None and pivoting == "natural" and n > FAST_DECISIONS_ABOVE and m:
+        fast = _analyse_float(W, digits, scaled, scaled64, exponents, zero, reuse, approximate_spectrum)
+        if fast is not None:
+            return fast
     everything = arb_mat(m, n, scaled) if m and n else arb_mat(m, n)
     G = _gram(everything)
     del everything
@@ -534,7 +553,9 @@ def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str,
     # s_{r+1} <= ||Ws_E - Ws_K B||_F for any exact B (Weyl: [Ws_K, Ws_K B] has rank r)
     residual = None
     if eliminated and kept and n > FAST_DECISIONS_ABOVE:
-        B, residual, tail = _refined_fast(scaled, (m, n), gm, kept, eliminated, Wk, beta_s)
+        def gram_kk() -> arb_mat:
+            return arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
+        B, residual, tail = _refined_fast(scaled, (m, n), gram_kk, kept, eliminated, Wk, beta_s)
     elif eliminated and kept:
         We = block(scaled, n, range(m), eliminated)
         B = _mid(beta_s)
@@ -571,7 +592,7 @@ def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str,
     return analysis
 
 
-def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], gm: Sequence[arb], kept: Sequence[int],
+def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], gram_kk: Callable[[], arb_mat], kept: Sequence[int],
                   eliminated: Sequence[int], Wk: arb_mat, beta_s: arb_mat) -> tuple[arb_mat, arb_mat, arb]:
     """(B, Ws_E - Ws_K B, its Frobenius bound) beyond FAST_DECISIONS_ABOVE columns.
 
@@ -587,9 +608,8 @@ def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], gm: Sequence[ar
     tail = frobenius_upper(residual)
     E = _mid(residual)
     if 4 * frobenius_upper(E) > tail:
-        Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
         try:
-            B1 = _mid(B + Gkk.solve(_mid(Wk.transpose() * E), algorithm="approx"))
+            B1 = _mid(B + gram_kk().solve(_mid(Wk.transpose() * E), algorithm="approx"))
         except ZeroDivisionError:
             return B, residual, tail
         other = We - Wk * B1
@@ -599,6 +619,82 @@ def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], gm: Sequence[ar
     return B, residual, tail
 
 
+
+def _analyse_float(W: arb_mat, digits: int, scaled: Sequence[arb], scaled64: np.ndarray, exponents: list[int],
+                   zero: list[int], reuse: tuple[list[int], list[int]] | None,
+                   approximate_spectrum: bool) -> BallAnalysis | None:
+    """The natural-order analysis beyond FAST_DECISIONS_ABOVE columns with K (the leftmost
+    basis) and R chosen in float64 (:mod:`baseparams.numeric.decide`), or ``reuse``d from
+    the previous precision's float64 choice; None when a proof below fails (the working
+    precision then decides, as always). The claims are those of :func:`_analyse`; what its
+    decisions at ``digits`` would conclude is proven too, with MARGIN_DECADES to spare:
+
+    - each kept column's Schur pivot in the scaled G is >= sigma_r_lower^2 (interlacing),
+      above the leftmost basis' threshold;
+    - each eliminated column e lies within ``tail + 2 sqrt(k) ||B[K > e, e]||`` of the
+      kept columns left of it (k of them right of it; scaled columns have norms below 2),
+      whose square is below that threshold;
+    - s_(r+1) <= tail with tail^2 below the noise threshold: no pivot after the r-th.
+    """
+    m, n = scaled64.shape
+    live = [j for j in range(n) if j not in set(zero)]
+    gmax = max(float(np.max(np.sum(scaled64[:, live] ** 2, axis=0))) if live else 0.0, 1e-300)
+    log_noise = math.log10(NOISE_FACTOR * n * gmax) - digits
+    log_strict = max(log_noise, math.log10(gmax) - digits // 2)
+    if reuse is not None:
+        kept, rows = list(reuse[0]), list(reuse[1])
+    else:
+        kept, Q = decide.natural_columns(scaled64, set(zero), FLOAT_BASIS_RELATIVE * math.sqrt(gmax))
+        rows = decide.square_rows(Q)
+    r = len(kept)
+    if not r or len(rows) != r or max(rows) >= m:
+        return None
+    eliminated = [j for j in range(n) if j not in set(kept)]
+    found = solve_block(scaled, n, rows, kept, eliminated)
+    if found is None:
+        return None
+    beta_s, inverse = found
+    f = frobenius_upper(inverse)
+    sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
+    if not sigma_lower > 0 or 2 * log10(sigma_lower) < log_strict + MARGIN_DECADES:
+        return None
+    B, residual, tail = arb_mat(r, 0), None, arb(0)
+    if eliminated:
+        K64 = scaled64[:, kept]
+
+        def gram_kk() -> arb_mat:
+            return arb_mat(r, r, [float(x) for x in (K64.T @ K64).ravel()])
+        Wk = block(scaled, n, range(m), kept)
+        B, residual, tail = _refined_fast(scaled, (m, n), gram_kk, kept, eliminated, Wk, beta_s)
+    log_tail = log10(tail) if tail != 0 else -math.inf
+    if 2 * log_tail > log_noise - MARGIN_DECADES or not _leftmost(B, kept, eliminated, log_tail,
+                                                                    log_strict - MARGIN_DECADES):
+        return None
+    beta = unscaled(beta_s, kept, eliminated, exponents)
+    svals = _approximate_singular_values(None, scaled64) if approximate_spectrum else []
+    analysis = BallAnalysis(digits, r, list(kept), eliminated, "natural", [], list(kept), beta_s, beta,
+                            exponents, zero, tail, sigma_lower, svals, B, [], decided="float64")
+    analysis.rows = list(rows)
+    if residual is not None:
+        analysis._residual = (W, _mid(residual))
+    return analysis
+
+
+def _leftmost(B: arb_mat, kept: Sequence[int], eliminated: Sequence[int], log_tail: float, log_limit: float) -> bool:
+    """Is every eliminated column e within 10^(log_limit / 2) of the kept columns left of it?
+    Bounded by ``tail + 2 sqrt(k) ||B[K > e, e]||`` (B exact; each |entry| bounded in float64
+    with one part in 10^15 and 1e-300 to spare, so underflow cannot hide one)."""
+    r, e = len(kept), len(eliminated)
+    if not e:
+        return True
+    b = np.array([abs(float(x)) for x in B.entries()]).reshape(r, e) * (1 + 1e-15) + 1e-300
+    below = np.vstack([np.cumsum((b ** 2)[::-1], axis=0)[::-1], np.zeros((1, e))])   # below[s]: rows s..r-1
+    starts = np.searchsorted(np.asarray(kept), np.asarray(eliminated), side="right")
+    right = r - starts
+    with np.errstate(divide="ignore"):
+        log_b = np.log10(2 * np.sqrt(right) * np.sqrt(below[starts, np.arange(e)]) * (1 + 1e-15))
+    worst = np.maximum(log_b, log_tail) + LOG10_2
+    return bool(np.all(2 * worst <= log_limit))
 
 def unscaled(beta_s: arb_mat, kept: Sequence[int], eliminated: Sequence[int], exponents: Sequence[int]) -> arb_mat:
     """beta = D_K^-1 beta_s D_E entry by entry (powers of two: exact)."""
@@ -611,7 +707,7 @@ def unscaled(beta_s: arb_mat, kept: Sequence[int], eliminated: Sequence[int], ex
                                    for a, i in enumerate(kept) for b, j in enumerate(eliminated)])
 
 
-def _approximate_singular_values(G: arb_mat, scaled64: np.ndarray) -> list[str]:
+def _approximate_singular_values(G: arb_mat | None, scaled64: np.ndarray) -> list[str]:
     """sqrt(|eigenvalues|) of the scaled Gram matrix, largest first, as decimal strings.
 
     ``acb_mat.eig(algorithm="approx")``: no error bounds (the cluster of zero eigenvalues
@@ -627,6 +723,7 @@ def _approximate_singular_values(G: arb_mat, scaled64: np.ndarray) -> list[str]:
     if n > SPECTRUM_IN_ARB_UP_TO:
         values = np.linalg.svd(scaled64, compute_uv=False) if m else np.zeros(0)
         return [arb(float(v)).str(12, radius=False) for v in values] + ["0"] * (n - len(values))
+    assert G is not None                # beyond SPECTRUM_IN_ARB_UP_TO columns only scaled64 is read
     M = acb_mat(G)
     spectrum = [abs(e.real.mid()).sqrt() for e in M.eig(algorithm="approx")]
     spectrum.sort(key=lambda v: -log10(v))

@@ -25,8 +25,8 @@ from baseparams.dynamics.observation import Subset, observation_matrix
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.expressions import exact_text
-from baseparams.numeric import certify
-from baseparams.numeric.backends import Arb
+from baseparams.numeric import certify, decide
+from baseparams.numeric.backends import Arb, Float64
 from baseparams.model.mechanism import Mechanism
 from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
                                          last_parameter_index)
@@ -48,6 +48,7 @@ MAX_ROWS_PER_PARAMETER = 6
 MIN_SAMPLES = 10
 KEPT_RIDGE_DECADES = 1     # imposed kept columns with less than this ridge after them do not span W
 MIN_WORKING_DIGITS = 10    # fewer digits cannot give the 10 agreeing digits (MIN_DIGITS) asked for
+ROWS_PER_RANK = 2          # beyond certify.FAST_DECISIONS_ABOVE parameters: rows per estimated rank (issue 47)
 
 
 BALL_ENTRY_BYTES = 400      # + the digits: one entry of W in balls, with the analysis' share
@@ -76,6 +77,30 @@ def default_samples(mechanism: Mechanism) -> int | None:
         return samples
     per = LARGE_ROWS_PER_PARAMETER if params > certify.FAST_DECISIONS_ABOVE else ROWS_PER_PARAMETER
     return max(MIN_SAMPLES, math.ceil(per * params / f))
+
+
+def samples_from_rank(mechanism: Mechanism, samples: int) -> tuple[int, int] | None:
+    """Beyond certify.FAST_DECISIONS_ABOVE parameters, fewer samples than the default
+    ``samples`` when the rank is far below the parameters (a robot's W: Talos 232 of 440):
+    (samples giving ROWS_PER_RANK rows per rank, the rank) estimated in float64
+    (:func:`baseparams.numeric.decide.rank_estimate`), kept only when that many samples
+    still show the same rank; else None. W and the analysis grow with the rows, and the
+    certificate does not depend on their number: the rank is proven on the W built, and a
+    W too short for the mechanism's rank fails the independent random batch, which then
+    joins W."""
+    if len(mechanism.parameters) <= certify.FAST_DECISIONS_ABOVE:
+        return None
+    f = _width(mechanism)
+    try:
+        W = observation_matrix(mechanism, Float64(), Trajectory.default(mechanism, samples=samples, memory=False))[0]
+        rank = decide.rank_estimate(W)
+        fewer = max(MIN_SAMPLES, math.ceil(ROWS_PER_RANK * rank / f))
+        if fewer >= samples:
+            return None
+        W = observation_matrix(mechanism, Float64(), Trajectory.default(mechanism, samples=fewer, memory=False))[0]
+    except KinematicsError:          # the solve itself reports it, with where
+        return None
+    return (fewer, rank) if decide.rank_estimate(W) == rank else None
 
 
 def _width(mechanism: Mechanism) -> int:
@@ -342,6 +367,12 @@ class VariablePrecisionSolver:
         steps = [int(digits)] if digits else [int(d) for d in ladder]
         first = steps[:2]          # the least the ladder needs: two precisions that agree
         chosen = samples or default_samples(mechanism)
+        fewer = samples_from_rank(mechanism, chosen) if not samples and chosen else None
+        if fewer is not None:
+            notes.append(f"{fewer[0]} samples ({fewer[0] * _width(mechanism):,} rows, {ROWS_PER_RANK} per rank "
+                         f"{fewer[1]} estimated in float64) instead of the default {chosen}")
+            say(progress, "vp: " + notes[-1])
+            chosen = fewer[0]
         if not samples and chosen:
             fitted = samples_in_budget(mechanism, first)
             if fitted is not None and fitted < chosen:
