@@ -1,9 +1,22 @@
-"""Robots at full size (issue 47): dp and vp CPU seconds beside a FIGAROH-like yardstick
-measured in the same run, the defaults' memory (no refusal), and how accurate the printed dp
-expressions are.
+"""Robots at full size (issue 47): dp and vp whole-process CPU seconds beside FIGAROH's own
+base parameters, interleaved in one process tree; dp and vp beside a FIGAROH-like yardstick in
+this process; the defaults' memory (no refusal); how accurate the printed dp expressions are.
 
-    pip install example-robot-data pin
-    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp] [--sections speed memory accuracy]
+    pip install example-robot-data pin figaroh
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp]
+        [--sections figaroh speed memory accuracy]
+
+figaroh: per round, for TX40 (examples/data/tx40), TIAGo and Talos (example-robot-data), one
+child process each for FIGAROH, dp and vp, in turn (``--repeats`` rounds; medians): the
+child's whole-process CPU s (user + system, from ``RUSAGE_CHILDREN``: the interpreter, the
+imports, loading the URDF, the solve) and its peak RSS. FIGAROH 1.0.2 runs its own documented
+path for base parameters: ``load_robot``, ``generate_waypoints`` (as many random states as dp's
+W has samples: the mechanism file's trajectory), ``build_regressor_basic``,
+``get_index_eliminate``/``build_regressor_reduced`` and ``get_baseParams`` (its double QR). Its
+URDF is the same file with ``<visual>`` and ``<collision>`` removed (FIGAROH's loader reads the
+meshes; TX40's are not shipped, and reading Talos' took 2.5 s: leaving them out favours
+FIGAROH). FIGAROH takes a ``<mimic>`` follower as a joint of its own (a higher rank on Talos and
+TIAGo); baseparams solves the coupled robot. Skipped with a note when figaroh is not installed.
 
 speed: per robot, interleaved ``--repeats`` times in this process (medians, CPU s of
 ``time.process_time``): dp, vp (Talos only; it is long), and the yardstick: what FIGAROH
@@ -38,6 +51,8 @@ sys.path.insert(0, str(ROOT / "tests"))                      # tests/ is not a p
 from urdf_reference import Reference, example_robot_data, robot_id  # noqa: E402
 
 SPEED = ("tiago_description/tiago", "talos_data/talos_full_v2")
+SIDE_BY_SIDE = ("tx40", "tiago_description/tiago", "talos_data/talos_full_v2")
+TX40 = ROOT / "examples" / "data" / "tx40" / "tx40_mdh_modified.urdf"
 VP = ("talos_data/talos_full_v2",)
 MEMORY = (("tiago_description/tiago_dual", "dp"), ("pr2_description/pr2", "vp"))
 ACCURACY = ("romeo_description/romeo", "romeo_description/romeo_laas_small", "pr2_description/pr2")
@@ -47,7 +62,7 @@ def paths() -> dict[str, Path]:
     found = {robot_id(p): p for p in example_robot_data()}
     if not found:
         sys.exit("example-robot-data is not installed (pip install example-robot-data)")
-    return found
+    return {**found, "tx40": TX40}
 
 
 def cpu(function):
@@ -91,6 +106,105 @@ def speed(found: dict[str, Path], repeats: int, with_vp: bool) -> None:
         print(f"| {name} | {len(mech.parameters)} | {ranks['y']} | {ranks['dp']} | {ranks.get('vp', '-')} | "
               f"{y:.2f} | {dp:.2f} | {dp / y:.2f}x | {'-' if vp is None else f'{vp:.1f}'} | "
               f"{'-' if vp is None else f'{vp / y:.1f}x'} |", flush=True)
+
+
+BASEPARAMS_CHILD = """
+import json, resource, sys
+from baseparams.io.loader import load_mechanism
+from baseparams.solvers.run import run_solver
+r = run_solver(sys.argv[2], load_mechanism(sys.argv[1]))
+print(json.dumps({"rank": r.rank, "certified": r.certified,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+FIGAROH_CHILD = """
+import json, resource, sys, warnings
+warnings.filterwarnings("ignore")
+import numpy as np
+from figaroh.tools.load_robot import load_robot
+from figaroh.tools.randomdata import generate_waypoints
+from figaroh.tools.regressor import build_regressor_basic, get_index_eliminate, build_regressor_reduced
+from figaroh.identification.parameter import get_standard_parameters
+from figaroh.tools.qrdecomposition import get_baseParams
+robot = load_robot(sys.argv[1], load_by_urdf=True)
+config = {"has_friction": False, "has_actuator_inertia": False, "has_joint_offset": False,
+          "is_joint_torques": True, "is_external_wrench": False, "force_torque": None,
+          "act_idxv": list(range(robot.model.nv))}
+np.random.seed(3)
+q, v, a = generate_waypoints(int(sys.argv[2]), robot, -1, 1)
+W = build_regressor_basic(robot, q, v, a, config)
+params_std = get_standard_parameters(robot.model, config)
+idx_e, params_r = get_index_eliminate(W, params_std, 1e-6)
+_, params_base, idx_base = get_baseParams(build_regressor_reduced(W, idx_e), params_r, params_std)
+print(json.dumps({"rank": len(idx_base), "certified": False,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def without_geometry(path: Path, folder: Path) -> Path:
+    """The URDF with its <visual> and <collision> elements removed (FIGAROH's loader reads meshes)."""
+    import xml.etree.ElementTree as ET
+    tree = ET.parse(path)
+    for link in tree.getroot().iter("link"):
+        for tag in ("visual", "collision"):
+            for element in link.findall(tag):
+                link.remove(element)
+    out = folder / path.name
+    tree.write(out)
+    return out
+
+
+def child(args: list[str]) -> tuple[dict, float]:
+    """(the child's JSON line, its whole-process CPU s)."""
+    import json
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run([sys.executable, "-c", *args], capture_output=True, text=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    seconds = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    if proc.returncode:
+        return {"error": (proc.stderr.strip().splitlines() or ["?"])[-1][:120]}, seconds
+    return json.loads(proc.stdout.strip().splitlines()[-1]), seconds
+
+
+def side_by_side(found: dict[str, Path], repeats: int) -> None:
+    """FIGAROH, dp and vp, each in a child process, interleaved round by round."""
+    import importlib.util
+    import tempfile
+    from baseparams.io.loader import load_mechanism
+    have_figaroh = importlib.util.find_spec("figaroh") is not None
+    if not have_figaroh:
+        print("figaroh is not installed (pip install figaroh): FIGAROH's columns are empty")
+    tools = (["figaroh"] if have_figaroh else []) + ["dp", "vp"]
+    with tempfile.TemporaryDirectory() as tmp:
+        runs: dict[tuple[str, str], list[tuple[dict, float]]] = {}
+        plain = {name: without_geometry(found[name], Path(tmp)) for name in SIDE_BY_SIDE}
+        samples = {name: load_mechanism(found[name]).trajectory.samples for name in SIDE_BY_SIDE}
+        for _ in range(repeats):
+            for name in SIDE_BY_SIDE:
+                for tool in tools:
+                    args = ([FIGAROH_CHILD, str(plain[name]), str(samples[name])] if tool == "figaroh" else
+                            [BASEPARAMS_CHILD, str(found[name]), tool])
+                    runs.setdefault((name, tool), []).append(child(args))
+    print("| robot | FIGAROH rank | dp rank | vp rank | FIGAROH s | dp s | dp / FIGAROH | vp s | vp / FIGAROH | "
+          "peak MB (FIGAROH, dp, vp) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in SIDE_BY_SIDE:
+        out = {tool: runs[name, tool] for tool in tools}
+        cpu_s = {tool: statistics.median(t for _, t in out[tool]) for tool in tools}
+        last = {tool: out[tool][-1][0] for tool in tools}
+
+        def rank(tool: str) -> str:
+            if tool not in last:
+                return "-"
+            r = last[tool]
+            return r.get("error", f"{r['rank']}" + (" certified" if r["certified"] else ""))
+
+        fig = cpu_s.get("figaroh")
+        ratio = {tool: "-" if not fig else f"{cpu_s[tool] / fig:.2f}x" for tool in ("dp", "vp")}
+        peaks = ", ".join(f"{last[t].get('peak_mb', 0):.0f}" for t in tools)
+        print(f"| {name} | {rank('figaroh')} | {rank('dp')} | {rank('vp')} | "
+              f"{'-' if fig is None else f'{fig:.2f}'} | {cpu_s['dp']:.2f} | {ratio['dp']} | {cpu_s['vp']:.2f} | "
+              f"{ratio['vp']} | {peaks} |", flush=True)
 
 
 CHILD = """
@@ -179,9 +293,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-vp", action="store_true", help="no vp in the speed section")
-    parser.add_argument("--sections", nargs="*", default=("speed", "memory", "accuracy"))
+    parser.add_argument("--sections", nargs="*", default=("figaroh", "speed", "memory", "accuracy"))
     args = parser.parse_args()
     found = paths()
+    if "figaroh" in args.sections:
+        side_by_side(found, args.repeats)
+        print()
     if "speed" in args.sections:
         speed(found, args.repeats, not args.no_vp)
     if "memory" in args.sections:
