@@ -84,7 +84,8 @@ def test_verbs_that_use_the_values_refuse_them(bad_arm, tmp_path):
 
 def test_a_body_welded_to_the_ground_need_not_be_physical_for_given_parameters(tmp_path):
     """A link fixed to the base with a non-physical inertia (the TIAGo's antennas) moves never
-    and no force depends on its values: diagnose --params holds the file as given without a
+    and no force depends on its values: kept as a body (merge_fixed=False) it is flagged, lumped
+    (the default) it is part of the ground, and diagnose --params holds the file as given without a
     word; a moving link's bad inertia is held as given too (the user's model, issue 48), with
     a note naming it (tests/test_impossible_estimates.py)."""
     from baseparams.diagnose.given import given_parameters
@@ -95,10 +96,12 @@ def test_a_body_welded_to_the_ground_need_not_be_physical_for_given_parameters(t
                                                                 'izz="0.0015"/></inertial></link><joint name="shoulder"')
     (tmp_path / "a.urdf").write_text(fixed)
     (tmp_path / "b.urdf").write_text(good_arm)
-    arm = read_urdf(tmp_path / "b.urdf").mechanism
+    arm = read_urdf(tmp_path / "b.urdf", merge_fixed=False).mechanism      # the antenna a body of its own
     assert [key for key, _ in arm.nonphysical] == ["link[name=antenna].inertia"]
-    held = given_parameters(arm, str(tmp_path / "b.urdf"))
-    assert len(held.parameters) == len(arm.parameters) and held.notes == []
+    lumped = read_urdf(tmp_path / "b.urdf").mechanism                       # the default: part of the ground
+    assert "antenna" not in [b.name for b in lumped.bodies] and not lumped.nonphysical
+    held = given_parameters(lumped, str(tmp_path / "b.urdf"))
+    assert len(held.parameters) == len(lumped.parameters) and held.notes == []
     notes = given_parameters(read_urdf(tmp_path / "a.urdf").mechanism, str(tmp_path / "a.urdf")).notes
     assert len(notes) == 1 and "(upper)" in notes[0] and "antenna" not in notes[0]
 

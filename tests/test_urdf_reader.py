@@ -130,7 +130,7 @@ def test_joint_frames_move_the_child_link_as_urdf_says():
 
 
 def test_types_limits_effects_and_default_trajectory():
-    mech = read_urdf(DATA / "gripper_arm.urdf").mechanism
+    mech = read_urdf(DATA / "gripper_arm.urdf", merge_fixed=False).mechanism
     types = {j.name: j.type.name for j in mech.joints}
     assert types == {"turret": "R", "shoulder": "R", "elbow": "R", "wrist": "Fixed", "finger_left": "P",
                      "finger_right": "P", "camera_pan": "R"}
@@ -151,9 +151,10 @@ def test_default_trajectory_stays_inside_the_limits_and_excites(path):
 
 
 def test_merge_fixed_is_exact_and_changes_no_torque():
-    """Merged parameters equal the kept links' transformed sum, and K phi is unchanged."""
-    kept = read_urdf(DATA / "gripper_arm.urdf").mechanism
-    merged = read_urdf(DATA / "gripper_arm.urdf", merge_fixed=True).mechanism
+    """Merged parameters (the default) equal the kept links' transformed sum, and K phi is
+    unchanged (tests/test_urdf_lumping.py checks against an independent composition)."""
+    kept = read_urdf(DATA / "gripper_arm.urdf", merge_fixed=False).mechanism
+    merged = read_urdf(DATA / "gripper_arm.urdf").mechanism
     assert [b.name for b in merged.bodies] == ["turret_link", "upper_arm", "forearm", "finger_left_link",
                                                 "finger_right_link", "camera"]
     forearm, palm = (next(b for b in kept.bodies if b.name == n) for n in ("forearm", "palm"))
@@ -177,9 +178,9 @@ def test_merge_fixed_is_exact_and_changes_no_torque():
 
 def test_a_link_fixed_to_the_ground_has_no_effect_on_the_base_parameters():
     dp = registry.solvers()["dp"].item
-    kept = read_urdf(DATA / "ur5.urdf").mechanism
+    kept = read_urdf(DATA / "ur5.urdf", merge_fixed=False).mechanism
     assert kept.bodies[0].name == "base_link" and kept.joints[0].type.name == "Fixed"
-    merged = read_urdf(DATA / "ur5.urdf", merge_fixed=True).mechanism
+    merged = read_urdf(DATA / "ur5.urdf").mechanism
     assert "base_link" not in [b.name for b in merged.bodies]
     assert dp.solve(kept, samples=60).rank == dp.solve(merged, samples=60).rank == 36
 

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 PathText = Union[str, "PathLike[str]"]
 StepProgress = Callable[[int, int, str], None]
-READER_OPTIONS = ("merge_fixed", "floating_base")
+READER_OPTIONS = ("merge_fixed", "keep_fixed", "floating_base")
 CONSISTENCY_TOLERANCE = 1e-9        # relative to the trace: eigenvalues of the COM inertia above -tol
 
 
@@ -137,15 +137,17 @@ def consistency_problem(phi: Sequence[Any]) -> str | None:
 
 # ----- convert ---------------------------------------------------------------------------
 def convert(mech: MechanismLike, output: PathText, *, merge_fixed: bool = False, floating_base: bool = False,
-            inertia: Any = None) -> "Conversion":
+            inertia: Any = None, keep_fixed: bool = False) -> "Conversion":
     """Write ``mech`` (a registered name or a file) to ``output`` in the format its suffix
     names (``.toml``, ``.urdf``, a plugin's), atomically. Reader options for URDF:
-    ``merge_fixed``, ``floating_base``. ``inertia``: an ``identify --physical`` JSON whose
-    parameters replace the bodies' (each body checked to be physically consistent)."""
+    ``keep_fixed`` (fixed links stay bodies; by default they are lumped into their parents,
+    which ``merge_fixed``, kept for older scripts, also says), ``floating_base``.
+    ``inertia``: an ``identify --physical`` JSON whose parameters replace the bodies' (each body checked to be physically consistent)."""
     from baseparams.io.atomic import atomic_path
 
     from .results import Conversion
-    options = {name: True for name, on in (("merge_fixed", merge_fixed), ("floating_base", floating_base)) if on}
+    options = {name: True for name, on in (("merge_fixed", merge_fixed), ("keep_fixed", keep_fixed),
+                                           ("floating_base", floating_base)) if on}
     if isinstance(mech, Mechanism):
         mechanism, notes = mech, list(mech.warnings)
     else:

@@ -19,20 +19,25 @@ from baseparams.cli.options import output_option
 @click.argument("mech", metavar="MECH")
 @output_option(help="The file to write; its suffix chooses the writer (.toml, .urdf, ...).", required=True)
 @click.option("--merge-fixed", is_flag=True,
-              help="Reader option (URDF): merge each fixed joint's link into its parent, inertia exactly.")
+              help="Reader option (URDF): merge each fixed joint's link into its parent, inertia exactly "
+                   "(the default since issue 47).")
+@click.option("--keep-fixed", is_flag=True,
+              help="Reader option (URDF): keep each fixed joint's link as a body of its own.")
 @click.option("--floating-base", is_flag=True,
               help="Reader option (URDF): attach the root link to the ground by a Free (6-coordinate) joint.")
 @click.option("--inertia", "inertia_file", type=click.Path(dir_okay=False), default=None, metavar="JSON",
               help="Replace the bodies' inertial parameters by the \"physical\" set of "
                    "`baseparams identify ... --physical --format json`.")
-def convert(mech: str, output: str, merge_fixed: bool, floating_base: bool, inertia_file: str | None) -> None:
+def convert(mech: str, output: str, merge_fixed: bool, keep_fixed: bool, floating_base: bool,
+            inertia_file: str | None) -> None:
     """Write MECH (a registered name or a file) as OUTPUT in the format of its suffix.
 
     Notes on what the target format cannot hold, or what was approximated (URDF angles
     that are not multiples of pi/2), go to stderr.
     """
     from baseparams.api import convert as run
-    result = run(mech, output, merge_fixed=merge_fixed, floating_base=floating_base, inertia=inertia_file)
+    result = run(mech, output, merge_fixed=merge_fixed, keep_fixed=keep_fixed, floating_base=floating_base,
+                 inertia=inertia_file)
     mechanism = result.mechanism
     for note in result.notes:
         click.echo(f"{'warning' if note in mechanism.warnings else 'note'}: {note}", err=True)

@@ -4,8 +4,9 @@ Mapping (docs/urdf.md): the root link is the ground (body 0); every other link i
 labelled 1, 2, ... in file order, its body frame the link frame; a joint's frame in the
 parent link is its ``<origin>`` turned so that z is the joint axis, and in the child link
 the same axis through the link origin, so the child link frame moves exactly as URDF says.
-revolute/continuous -> ``R``, prismatic -> ``P``, fixed -> ``Fixed`` (or merged into its
-parent with ``merge_fixed``), floating -> ``Free``. Limits become coordinate limits;
+revolute/continuous -> ``R``, prismatic -> ``P``, fixed: the child link lumped into its
+parent exactly (the default since issue 47; ``merge_fixed=False`` keeps it as a body on a
+``Fixed`` joint), floating -> ``Free``. Limits become coordinate limits;
 ``<dynamics damping friction>`` become viscous and Coulomb friction effects;
 ``<transmission>`` elements (simple, differential, four-bar linkage; under ``<robot>`` or,
 ros2_control's, inside ``<ros2_control>``) become the motors of the drive chain (:func:`motor_ratios`); a default
@@ -16,7 +17,7 @@ works on a bare URDF.
 import random
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
@@ -29,7 +30,7 @@ from baseparams.model.mechanism import Joint, Mechanism
 from baseparams.model.params import PARAMETER_KINDS
 
 from .parse import Urdf, UrdfJoint, UrdfTransmission, parse_urdf, transform_parameters
-from .rotations import bounded_rotation, matmul, matvec, rounded
+from .rotations import bounded_rotation, matmul, matvec
 
 TYPE_OF = {"revolute": "R", "continuous": "R", "prismatic": "P", "fixed": "Fixed", "floating": "Free"}
 RESERVED = frozenset({"t", "pi", "sin", "cos", "exp", "sqrt"})
@@ -46,11 +47,13 @@ Bounds = tuple[Decimal, Decimal]   # a joint's (lower, upper) limits as the file
 @dataclass
 class UrdfResult:
     """What reading a URDF gives: the mechanism, the notes (snapped or approximate angles,
-    renamed joints, merged links ...), and which link each body label is."""
+    renamed joints, merged links ...), which link each body label is, and which links were
+    lumped into which (``merged_into``: link -> the body's link, or the ground's name)."""
     mechanism: Mechanism
     notes: list[str]
     links: dict[int, str]          # body label -> link name
     merged: bool
+    merged_into: dict[str, str] = field(default_factory=dict)
 
 
 class UrdfReader:
@@ -59,21 +62,31 @@ class UrdfReader:
     name = "urdf"
     suffixes: tuple[str, ...] = (".urdf",)
     description = "URDF robot descriptions (docs/urdf.md)"
-    options: tuple[str, ...] = ("merge_fixed", "floating_base")
+    options: tuple[str, ...] = ("merge_fixed", "keep_fixed", "floating_base")
 
     def read(self, path: str | Path, **options: bool) -> Mechanism:
-        return read_urdf(path, **options).mechanism
+        return read_urdf(path, **_flags(options)).mechanism
 
     def read_notes(self, path: str | Path, **options: bool) -> tuple[Mechanism, list[str]]:
         """The mechanism and the reader's notes (for ``convert``, which prints them)."""
-        result = read_urdf(path, **options)
+        result = read_urdf(path, **_flags(options))
         return result.mechanism, result.notes
 
 
-def read_urdf(path: str | Path, *, merge_fixed: bool = False, floating_base: bool = False) -> UrdfResult:
-    """Read the URDF file at ``path``. ``merge_fixed``: fixed joints' links merged into their
-    parents exactly; ``floating_base``: the root link is a body on a Free joint (else it is
-    the ground)."""
+def _flags(options: dict[str, bool]) -> dict[str, bool]:
+    """Reader options are flags (``convert --keep-fixed``): ``keep_fixed`` is ``merge_fixed=False``;
+    ``merge_fixed``, the default since issue 47, is accepted as before."""
+    keep = options.pop("keep_fixed", False)
+    if keep and options.get("merge_fixed"):
+        raise InputError("--merge-fixed and --keep-fixed contradict each other: give one")
+    return {**options, "merge_fixed": not keep}
+
+
+def read_urdf(path: str | Path, *, merge_fixed: bool = True, floating_base: bool = False) -> UrdfResult:
+    """Read the URDF file at ``path``. ``merge_fixed`` (default): fixed joints' links lumped
+    into their parents exactly, before any solver runs (issue 47: fewer parameters, the same
+    dynamics); False keeps each as a body on a ``Fixed`` joint. ``floating_base``: the root
+    link is a body on a Free joint (else it is the ground)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -84,7 +97,7 @@ def read_urdf(path: str | Path, *, merge_fixed: bool = False, floating_base: boo
     return build(parse_urdf(text, path), merge_fixed=merge_fixed, floating_base=floating_base)
 
 
-def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False) -> UrdfResult:
+def build(urdf: Urdf, *, merge_fixed: bool = True, floating_base: bool = False) -> UrdfResult:
     """The mechanism of a parsed URDF (see :func:`read_urdf` for the options)."""
     notes = list(urdf.notes)
     inertia = {name: link.inertia if link.inertia is not None else ZERO10 for name, link in urdf.links.items()}
@@ -109,8 +122,10 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     massless = [name for name in links if urdf.links[name].inertia is None]
     if massless:
         notes.append(f"links without <inertial> (mass 0): {', '.join(massless)}")
+    merged_into: dict[str, str] = {}
     if merge_fixed:
-        joints, links = _merge_fixed(ground, joints, links, inertia, notes)
+        joints, links = _merge_fixed(ground, joints, links, inertia, merged_into)
+        notes += _merge_notes(merged_into, ground, inertia)
     label = {name: k + 1 for k, name in enumerate(links)}
     label[ground] = 0
     b = MechanismBuilder(_mechanism_name(urdf.robot), urdf.path, title=f"{urdf.robot} (URDF)",
@@ -148,7 +163,7 @@ def build(urdf: Urdf, *, merge_fixed: bool = False, floating_base: bool = False)
     b.trajectory(default_trajectory(urdf.robot, motions), t_start=0, t_end=T_END, samples=SAMPLES,
                  key="trajectory")
     mech = b.build()
-    return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed)
+    return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed, merged_into)
 
 
 def _couplings(b: MechanismBuilder, joints: Sequence[UrdfJoint], names: Mapping[str, str]) -> set[str]:
@@ -251,30 +266,52 @@ def _copy(j: UrdfJoint) -> UrdfJoint:
 
 
 def _merge_fixed(ground: str, joints: list[UrdfJoint], links: list[str], inertia: dict[str, tuple[Fraction, ...]],
-                 notes: list[str]) -> tuple[list[UrdfJoint], list[str]]:
+                 merged_into: dict[str, str]) -> tuple[list[UrdfJoint], list[str]]:
     """Fixed joints removed: each child link's parameters moved exactly into its parent's
-    frame and added (parameters are linear in the mass distribution); its children hang
-    from the parent with composed origins. A link fixed to the root joins the ground."""
+    frame and added, in rationals (parameters are linear in the mass distribution; the
+    rotations are the exact rational ones the file's angles give, composed exactly through
+    chains of fixed joints); its children hang from the parent with composed origins (a
+    composed rotation whose entries grew long is shortened for the joint frame only). A link fixed to the root joins the ground. ``merged_into`` gets
+    link -> the link (or ground) that now carries it."""
+    exact: dict[int, Any] = {}          # id(joint) -> its exact rotation where j.rotation was shortened
     while True:
         fixed = next((j for j in joints if j.type == "fixed"), None)
         if fixed is None:
             return joints, links
         parent, child = fixed.parent, fixed.child
-        if parent == ground:
-            if any(inertia[child]):
-                notes.append(f"{fixed.key}: link {child!r} is fixed to the root link: merged into the "
-                             "ground, its inertia does not act")
-        else:
-            moved = transform_parameters(inertia[child], fixed.rotation, fixed.origin)
-            inertia[parent] = tuple(rounded(a + c) for a, c in zip(inertia[parent], moved))
-            notes.append(f"{fixed.key}: link {child!r} merged into {parent!r} (--merge-fixed)")
+        rotation = exact.get(id(fixed), fixed.rotation)
+        if parent != ground:
+            moved = transform_parameters(inertia[child], rotation, fixed.origin)
+            inertia[parent] = tuple(a + c for a, c in zip(inertia[parent], moved))
+        for link, into in list(merged_into.items()):
+            if into == child:
+                merged_into[link] = parent
+        merged_into[child] = parent
         for j in joints:
             if j.parent == child:
                 j.parent = parent
-                j.origin = tuple(a + c for a, c in zip(matvec(fixed.rotation, j.origin), fixed.origin))
-                j.rotation = bounded_rotation(matmul(fixed.rotation, j.rotation))
+                j.origin = tuple(a + c for a, c in zip(matvec(rotation, j.origin), fixed.origin))
+                exact[id(j)] = matmul(rotation, exact.get(id(j), j.rotation))
+                j.rotation = bounded_rotation(exact[id(j)])      # the frame: short entries, within 2e-17 rad
         joints = [j for j in joints if j is not fixed]
         links = [name for name in links if name != child]
+
+
+def _merge_notes(merged_into: Mapping[str, str], ground: str, inertia: Mapping[str, tuple[Fraction, ...]]) -> list[str]:
+    """One note per body that lumps links, and one for the links with inertia fixed to the
+    ground (``inertia``: each link's, its own lumped children's included)."""
+    into: dict[str, list[str]] = {}
+    for link, target in merged_into.items():
+        into.setdefault(target, []).append(link)
+    notes = []
+    for target, links in into.items():
+        if target != ground:
+            notes.append(f"link {target!r} lumps the fixed link(s) {', '.join(links)} (fixed joints merged "
+                         "exactly; merge_fixed=False keeps them as bodies)")
+        elif any(any(inertia[link]) for link in links):
+            notes.append(f"link(s) {', '.join(link for link in links if any(inertia[link]))} fixed to the "
+                         "root link: merged into the ground, their inertia does not act")
+    return notes
 
 
 def _frames(j: UrdfJoint, jtype: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:

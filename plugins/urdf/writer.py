@@ -2,10 +2,11 @@
 
 Two modes:
 
-- *patch*: the mechanism was read from a URDF file whose links are still its bodies (no
-  ``--merge-fixed``): that file is copied and only its links' ``<inertial>`` elements are
-  replaced by the bodies' parameters, so meshes, visuals, collisions, transmissions and
-  vendor tags survive (``convert robot.urdf --inertia identified.json -o out.urdf``);
+- *patch*: the mechanism was read from a URDF file whose links (fixed ones lumped into
+  their parents, or not) are still its bodies: that file is copied and only its links'
+  ``<inertial>`` elements are replaced by the bodies' parameters (a link lumped into a moving
+  body loses its own: the body's link carries its mass), so meshes, visuals, collisions,
+  transmissions and vendor tags survive (``convert robot.urdf --inertia identified.json -o out.urdf``);
 - *generate*: any other tree mechanism is written from scratch. URDF puts a link's origin
   on its parent joint's axis, so a body whose revolute axis does not pass through its
   origin gets a link frame shifted (never turned) onto the axis, and its inertia is
@@ -50,7 +51,7 @@ class UrdfWriter:
     def write(self, mechanism: Mechanism, path: str | Path) -> list[str]:
         source = _source_links(mechanism)
         if source is not None:
-            text, notes = patch_inertials(mechanism, source)
+            text, notes = patch_inertials(mechanism, *source)
         else:
             text, notes = mechanism_urdf(mechanism)
         Path(path).write_text(text, encoding="utf-8")
@@ -78,26 +79,36 @@ def _triple(values: Iterable[object]) -> str:
 
 
 # ----- patch mode -----------------------------------------------------------------------------
-def _source_links(mech: Mechanism) -> dict[int, str] | None:
-    """{label: link name} when ``mech`` came from a URDF file whose links are its bodies."""
+def _source_links(mech: Mechanism) -> tuple[dict[int, str], list[str]] | None:
+    """({label: link name}, [links lumped into a moving body]) when ``mech`` came from a URDF
+    file whose links (fixed ones lumped or kept) are its bodies."""
     if not mech.path or Path(mech.path).suffix.lower() != ".urdf" or not Path(mech.path).exists():
         return None
-    try:
-        original = read_urdf(mech.path)
-    except InputError:
-        return None
-    same = (len(original.mechanism.bodies) == len(mech.bodies)
-            and all(original.links.get(b.label) == b.name for b in mech.bodies)
-            and [j.name for j in original.mechanism.joints] == [j.name for j in mech.joints])
-    return original.links if same else None
+    for merge in (True, False):
+        try:
+            original = read_urdf(mech.path, merge_fixed=merge)
+        except InputError:
+            return None
+        same = (len(original.mechanism.bodies) == len(mech.bodies)
+                and all(original.links.get(b.label) == b.name for b in mech.bodies)
+                and [j.name for j in original.mechanism.joints] == [j.name for j in mech.joints])
+        if same:
+            bodies = set(original.links.values())
+            return original.links, [link for link, into in original.merged_into.items() if into in bodies]
+    return None
 
 
-def patch_inertials(mech: Mechanism, links: Mapping[int, str]) -> tuple[str, list[str]]:
-    """The source URDF with each body's ``<inertial>`` replaced (comments kept)."""
+def patch_inertials(mech: Mechanism, links: Mapping[int, str], lumped: Sequence[str] = ()) -> tuple[str, list[str]]:
+    """The source URDF with each body's ``<inertial>`` replaced (comments kept); the links
+    ``lumped`` into a body lose theirs (the body's link carries their mass)."""
     assert mech.path is not None                # read from that file (_source_links)
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     root = ET.fromstring(Path(mech.path).read_text(encoding="utf-8"), parser=parser)
     by_name = {elem.get("name"): elem for elem in root.findall("link")}
+    for name in lumped:
+        old = by_name[name].find("inertial")
+        if old is not None:
+            by_name[name].remove(old)
     for body in mech.bodies:
         link = by_name[links[body.label]]
         old = link.find("inertial")
@@ -109,7 +120,8 @@ def patch_inertials(mech: Mechanism, links: Mapping[int, str]) -> tuple[str, lis
             link.insert(0, new)
     ET.indent(root, space="  ")
     text = '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-    return text, [f"kept {mech.path}; replaced the <inertial> of {len(mech.bodies)} link(s)"]
+    return text, [f"kept {mech.path}; replaced the <inertial> of {len(mech.bodies)} link(s)"
+                  + (f", removed those of the links lumped into them: {', '.join(lumped)}" if lumped else "")]
 
 
 def _inertial(phi: Sequence[Fraction], key: str, path: str | None) -> ET.Element:
