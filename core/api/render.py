@@ -54,7 +54,10 @@ def diagnosis_text(result: "Diagnosis", written: str | None = None, verbose: boo
 def _head(result: "Diagnosis") -> list[str]:
     """The verdict and the gap (and the kept-out block's), both reports' first lines."""
     gap = result.gap
-    lines = [f"verdict: {result.verdict.upper()}: {VERDICTS.get(result.verdict, '')}",
+    said = VERDICTS.get(result.verdict, "")
+    if result.unexplained.get("held_lack") and result.verdict in ("explained", "nothing missing"):
+        said = said.replace("the noise level", "what the held model lacks on its own run")
+    lines = [f"verdict: {result.verdict.upper()}: {said}",
              f"gap (NRMS, blocks predicted from the others, {gap['cv_folds']} blocks): {gap['cv_before']:.4g} -> "
              f"{gap['cv_after']:.4g}; fitted: {gap['before']:.4g} -> {gap['after']:.4g}"]
     if gap["holdout_before"] is not None:

@@ -45,6 +45,7 @@ class Given:
     masses: bool = True
     gains: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)      # held values no robot has (before the run)
+    fit_nrms: dict[str, float] = field(default_factory=dict)  # its residual NRMS on its own run, per coordinate
 
 
 def given_parameters(mechanism: Mechanism, source: str) -> Given:
@@ -125,7 +126,19 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
             raise InputError(f"a gain needs a name and a value ({exc})", file=file, key=f"gains[{k}]") from None
     covariance = _base_covariance(report, base, path)
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
-                 notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance))
+                 notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance),
+                 fit_nrms=_fit_nrms(report, file))
+
+
+def _fit_nrms(report: dict, file: str) -> dict[str, float]:
+    """The identify result's residual NRMS on its own run, per coordinate (``nrms``; absent in
+    older results, null where undefined: left out)."""
+    value = report.get("nrms")
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"a table of coordinates is needed, not {_kind(value)}", file=file, key="nrms")
+    return {str(c): _finite(v, file, f"nrms.{c}") for c, v in value.items() if v is not None}
 
 
 # An identify result is a few kB to a few MB; a file far larger is not one (and is not read whole)
