@@ -31,7 +31,7 @@ def block_beta(Wr: arb_mat, digits: int, kept: Sequence[int], rows: Sequence[int
         n = Wr.ncols()
         eliminated = [j for j in range(n) if j not in set(kept)]
         scaled = scaled_entries(Wr.entries(), n, exponents)
-        found = solve_block(scaled, n, list(rows), list(kept), eliminated) if kept else None
+        found = solve_block(scaled, n, list(rows), list(kept), eliminated, inverse=False) if kept else None
         if kept and found is None:
             raise ValueError(f"the square block of W is not proven nonsingular at {digits} digits")
         beta_s = found[0] if found is not None else arb_mat(0, len(eliminated))
