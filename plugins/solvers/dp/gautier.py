@@ -36,8 +36,9 @@ Choices made here, all reported in the result's diagnostics:
   are the leftmost independent columns of W, the choice vp, exact and symbolic make, so that
   every solver gives the same base parameters under the same names: the columns of ``V1^T``
   (W's row space) are taken left to right, each kept when its part outside the kept ones'
-  span is above ``NATURAL_FLOOR``. Should that choice make ``V22`` worse conditioned than
-  ``NATURAL_CONDITION`` times QR pivoting's (beta's error estimate grows with it), or find
+  span is above ``NATURAL_FLOOR``. Should that choice make ``cond(V22)`` larger than
+  ``NATURAL_CONDITION`` (beta's error estimate grows with it, and the base regressor's
+  conditioning for identification with it; QR pivoting's is 1-3 on the built-ins), or find
   too few columns (a nearly dependent column in the way), the pivoted choice is taken, and
   a note says so. ``pivoting="qr"``: QR with
   column pivoting (Businger-Golub) on ``V2^T`` picks the n-r parameters whose rows of V2 are
@@ -64,7 +65,7 @@ from baseparams.numeric.rank import numerical_rank
 RIDGE_RATIO = 1e3
 EPS = np.finfo(float).eps
 NATURAL_FLOOR = 1e-6        # a column of V1^T outside the kept ones' span by less is dependent
-NATURAL_CONDITION = 100     # cond(V22) the natural choice may cost (two digits), relative to QR pivoting's
+NATURAL_CONDITION = 100     # the largest cond(V22) the natural choice may have (QR pivoting's is ~1-3)
 NATURAL_BLOCK = 64          # columns projected together (one matrix product per block)
 
 
@@ -205,12 +206,12 @@ def _kept_columns(v: np.ndarray, r: int, pivoting: str, notes: list[str]) -> tup
         natural = _leftmost_independent(v[:, :r].T)
         if len(natural) == r:
             result = split(natural)
-            pivoted = split(sorted(set(range(n)) - set(pivoted_qr_columns(v2.T, n - r))))
-            if result[2] <= NATURAL_CONDITION * pivoted[2]:
+            if result[2] <= NATURAL_CONDITION:
                 return result
-            why = f"makes cond(V22) {result[2]:.3g} where QR pivoting gives {pivoted[2]:.3g}"
+            pivoted = split(sorted(set(range(n)) - set(pivoted_qr_columns(v2.T, n - r))))
+            why = f"make cond(V22) {result[2]:.3g}, above {NATURAL_CONDITION:g} (QR pivoting's: {pivoted[2]:.3g})"
         else:
-            why = f"finds {len(natural)} of {r} columns above {NATURAL_FLOOR:g}"
+            why = f"are {len(natural)} of {r} columns above {NATURAL_FLOOR:g}"
         notes.append(f"kept parameters by QR pivoting: the leftmost independent ones (vp's, exact's) {why}, "
                      f"so these base parameters are other combinations than theirs")
     return pivoted or split(sorted(set(range(n)) - set(pivoted_qr_columns(v2.T, n - r))))
