@@ -4,7 +4,7 @@ this process; the defaults' memory (no refusal); how accurate the printed dp exp
 
     pip install example-robot-data pin figaroh
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp]
-        [--sections figaroh speed memory accuracy]
+        [--sections figaroh identify speed memory accuracy]
 
 figaroh: per round, for TX40 (examples/data/tx40), TIAGo and Talos (example-robot-data), one
 child process each for FIGAROH, dp and vp, in turn (``--repeats`` rounds; medians): the
@@ -17,6 +17,10 @@ URDF is the same file with ``<visual>`` and ``<collision>`` removed (FIGAROH's l
 meshes; TX40's are not shipped, and reading Talos' took 2.5 s: leaving them out favours
 FIGAROH). FIGAROH takes a ``<mimic>`` follower as a joint of its own (a higher rank on Talos and
 TIAGo); baseparams solves the coupled robot. Skipped with a note when figaroh is not installed.
+
+identify: ``identify`` of TIAGo's 48-joint model with the default solver (vp) on a recording
+simulated by ``bp.simulate`` (the file's trajectory, 1 % noise), in a child process each round:
+identify's own CPU s and the whole process's.
 
 speed: per robot, interleaved ``--repeats`` times in this process (medians, CPU s of
 ``time.process_time``): dp, vp (Talos only; it is long), and the yardstick: what FIGAROH
@@ -234,6 +238,41 @@ def memory(found: dict[str, Path]) -> None:
               f"{after.ru_maxrss / 1024:.0f} | {how[:140]} |", flush=True)
 
 
+IDENTIFY_CHILD = """
+import json, resource, sys, time
+import baseparams as bp
+start = time.process_time()
+fit = bp.identify(sys.argv[1], sys.argv[2])
+seconds = time.process_time() - start
+out = fit.to_json()
+print(json.dumps({"identify_s": seconds, "rank": out["rank"],
+                  "rms_overall": out.get("rms_overall"),
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def identify_tiago(found: dict[str, Path], repeats: int) -> None:
+    """identify of TIAGo's 48-joint model (issue 47: <= 5 CPU s) with the default solver, on a
+    simulated recording (bp.simulate: the file's trajectory, 1 % noise), in a child process:
+    identify's own CPU s and the whole process's."""
+    import tempfile
+    import baseparams as bp
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "tiago.csv"
+        bp.simulate(str(found["tiago_description/tiago"]), output=str(data), noise=0.01)
+        print("| robot | joints | identify CPU s (median) | whole process CPU s | base parameters | RMS | peak MB |")
+        print("|---|---|---|---|---|---|---|")
+        runs = [child([IDENTIFY_CHILD, str(found["tiago_description/tiago"]), str(data)]) for _ in range(repeats)]
+        ok = [(out, t) for out, t in runs if "error" not in out]
+        if not ok:
+            print(f"| tiago | 48 | failed: {runs[-1][0]['error']} |||||")
+            return
+        out = ok[-1][0]
+        print(f"| tiago_description/tiago | 48 | {statistics.median(o['identify_s'] for o, _ in ok):.2f} | "
+              f"{statistics.median(t for _, t in ok):.2f} | {out['rank']} | {out['rms_overall']:.3g} | "
+              f"{out['peak_mb']:.0f} |", flush=True)
+
+
 def old_rule_rows(g, n: int) -> np.ndarray:
     """The printed rows by the rule before issue 47: each coefficient to
     floor(log10(|beta_s| / estimate)) digits, dropped at or below the estimate."""
@@ -293,11 +332,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-vp", action="store_true", help="no vp in the speed section")
-    parser.add_argument("--sections", nargs="*", default=("figaroh", "speed", "memory", "accuracy"))
+    parser.add_argument("--sections", nargs="*", default=("figaroh", "identify", "speed", "memory", "accuracy"))
     args = parser.parse_args()
     found = paths()
     if "figaroh" in args.sections:
         side_by_side(found, args.repeats)
+        print()
+    if "identify" in args.sections:
+        identify_tiago(found, args.repeats)
         print()
     if "speed" in args.sections:
         speed(found, args.repeats, not args.no_vp)
