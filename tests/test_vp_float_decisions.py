@@ -136,3 +136,11 @@ def test_rows_sized_by_the_rank_give_the_default_samples_result(chain, exact):
     rows = [[float(row["expression"].get(p, 0)) for p in small["parameters"]] for row in small["base"]]
     other = [[float(row["expression"].get(p, 0)) for p in whole["parameters"]] for row in whole["base"]]
     assert np.sin(np.max(scipy.linalg.subspace_angles(np.array(rows).T, np.array(other).T))) < 1e-12
+
+
+def test_no_rank_estimate_keeps_the_default_samples(chain, monkeypatch):
+    monkeypatch.setattr(decide, "rank_estimate", lambda W, threshold=1e-8: 0)     # W not finite in float64
+    assert vp_solver.samples_from_rank(chain, vp_solver.default_samples(chain)) is None
+    small = parse_mechanism(generate.serial_chain(3, bodies=4), "chain4.toml")     # up to 80 parameters: never
+    assert len(small.parameters) <= certify.FAST_DECISIONS_ABOVE
+    assert vp_solver.samples_from_rank(small, 1000) is None

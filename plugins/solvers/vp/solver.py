@@ -95,7 +95,7 @@ def samples_from_rank(mechanism: Mechanism, samples: int) -> tuple[int, int] | N
         W = observation_matrix(mechanism, Float64(), Trajectory.default(mechanism, samples=samples, memory=False))[0]
         rank = decide.rank_estimate(W)
         fewer = max(MIN_SAMPLES, math.ceil(ROWS_PER_RANK * rank / f))
-        if fewer >= samples:
+        if not rank or fewer >= samples:          # no estimate (W not finite in float64), or no saving
             return None
         W = observation_matrix(mechanism, Float64(), Trajectory.default(mechanism, samples=fewer, memory=False))[0]
     except KinematicsError:          # the solve itself reports it, with where
