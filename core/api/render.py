@@ -79,6 +79,8 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
         corr = max((abs(ev["correlation"]) for ev in a["evidence"]), default=float("nan"))
         lines.append(f"ambiguous: {names} (|corr| up to {corr:.3f}; none adds significantly over the others)")
         lines.append(f"  equivalent: {a['equivalent']}" if "equivalent" in a else f"  to separate them: {a['separate_by']}")
+        if "equivalent" in a and not a["separate_by"].startswith("no motion can"):
+            lines.append(f"  to separate them: {a['separate_by']}")
     for u in result.unsupported:
         lines.append(f"not named (unsupported): {u['kind']} on {u['coordinate']}: {u['reason']}")
     un = result.unexplained
@@ -321,7 +323,9 @@ def _ambiguous_line(group: dict) -> str:
     if "equivalent" in group:                      # tied coordinates: no motion separates them
         fitted = (f"; as one effect on {group['strongest']}: " + ", ".join(f"{v:.4g}" for v in group["value"])
                   if "value" in group else "")
-        return f"equivalent: {names}: {group['equivalent']}{fitted}"
+        separate = "" if group["separate_by"].startswith("no motion can") else \
+            f"; to separate them: {group['separate_by']}"          # loop-equivalent bodies (issue 49)
+        return f"equivalent: {names}: {group['equivalent']}{fitted}{separate}"
     return f"ambiguous: {names} (|corr| up to {corr:.3f}); to separate them: {group['separate_by']}"
 
 
@@ -382,6 +386,10 @@ def _body_text(c: dict) -> str:
     if absorbed:
         parts.append(f"not identifiable on their own here: {', '.join(absorbed)} (--verbose: what the data "
                      "determine)")
+    moments = [f"{k} = {_pm(c[k]['value'], c[k]['std'])}" for k in ("mx", "my", "mz")
+               if k in c and c[k]["value"] is not None]
+    if m["value"] is None and moments:     # the load as the data fix it: mass x position (issue 49)
+        parts.append(f"mass x position {', '.join(moments)} kg m")
     return "; ".join(parts)
 
 
@@ -437,6 +445,10 @@ def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping
     shown = result.changes if verbose else result.changes[:max(room, 1)]
     for entry in shown:
         lines.append(f"  {_effect_line(entry, kinds)}  (p = {entry['test']['pvalue_holm']:.2g}, Holm)")
+        lines += [f"    or, equivalently, {_effect_line(other, kinds)}" for other in entry.get("alternatives", [])]
+        if "equivalent" in entry:      # bodies that move together through a closed loop (issue 49)
+            lines.append(f"    equivalent: {entry['equivalent']['reason']}; to separate them: "
+                         f"{entry['equivalent']['separate_by']}")
     if len(shown) < len(result.changes):
         lines.append(f"  ... and {len(result.changes) - len(shown)} more (--verbose)")
     for group in groups:

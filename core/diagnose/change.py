@@ -58,6 +58,7 @@ from baseparams.diagnose.workflow import _coefficient_map, coefficients, nrms
 from baseparams.identify.fit import measured_design
 from baseparams.diagnose.given import Given
 from baseparams.diagnose.identifiable import regroup
+from baseparams.diagnose.loopbodies import named_groups
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
 from baseparams.dynamics.forces import evaluate, independent_names
 from baseparams.diagnose.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, held_out_gain, named_changes, predicts,
@@ -457,6 +458,9 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
                          "fitted to (" + ", ".join(f"{c} {v:.3g}" for c, v in zip(coordinates, floor)) + "): "
                          + ", ".join(b["candidate"] for b in below))
     changes, ambiguous, in_model = _entries(chosen, difference, empty, kept)
+    # bodies that move together through a closed loop: one change, with its physical alternatives (issue 49)
+    changes, ambiguous = named_groups(mechanism, chosen, kept, changes, ambiguous, difference, alpha,
+                                      lambda search, keep: _entries(search, difference, empty, keep)[0])
     final = [chosen.candidates[i].columns for i in chosen.in_model if i in kept]
     model_after = np.concatenate([empty] + final, axis=-1)
     after = difference - (model_after @ _plain_fit(model_after, difference, weights).coefficients

@@ -12,7 +12,6 @@ reported as absorbed into the kept ones, as ``identify`` reports its absorbed co
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import qr
 
 from baseparams.diagnose.derived import ROUNDING   # a column this much smaller than the largest is zero
 from baseparams.diagnose.selection import orthonormal_basis, project_out
@@ -52,12 +51,11 @@ def regroup(others: np.ndarray, columns: np.ndarray, values: np.ndarray, covaria
     rounding = scale <= ROUNDING * max(scale.max(initial=0.0), 1e-300)     # a column of rounding: zero
     beyond = np.where(rounding[None, :], 0.0, beyond)
     scale = np.where(rounding, 1.0, scale)
-    _, r, order = qr(beyond / scale, mode="economic", pivoting=True)
-    diagonal = np.abs(np.diag(r))
-    rank = int(np.sum(diagonal > TOLERANCE * max(diagonal.max(initial=0.0), 1e-300)))
+    kept = _kept_in_order(beyond / scale)
+    rank = len(kept)
     if rank == c:
         return None
-    kept, absorbed = sorted(order[:rank].tolist()), sorted(order[rank:].tolist())
+    absorbed = [j for j in range(c) if j not in kept]
     # beyond[:, absorbed] = beyond[:, kept] K in the scaled units, by least squares on the kept
     scaled = beyond / scale
     into_scaled = np.linalg.lstsq(scaled[:, kept], scaled[:, absorbed], rcond=None)[0]
@@ -67,3 +65,24 @@ def regroup(others: np.ndarray, columns: np.ndarray, values: np.ndarray, covaria
     transform[np.arange(rank), kept] = 1.0
     transform[:, absorbed] = into
     return Regrouping(kept, absorbed, into, transform @ values, transform @ covariance @ transform.T)
+
+
+def _kept_in_order(scaled: np.ndarray) -> list[int]:
+    """The coefficients kept, in the effect's own order (a body's mass first, then its first
+    moments, then its inertia): each kept when its column adds a direction the ones kept
+    before it do not span. Why in order, not by pivoting on the largest column: the first a
+    reader asks of a load is its mass; pivoting kept a parallelogram end link's inertia and
+    left its mass "not identifiable" (issue 49), where the data determine the mass beside a
+    combination of inertias."""
+    norms = np.linalg.norm(scaled, axis=0)
+    largest = max(float(norms.max(initial=0.0)), 1e-300)
+    kept: list[int] = []
+    basis = np.zeros((scaled.shape[0], 0))
+    for j in range(scaled.shape[1]):
+        left = scaled[:, j] - basis @ (basis.T @ scaled[:, j])
+        size = float(np.linalg.norm(left))
+        if size > TOLERANCE * largest:
+            kept.append(j)
+            left = left - basis @ (basis.T @ left)        # twice is enough (Kahan)
+            basis = np.concatenate([basis, (left / np.linalg.norm(left))[:, None]], axis=1)
+    return kept

@@ -167,7 +167,8 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
                     noise_level: float = 0.01, payload: float = 0.0, friction_drift: float = 0.0,
                     drift_coordinate: int = 0, common_errors: bool = True, random_inertia: bool = False,
                     payload_mass: float | None = None, load_friction: float = 0.0, quantum: float = 0.0,
-                    payload_body: int | None = None) -> tuple[MeasuredData, MeasuredData, dict]:
+                    payload_body: int | None = None, payload_at: Sequence[float] = (0.0, 0.0, 0.0)
+                    ) -> tuple[MeasuredData, MeasuredData, dict]:
     """(baseline, changed, truth): two recordings of the default trajectory, the second after
     a change, for the proof of ``diagnose --baseline``. ``payload``: a rigid point load of this
     fraction of the last body's mass, at a random point within 5 cm of its frame's origin;
@@ -181,7 +182,9 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
     coordinate, common to both runs, so a payload's torque changes it too (as on a real
     gearbox). ``quantum``: torques rounded to this step (N m), as a drive reports them.
     ``payload_body``: the index (0-based, file order) of the body that carries the payload
-    instead of the last (a parallelogram's link, issue 49)."""
+    instead of the last (a parallelogram's link, issue 49); ``payload_at``: the centre of the
+    payload's 5 cm ball in that body's axes (its frame's origin by default; a link's middle,
+    where the origin is on a fixed pivot and a load there moves nothing)."""
     rng = np.random.default_rng(seed)
     coordinates = independent_names(mechanism)
     motion = trajectory_motion(mechanism, samples)
@@ -207,7 +210,7 @@ def simulate_change(mechanism: Mechanism, *, samples: int | None = None, seed: i
     last = len(mechanism.bodies) - 1 if payload_body is None else payload_body
     mass = payload * phi[10 * last] if payload_mass is None else payload_mass
     direction = rng.standard_normal(3)
-    centre = direction / np.linalg.norm(direction) * 0.05 * rng.uniform() ** (1 / 3)
+    centre = np.asarray(payload_at, dtype=float) + direction / np.linalg.norm(direction) * 0.05 * rng.uniform() ** (1 / 3)
     if mass:
         x, y, z = centre
         change[10 * last:10 * last + 10] = mass * np.array([1.0, x, y, z, y * y + z * z, -x * y, -x * z,
