@@ -42,7 +42,8 @@ def judge(result: ChangeDiagnosis, link: str | None, mass: float, centre: list[f
     named on the link itself, what went wrong). On the back and front links, which turn about
     fixed pivots, a load's mass and its distance are one product to the torques (a mass m at
     r and 4m at r/2 differ only in inertia, which a small load barely moves): there the first
-    moments m x centre are judged, within the tolerance of their size."""
+    moments m x centre the data determine are judged (along the pivot's axis none is), within
+    the tolerance of their size."""
     if link is None:
         ok = result.verdict == "nothing changed"
         return ok, ok, ok, "" if ok else f"{result.verdict}: " + ",".join(f"{e['kind']}:{e['coordinate']}"
@@ -57,9 +58,11 @@ def judge(result: ChangeDiagnosis, link: str | None, mass: float, centre: list[f
         return False, False, False, f"on {[e['coordinate'] for e in entries]}"
     c = on_link[0]["coefficients"]
     if link in WHERE:         # a link turning about a fixed pivot: what the data fix is m x its centre
+        fixed = [i for i, k in enumerate(("mx", "my", "mz")) if c[k]["value"] is not None]
         moment = [c[k]["value"] for k in ("mx", "my", "mz")]
-        true = mass * np.asarray(centre)
-        within = None not in moment and bool(np.linalg.norm(np.subtract(moment, true)) <= tolerance * np.linalg.norm(true))
+        true = mass * np.asarray(centre)[fixed]
+        found = np.array([moment[i] for i in fixed])
+        within = bool(fixed) and bool(np.linalg.norm(found - true) <= tolerance * np.linalg.norm(true))
         return True, within, entries[0] is on_link[0], "" if within else f"{link} m c = {moment}"
     m = c["m"]["value"]
     within = m is not None and abs(m - mass) <= tolerance * mass
