@@ -30,7 +30,8 @@ from scipy.signal import lfilter
 from scipy.special import fdtrc
 
 from baseparams.diagnose.changesearch import Search, ar_whitening
-from baseparams.diagnose.selection import Candidate, orthonormal_basis, project_out
+from baseparams.diagnose.selection import Candidate
+from baseparams.diagnose.wald import orthonormal_basis, project_out
 from baseparams.dynamics.forces import Motion, evaluate, independent_names, inertial_columns
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
@@ -244,6 +245,8 @@ def named_groups(mechanism: Mechanism, chosen: Search, kept: set, changes: list[
         rest = [j for j in chosen.in_model if j in kept and j not in group]
         pool = [j for name, j in body_at.items() if j not in group + rest
                 and equivalence(mechanism, [cands[0].coordinate, name]) is not None]
+        if not pool and (len(group) < 2 or equivalence(mechanism, [c.coordinate for c in cands]) is None):
+            continue                  # no loop body among them: the search's own answer stands
         members = _undominated(chosen, y, rest, group + pool, alpha)
         found = equivalence(mechanism, [chosen.candidates[j].coordinate for j in members])
         if members == [head] or (len(members) > 1 and found is None):
