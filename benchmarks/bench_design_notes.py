@@ -85,7 +85,7 @@ def main() -> None:
     gc.collect()
     collect = best(gc.collect, args.repeat)
     row(f"gc.collect() in this process (sympy and the SLA loaded): {collect * 1e3:.0f} ms",
-        "core/diagnose/selection.py holm")
+        "core/diagnose/wald.py holm")
 
 
 if __name__ == "__main__":

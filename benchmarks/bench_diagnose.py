@@ -52,7 +52,7 @@ from collections import Counter, defaultdict  # noqa: E402
 import numpy as np  # noqa: E402
 
 from baseparams import registry  # noqa: E402
-from baseparams.diagnose import selection as S  # noqa: E402
+from baseparams.diagnose import wald as W  # noqa: E402
 from baseparams.identify.linear import RANK_TOL, WeightedLinearModel  # noqa: E402
 from baseparams.diagnose.workflow import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
 from baseparams.dynamics.forces import evaluate  # noqa: E402
@@ -76,12 +76,12 @@ def testable(problem, phi, rng):
                                   np.sqrt(np.mean(clean ** 2, axis=0))).fit()
     out, skipped = [], Counter()
     for i, cand in enumerate(problem.candidates):
-        basis = S.candidate_basis(cand, fit)
-        test = S.wald(fit.residual, basis, (n, f), fit.rank) if basis.shape[1] else S.NOT_TESTED
+        basis = W.candidate_basis(cand, fit)
+        test = W.wald(fit.residual, basis, (n, f), fit.rank) if basis.shape[1] else W.NOT_TESTED
         Z = (cand.columns * fit.weights[None, :, None]).reshape(n * f, -1)
         norms = np.linalg.norm(Z, axis=0)
         norms[norms == 0] = 1
-        kept = np.linalg.svd(S.project_out(Z / norms, fit.basis), compute_uv=False).min()
+        kept = np.linalg.svd(W.project_out(Z / norms, fit.basis), compute_uv=False).min()
         if not test.tested:
             skipped[test.reason] += 1
         elif kept < WEAK:
@@ -267,7 +267,7 @@ def confusable_pairs(problem, pool, rng, m):
     one is named unless the larger one's extra directions are significant."""
     phi = random_physical_inertia(m, rng)
     _, _, fit = testable(problem, phi, rng)
-    bases = {i: S.candidate_basis(problem.candidates[i], fit) for i in pool}
+    bases = {i: W.candidate_basis(problem.candidates[i], fit) for i in pool}
     out = []
     for x, i in enumerate(pool):
         for j in pool[x + 1:]:

@@ -1,5 +1,5 @@
 """The Wald test of a direction acting on few samples, on coloured noise (issue 21): its
-rejection rate at 5 % as ``selection.wald`` makes it on whitened data (the stationary
+rejection rate at 5 % as ``wald.wald`` makes it on whitened data (the stationary
 variance, truncated kernel floored by Bartlett's, scaled by the noise's local power where
 the direction acts), against the Bartlett-tapered stationary variance alone and the
 classical sigma^2 I; on AR(1) noise of one level, and with the noise ``--louder`` times
@@ -18,7 +18,7 @@ from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from baseparams.identify import longrun
-from baseparams.diagnose import selection as S
+from baseparams.diagnose import wald as W
 
 
 def main() -> None:
@@ -30,11 +30,11 @@ def main() -> None:
     args = parser.parse_args()
     n = args.samples
     t = np.linspace(0.0, 10.0, n)
-    Q = S.orthonormal_basis(np.stack([np.ones(n), np.sin(t), np.cos(0.7 * t)], axis=1), 1e-12)
+    Q = W.orthonormal_basis(np.stack([np.ones(n), np.sin(t), np.cos(0.7 * t)], axis=1), 1e-12)
     z = np.zeros(n)
     z[n // 2:n // 2 + 6] = 1.0                               # a direction on 6 samples
-    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
-    dense = S.orthonormal_basis(S.project_out(np.sin(3.1 * t)[:, None], Q), S.ABSORB_TOL)
+    U = W.orthonormal_basis(W.project_out(z[:, None], Q), W.ABSORB_TOL, reference=z[:, None])
+    dense = W.orthonormal_basis(W.project_out(np.sin(3.1 * t)[:, None], Q), W.ABSORB_TOL)
     around = np.ones(n)
     around[n // 2 - 30:n // 2 + 30] = args.louder
     rng = np.random.default_rng(11)
@@ -44,10 +44,10 @@ def main() -> None:
             y = lfilter([np.sqrt(1 - args.rho ** 2)], [1.0, -args.rho], rng.standard_normal(n)) * level
             e = y - Q @ (Q.T @ y)
             started = time.process_time()
-            test = S.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
+            test = W.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
             sparse_cpu += time.process_time() - started
             started = time.process_time()
-            S.wald(e, dense, (n, 1), 3)
+            W.wald(e, dense, (n, 1), 3)
             dense_cpu += time.process_time() - started
             wald.append(test.pvalue <= 0.05)
             g = float(U[:, 0] @ e)

@@ -16,7 +16,7 @@ from baseparams.dynamics.effects import Effect
 from baseparams.errors import InputError
 from baseparams.hookspecs import hookimpl
 from baseparams.identify import longrun
-from baseparams.diagnose import selection as S
+from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.diagnose import whiteness
 from baseparams.diagnose.workflow import decimal_text, diagnose, prepare, write_fixed
@@ -52,7 +52,7 @@ def _named(d):
 # ----- the statistics against statsmodels ----------------------------------------------------
 def test_holm_matches_statsmodels():
     p = np.random.default_rng(0).uniform(size=30) ** 3
-    np.testing.assert_allclose(S.holm(p), multipletests(p, method="holm")[1])
+    np.testing.assert_allclose(W.holm(p), multipletests(p, method="holm")[1])
 
 
 def test_wald_matches_statsmodels_hac_regression():
@@ -67,11 +67,11 @@ def test_wald_matches_statsmodels_hac_regression():
     lags = 5
     res = sm.OLS(y, np.column_stack([X, z])).fit(cov_type="HAC", cov_kwds={"maxlags": lags, "use_correction": False})
     expected = float(res.params[-1] ** 2 / res.cov_params()[-1, -1])
-    Q = S.orthonormal_basis(X, 1e-12)
+    Q = W.orthonormal_basis(X, 1e-12)
     e = y - Q @ (Q.T @ y)
-    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    U = W.orthonormal_basis(W.project_out(z[:, None], Q), W.ABSORB_TOL, reference=z[:, None])
     rows = n
-    test = S.wald(e, U, (n, 1), Q.shape[1], lags=lags, prewhiten=False)
+    test = W.wald(e, U, (n, 1), Q.shape[1], lags=lags, prewhiten=False)
     # our statistic carries the small-sample factor rows / (rows - dof - r)
     assert test.stat == pytest.approx(expected / (rows / (rows - 3 - 1)), rel=1e-9)
 
@@ -89,7 +89,7 @@ def test_wald_size_on_white_noise_is_near_alpha():
     for _ in range(150):
         fit = WeightedLinearModel(problem.inertial, clean + rng.standard_normal(clean.shape) * sd).fit()
         for cand in testable:
-            rejections.append(S.wald(fit.residual, S.candidate_basis(cand, fit), (n, f), fit.rank).pvalue < 0.05)
+            rejections.append(W.wald(fit.residual, W.candidate_basis(cand, fit), (n, f), fit.rank).pvalue < 0.05)
     assert 0.02 <= np.mean(rejections) <= 0.085      # 900 tests: 5 % +- 2.5 SE
 
 
@@ -161,8 +161,8 @@ def test_absorbed_and_sparse_candidates_are_not_tested():
     # the narrowest Stribeck bump of the shape grid is never sampled: not tested
     stribeck = next(c for c in problem.candidates if c.kind == "stribeck_friction")
     fit = WeightedLinearModel(problem.inertial, tau).fit()
-    narrow = S.candidate_basis(stribeck.variants[0], fit)
-    assert S.wald(fit.residual, narrow, tau.shape, fit.rank).reason == "support"
+    narrow = W.candidate_basis(stribeck.variants[0], fit)
+    assert W.wald(fit.residual, narrow, tau.shape, fit.rank).reason == "support"
 
 
 # ----- seeded campaign subset ------------------------------------------------------------------

@@ -13,7 +13,9 @@ from click.testing import CliRunner
 
 from baseparams.cli import main
 from baseparams.identify import longrun
+from baseparams.diagnose import final as FN
 from baseparams.diagnose import selection as S
+from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.diagnose.workflow import diagnose, prepare
 from baseparams.dynamics.forces import evaluate
@@ -71,7 +73,7 @@ def test_wald_size_after_whitening_with_ar1_noise(puma):
         w = S.Whitening.of(fit.residual.reshape(n, f) / fit.weights)
         fit = WeightedLinearModel(w(P.inertial), w(data.tau)).fit()
         for c in cands:
-            t = S.wald(fit.residual, S.candidate_basis(w(c.columns), fit), (n, f), fit.rank)
+            t = W.wald(fit.residual, W.candidate_basis(w(c.columns), fit), (n, f), fit.rank)
             rejected.append(t.pvalue < 0.05)
     assert 0.02 <= np.mean(rejected) <= 0.09          # 300 tests: 5 % +- 3 SE
 
@@ -148,7 +150,7 @@ def test_simpler_form_is_tried_in_place_of_a_held_back_general_one(puma):
         tau = clean + force + C.noise(rng, clean.shape, sd, 0.9)
         chosen = S.select_whitened(P.inertial, tau, cands)
         held = S.Selection(chosen.steps, [0], {}, candidates=list(chosen.candidates), bars={0: 0.05 / 3})
-        found = S.simpler_in_place(P.inertial, tau, held, 0, [], 0.05)
+        found = FN.simpler_in_place(P.inertial, tau, held, 0, [], 0.05)
         if hidden:
             proposed.append(None if found is None else cands[found[0].chosen].kind)
         else:
@@ -1031,7 +1033,7 @@ def test_a_correction_whose_total_is_not_physical_is_held_back():
 
 
 def test_an_effects_test_added_to_a_model_is_the_selections_own(puma):
-    """``selection.added_test`` (an unsupported effect judged beside the final model) makes the
+    """``final.added_test`` (an unsupported effect judged beside the final model) makes the
     selection's own test: added to the model of the first step, with that step's filter and
     weights, it gives the chosen candidate's statistic and p value there."""
     P = puma.problem
@@ -1043,7 +1045,7 @@ def test_an_effects_test_added_to_a_model_is_the_selections_own(puma):
     chosen = S.select_whitened(P.inertial, tau, cands)
     first = chosen.steps[0]
     i = first.chosen
-    test = S.added_test(P.inertial, tau, chosen.candidates, [], i, first.whiten, first.fit.weights)
+    test = FN.added_test(P.inertial, tau, chosen.candidates, [], i, first.whiten, first.fit.weights)
     assert test is not None and test.tested
     np.testing.assert_allclose(test.stat, first.tests[i].stat, rtol=1e-6)
     assert abs(test.pvalue - first.tests[i].pvalue) <= 1e-6 + 1e-6 * first.tests[i].pvalue

@@ -12,6 +12,7 @@ from scipy.signal import lfilter
 
 from baseparams.identify import longrun
 from baseparams.diagnose import selection as S
+from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.diagnose.workflow import diagnose, prepare
 from baseparams.dynamics.forces import evaluate
@@ -79,8 +80,8 @@ def _rival_pair(n: int, cosine: float, along_a: float, along_b: float):
     u, w = q[:, 0], q[:, 1]
     A = u[:, None]
     B = (cosine * u + np.sqrt(1 - cosine ** 2) * w)[:, None]
-    a_beyond_b = S.conditional(A, B)[:, 0]
-    b_beyond_a = S.conditional(B, A)[:, 0]
+    a_beyond_b = W.conditional(A, B)[:, 0]
+    b_beyond_a = W.conditional(B, A)[:, 0]
     noise = rng.standard_normal(n)
     for v in (a_beyond_b, b_beyond_a, u, w):       # remove the noise's part on the plane
         noise -= v * (v @ noise) / (v @ v)
@@ -103,7 +104,7 @@ def test_rivals_that_add_over_each_other_must_clear_the_further_effect_bar(along
     n = 800
     A, B, residual = _rival_pair(n, 0.99, along, along)
     fit = WeightedLinearModel(np.zeros((n, 1, 0)), residual[:, None]).fit(np.ones(1))   # an empty model
-    t_ab = S.wald(residual - B @ (B.T @ residual), S.conditional(A, B), (n, 1), 1, lags=0)
+    t_ab = W.wald(residual - B @ (B.T @ residual), W.conditional(A, B), (n, 1), 1, lags=0)
     # White's (HC0) statistic on unit white noise: about along^2, chi-square's tail
     assert t_ab.stat == pytest.approx(along ** 2, rel=0.5)
     assert t_ab.pvalue == pytest.approx(stats.f.sf(t_ab.stat, 1, n - 2), rel=1e-9)
@@ -130,15 +131,15 @@ def test_sparse_direction_on_a_white_residual_gets_the_classical_test():
     X = _smooth(n)[:, 0, :]
     z = np.zeros(n)
     z[200:208] = [1.0, 3.0, 5.0, 6.0, 5.0, 3.0, 1.0, 0.5]
-    Q = S.orthonormal_basis(X, 1e-12)
-    U = S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    Q = W.orthonormal_basis(X, 1e-12)
+    U = W.orthonormal_basis(W.project_out(z[:, None], Q), W.ABSORB_TOL, reference=z[:, None])
     white = rng.standard_normal(n)
     louder = white * np.where((np.arange(n) >= 190) & (np.arange(n) < 220), 3.0, 1.0)
     for noise, local in ((white, False), (louder, True)):
         y = X @ [1.0, 2.0, -1.0] + 0.4 * z + noise
         e = y - Q @ (Q.T @ y)
-        assert S.wald(e, U, (n, 1), 3).reason == "support"
-        test = S.wald(e, U, (n, 1), 3, lags=0, sparse_if_white=True)       # the white branch
+        assert W.wald(e, U, (n, 1), 3).reason == "support"
+        test = W.wald(e, U, (n, 1), 3, lags=0, sparse_if_white=True)       # the white branch
         ols = sm.OLS(y, np.column_stack([X, z])).fit()
         squares = ols.resid ** 2
         padded = pd.Series(np.pad(squares, 12, mode="edge"))       # the end samples repeated
@@ -154,10 +155,10 @@ def test_sparse_direction_on_a_white_residual_gets_the_classical_test():
 
 def _six_samples(n: int, start: int) -> tuple[np.ndarray, np.ndarray]:
     """The small model's orthonormal basis, and a direction beyond it acting on 6 samples."""
-    Q = S.orthonormal_basis(_smooth(n)[:, 0, :], 1e-12)
+    Q = W.orthonormal_basis(_smooth(n)[:, 0, :], 1e-12)
     z = np.zeros(n)
     z[start:start + 6] = 1.0
-    return Q, S.orthonormal_basis(S.project_out(z[:, None], Q), S.ABSORB_TOL, reference=z[:, None])
+    return Q, W.orthonormal_basis(W.project_out(z[:, None], Q), W.ABSORB_TOL, reference=z[:, None])
 
 
 def test_sparse_direction_test_has_its_size_on_white_noise():
@@ -167,7 +168,7 @@ def test_sparse_direction_test_has_its_size_on_white_noise():
     rejections = []
     for _ in range(400):
         y = rng.standard_normal(n)
-        t = S.wald(y - Q @ (Q.T @ y), U, (n, 1), 3, sparse_if_white=True)
+        t = W.wald(y - Q @ (Q.T @ y), U, (n, 1), 3, sparse_if_white=True)
         if t.tested:
             rejections.append(t.pvalue <= 0.05)
     assert len(rejections) > 300 and 0.02 <= np.mean(rejections) <= 0.09
@@ -266,8 +267,8 @@ def test_sparse_direction_on_coloured_noise_has_its_size_with_the_stationary_var
     for _ in range(400):
         y = lfilter([0.8], [1.0, -0.6], rng.standard_normal(n))
         e = y - Q @ (Q.T @ y)
-        refused += S.wald(e, U, (n, 1), 3, sparse_if_white=True).reason == "support"
-        t = S.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
+        refused += W.wald(e, U, (n, 1), 3, sparse_if_white=True).reason == "support"
+        t = W.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
         if t.tested and t.lags > 0:
             rejections.append(t.pvalue <= 0.05)
     assert refused > 300 and len(rejections) > 300
@@ -290,7 +291,7 @@ def test_sparse_direction_where_the_noise_is_larger_keeps_its_size(rho, highest)
     for _ in range(400):
         y = lfilter([np.sqrt(1 - rho ** 2)], [1.0, -rho], rng.standard_normal(n)) * level
         e = y - Q @ (Q.T @ y)
-        t = S.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
+        t = W.wald(e, U, (n, 1), 3, sparse_if_white=True, sparse_if_coloured=True)
         assert t.tested
         rejections.append(t.pvalue <= 0.05)
         gamma = float(U[:, 0] @ e)

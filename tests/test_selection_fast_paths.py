@@ -8,6 +8,7 @@ from statsmodels.stats.sandwich_covariance import S_hac_simple
 
 from baseparams.identify import longrun
 from baseparams.diagnose import selection as S
+from baseparams.diagnose import wald as W
 from baseparams.recordings.data import zero_phase
 from baseparams.identify.linear import WeightedLinearModel
 
@@ -56,17 +57,17 @@ def test_one_column_basis_and_support_are_the_svd_ones():
     for size in (1.0, 1e-6, 1e-8, 0.0):
         column = rng.standard_normal((300, 1)) * size
         reference = rng.standard_normal((300, 1))
-        fast = S.orthonormal_basis(column, S.ABSORB_TOL, reference)
+        fast = W.orthonormal_basis(column, W.ABSORB_TOL, reference)
         u, s, _ = np.linalg.svd(column / np.linalg.norm(reference), full_matrices=False)
-        slow = u[:, s > S.ABSORB_TOL]
+        slow = u[:, s > W.ABSORB_TOL]
         assert fast.shape == slow.shape and np.allclose(np.abs(fast), np.abs(slow))
     basis = np.linalg.qr(rng.standard_normal((300, 3)) * np.linspace(0.01, 1, 300)[:, None])[0]
     w = (basis ** 2).reshape(100, 3, 3).sum(axis=1)
     w = w / w.sum(axis=0)
-    assert S.support(basis, (100, 3)) == pytest.approx(np.min(1 / np.sum(w ** 2, axis=0)))
+    assert W.support(basis, (100, 3)) == pytest.approx(np.min(1 / np.sum(w ** 2, axis=0)))
     spike = np.zeros((300, 1))
     spike[7] = 1.0
-    assert S.support(np.hstack([spike, np.full((300, 1), 300 ** -0.5)]), (100, 3)) == pytest.approx(1.0)
+    assert W.support(np.hstack([spike, np.full((300, 1), 300 ** -0.5)]), (100, 3)) == pytest.approx(1.0)
 
 
 def test_bases_projected_together_are_each_ones(monkeypatch):
@@ -82,10 +83,10 @@ def test_bases_projected_together_are_each_ones(monkeypatch):
              S.Candidate("spring", "q1", ("k", "kq0"), rng.standard_normal((n, f, 2))),
              S.Candidate("smooth", "q2", ("fc",), inside, (inside, rng.standard_normal((n, f, 1))),
                        ({"v": 1.0}, {"v": 2.0}), {"v": 1.0})]
-    for batch in (S.BATCH_BYTES, 8 * n * f):
-        monkeypatch.setattr(S, "BATCH_BYTES", batch)
+    for batch in (W.BATCH_BYTES, 8 * n * f):
+        monkeypatch.setattr(W, "BATCH_BYTES", batch)
         together = S.candidate_bases(cands, fit)
-        each = [[S.candidate_basis(c, fit)] if not c.variants else [S.candidate_basis(v, fit) for v in c.variants]
+        each = [[W.candidate_basis(c, fit)] if not c.variants else [W.candidate_basis(v, fit) for v in c.variants]
                 for c in cands]
         assert [[b.shape for b in forms] for forms in together] == [[(n * f, 1)], [(n * f, 2)], [(n * f, 0), (n * f, 1)]]
         for forms, expected in zip(together, each):
@@ -142,13 +143,13 @@ def test_complete_fit_grown_from_a_known_one_is_the_direct_fit():
     rho = S.Whitening(np.array([0.5, 0.2]))
     for whiten in (S._same, rho):
         first = [0, 1, 2]
-        known_fit, _ = S._complete(model, y, cands, first, whiten, weights)
+        known_fit, _ = S.complete_fit(model, y, cands, first, whiten, weights)
         known = (known_fit, [cands[i].columns for i in first])
         changed = list(cands)
         changed[2] = S.Candidate("offset", "q2", ("a",), rng.standard_normal((n, f, 1)))   # a new shape
         wanted = [2, 0, 4, 3]                                     # 1 taken out, 3 and 4 new, reordered
-        grown, offsets = S._complete(model, y, changed, wanted, whiten, weights, known)
-        direct, same = S._complete(model, y, changed, wanted, whiten, weights)
+        grown, offsets = S.complete_fit(model, y, changed, wanted, whiten, weights, known)
+        direct, same = S.complete_fit(model, y, changed, wanted, whiten, weights)
         assert S._extended(known, [changed[i].columns for i in wanted], 5, whiten, weights) is not None
         assert np.array_equal(offsets, same)
         assert np.allclose(grown.coefficients, direct.coefficients, rtol=1e-9)
@@ -253,27 +254,27 @@ def test_wald_tests_of_many_forms_at_once_are_each_ones(rho):
         if len(bases) in (2, 6):                  # a step: acts on a few samples only
             X[30:] = 0.0
         X -= Q @ (Q.T @ X)
-        bases.append(S.orthonormal_basis(X, S.ABSORB_TOL) if width else np.zeros((rows, 0)))
+        bases.append(W.orthonormal_basis(X, W.ABSORB_TOL) if width else np.zeros((rows, 0)))
         e = _ar(rng, n, f, rho).reshape(rows) + (X @ rng.standard_normal(width) * 0.1 if width else 0.0)
         residuals.append(e - Q @ (Q.T @ e))
     dofs = [dof + j for j in range(len(bases))]
     extra = [j % 2 for j in range(len(bases))]
     for sparse in (False, True):
-        tests = S.wald_each(residuals, bases, shape, dofs, None, extra, sparse_if_white=sparse,
+        tests = W.wald_each(residuals, bases, shape, dofs, None, extra, sparse_if_white=sparse,
                             sparse_if_coloured=sparse)
-        alone = [S.wald(e, b, shape, d, extra_df=x, sparse_if_white=sparse, sparse_if_coloured=sparse)
+        alone = [W.wald(e, b, shape, d, extra_df=x, sparse_if_white=sparse, sparse_if_coloured=sparse)
                  for e, b, d, x in zip(residuals, bases, dofs, extra)]
         assert [(t.df, t.reason, t.lags) for t in tests] == [(t.df, t.reason, t.lags) for t in alone]
         for t, a in zip(tests, alone):
             assert t.stat == pytest.approx(a.stat, rel=1e-9) and t.pvalue == pytest.approx(a.pvalue, rel=1e-8, abs=1e-300)
-    tests = S.wald_each(residuals, bases, shape, dofs, None, extra)
+    tests = W.wald_each(residuals, bases, shape, dofs, None, extra)
     assert [t.reason for t in tests] == ["", "", "support", "", "absorbed", "", "support"]
     for j in (0, 1, 3, 5):
         stat, p, lags = _dense_reference(residuals[j], bases[j], shape, dofs[j], None, extra[j])
         assert tests[j].lags == lags
         assert tests[j].stat == pytest.approx(stat, rel=1e-9) and tests[j].pvalue == pytest.approx(p, rel=1e-7)
     # one residual for all, a given window
-    shared = S.wald_each([residuals[0]], bases, shape, [dof], 4, [0])
+    shared = W.wald_each([residuals[0]], bases, shape, [dof], 4, [0])
     for j in (0, 1, 3, 5):
         stat, p, _ = _dense_reference(residuals[0], bases[j], shape, dof, 4)
         assert shared[j].stat == pytest.approx(stat, rel=1e-9) and shared[j].lags == 4
@@ -285,12 +286,12 @@ def test_encompassing_with_many_rivals_at_once_is_each_pairs():
     n, f = 250, 3
     rows = n * f
     residual = _ar(rng, n, f, 0.5).reshape(rows)
-    a = S.orthonormal_basis(rng.standard_normal((rows, 1)), S.ABSORB_TOL)
-    rivals = [S.orthonormal_basis(a + 0.3 * rng.standard_normal((rows, 1)), S.ABSORB_TOL),
-              S.orthonormal_basis(rng.standard_normal((rows, 2)), S.ABSORB_TOL), a.copy()]
-    together = S.encompassing_each(a, rivals, residual, (n, f), 5, sparse_if_coloured=True)
+    a = W.orthonormal_basis(rng.standard_normal((rows, 1)), W.ABSORB_TOL)
+    rivals = [W.orthonormal_basis(a + 0.3 * rng.standard_normal((rows, 1)), W.ABSORB_TOL),
+              W.orthonormal_basis(rng.standard_normal((rows, 2)), W.ABSORB_TOL), a.copy()]
+    together = W.encompassing_each(a, rivals, residual, (n, f), 5, sparse_if_coloured=True)
     for (t_ab, t_ba), b in zip(together, rivals):
-        o_ab, o_ba = S.encompassing(a, b, residual, (n, f), 5, sparse_if_coloured=True)
+        o_ab, o_ba = W.encompassing(a, b, residual, (n, f), 5, sparse_if_coloured=True)
         for t, o in ((t_ab, o_ab), (t_ba, o_ba)):
             assert (t.df, t.reason, t.lags) == (o.df, o.reason, o.lags)
             assert t.stat == pytest.approx(o.stat, rel=1e-9)

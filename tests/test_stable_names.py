@@ -14,7 +14,8 @@ from baseparams.cli import main
 from baseparams.diagnose import workflow as D
 from baseparams.identify.impossible import PHYSICAL_SCALE, beyond_scale
 from baseparams.recordings.recording import read_data
-from baseparams.diagnose.selection import Candidate, Step, Test as WaldTest
+from baseparams.diagnose.selection import Candidate, Step
+from baseparams.diagnose.wald import Test as WaldTest
 from baseparams.io.loader import resolve
 
 from test_diagnose import _data, _problem

@@ -16,7 +16,7 @@ import pytest
 from baseparams.diagnose.workflow import reduced_model
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.identify.longrun import long_run_each
-from baseparams.diagnose.selection import orthonormal_basis
+from baseparams.diagnose.wald import orthonormal_basis
 from baseparams.numeric.linalg import svd
 
 NUMPY_SVD = np.linalg.svd

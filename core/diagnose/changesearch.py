@@ -11,7 +11,8 @@ from scipy.signal import lfilter
 from scipy.special import fdtrc
 
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.diagnose.selection import Candidate, holm, orthonormal_basis, project_out, wilson_hilferty
+from baseparams.diagnose.selection import Candidate
+from baseparams.diagnose.wald import holm, orthonormal_basis, project_out, wilson_hilferty
 
 # With nothing named, the rest of the difference must be significant at alpha / UNEXPLAINED_BAR
 # to call it unexplained (the first step's Holm test already spent alpha on "nothing changed").

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from baseparams.diagnose.derived import ROUNDING   # a column this much smaller than the largest is zero
-from baseparams.diagnose.selection import orthonormal_basis, project_out
+from baseparams.diagnose.wald import orthonormal_basis, project_out
 
 # a direction of the scaled columns below this fraction of the largest is not seen (the
 # fits' own rank tolerance, baseparams.identify.linear.RANK_TOL)

@@ -1,33 +1,15 @@
-"""Statistical selection of missing effects: forward steps of Wald tests with a
-heteroscedasticity-and-autocorrelation-consistent (HAC) covariance, Holm's correction over
-the candidates, and encompassing tests that decide whether the winner is named or reported
-as ambiguous with its rivals.
+"""Statistical selection of missing effects: forward steps of Wald tests (:mod:`.wald`: a
+heteroscedasticity-and-autocorrelation-consistent covariance), Holm's correction over the
+candidates, and encompassing tests that decide whether the winner is named or reported as
+ambiguous with its rivals; then backward passes given the complete model.
 
 Everything works on the weighted, stacked rows of the model (sample-major: the f
 coordinates of sample 1, then of sample 2 ...). Each coordinate's rows are divided by its
 noise level estimated from the current model's residual (Gautier's weighting), so a
 coordinate with a large torque does not drown the others.
 
-Why these choices:
+Why the steps are made so (the tests' own reasons: :mod:`.wald`):
 
-- A candidate's columns are first projected on the orthogonal complement of the current
-  model (Frisch-Waugh-Lovell): the test then sees only what the candidate adds, and a
-  candidate the model absorbs (rotor inertia on a joint whose inertia is already a base
-  parameter; an offset once a spring on the same independent coordinate is in) has no
-  direction left and is not tested at all (``absorbed``).
-- Wald, not score (LM), statistics: with a strong missing effect the LM statistic's HAC
-  variance is computed from a residual that still contains the effect, which bounds the
-  statistic near N / lags and makes every correlated candidate look alike. The Wald
-  statistic uses the residual after the candidate is added, so the true effect stands out.
-- The HAC covariance sums each sample's scores over its coordinates and applies the
-  Newey-West (Bartlett) kernel over time (Driscoll-Kraay), with statsmodels'
-  ``S_hac_simple``. The lag window is at least the Newey-West rule 4 (N/100)^(2/9) and at
-  least the lag where the residual's autocorrelation falls inside its 95 % band: oversampled,
-  low-pass-filtered residuals are correlated over many samples and a naive F test would
-  reject far too often.
-- p values from F(r, dof) (r the candidate's directions, dof the rows left), ranked by the
-  Wilson-Hilferty normal equivalent of the statistic, which does not saturate at p = 0 and
-  compares candidates with different numbers of columns.
 - After the forward steps, two backward passes given the complete model (its residual is
   then white): an ambiguous group formed because a comparison inside it could not be made
   (:func:`regroup`) is compared again, and a named effect that no longer clears the bar it
@@ -38,18 +20,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.special import fdtrc
 from scipy.optimize import minimize_scalar
 
-from baseparams.identify.longrun import hac_lags, hac_lags_each, local_power, long_run_each, stationary_variance
 from baseparams.identify.linear import LinearFit as Fit, Reduced, WeightedLinearModel
+from baseparams.identify.longrun import hac_lags
 from baseparams.identify.weighting import TOLERANCE
-from baseparams.numeric.linalg import svd
-from baseparams.numeric.rank import numerical_rank
+from baseparams.diagnose.wald import (NOT_TESTED, Test, candidate_basis, column_bases, encompassing,
+                                      encompassing_each, correlation, holm, wald, wald_each)
 
-# A candidate direction that keeps less than ABSORB_TOL of its (unit) norm after the
-# current model is projected out is absorbed by the model.
-ABSORB_TOL = 1e-7
 MAX_STEPS = 12
 # Rivals are confusable with the winner only when what they explain is this correlated: two
 # weak candidates that explain different things, neither adding over the other (on a residual
@@ -59,32 +37,6 @@ CONFUSABLE_CORRELATION = 0.5
 # Between steps the noise weights move little: refitted until no SD changes by 2 %, not 0.1 %
 # (a test statistic moves by as little; half the weighted fits of a diagnosis).
 STEP_TOLERANCE = 0.02
-# The tests are asymptotic in the number of samples a candidate acts on: a candidate whose
-# directions spread over fewer samples than this fraction of the data (a Stribeck bump
-# sampled at a few zero crossings) is not tested (its statistic would be one spike).
-MIN_SUPPORT = 0.05
-# The most bytes of candidate columns projected off the model, or of directions tested, at once.
-BATCH_BYTES = 64 << 20
-
-
-@dataclass(frozen=True)
-class Test:
-    """A Wald test: statistic, degrees of freedom (directions tested), p value, and the
-    Wilson-Hilferty normal equivalent ``z`` used for ranking; ``lags`` of the HAC window."""
-    stat: float
-    df: int
-    pvalue: float
-    z: float
-    lags: int = 0
-    reason: str = ""              # why not tested: "absorbed" or "support"
-
-    @property
-    def tested(self) -> bool:
-        return self.df > 0
-
-
-NOT_TESTED = Test(0.0, 0, 1.0, -np.inf, reason="absorbed")
-TOO_SPARSE = Test(0.0, 0, 1.0, -np.inf, reason="support")
 
 
 @dataclass(frozen=True)
@@ -180,250 +132,6 @@ class Selection:
         return self.added + self.companions
 
 
-# ----- linear algebra --------------------------------------------------------------------
-def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | None = None) -> np.ndarray:
-    """An orthonormal basis of the range of ``matrix`` (rows, k): directions whose singular
-    value exceeds ``tol`` times the norm of the corresponding ``reference`` columns (the
-    columns before a projection; default: the largest singular value)."""
-    if matrix.shape[1] == 0:
-        return np.zeros((matrix.shape[0], 0))
-    if matrix.shape[1] == 1:          # one column: its direction (an SVD call costs 10 times more)
-        column = matrix[:, 0]
-        norm = float(np.linalg.norm(column))
-        size = norm if reference is None else float(np.linalg.norm(reference))
-        if norm == 0.0 or (reference is not None and norm <= tol * (size if size > 0 else 1.0)):
-            return np.zeros((matrix.shape[0], 0))
-        return (column / norm)[:, None]
-    if reference is not None:
-        scale = np.linalg.norm(reference, axis=0)
-        scale[scale == 0] = 1.0
-        scaled = matrix / scale
-        u, s, _ = svd(scaled, full_matrices=False)
-        keep = s > tol
-    else:
-        scale = np.linalg.norm(matrix, axis=0)
-        scale[scale == 0] = 1.0
-        u, s, _ = svd(matrix / scale, full_matrices=False)
-        keep = np.arange(s.size) < numerical_rank(tol=tol, singular_values=s)
-    return u[:, keep]
-
-
-def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
-    """matrix minus its projection on the (orthonormal) ``basis``."""
-    if basis.shape[1] == 0:
-        return matrix
-    return matrix - basis @ (basis.T @ matrix)
-
-
-def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
-    """The fewest samples any direction of ``basis`` effectively acts on (participation
-    ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
-    return float(support_each(basis[None], shape)[0])
-
-
-def support_each(bases: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """:func:`support` of each of m bases (m, rows, r) of one width."""
-    n, f = shape
-    b = bases.reshape(len(bases), n, f, -1)
-    w = np.einsum("mtjr,mtjr->mtr", b, b)
-    total, squares = w.sum(axis=1), np.einsum("mtr,mtr->mr", w, w)
-    return np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf).min(axis=1)
-
-
-def wilson_hilferty(stat: float, df: int) -> float:
-    """The normal deviate with the same upper tail as chi2(df) at ``stat`` (approximately)."""
-    if df <= 0:
-        return -np.inf
-    c = 2.0 / (9.0 * df)
-    return float(((max(stat, 0.0) / df) ** (1.0 / 3.0) - (1.0 - c)) / np.sqrt(c))
-
-
-def wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int,
-         lags: int | None = None, sparse_if_white: bool = False, extra_df: int = 0,
-         prewhiten: bool = True, sparse_if_coloured: bool = False) -> Test:
-    """Wald test that the orthonormal directions ``basis`` (rows, r), orthogonal to the null
-    model, have zero coefficients, given the null model's ``residual`` (rows,). HAC covariance:
-    per-sample scores summed over the f coordinates, Bartlett kernel over time.
-
-    Directions acting on fewer samples than MIN_SUPPORT are not tested (their HAC variance
-    would rest on a few scores), unless ``sparse_if_white`` and the residual is white (HAC
-    window 0): then the classical variance sigma^2 I (the directions are orthonormal and
-    orthogonal to the null model, the weighted noise has one level per row) is exact for
-    white noise however few samples the directions act on (see :func:`resolve`); and, with
-    ``sparse_if_coloured`` too, on a coloured residual the variance from its autocovariance
-    over all samples (:func:`~baseparams.identify.longrun.stationary_variance`); either
-    scaled up by the noise's local power where the direction acts
-    (:func:`~baseparams.identify.longrun.local_power`) when that is above its average."""
-    return wald_each([residual], [basis], shape, [dof], lags, [extra_df], sparse_if_white, sparse_if_coloured,
-                     prewhiten)[0]
-
-
-def wald_each(residuals: Sequence[np.ndarray], bases: Sequence[np.ndarray], shape: tuple[int, int],
-              dofs: Sequence[int], lags: int | None, extra_df: Sequence[int], sparse_if_white: bool = False,
-              sparse_if_coloured: bool = False, prewhiten: bool = True) -> list[Test]:
-    """:func:`wald` of each basis against its residual (one residual for all when
-    ``residuals`` has one), with its null model's ``dofs`` and its ``extra_df``; the bases of
-    one width that are not sparse (most: a friction or offset column) all at once, in matrix
-    form (BATCH_BYTES at a time). Why: a step tests every form of every candidate (about 130
-    on the TX40) and compares the winner with each rival, and one call per form was a fifth
-    of diagnose's time, most of it in small numpy calls."""
-    n, f = shape
-    rows = n * f
-    count = len(bases)
-    residual_of = (lambda i: residuals[0]) if len(residuals) == 1 else (lambda i: residuals[i])
-    dof_of = (lambda i: dofs[0]) if len(dofs) == 1 else (lambda i: dofs[i])
-    tests: list[Test | None] = [None] * count
-    for r in sorted({b.shape[1] for b in bases}):
-        group = [i for i in range(count) if bases[i].shape[1] == r]
-        if r == 0:
-            for i in group:
-                tests[i] = NOT_TESTED
-            continue
-        per_batch = max(1, BATCH_BYTES // (8 * rows * r))
-        for first in range(0, len(group), per_batch):
-            members = group[first:first + per_batch]
-            B = np.stack([bases[i] for i in members])                            # (m, rows, r)
-            dense = support_each(B, shape) >= max(MIN_SUPPORT * n, 10)
-            for i, is_dense in zip(members, dense):
-                if not is_dense:
-                    tests[i] = (_sparse_test(residual_of(i), bases[i], shape, dof_of(i), lags, sparse_if_coloured)
-                                if sparse_if_white else TOO_SPARSE)
-            chosen = [i for i, is_dense in zip(members, dense) if is_dense]
-            if chosen:
-                R = np.stack([residual_of(i) for i in chosen])
-                results = _dense_tests(R, B[dense], shape, np.array([dof_of(i) for i in chosen]), lags,
-                                       np.array([extra_df[0] if len(extra_df) == 1 else extra_df[i] for i in chosen]),
-                                       prewhiten)
-                for i, test in zip(chosen, results):
-                    tests[i] = test
-    return tests                                                                     # type: ignore[return-value]
-
-
-def _dense_tests(R: np.ndarray, B: np.ndarray, shape: tuple[int, int], dofs: np.ndarray, lags: int | None,
-                 extra_df: np.ndarray, prewhiten: bool) -> list[Test]:
-    """HAC Wald tests of m sets of r directions B (m, rows, r) that are not sparse, each
-    against its residual R (m, rows) (:func:`wald`)."""
-    n, f = shape
-    m, rows, r = B.shape
-    gamma = np.einsum("mxr,mx->mr", B, R)
-    augmented = R - np.einsum("mxr,mr->mx", B, gamma)
-    windows = (hac_lags_each(np.moveaxis(augmented.reshape(m, n, f), 0, 2)) if lags is None
-               else np.full(m, lags, dtype=int))
-    scores = np.einsum("mtjr,mtj->mtr", B.reshape(m, n, f, r), augmented.reshape(m, n, f))
-    left = np.maximum(rows - dofs - r, 1)
-    S = long_run_each(scores, windows, prewhiten) * (rows / left)[:, None, None]     # small-sample factor
-    white = np.nonzero((windows == 0) & prewhiten)[0]
-    if white.size:
-        # no autocorrelation left: White's variance, but never below the classical one
-        # (sigma^2 I on orthonormal directions), which White's underestimates where few
-        # samples carry a direction (liberal in the tails: 1.7 times at 1 % on the PUMA)
-        classical = np.einsum("mx,mx->m", augmented[white], augmented[white]) / left[white]
-        values, vectors = np.linalg.eigh(S[white])
-        S[white] = (vectors * np.maximum(values, classical[:, None])[:, None, :]) @ np.swapaxes(vectors, 1, 2)
-    try:
-        stat = np.einsum("mr,mr->m", gamma, np.linalg.solve(S, gamma[:, :, None])[:, :, 0])
-    except np.linalg.LinAlgError:                   # a singular one among them: each alone
-        stat = np.array([_quadratic(g, V) for g, V in zip(gamma, S)])
-    k = r + extra_df              # a shape fitted over a grid: one more degree of freedom each
-    denominator = np.maximum(n - np.ceil(dofs / f).astype(int) - r, 1)   # samples left: scores are per sample
-    pvalues = fdtrc(k, denominator, stat / k)      # F upper tail (stats.f.sf, 40x faster)
-    return [Test(float(s_), r, float(p), wilson_hilferty(float(s_), int(kk)), int(L))
-            for s_, p, kk, L in zip(stat, pvalues, k, windows)]
-
-
-def _sparse_test(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: int, lags: int | None,
-                 sparse_if_coloured: bool) -> Test:
-    """:func:`wald` of directions acting on few samples: the classical variance on a white
-    residual, the stationary one on a coloured residual (with ``sparse_if_coloured``, else
-    not tested), scaled by the noise's local power where they act."""
-    n, f = shape
-    r = basis.shape[1]
-    gamma = basis.T @ residual
-    augmented = residual - basis @ gamma
-    if lags is None:
-        lags = hac_lags(augmented.reshape(n, f))
-    rows = n * f
-    left = max(rows - dof - r, 1)
-    if lags > 0 and not sparse_if_coloured:
-        return TOO_SPARSE
-    noise, directions = augmented.reshape(n, f), basis.reshape(n, f, r)
-    if lags > 0:
-        V = stationary_variance(noise, directions, lags, left / f, truncated=True)
-    else:
-        V = float(augmented @ augmented) / left * np.eye(r)
-    # each direction's variance scaled up by the noise's local power where it acts, when
-    # that is above the residual's average: a direction where the residual is larger
-    # (at velocity reversals, under load) is not named on that excess
-    power = local_power(noise, lags)
-    energy = directions ** 2
-    factor = np.sqrt(np.maximum(np.einsum("tj,tjr->r", power, energy) / energy.sum(axis=(0, 1)), 1.0))
-    stat = _quadratic(gamma / factor, V)
-    pvalue = float(fdtrc(r, left, stat / r))
-    return Test(stat, r, pvalue, wilson_hilferty(stat, r), lags)
-
-
-def _quadratic(gamma: np.ndarray, V: np.ndarray) -> float:
-    """gamma' V^-1 gamma (the pseudo-inverse when V is singular)."""
-    try:
-        return float(gamma @ np.linalg.solve(V, gamma))
-    except np.linalg.LinAlgError:
-        return float(gamma @ np.linalg.pinv(V) @ gamma)
-
-
-def candidate_basis(candidate: "Candidate | np.ndarray", fit: "Fit | Reduced") -> np.ndarray:
-    """The candidate's (or columns') directions beyond the current model (weighted, orthonormal)."""
-    columns = candidate.columns if isinstance(candidate, Candidate) else candidate
-    n, f, c = columns.shape
-    Z = (columns * fit.weights[None, :, None]).reshape(n * f, c)
-    return orthonormal_basis(fit.orthogonal(Z), ABSORB_TOL, reference=Z)
-
-
-def conditional(first: np.ndarray, given: np.ndarray) -> np.ndarray:
-    """The directions of ``first`` beyond ``given`` (both orthonormal, beyond the model)."""
-    return orthonormal_basis(project_out(first, given), ABSORB_TOL, reference=first)
-
-
-def encompassing(a: np.ndarray, b: np.ndarray, residual: np.ndarray, shape: tuple[int, int],
-                 dof: int, sparse_if_coloured: bool = False) -> tuple[Test, Test]:
-    """Encompassing tests of two sets of directions (orthonormal, beyond the model whose
-    ``residual`` and ``dof`` are given): (what a adds over b, what b adds over a), each a
-    Wald test on the residual with the other's directions in."""
-    return encompassing_each(a, [b], residual, shape, dof, sparse_if_coloured)[0]
-
-
-def encompassing_each(a: np.ndarray, rivals: Sequence[np.ndarray], residual: np.ndarray, shape: tuple[int, int],
-                      dof: int, sparse_if_coloured: bool = False) -> list[tuple[Test, Test]]:
-    """:func:`encompassing` of ``a`` with each rival's directions, all tests made at once
-    (:func:`wald_each`)."""
-    residuals, bases, dofs = [], [], []
-    for b in rivals:
-        residuals += [residual - b @ (b.T @ residual), residual - a @ (a.T @ residual)]
-        bases += [conditional(a, b), conditional(b, a)]
-        dofs += [dof + b.shape[1], dof + a.shape[1]]
-    tests = wald_each(residuals, bases, shape, dofs, None, [0], sparse_if_white=True,
-                      sparse_if_coloured=sparse_if_coloured)
-    return [(tests[2 * j], tests[2 * j + 1]) for j in range(len(rivals))]
-
-
-def correlation(residual: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    """Correlation of what ``a`` and ``b`` each explain of the residual."""
-    fa, fb = a @ (a.T @ residual), b @ (b.T @ residual)
-    na, nb = np.linalg.norm(fa), np.linalg.norm(fb)
-    return float(fa @ fb / (na * nb)) if na > 0 and nb > 0 else 0.0
-
-
-def holm(pvalues: Sequence[float]) -> np.ndarray:
-    """Holm's step-down adjusted p values (statsmodels' ``multipletests(method="holm")`` gives
-    the same, tests/test_diagnose.py checks it, but it runs ``gc.collect()`` on every call,
-    which in a process holding sympy costs more than all of a step's tests)."""
-    p = np.asarray(pvalues, dtype=float)
-    order = np.argsort(p)
-    m = len(p)
-    stepped = np.maximum.accumulate(np.minimum(p[order] * (m - np.arange(m)), 1.0))
-    out = np.empty(m)
-    out[order] = stepped
-    return out
-
 
 # ----- coloured residuals: Prais-Winsten whitening --------------------------------------------
 # The largest AR(1) coefficient whitening uses (beyond it the filter is a plain difference).
@@ -498,19 +206,6 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     steps only."""
     n, f, _ = model.shape
     filtered: Callable[[np.ndarray], np.ndarray] = whiten or _same
-    candidates = list(candidates)             # shaped ones are fixed at their variant on entry
-    shaped: dict[int, Candidate] = {}         # ... and their every variant kept here
-    added: list[int] = []
-    steps: list[Step] = []
-    ambiguous: dict = {}
-    companions: list[int] = []
-    removed: list[tuple[int, Test, float]] = []
-    bars: dict[int, float] = {}               # named index -> the Bonferroni bar it entered by
-    regrouped: set[int] = set()               # ambiguous groups already resolved again
-    regroups: list[tuple[int, int]] = []
-    previous = None
-    touched: set = set()                      # places where the model changed since the last step
-    whitened: dict[int, tuple[Candidate, Candidate]] = {}
     # Coloured noise (whitened data): a direction acting on few samples is tested with the
     # stationary variance, for entry and in comparisons. Why: refused, the truth never
     # entered and a stand-in took its place (a four-bar's gear loss, whitened, acts on 4 % of
@@ -519,122 +214,160 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     # the other joint ended ambiguous in 9 of 20 although Coulomb added p 1e-173 over it. On
     # white noise a refused comparison waits for the complete model (:func:`regroup`).
     coloured = whiten is not None
+    # the selection so far, grown in place; shaped candidates are fixed at their variant on entry
+    state = Selection([], [], {}, candidates=list(candidates)) if resume is None else _resumed(resume)
+    touched: set = set()                      # places where the model changed since the last step
     if resume is not None:
-        candidates, shaped = list(resume.candidates), dict(resume.shaped)
-        added, steps, companions = list(resume.added), list(resume.steps), list(resume.companions)
-        ambiguous = {k: list(v) for k, v in resume.ambiguous.items()}
-        removed, regroups = list(resume.removed), list(resume.regrouped)
-        bars, regrouped = dict(resume.bars), set(resume.resolved)
         touched = {"all"}                     # every shape is chosen again under the new filter
-        max_steps = len(steps) + max_steps
+        max_steps = len(state.steps) + max_steps
+    previous = None
     known: KnownFit | None = None             # the last step's fit, which the next complete fit extends
-    while len(steps) < max_steps:
-        complete = refine_shapes(model, y, candidates, added + companions, shaped, previous, filtered, touched,
-                                 known)
+    whitened: dict[int, tuple[Candidate, Candidate]] = {}
+    while len(state.steps) < max_steps:
+        candidates, in_model = state.candidates, state.in_model
+        complete = refine_shapes(model, y, candidates, in_model, state.shaped, previous, filtered, touched, known)
         touched = set()
-        blocks = [candidates[i].columns for i in added + companions]
+        blocks = [candidates[i].columns for i in in_model]
         if complete is None and known is not None and previous is not None:
             complete = _extended(known, blocks, model.shape[-1], filtered, previous)
         # the step's fit, at the weights its noise levels move to, refitted from the complete one
         fit = WeightedLinearModel(filtered(np.concatenate([model] + blocks, axis=-1)), filtered(y)).fit(
             start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE, near=complete)
         previous, known = fit.weights, (fit, blocks)
-        dof = fit.rank
-        excluded = set(added) | set(companions) | {i for i, _, _ in removed}
-        bases, tests, variant = {}, [], {}
-        lags = hac_lags(fit.residual.reshape(n, f))     # one window per step: candidates barely change it
-        seen: dict[int, Candidate] = {}
-        for i, cand in enumerate(candidates):
-            if i in excluded:
-                continue
-            if whiten is None:
-                seen[i] = cand
-            else:                                 # whitened once a pass (until its shape changes)
-                if i not in whitened or whitened[i][0] is not cand:
-                    whitened[i] = (cand, whiten.candidate(cand))
-                seen[i] = whitened[i][1]
-        forms = dict(zip(seen, candidate_bases(list(seen.values()), fit)))
-        # every form of every candidate tested at once; whitened, a step (Coulomb friction)
-        # is a few spikes: tested with the classical variance when the whitened residual is
-        # white, else with the stationary one
-        flat = [basis for i in seen for basis in forms[i]]
-        extra = [seen[i].extra_df if seen[i].variants else 0 for i in seen for _ in forms[i]]
-        each = wald_each([fit.residual], flat, (n, f), [dof], lags, extra, sparse_if_white=coloured,
-                         sparse_if_coloured=coloured)
-        form_tests, at = {}, 0
-        for i in seen:
-            form_tests[i], at = each[at:at + len(forms[i])], at + len(forms[i])
-        for i in range(len(candidates)):
-            if i not in seen:
-                tests.append(NOT_TESTED)
-                continue
-            bases[i], test, variant[i] = best_variant(seen[i], fit, (n, f), dof, bases=forms[i], tests=form_tests[i])
-            tests.append(test)
+        excluded = set(state.added) | set(state.companions) | {i for i, _, _ in state.removed}
+        seen = _seen(candidates, excluded, whiten, whitened)
+        tests, bases, variant = _tested(candidates, seen, fit, (n, f), coloured)
         tested = [i for i, t in enumerate(tests) if t.tested]
         adjusted = np.ones(len(candidates))
         if tested:
             adjusted[tested] = holm([tests[i].pvalue for i in tested])
         step = Step(tests, adjusted, fit, filtered)
-        steps.append(step)
+        state.steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
         if not significant:
-            if len(steps) >= max_steps:    # no step left to test a changed model: this fit is the last
+            if len(state.steps) >= max_steps:    # no step left to test a changed model: this fit is the last
                 break
-            change = regroup(model, y, candidates, added, companions, ambiguous, bars, fit.weights,
-                             alpha, regrouped, filtered)
+            change = regroup(model, y, candidates, state.added, state.companions, state.ambiguous, state.bars,
+                             fit.weights, alpha, state.resolved, filtered)
             if change is not None:
-                old, winner, confusable, beaten = change
-                regroups.append((old, winner))
-                for r in ambiguous.pop(old):
-                    companions.remove(r.index)
-                added[added.index(old)] = winner
-                touched |= {candidates[old].coordinate, candidates[winner].coordinate}
-                bars[winner] = bars[old]
-                regrouped.add(winner)
-                entered = next(s for s in steps if s.chosen == old)
-                opened = old if entered.strongest is None else entered.strongest
-                entered.chosen, entered.confusable, entered.beaten = winner, confusable, beaten
-                entered.strongest, entered.over = (None, None) if winner == opened else (
-                    opened, next((r.winner_over_rival for r in beaten if r.index == opened), None))
-                if confusable:
-                    ambiguous[winner] = confusable
-                    companions.extend(r.index for r in confusable)
+                touched |= _regrouped(state, *change)
                 continue
-            out = eliminate(model, y, candidates, added, companions, ambiguous, bars, fit.weights, filtered,
-                            complete=fit)    # this step's fit: the final model at these weights
+            out = eliminate(model, y, candidates, state.added, state.companions, state.ambiguous, state.bars,
+                            fit.weights, filtered, complete=fit)    # this step's fit: the final model at these weights
             if out is None:
                 break
-            removed.append(out)
-            added.remove(out[0])
+            state.removed.append(out)
+            state.added.remove(out[0])
             touched.add(candidates[out[0]].coordinate)
             continue
         strongest = max(significant, key=lambda i: tests[i].z)
         rivals = [i for i in tested if tests[i].pvalue <= alpha and i != strongest]
-        winner, confusable, beaten = resolve(strongest, rivals, bases, fit, (n, f), dof, alpha,
+        winner, confusable, beaten = resolve(strongest, rivals, bases, fit, (n, f), fit.rank, alpha,
                                              nested_level=alpha / len(tested),
-                                             generalises=_generalises(candidates), sparse_if_coloured=coloured)
+                                             generalises=generalisation(candidates), sparse_if_coloured=coloured)
         step.chosen, step.confusable, step.beaten = winner, confusable, beaten
         if winner != strongest:                   # a rival named for the signal the strongest cleared Holm on
             step.strongest = strongest
-            step.over = encompassing(bases[winner], bases[strongest], fit.residual, (n, f), dof, coloured)[0]
-        for i in [winner] + [r.index for r in confusable]:
-            if candidates[i].variants:            # its shape is chosen again at each step (refine_shapes)
-                shaped[i] = candidates[i]
-                candidates[i] = candidates[i].at(variant[i])
-        added.append(winner)
-        touched |= {candidates[i].coordinate for i in [winner] + [r.index for r in confusable]}
-        bars[winner] = alpha / len(tested)
-        if confusable:
-            ambiguous[winner] = confusable
-            companions.extend(r.index for r in confusable)
-    return Selection(steps, added, ambiguous, companions, removed, regroups, candidates, shaped, bars, regrouped)
+            step.over = encompassing(bases[winner], bases[strongest], fit.residual, (n, f), fit.rank, coloured)[0]
+        touched |= _entered(state, winner, confusable, variant, alpha / len(tested))
+    return state
 
+
+def _resumed(selection: Selection) -> Selection:
+    """A copy of ``selection`` to continue (its lists, dicts and sets new: it stays as it was)."""
+    return Selection(list(selection.steps), list(selection.added),
+                     {k: list(v) for k, v in selection.ambiguous.items()}, list(selection.companions),
+                     list(selection.removed), list(selection.regrouped), list(selection.candidates),
+                     dict(selection.shaped), dict(selection.bars), set(selection.resolved))
+
+
+def _seen(candidates: Sequence[Candidate], excluded: set[int], whiten: "Whitening | None",
+          whitened: dict[int, tuple[Candidate, Candidate]]) -> dict[int, Candidate]:
+    """The candidates a step tests (index -> candidate, those not ``excluded``) as its filter
+    sees them: whitened once a pass, until a shape changes (``whitened`` keeps them)."""
+    seen: dict[int, Candidate] = {}
+    for i, cand in enumerate(candidates):
+        if i in excluded:
+            continue
+        if whiten is None:
+            seen[i] = cand
+        else:
+            if i not in whitened or whitened[i][0] is not cand:
+                whitened[i] = (cand, whiten.candidate(cand))
+            seen[i] = whitened[i][1]
+    return seen
+
+
+def _tested(candidates: Sequence[Candidate], seen: dict[int, Candidate], fit: Fit, shape: tuple[int, int],
+            coloured: bool) -> tuple[list[Test], dict[int, np.ndarray], dict[int, int]]:
+    """Every candidate's test against a step's ``fit`` (NOT_TESTED unless ``seen``), with the
+    basis and variant index of each seen one's best form. Every form of every candidate is
+    tested at once; whitened (``coloured``), a step (Coulomb friction) is a few spikes: tested
+    with the classical variance when the whitened residual is white, else with the stationary one."""
+    n, f = shape
+    lags = hac_lags(fit.residual.reshape(n, f))     # one window per step: candidates barely change it
+    forms = dict(zip(seen, candidate_bases(list(seen.values()), fit)))
+    flat = [basis for i in seen for basis in forms[i]]
+    extra = [seen[i].extra_df if seen[i].variants else 0 for i in seen for _ in forms[i]]
+    each = wald_each([fit.residual], flat, (n, f), [fit.rank], lags, extra, sparse_if_white=coloured,
+                     sparse_if_coloured=coloured)
+    form_tests, at = {}, 0
+    for i in seen:
+        form_tests[i], at = each[at:at + len(forms[i])], at + len(forms[i])
+    tests: list[Test] = []
+    bases, variant = {}, {}
+    for i in range(len(candidates)):
+        if i not in seen:
+            tests.append(NOT_TESTED)
+            continue
+        bases[i], test, variant[i] = best_variant(seen[i], fit, (n, f), fit.rank, bases=forms[i], tests=form_tests[i])
+        tests.append(test)
+    return tests, bases, variant
+
+
+def _regrouped(state: Selection, old: int, winner: int, confusable: list[Rival], beaten: list[Rival]) -> set[str]:
+    """An ambiguous group resolved again (:func:`regroup`) put into ``state``: ``winner`` in the
+    old head's place, at its bar, and the step that entered the group rewritten. Returns the
+    places where the model changed."""
+    state.regrouped.append((old, winner))
+    for r in state.ambiguous.pop(old):
+        state.companions.remove(r.index)
+    state.added[state.added.index(old)] = winner
+    state.bars[winner] = state.bars[old]
+    state.resolved.add(winner)
+    entered = next(s for s in state.steps if s.chosen == old)
+    opened = old if entered.strongest is None else entered.strongest
+    entered.chosen, entered.confusable, entered.beaten = winner, confusable, beaten
+    entered.strongest, entered.over = (None, None) if winner == opened else (
+        opened, next((r.winner_over_rival for r in beaten if r.index == opened), None))
+    if confusable:
+        state.ambiguous[winner] = confusable
+        state.companions.extend(r.index for r in confusable)
+    return {state.candidates[old].coordinate, state.candidates[winner].coordinate}
+
+
+def _entered(state: Selection, winner: int, confusable: list[Rival], variant: dict[int, int], bar: float) -> set[str]:
+    """A step's ``winner`` (and its confusable group, as companions) put into ``state`` at the
+    Bonferroni ``bar`` it cleared; shaped ones fixed at their tested variant (their shape is
+    chosen again at each step: :func:`refine_shapes`). Returns the places where the model changed."""
+    candidates = state.candidates
+    group = [winner] + [r.index for r in confusable]
+    for i in group:
+        if candidates[i].variants:
+            state.shaped[i] = candidates[i]
+            candidates[i] = candidates[i].at(variant[i])
+    state.added.append(winner)
+    state.bars[winner] = bar
+    if confusable:
+        state.ambiguous[winner] = confusable
+        state.companions.extend(r.index for r in confusable)
+    return {candidates[i].coordinate for i in group}
 
 # kinds that act on a body, not a coordinate: a kind generalising them may act anywhere
 BODY_KINDS = ("mass", "body")
 
 
-def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
+def generalisation(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
     """Whether candidate a's kind generalises candidate b's on the same coordinate (or on the
     body b acts on: cogging on a joint imitates the gravity of a mass carried beyond it)."""
     def relation(a: int, b: int) -> bool:
@@ -643,58 +376,13 @@ def _generalises(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
     return relation
 
 
-def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, held: int,
-                     kept: Sequence[int], alpha: float) -> tuple[Step, int] | None:
-    """The simpler kinds a held-back effect generalises on its coordinate (cogging: an offset
-    or a spring), tested in its place against the model with the ``kept`` effects, under the
-    selection's last filter and weights, at the bar ``held`` entered by (Holm over the simpler
-    forms): a step choosing the strongest that clears it, or None. Why: with AR(1) noise at
-    0.9 a general form's extra directions take a part of the noise's slow swings, win over
-    the simpler form that is the truth (cogging over an offset), and then fail the
-    out-of-sample checks; without this the truth was lost in 2 of 40 such datasets. The
-    step is not in ``selection`` (the caller enters it once its choice holds up)."""
-    candidates = selection.candidates
-    relation = _generalises(candidates)
-    place = candidates[held].coordinate
-    simpler = [j for j, cand in enumerate(candidates) if cand.coordinate == place and relation(held, j)
-               and j not in selection.in_model and not any(j == i for i, _, _ in selection.removed)]
-    if not simpler:
-        return None
-    last = selection.steps[-1]
-    filtered = last.whiten
-    n, f, _ = model.shape
-    fit, _ = _complete(model, y, candidates, kept, filtered, last.fit.weights)
-    tests, variant, bases = [NOT_TESTED] * len(candidates), {}, {}
-    for j in simpler:
-        seen = filtered.candidate(candidates[j]) if isinstance(filtered, Whitening) else candidates[j]
-        bases[j], tests[j], variant[j] = best_variant(seen, fit, (n, f), fit.rank,
-                                                      sparse_if_white=isinstance(filtered, Whitening),
-                                                      sparse_if_coloured=isinstance(filtered, Whitening))
-    tested = [j for j in simpler if tests[j].tested]
-    adjusted = np.ones(len(candidates))
-    if tested:
-        adjusted[tested] = holm([tests[j].pvalue for j in tested])
-    bar = selection.bars.get(held, alpha)
-    passing = [j for j in tested if adjusted[j] <= bar]
-    if not passing:
-        return None
-    strongest = max(passing, key=lambda j: tests[j].z)
-    # among themselves as in a forward step: an offset nested in a spring replaces it unless
-    # the spring's slope clears the bar too; forms the data cannot tell apart: none named
-    best, confusable, beaten = resolve(strongest, [j for j in passing if j != strongest], bases, fit, (n, f),
-                                       fit.rank, alpha, nested_level=bar, generalises=relation)
-    if confusable:
-        return None
-    over = None if best == strongest else next((r.winner_over_rival for r in beaten if r.index == strongest), None)
-    return Step(tests, adjusted, fit, filtered, chosen=best, beaten=beaten,
-                strongest=None if best == strongest else strongest, over=over), variant[best]
 
 
-# A fit of the model and some effects' columns (the arrays, in their order), for _complete to extend.
+# A fit of the model and some effects' columns (the arrays, in their order), for complete_fit to extend.
 KnownFit = tuple[Fit, list[np.ndarray]]
 
 
-def _complete(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
+def complete_fit(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
               whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray,
               known: KnownFit | None = None) -> tuple[Fit, np.ndarray]:
     """The complete model's fit (the model and every effect in ``in_model``, filtered by
@@ -750,98 +438,6 @@ def _extended(known: KnownFit, blocks: list[np.ndarray], p: int, whiten: Callabl
                                              for c in range(blocks[j].shape[-1])])
 
 
-def _left_out(complete: Fit, offsets: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int], i: int,
-              whiten: Callable[[np.ndarray], np.ndarray]) -> tuple[Fit | Reduced, np.ndarray] | None:
-    """The complete fit with effect ``i`` left out (Frisch-Waugh-Lovell) and i's directions
-    beyond it; None when that needs a refit or i has no direction of its own."""
-    k = list(in_model).index(i)
-    fit = complete.without(range(offsets[k], offsets[k + 1]))
-    if fit is None:
-        return None
-    own = candidate_basis(whiten(candidates[i].columns), fit)
-    return (fit, own) if own.shape[1] else None
-
-
-def outdone(model: np.ndarray, y: np.ndarray, selection: Selection, in_model: Sequence[int],
-            rivals: dict[int, Candidate], level: float) -> dict[int, tuple[Test, Test]]:
-    """Named effects (keys of ``rivals``, in ``in_model``) that their rival outdoes: given every
-    other effect in ``in_model``, the rival adds significantly (at ``level``) over the effect
-    and the effect adds nothing over the rival; each with (the rival's test over it, its test
-    over the rival). Under the selection's last filter and weights, from one fit of the
-    complete model (each effect left out by Frisch-Waugh-Lovell). Why: rivals that are not
-    candidates (one drive's own delay) still show what a named effect may stand in for."""
-    last = selection.steps[-1]
-    filtered = last.whiten                  # the identity when the noise was white
-    n, f, p = model.shape
-    candidates = selection.candidates
-    complete, offsets = _complete(model, y, candidates, in_model, filtered, last.fit.weights)
-    out = {}
-    for i, rival in rivals.items():
-        found = _left_out(complete, offsets, candidates, in_model, i, filtered)
-        if found is None:
-            continue
-        fit, own = found
-        other = candidate_basis(filtered(rival.columns), fit)
-        if other.shape[1] == 0:
-            continue
-        over_other, over_own = encompassing(own, other, fit.residual, (n, f), fit.rank)
-        rival_adds = over_own.tested and over_own.pvalue <= level
-        own_adds = over_other.tested and over_other.pvalue <= level
-        if rival_adds and not own_adds:
-            out[i] = (over_own, over_other)
-    return out
-
-
-def weakest_over(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
-                 i: int, rivals: Sequence[np.ndarray], whiten: Callable[[np.ndarray], np.ndarray],
-                 weights: np.ndarray, scale: tuple[float, float]) -> tuple[Test, int] | None:
-    """What candidate ``i`` (in ``in_model``) adds over each rival (n, f) whose fitted
-    coefficient lies in ``scale`` (given every other effect in ``in_model``, ``i`` left out):
-    the weakest of those tests (largest p) and its rival's index; None when no rival is in
-    scale or ``i`` has no direction of its own. Why: a named effect that some member of a
-    physical family (a resonant lag over its grid) explains as well cannot be told from that
-    family on these data; the scale keeps the member physical (a third of a resonance, which
-    is no elastic joint, imitated a first-order filter's lag)."""
-    if not rivals:
-        return None
-    n, f, p = model.shape
-    found = _left_out(*_complete(model, y, candidates, in_model, whiten, weights), candidates, in_model, i, whiten)
-    if found is None:
-        return None
-    fit, own = found
-    Z = np.stack([(whiten(rival) * fit.weights[None, :]).reshape(n * f) for rival in rivals], axis=1)
-    beyond = fit.orthogonal(Z)                       # every rival projected off the model at once
-    size = np.einsum("xr,xr->r", beyond, beyond)
-    fitted = (beyond.T @ fit.residual) / np.where(size > 0, size, 1.0)
-    in_scale = [r for r in range(len(rivals)) if size[r] > 0 and scale[0] <= fitted[r] <= scale[1]]
-    others = {r: orthonormal_basis(beyond[:, r:r + 1], ABSORB_TOL, reference=Z[:, r:r + 1]) for r in in_scale}
-    others = {r: b for r, b in others.items() if b.shape[1]}
-    weakest: tuple[Test, int] | None = None
-    pairs = encompassing_each(own, list(others.values()), fit.residual, (n, f), fit.rank)
-    for r, (over, _) in zip(others, pairs):
-        if not over.tested:              # no test to make: the rival is the candidate on these data
-            continue
-        if weakest is None or over.z < weakest[0].z:
-            weakest = (over, r)
-    return weakest
-
-
-def added_test(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], in_model: Sequence[int],
-               i: int, whiten: Callable[[np.ndarray], np.ndarray], weights: np.ndarray,
-               sparse: bool = False) -> Test | None:
-    """The Wald test of candidate ``i`` added to the model and the effects ``in_model`` (i not
-    among them), filtered by ``whiten`` at ``weights``; None when i has no direction of its
-    own there or the fit needs a refit. Why: an effect found significant at its step, then
-    held back, may explain nothing the final model leaves (it stood in for one named later).
-    ``sparse``: directions acting on few samples are tested too (:func:`_sparse_test`)."""
-    n, f, _ = model.shape
-    found = _left_out(*_complete(model, y, candidates, [*in_model, i], whiten, weights), candidates,
-                      [*in_model, i], i, whiten)
-    if found is None:
-        return None
-    fit, own = found
-    return wald(fit.residual, own, (n, f), fit.rank, sparse_if_white=sparse, sparse_if_coloured=sparse)
-
 
 # A selection is repeated when the complete model's residual asks for a filter differing from
 # the one it ran with by more than this (in any coordinate's AR(1) coefficient).
@@ -895,7 +491,7 @@ def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate],
         fit: Fit | Reduced | None = None
         if weights is not None:
             if complete is None:
-                complete, _ = _complete(model, y, candidates, in_model, whiten, weights, known)
+                complete, _ = complete_fit(model, y, candidates, in_model, whiten, weights, known)
                 known = (complete, [candidates[j].columns for j in in_model])
             start = model.shape[-1] + sum(candidates[j].columns.shape[-1] for j in in_model[:in_model.index(i)])
             fit = complete.without(range(start, start + candidates[i].columns.shape[-1]))
@@ -979,29 +575,6 @@ def candidate_bases(candidates: Sequence[Candidate], fit: "Fit | Reduced") -> li
     return out
 
 
-def column_bases(arrays: Sequence[np.ndarray], fit: "Fit | Reduced") -> list[np.ndarray]:
-    """:func:`candidate_basis` of each array of columns (n, f, c), projected off the model
-    together, BATCH_BYTES at a time."""
-    if not arrays:
-        return []
-    n, f, _ = arrays[0].shape
-    per_batch = max(1, BATCH_BYTES // (8 * n * f))       # columns projected at once (bounded memory)
-    bases: list[np.ndarray] = []
-    first = 0
-    while first < len(arrays):
-        last, width = first, 0
-        while last < len(arrays) and (last == first or width + arrays[last].shape[-1] <= per_batch):
-            width += arrays[last].shape[-1]
-            last += 1
-        Z = np.concatenate([(c * fit.weights[None, :, None]).reshape(n * f, -1) for c in arrays[first:last]], axis=1)
-        projected = fit.orthogonal(Z)
-        bounds = np.cumsum([0] + [c.shape[-1] for c in arrays[first:last]])
-        bases += [orthonormal_basis(projected[:, a:b], ABSORB_TOL, reference=Z[:, a:b])
-                  for a, b in zip(bounds[:-1], bounds[1:])]
-        first = last
-    return bases
-
-
 def best_variant(cand: Candidate, fit: "Fit", shape: tuple[int, int], dof: int, sparse_if_white: bool = False,
                  lags: int | None = None, sparse_if_coloured: bool = False,
                  bases: list[np.ndarray] | None = None,
@@ -1059,7 +632,7 @@ def regroup(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], a
         if any(b.shape[1] == 0 for b in bases.values()):
             continue
         winner, confusable, beaten = resolve(head, members[1:], bases, fit, (n, f), fit.rank, alpha,
-                                             nested_level=bars[head], generalises=_generalises(candidates))
+                                             nested_level=bars[head], generalises=generalisation(candidates))
         if winner == head and {r.index for r in confusable} == set(members[1:]):
             continue
         return head, winner, confusable, beaten

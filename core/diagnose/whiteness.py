@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:            # selection imports this module: its Test only for the types
-    from baseparams.diagnose.selection import Test
+if TYPE_CHECKING:            # its Test only for the types
+    from baseparams.diagnose.wald import Test
 
 # Replicates per test: enough that Holm over the coordinates can reach alpha (p >= 1/(B+1)).
 MIN_REPLICATES = 200
@@ -107,7 +107,7 @@ def monte_carlo_pvalues(residual: np.ndarray, basis: np.ndarray, lags: int, alph
 # generalised least squares: data, model and basis are filtered by each coordinate's AR(p)
 # fit of the residual (order by BIC), so stationary coloured noise, whatever its spectrum,
 # leaves a nearly white residual and the test its size; what colour remains goes to the
-# (prewhitened) HAC variance of selection.wald.
+# (prewhitened) HAC variance of wald.wald.
 
 # blocks of the recording, each one indicator column per coordinate
 MOTION_BLOCKS = 5
@@ -314,7 +314,7 @@ def _wald(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int], dof: 
     prewhitened Newey-West on their sparse scores rejected 26-38 % of nulls at 5 % under
     low-pass-filtered noise."""
     from baseparams.identify.longrun import hac_lags, stationary_variance
-    from baseparams.diagnose.selection import Test
+    from baseparams.diagnose.wald import Test
     n, f = shape
     k = basis.shape[1]
     gamma = basis.T @ residual
@@ -352,7 +352,7 @@ def predictable(model: np.ndarray, y: np.ndarray, weights: np.ndarray, basis: Se
     inertial model and every effect in it) fitted to ``y`` (n, f) at ``weights`` (f,) is not
     predicted by the columns ``basis[j]`` (n, k) acting on j (:func:`motion_basis`), after
     generalised least squares with each coordinate's AR(p) filter. Returns (tests:
-    selection.Test or None for a coordinate not tested, its ``lags`` the effective count of
+    wald.Test or None for a coordinate not tested, its ``lags`` the effective count of
     low-frequency observations nu of its reference F(k, nu); the residual's colour per
     coordinate; the final residual (n, f) unweighted).
 
@@ -372,7 +372,7 @@ def predictable(model: np.ndarray, y: np.ndarray, weights: np.ndarray, basis: Se
     from scipy.special import fdtrc
 
     from baseparams.identify.linear import RANK_TOL, WeightedLinearModel
-    from baseparams.diagnose.selection import ABSORB_TOL, Test, orthonormal_basis, wilson_hilferty
+    from baseparams.diagnose.wald import ABSORB_TOL, Test, orthonormal_basis, wilson_hilferty
 
     n, f, p = model.shape
     weights = np.asarray(weights, float)

@@ -49,8 +49,9 @@ from baseparams.identify.fit import measured_design, measured_forces
 from baseparams.identify.linear import RANK_TOL, LinearFit as Fit, WeightedLinearModel
 from baseparams.numeric.linalg import svd
 from baseparams.numeric.rank import numerical_rank
-from baseparams.diagnose.selection import (BODY_KINDS, Candidate, Rival, Selection, Step, Test, added_test, holm,
-                                          outdone, select_whitened, simpler_in_place, weakest_over)
+from baseparams.diagnose.final import added_test, outdone, simpler_in_place, weakest_over
+from baseparams.diagnose.selection import BODY_KINDS, Candidate, Rival, Selection, Step, select_whitened
+from baseparams.diagnose.wald import Test, holm
 from baseparams.diagnose.whiteness import (MOTION_BASIS_NAMES, MOTION_BLOCKS, monte_carlo_pvalues, motion_basis,
                                             predictable, replicates)
 from baseparams.dynamics.evaluator import Sample
@@ -649,7 +650,7 @@ def _simpler_forms(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
                    everything: list[Candidate], full: list[Candidate], unsupported: list[dict],
                    kept_named: list[int], in_model: list[int], weights: np.ndarray, alpha: float, folds: int,
                    checks: dict, lag: derived.LagEvidence | None) -> list[tuple[int, str, str]]:
-    """Each held-back effect's simpler forms (:func:`.selection.simpler_in_place`) tried in its
+    """Each held-back effect's simpler forms (:func:`.final.simpler_in_place`) tried in its
     place: one that clears the bar and passes the same checks (:func:`_gate`, at ``alpha``)
     is named instead, entered in ``chosen`` as a step, and the held-back effect leaves
     ``unsupported`` (it is superseded, not unexplained). Updates the lists given; returns
@@ -759,7 +760,7 @@ def _lag_stand_ins(problem: Problem, model: np.ndarray, y: np.ndarray, chosen: S
                    named: list[int], level: float, evidence: derived.LagEvidence | None
                    ) -> list[tuple[int, str]]:
     """Named effects on a coordinate that a lag of the joints' torques outdoes
-    (:func:`.selection.outdone`), with the reason. The lag: -dtau_c/dt and -d2tau_c/dt2 (the
+    (:func:`.final.outdone`), with the reason. The lag: -dtau_c/dt and -d2tau_c/dt2 (the
     delay's columns; ``evidence``: training rows) on every coordinate c with its own
     coefficients: one drive's delay or filter, or an elastic joint, not default candidates.
     Why: with one joint's torque lagging 4-6 samples, cogging and a spring on that joint
@@ -1327,7 +1328,7 @@ def _sparse_left(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], 
     their support (acting on under MIN_SUPPORT of the samples) that, added to the final model,
     are significant (Holm at ``alpha``) with the residual's own variance (the classical one on a
     white residual, the stationary one on a coloured one, scaled by the noise's local power:
-    :func:`.selection.added_test` with ``sparse``): what the model lacks there holds the verdict
+    :func:`.final.added_test` with ``sparse``): what the model lacks there holds the verdict
     back. Why: on the SLA the rotor inertia of theta2, beyond the inertial model, acts near the
     arms' toggle only; refused on support at every step, it left "nothing missing" (exit 0)."""
     refused = [i for i, t in enumerate(last.tests) if t.reason == "support" and i not in in_model]
