@@ -84,32 +84,35 @@ def load_physical(path: Any) -> dict[str, str]:
 def with_inertia(mech: Mechanism, physical: Mapping[str, str], path: PathText) -> Mechanism:
     """``mech`` with every body's ten parameters taken from ``physical`` (exact decimals),
     each set checked: mass >= 0 and the inertia at the centre of mass positive semidefinite
-    (to 1e-9 of its trace)."""
+    (to 1e-9 of its trace). Names in either form: the mechanism's (``m_forearm``) or the
+    body label's (``m3``)."""
     from baseparams.model.expressions import ExpressionError, parse_decimal
-    from baseparams.model.params import body_parameter_names, split_name
-    labels = set(mech.body_labels)
-    for name in physical:
+    from baseparams.model.params import split_name
+    given: dict[str, str] = {}
+    for name, value in physical.items():
         try:
-            _, label = split_name(name)
+            _, key = split_name(name)
         except ValueError:
             continue                                 # other identified quantities (friction ...)
-        if label not in labels:
-            raise InputError(f"body {label} is not a body of {mech.name} (bodies: {sorted(labels)})",
-                             file=path, key=f"physical.{name}")
+        try:
+            given[mech.parameter(name)] = value
+        except ValueError:
+            raise InputError(f"body {key} is not a body of {mech.name} (bodies: "
+                             f"{', '.join(map(str, mech.body_keys))})", file=path, key=f"physical.{name}") from None
     bodies = []
     for body in mech.bodies:
         values = []
-        for name in body_parameter_names(body.label):
-            if name not in physical:
+        for name in mech.body_parameters(body.label):
+            if name not in given:
                 raise InputError("missing: every body needs its ten parameters", file=path, key=f"physical.{name}")
             try:
-                values.append(parse_decimal(physical[name]))
+                values.append(parse_decimal(given[name]))
             except ExpressionError as exc:
                 raise InputError(str(exc), file=path, key=f"physical.{name}") from None
         problem = consistency_problem(values)
         if problem:
-            raise InputError(f"body {body.label} is not physically consistent: {problem}", file=path,
-                             key=f"physical.m{body.label}")
+            raise InputError(f"body {mech.body_key(body.label)} is not physically consistent: {problem}",
+                             file=path, key=f"physical.{mech.body_parameters(body.label)[0]}")
         bodies.append(dataclasses.replace(body, inertia=tuple(values)))
     return dataclasses.replace(mech, bodies=tuple(bodies))
 

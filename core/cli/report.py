@@ -52,8 +52,9 @@ class _Writer:
     def param(self, name: str) -> str:
         if self.fmt != "latex":
             return name
-        kind, label = split_name(name)
-        return f"\\mathit{{{kind}}}_{{{label}}}"
+        kind, key = split_name(name)          # key: a body label, or a named body's name (issue 45)
+        sub = key if isinstance(key, int) else "\\mathrm{" + key.replace("_", "\\_") + "}"
+        return f"\\mathit{{{kind}}}_{{{sub}}}"
 
     def expr(self, e: Any) -> str:
         e = sympy.factor(e) if not e.is_Number else e

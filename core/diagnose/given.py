@@ -48,6 +48,15 @@ class Given:
     fit_nrms: dict[str, float] = field(default_factory=dict)  # its residual NRMS on its own run, per coordinate
 
 
+def _own_name(mechanism: Mechanism, name: str) -> str:
+    """A standard parameter's name in either form (``m3``, or ``m_forearm`` for a URDF's
+    link: issue 45) as ``mechanism`` writes it; any other name as it is."""
+    try:
+        return mechanism.parameter(name)
+    except ValueError:
+        return name
+
+
 def given_parameters(mechanism: Mechanism, source: str) -> Given:
     """What ``source`` holds as given for ``mechanism``."""
     path = Path(source)
@@ -92,8 +101,9 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
         if not isinstance(expression, dict) or not expression:
             raise InputError(f"an expression is an object {{parameter: coefficient}} over {mechanism.name}'s "
                              f"standard parameters, not {_kind(expression)}", file=file, key=f"{where}.expression")
-        for name, coefficient in expression.items():
-            key = f"{where}.expression.{name}"
+        for written, coefficient in expression.items():
+            key = f"{where}.expression.{written}"
+            name = _own_name(mechanism, written)
             if name not in names:
                 raise InputError(f"{name!r} is not a standard parameter of {mechanism.name}", file=file, key=key)
             E[k, names.index(name)] = _coefficient(coefficient, file, key)
@@ -183,6 +193,8 @@ def _check_identity(mechanism: Mechanism, report: dict, file: str) -> None:
         raise InputError(f"the result of identify on {name!r}, not on {mechanism.name!r}: give a result of the "
                          f"same mechanism", file=file, key="mechanism")
     listed = report.get("parameters")
+    if isinstance(listed, list):
+        listed = [_own_name(mechanism, n) if isinstance(n, str) else n for n in listed]
     if listed is not None and listed != list(mechanism.parameters):
         count = len(listed) if isinstance(listed, list) else _kind(listed)
         raise InputError(f"its standard parameters ({count}) are not {mechanism.name}'s "

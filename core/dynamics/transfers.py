@@ -31,7 +31,6 @@ import sympy
 from baseparams.numeric.backends import Symbolic
 from baseparams.model.mechanism import Frame, Joint, Mechanism
 from baseparams.model.multipoles import TransferRule
-from baseparams.model.params import body_parameter_names
 
 Tensor = list[list[Any]]              # 3 x 3, rows (exact numbers or sympy expressions)
 Placement = tuple[list[list[Any]], list[Any]]   # (R, p) of a frame in its body's axes
@@ -117,10 +116,11 @@ def rotate_tensor(r: Sequence[Sequence[Any]], t: Sequence[Sequence[Any]]) -> Ten
     return [[sum(rt[i][k] * r[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
 
 
-def as_vector(label: int, values: Sequence[Any], sign: int = 1) -> dict[str, Any]:
-    """Ten values of body ``label`` -> {parameter name: sympy expr}, zeros dropped."""
+def as_vector(names: Sequence[str], values: Sequence[Any], sign: int = 1) -> dict[str, Any]:
+    """Ten values of a body -> {parameter name: sympy expr}, zeros dropped; ``names``: the
+    body's ten names (``Mechanism.body_parameters``)."""
     out: dict[str, Any] = {}
-    for name, value in zip(body_parameter_names(label), values):
+    for name, value in zip(names, values):
         v = sympy.sympify(value) * sign
         if v != 0:
             out[name] = v
@@ -207,7 +207,7 @@ def rule_generators(mechanism: Mechanism, joint: Joint, rule: TransferRule) -> l
                            "direction": None if u is None else map_direction(fr, u)}
             if body == 0:
                 continue
-            vector = add_vectors(vector, as_vector(body, make(fr), sign))
+            vector = add_vectors(vector, as_vector(mechanism.body_parameters(body), make(fr), sign))
         label = rule.multipole if k is None else f"quadrupole {INERTIA_KINDS[k]}"
         out.append(Generator(vector=vector, kind="transfer", multipole=rule.multipole,
                              condition=rule.condition, bodies=tuple(moving), joint=joint,

@@ -255,8 +255,8 @@ def _bodies(parameters: Sequence[str], base_map: np.ndarray, values: np.ndarray,
         v = vectors[:, 0]
         gradient = np.array([v @ a @ v for a in basis])
         sd = float(np.sqrt(max(gradient @ C @ gradient, 0.0)))
-        label = split_name(parameters[10 * b])[1]
-        who = f"body {label}" + (f" ({labels[label]})" if labels and labels.get(label) else "")
+        key = split_name(parameters[10 * b])[1]       # a label, or a named body's name (issue 45)
+        who = f"body {key}" + (f" ({labels[key]})" if isinstance(key, int) and labels and labels.get(key) else "")
         flag = _flag(who, float(eigenvalues[0]), sd,
                      "its ten identified parameters are not a mass distribution (the pseudo-inertia's "
                      "smallest eigenvalue is negative: a negative mass, or an inertia that is not positive "

@@ -17,7 +17,7 @@ import sympy
 
 from baseparams.model.expressions import exact_text
 from baseparams.model.joints import JointType
-from baseparams.model.params import parameter_names
+from baseparams.model.params import BodyKey, body_parameter_names, parameter_name, parameter_names, split_name
 
 if TYPE_CHECKING:
     from baseparams.numeric.backends import Backend
@@ -140,6 +140,9 @@ class Mechanism:
     couplings: tuple[Coupling, ...] = ()      # file order: coordinates following another
     nonphysical: tuple[tuple[str, str], ...] = ()   # (key, reason) of bodies accepted with a non-physical inertia
     nonphysical_labels: tuple[int, ...] = ()         # those bodies' labels, in the same order
+    # per body, in body order: the name its parameters carry (``m_forearm``: a URDF's link
+    # names, issue 45); empty: the labels (``m3``), as every mechanism file's bodies
+    parameter_keys: tuple[str, ...] = ()
 
     # ----- names and counts -------------------------------------------------
     @property
@@ -147,8 +150,39 @@ class Mechanism:
         return [b.label for b in self.bodies]
 
     @property
+    def body_keys(self) -> list[BodyKey]:
+        """What names each body in parameter names: its name (named bodies) or its label."""
+        keys: list[BodyKey] = list(self.parameter_keys) if self.parameter_keys else list(self.body_labels)
+        return keys
+
+    @property
     def parameters(self) -> list[str]:
-        return parameter_names(self.body_labels)
+        return parameter_names(self.body_keys)
+
+    def body_key(self, label: int) -> BodyKey:
+        """Body ``label``'s key in parameter names (the label itself for the ground, 0)."""
+        labels = self.body_labels
+        return self.parameter_keys[labels.index(label)] if self.parameter_keys and label in labels else label
+
+    def body_parameters(self, label: int) -> list[str]:
+        """Body ``label``'s ten parameter names, as :attr:`parameters` writes them."""
+        return body_parameter_names(self.body_key(label))
+
+    def parameter_body(self, name: str) -> tuple[str, int]:
+        """(kind, body label) of a parameter name in either form: this mechanism's
+        (``m_forearm`` for a named body) or the label's (``m3``, accepted for every body).
+        ValueError when it is no parameter name of this mechanism."""
+        kind, key = split_name(name)
+        if isinstance(key, int) and key in self.body_labels:
+            return kind, key
+        if isinstance(key, str) and key in self.parameter_keys:
+            return kind, self.body_labels[self.parameter_keys.index(key)]
+        raise ValueError(f"{name!r} names no body of {self.name}")
+
+    def parameter(self, name: str) -> str:
+        """This mechanism's name of a parameter given in either form (``m3`` -> ``m_forearm``)."""
+        kind, label = self.parameter_body(name)
+        return parameter_name(kind, self.body_key(label))
 
     @property
     def closure_equation_count(self) -> int:

@@ -2,34 +2,50 @@
 
 For body ``i``: ``m{i} mx{i} my{i} mz{i} Ixx{i} Ixy{i} Ixz{i} Iyy{i} Iyz{i} Izz{i}``,
 about the body origin, in body axes; ``Ixy`` is the inertia-tensor entry ``-∫xy dm``.
+A mechanism whose bodies are named for the user (a URDF's links) names them by the body's
+name instead of its label: ``m_forearm_link ... Izz_forearm_link`` (since issue 45). Names
+are made by :func:`parameter_name` and read back by :func:`split_name`, in one place.
 """
 
 from collections.abc import Iterable, Sequence
 from fractions import Fraction
-from typing import TypeVar
+from typing import TypeVar, Union
 
 Number = TypeVar("Number", Fraction, float)   # exact (the builder) or float (simulate)
+BodyKey = Union[int, str]                     # what names a body in parameter names: its label or its name
 
 PARAMETER_KINDS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")
 
 
-def body_parameter_names(label: int) -> list[str]:
-    return [f"{kind}{label}" for kind in PARAMETER_KINDS]
+def parameter_name(kind: str, body: BodyKey) -> str:
+    """The one rendering of a parameter's name: ('Iyy', 12) -> 'Iyy12' (a numbered body),
+    ('Iyy', 'forearm') -> 'Iyy_forearm' (a named body: the underscore keeps 'm_x1' apart from
+    'mx1')."""
+    return f"{kind}{body}" if isinstance(body, int) else f"{kind}_{body}"
 
 
-def parameter_names(body_labels: Iterable[int]) -> list[str]:
+def body_parameter_names(body: BodyKey) -> list[str]:
+    return [parameter_name(kind, body) for kind in PARAMETER_KINDS]
+
+
+def parameter_names(bodies: Iterable[BodyKey]) -> list[str]:
     """The full parameter vector's names, body after body, in body order."""
     names: list[str] = []
-    for label in body_labels:
-        names.extend(body_parameter_names(label))
+    for body in bodies:
+        names.extend(body_parameter_names(body))
     return names
 
 
-def split_name(name: str) -> tuple[str, int]:
-    """'Iyy12' -> ('Iyy', 12)."""
+def split_name(name: str) -> tuple[str, BodyKey]:
+    """'Iyy12' -> ('Iyy', 12); 'Iyy_forearm' -> ('Iyy', 'forearm'). ValueError otherwise."""
     for kind in sorted(PARAMETER_KINDS, key=len, reverse=True):
-        if name.startswith(kind) and name[len(kind):].isdigit():
-            return kind, int(name[len(kind):])
+        if not name.startswith(kind):
+            continue
+        rest = name[len(kind):]
+        if rest.isdigit() and rest.isascii():
+            return kind, int(rest)
+        if rest.startswith("_") and len(rest) > 1:
+            return kind, rest[1:]
     raise ValueError(f"not an inertial parameter name: {name!r}")
 
 

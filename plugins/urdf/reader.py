@@ -17,7 +17,7 @@ works on a bare URDF.
 import random
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from fractions import Fraction
 from pathlib import Path
@@ -27,7 +27,7 @@ from baseparams.errors import InputError
 from baseparams.model.builder import MechanismBuilder
 from baseparams.model.expressions import exact_text
 from baseparams.model.mechanism import Joint, Mechanism
-from baseparams.model.params import PARAMETER_KINDS
+from baseparams.model.params import PARAMETER_KINDS, parameter_name
 
 from .parse import Urdf, UrdfJoint, UrdfTransmission, parse_urdf, transform_parameters
 from .rotations import bounded_rotation, matmul, matvec
@@ -162,8 +162,22 @@ def build(urdf: Urdf, *, merge_fixed: bool = True, floating_base: bool = False) 
                for joint, jtype, limits in motions if not set(joint.coordinates) & followers]
     b.trajectory(default_trajectory(urdf.robot, motions), t_start=0, t_end=T_END, samples=SAMPLES,
                  key="trajectory")
-    mech = b.build()
+    mech = replace(b.build(), parameter_keys=_parameter_keys(urdf, links, notes))
     return UrdfResult(mech, notes, {v: k for k, v in label.items() if v}, merge_fixed, merged_into)
+
+
+def _parameter_keys(urdf: Urdf, links: Sequence[str], notes: list[str]) -> tuple[str, ...]:
+    """Each body's name in parameter names (``m_forearm``, issue 45): its link's name, made
+    an identifier (noted when it had to change) and unique."""
+    used: set[str] = set()
+    keys = []
+    for name in links:
+        key = _identifier(name, used)
+        if key != name:
+            notes.append(f"{urdf.links[name].key}: parameters named {parameter_name('m', key)} ... "
+                         f"(parameter names need identifiers)")
+        keys.append(key)
+    return tuple(keys)
 
 
 def _couplings(b: MechanismBuilder, joints: Sequence[UrdfJoint], names: Mapping[str, str]) -> set[str]:

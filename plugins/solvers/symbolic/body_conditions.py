@@ -44,7 +44,6 @@ from baseparams.numeric.rank import numerical_rank, to_fmpq
 from baseparams.dynamics.evaluator import Evaluator, independent_rows
 from baseparams.dynamics.observation import RationalStates, evaluate_states
 from baseparams.errors import InputError
-from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import (INERTIA_KINDS, TENSOR_INDEX, Generator, as_vector, dipole_params,
                         monopole_params, quadrupole_params, symbolic_frame)
@@ -402,7 +401,7 @@ def analyse_body(mechanism: Mechanism, label: int, forms: list, dps: int) -> Bod
     points = dedupe(list(point_candidates), subs, dps)
     dirs = dedupe(list(direction_candidates), subs, dps, directions=True)
     motion = BodyMotion(label, omega_rank, null_dim)
-    names = body_parameter_names(label)
+    names = mechanism.body_parameters(label)
 
     def norm(v: Sequence[mpmath.mpf]) -> list[mpmath.mpf]:
         n = mpmath.sqrt(sum(x * x for x in v))
@@ -456,7 +455,7 @@ def analyse_body(mechanism: Mechanism, label: int, forms: list, dps: int) -> Bod
                            f"monopole at {pname}"))
     valid = []
     for multipole, cond, values, pref, side, text in candidates:
-        vector = as_vector(label, values)
+        vector = as_vector(names, values)
         num = [to_number(vector.get(n, 0), subs, dps) for n in names]
         if residual(rows, num) >= NULL_TOL * 100:
             continue           # a quadrupole of a wrongly identified span: never trust it

@@ -65,7 +65,7 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.dynamics.transfers import Generator, transfer_generators
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.mechanism import Joint, Mechanism
-from baseparams.model.params import PARAMETER_KINDS, split_name
+from baseparams.model.params import PARAMETER_KINDS, parameter_name
 from baseparams.numeric.backends import Arb, Float64
 from baseparams.numeric.certify import analyse
 from baseparams.solvers.result import BaseParameterResult, Coefficient, Diagnostics, parse_coefficient
@@ -240,7 +240,8 @@ def transfer_preference(gen: Generator, mechanism: Mechanism, field: ExactField)
     body = gen.acceptor if gen.donor == 0 else gen.donor
     assert body is not None
     side = gen.sides.get(body, {})
-    names = lambda kinds: [f"{k}{body}" for k in kinds]  # noqa: E731
+    key = mechanism.body_key(body)
+    names = lambda kinds: [parameter_name(k, key) for k in kinds]  # noqa: E731
     if gen.multipole == "monopole":
         if gen.donor != 0:
             return names(["m"]) + names(DIAGONAL) + names(FIRST_MOMENTS)
@@ -333,10 +334,16 @@ def eliminate(mechanism: Mechanism, keep: Sequence[str] = (), eliminate_first: S
               states: list | None = None, seed: int = 1) -> Derivation:
     """Run the whole derivation (generators, elimination, base expressions)."""
     params = list(mechanism.parameters)
-    for name, opt in [(n, "keep") for n in keep] + [(n, "eliminate_first") for n in eliminate_first]:
-        if name not in params:
+
+    def own(name: str, opt: str) -> str:         # either form: m3 or m_forearm (issue 45)
+        try:
+            return mechanism.parameter(name)
+        except ValueError:
             raise InputError(f"{name!r} is not a parameter of {mechanism.name} "
-                             f"({params[0]} ... {params[-1]})", key=opt)
+                             f"({params[0]} ... {params[-1]})", key=opt) from None
+
+    keep = [own(n, "keep") for n in keep]
+    eliminate_first = [own(n, "eliminate_first") for n in eliminate_first]
     bodies, forms = analyse_bodies(mechanism, states=states, seed=seed)
     transfers, missing = transfer_generators(mechanism, registry.transfer_rules)
     for joint in mechanism.joints:
@@ -374,7 +381,7 @@ def eliminate(mechanism: Mechanism, keep: Sequence[str] = (), eliminate_first: S
         if gen.kind == "transfer":
             gen.preference = transfer_preference(gen, mechanism, field_)
         donor = gen.donor if gen.kind == "transfer" and gen.donor else None
-        fallback = sorted(live, key=lambda p: (split_name(p)[1] != donor, order[p]))
+        fallback = sorted(live, key=lambda p: (mechanism.parameter_body(p)[1] != donor, order[p]))
         ranked = [p for p in first if p in live] + [p for p in gen.preference if p in live] + fallback
         choice = next((p for p in ranked if p not in keep_set), None)
         if choice is None:

@@ -164,7 +164,7 @@ def planar_loop_generators(mechanism: Mechanism) -> list[Generator]:
                 norm2 = sum(c * c for c in b)          # 1 for the frames' unit axes
                 w = _cross(b, [p_out[i] - p_in[i] for i in range(3)])
                 q = [[sympy.simplify((b[r] * w[c] + w[r] * b[c]) / norm2) for c in range(3)] for r in range(3)]
-                vector = add_vectors(vector, as_vector(body, quadrupole_params(q)))
+                vector = add_vectors(vector, as_vector(mechanism.body_parameters(body), quadrupole_params(q)))
             if not vector:
                 continue
             first = bodies.index(min(bodies))

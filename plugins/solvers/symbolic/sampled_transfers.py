@@ -26,7 +26,6 @@ import mpmath
 from baseparams.plugins.solvers.symbolic.body_conditions import (NULL_TOL, body_candidates, dedupe, lagrangian_rows,
                                                                 residual, to_number)
 from baseparams.model.mechanism import Joint, Mechanism
-from baseparams.model.params import body_parameter_names
 from baseparams.dynamics.transfers import (Generator, as_vector, dipole_params, joint_frames, map_direction, map_point,
                         monopole_params)
 
@@ -61,7 +60,7 @@ def sampled_joint_transfers(mechanism: Mechanism, joint: Joint, forms: list, kno
                           lambda fr, u=u: dipole_params(map_point(fr, zero), map_direction(fr, u)),
                           lambda fr, u=u_num: dipole_params(fr[1], [mpmath.fsum(fr[0][i][k] * u[k] for k in range(3))
                                                                      for i in range(3)])))
-        names = body_parameter_names(joint.parent) + body_parameter_names(joint.child)
+        names = mechanism.body_parameters(joint.parent) + mechanism.body_parameters(joint.child)
         numeric = {b: ([[to_number(c, subs, dps) for c in row] for row in frames[b][0]],
                        [to_number(c, subs, dps) for c in frames[b][1]]) for b in (joint.parent, joint.child)}
         out = []
@@ -71,7 +70,7 @@ def sampled_joint_transfers(mechanism: Mechanism, joint: Joint, forms: list, kno
                 continue
             vector: dict[str, Any] = {}
             for body, sign in ((joint.parent, 1), (joint.child, -1)):
-                for name, v in as_vector(body, make(frames[body]), sign).items():
+                for name, v in as_vector(mechanism.body_parameters(body), make(frames[body]), sign).items():
                     vector[name] = vector.get(name, 0) + v
             num = [to_number(vector.get(n, 0), subs, dps) for n in names]
             if residual(rows, num) >= NULL_TOL:
