@@ -54,7 +54,10 @@ import numpy as np  # noqa: E402
 from baseparams import registry  # noqa: E402
 from baseparams.diagnose import wald as W  # noqa: E402
 from baseparams.identify.linear import RANK_TOL, WeightedLinearModel  # noqa: E402
-from baseparams.diagnose.workflow import WEAK, diagnose, holdout_floor, nrms, prepare  # noqa: E402
+from baseparams.diagnose.estimates import holdout_floor, nrms  # noqa: E402
+from baseparams.diagnose.problem import prepare  # noqa: E402
+from baseparams.diagnose.verdict import WEAK  # noqa: E402
+from baseparams.diagnose.workflow import diagnose  # noqa: E402
 from baseparams.dynamics.forces import evaluate  # noqa: E402
 from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion  # noqa: E402
 from baseparams.io.loader import resolve  # noqa: E402

@@ -43,7 +43,8 @@ from baseparams.excite import design  # noqa: E402
 from baseparams.excite.limits import limits_of  # noqa: E402
 from baseparams.excite.plan import Settings, plan  # noqa: E402
 from baseparams.identify.base import BaseModel  # noqa: E402
-from baseparams.diagnose.workflow import diagnose, prepare  # noqa: E402
+from baseparams.diagnose.problem import prepare  # noqa: E402
+from baseparams.diagnose.workflow import diagnose  # noqa: E402
 from baseparams.identify.fit import identify  # noqa: E402
 from baseparams.dynamics.forces import Motion, design as model_design, evaluate  # noqa: E402
 from baseparams.recordings.recording import read_data  # noqa: E402

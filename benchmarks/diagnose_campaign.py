@@ -19,7 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from baseparams.diagnose.workflow import Problem, diagnose, prepare
+from baseparams.diagnose.problem import Problem, prepare
+
+from baseparams.diagnose.workflow import diagnose
 from baseparams.dynamics.forces import evaluate
 from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import resolve

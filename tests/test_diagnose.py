@@ -19,7 +19,9 @@ from baseparams.identify import longrun
 from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.diagnose import whiteness
-from baseparams.diagnose.workflow import decimal_text, diagnose, prepare, write_fixed
+from baseparams.diagnose.fixed import decimal_text, write_fixed
+from baseparams.diagnose.problem import prepare
+from baseparams.diagnose.workflow import diagnose
 from baseparams.dynamics.forces import evaluate
 from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import parse_mechanism, resolve

@@ -64,7 +64,7 @@ def test_a_candidate_refused_for_its_support_is_tested_beside_the_final_model(si
     model with the residual's own variance; significant, it is an unsupported entry, which
     holds the verdict back (before: nothing was said, and the verdict could be "nothing
     missing", exit 0). Nothing hidden: nothing is entered."""
-    from baseparams.diagnose.workflow import _sparse_left
+    from baseparams.diagnose.verdict import _sparse_left
     model, y, candidates, chosen = _sparse_case(size, 3)
     last = chosen.steps[-1]
     index = len(candidates) - 1

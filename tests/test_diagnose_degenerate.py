@@ -77,7 +77,7 @@ def test_a_named_effect_is_physical_in_the_final_model():
     SLA simulated without noise, at a version of this check's session, a rotor inertia judged
     positive beside effects held back later was -162 without them, and was named); an
     ambiguous group's member (not named) and a physical effect are left alone."""
-    from baseparams.diagnose import workflow as D
+    from baseparams.diagnose import gates
     from baseparams.diagnose.selection import Candidate
     n = 10
     cands = [Candidate("rotor_inertia", "q1", ("Ia",), np.zeros((n, 1, 1))),
@@ -87,6 +87,6 @@ def test_a_named_effect_is_physical_in_the_final_model():
                  (np.array([-1.0]), np.array([0.1]))]
     from types import SimpleNamespace
     problem = SimpleNamespace(mechanism=SimpleNamespace(effects=()), qd=None, given=None)    # no known effects
-    turned = D._turned(problem, cands, [0, 1, 2], [0, 1], estimates)
+    turned = gates._turned(problem, cands, [0, 1, 2], [0, 1], estimates)
     assert [i for i, _ in turned] == [0]
     assert "must be positive" in turned[0][1] and "in the final model" in turned[0][1]

@@ -12,7 +12,9 @@ import statsmodels.api as sm
 from baseparams.cli.diagnose import render_text
 from baseparams.diagnose import selection as S
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.diagnose.workflow import Problem, diagnose, holdout_floor, nrms
+from baseparams.diagnose.estimates import holdout_floor, nrms
+from baseparams.diagnose.problem import Problem
+from baseparams.diagnose.workflow import diagnose
 from baseparams.io.loader import resolve
 
 N, TRAIN, P = 100, 70, 4

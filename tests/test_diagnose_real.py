@@ -17,7 +17,8 @@ from baseparams.diagnose import final as FN
 from baseparams.diagnose import selection as S
 from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.diagnose.workflow import diagnose, prepare
+from baseparams.diagnose.problem import prepare
+from baseparams.diagnose.workflow import diagnose
 from baseparams.dynamics.forces import evaluate
 from baseparams.diagnose.outofsample import cross_validate, stability
 from baseparams.identify.impossible import implausible
@@ -593,7 +594,7 @@ def test_what_stands_in_for_another_joints_elastic_lag_is_not_named(monkeypatch)
     the lag of every joint's torque outdoes them, so nothing is named. (Judged on the typical
     held-out block, the offset on q4 is already too small to name: 5.7 %. With that size gate
     off, the lag's check still holds back the first dataset's offset.)"""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     s = C.generated_setting("chain4", 1200)
     outdone = 0
     for state in CHAIN_ELASTIC:
@@ -660,7 +661,7 @@ def test_one_elastic_joints_lag_is_not_named_the_recordings_delay(monkeypatch):
     chain agree on every joint and stay named. (In the first dataset, once two ambiguous
     groups that predicted no held-out block left the model, the delay is too small to name
     before that check; with that size gate off, the per-joint check holds it back on both.)"""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     s = C.generated_setting("chain4", 1200)
     for state in CHAIN_ELASTIC_DELAY:
         d = diagnose(s.problem, C.compliance(s, _at(state)).tau)
@@ -691,7 +692,7 @@ def test_an_ambiguous_group_that_predicts_no_held_out_block_leaves_the_model():
     hidden effect's column are kept. (On the TX40, a group of position and Stribeck friction
     on joint 2 improved the held-out blocks by 0.15 %; beside it Coulomb friction on that
     joint was too small to name, and both left.)"""
-    from baseparams.diagnose.workflow import _gate
+    from baseparams.diagnose.gates import _gate
     rng = np.random.default_rng(3)
     n = 600
     t = np.linspace(0.0, 10.0, n)
@@ -799,7 +800,7 @@ def test_a_block_that_cannot_determine_an_effect_does_not_hold_it_back():
     that block does not count against it, in 7, and in the eighth cogging (harmonics of q,
     correlation 0.995 with the spring beyond the model, adding over it at p 0.014) is named
     with the spring as its rival."""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     from baseparams.diagnose import outofsample
     from baseparams.recordings.simulate import random_physical_inertia
     s = C.setting("pendulum", 1000)
@@ -837,7 +838,7 @@ def test_effects_that_cancel_each_other_are_not_named(puma_1200, monkeypatch):
     cogging on q3 fitted it together with forces ~240 times the joint's torque, cancelling to a
     few N m, each significant and steady over the blocks. No such force acts in a mechanism:
     both are held back (without the check, both are named)."""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     data = C.OUTSIDE["ripple"](puma_1200, _at(PUMA_RIPPLE_AR), rho=0.9)
     d = diagnose(puma_1200.problem, data.tau)
     assert _named(d) == set()
@@ -877,7 +878,7 @@ def test_one_badly_extrapolated_block_does_not_hold_back_a_true_effect(monkeypat
     last held-out block is extrapolated badly with or without it; judged on the totals it
     'did not predict held-out blocks better' (-4 %) while the other four blocks improved 6 to
     33 times. Judged on the typical block (:func:`held_out_gain`) it is named."""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     s = C.generated_setting("four_bar2", 1200)
     data = C.INSIDE["viscous"](s, _at(FOUR_BAR_AR_VISCOUS), rho=0.9)
     d = diagnose(s.problem, data.tau)
@@ -900,7 +901,7 @@ def test_viscous_friction_standing_in_for_an_elastic_lag_is_held_back(monkeypatc
     viscous force, and viscous friction was named (it predicts four of five held-out blocks
     better). It must add over every resonant lag of the grid, as the delay must: it does not,
     and is held back with that reason; without the check it is named."""
-    from baseparams.diagnose import workflow as diagnose_module
+    from baseparams.diagnose import gates as diagnose_module
     s = C.generated_setting("four_bar2", 1200)
     data = C.compliance(s, _at(FOUR_BAR_AR_ELASTIC), rho=0.9)
     d = diagnose(s.problem, data.tau)
@@ -968,7 +969,7 @@ def test_friction_the_model_has_but_the_data_lack_is_corrected_not_stood_in_for(
 def test_position_friction_that_drives_the_motion_is_not_friction():
     """Position friction fcc -3 about the PUMA's q2 travel resists nowhere (a negative
     Coulomb friction in its clothes): held back with the reason; +3 resists and passes."""
-    from baseparams.diagnose.workflow import _unphysical
+    from baseparams.diagnose.gates import _unphysical
     from baseparams.recordings.simulate import trajectory_motion as motion_of
     m = resolve("puma560")
     problem = prepare(m, motion_of(m, 300))
@@ -978,7 +979,7 @@ def test_position_friction_that_drives_the_motion_is_not_friction():
 
 
 def _puma_with(tmp_path, effects) -> Path:
-    from baseparams.diagnose.workflow import effects_toml
+    from baseparams.diagnose.fixed import effects_toml
     from baseparams.model.mechanism import EffectSpec
     mech = tmp_path / "puma_known.toml"
     mech.write_text(Path(resolve("puma560").path).read_text() + "\n"
@@ -1016,7 +1017,8 @@ def test_an_effect_the_model_knows_is_corrected_to_the_datas_value(tmp_path, kno
 def test_a_correction_whose_total_is_not_physical_is_held_back():
     """A correction is judged on the total: -1.5 beside a known fv = 1 is a negative viscous
     friction (not named), -0.5 is fine; without a known value -0.5 is not."""
-    from baseparams.diagnose.workflow import _unphysical, effects_toml
+    from baseparams.diagnose.fixed import effects_toml
+    from baseparams.diagnose.gates import _unphysical
     from baseparams.io.loader import parse_mechanism
     from baseparams.recordings.simulate import trajectory_motion as motion_of
     from baseparams.model.mechanism import EffectSpec

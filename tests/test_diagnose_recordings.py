@@ -227,7 +227,7 @@ def test_diagnose_builds_long_recordings_chunk_by_chunk_like_identify(tmp_path, 
     memory: a Panda logged 120 s at 1 kHz held 3.6 GB before) as the whole recording's
     columns evaluated at once and filtered: the real TX40 subset, two runs."""
     from baseparams.recordings import data as data_module
-    from baseparams.diagnose.workflow import prepare
+    from baseparams.diagnose.problem import prepare
     from baseparams.dynamics.forces import design, evaluate, standard_parameters
     from baseparams.recordings.recording import read_recording
     tx40 = Path(__file__).parent / "data" / "tx40"
@@ -296,7 +296,7 @@ def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
     """A named effect whose rival correlates with it at 0.999 beyond the model and which it
     outdoes at p 0.031 only gets a note naming the rival; a rival it outdoes at p 1e-6, or a
     less correlated one, does not."""
-    from baseparams.diagnose.workflow import _near_twins
+    from baseparams.diagnose.entries import _near_twins
     effects = [{"kind": "body", "coordinate": "arm_6_link", "rivals": [
         {"candidate": "body:arm_7_link", "correlation": 0.9993, "pvalue_named_over_rival": 0.031},
         {"candidate": "mass:arm_7_link", "correlation": 0.9995, "pvalue_named_over_rival": 1e-6},
@@ -308,7 +308,8 @@ def test_a_rival_that_explains_a_named_effect_nearly_as_well_is_said():
 def test_a_negative_stribeck_friction_beside_a_sign_law_coulomb_says_what_it_may_be():
     """A Stribeck friction with fs < 0 is not physical alone; where the model has a sign-law
     Coulomb friction, its reason says what it may stand for: a smoother Coulomb law."""
-    from baseparams.diagnose.workflow import Problem, _unphysical
+    from baseparams.diagnose.gates import _unphysical
+    from baseparams.diagnose.problem import Problem
     from baseparams.diagnose.selection import Candidate
     from baseparams.io.loader import parse_mechanism
     from baseparams.model import generate

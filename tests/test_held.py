@@ -16,7 +16,7 @@ from baseparams import registry
 from baseparams.cli import main
 from baseparams.errors import InputError
 from baseparams.identify.base import BaseModel
-from baseparams.diagnose.workflow import prepare
+from baseparams.diagnose.problem import prepare
 from baseparams.identify.fit import identify
 from baseparams.dynamics.forces import Motion, evaluate, standard_parameters
 from baseparams.recordings.recording import read_data

@@ -133,7 +133,7 @@ def test_named_bodies_that_the_motion_moves_alike_are_said_to_share_what_they_ad
     """Two named changed bodies whose masses move the joints alike: each mass is determined
     alone, not beside the other (a Z1's payload named as 0.395 kg on link06 and 0.557 kg on
     link04): the report says the split is not in the data, once for the pair."""
-    from baseparams.diagnose import workflow as D
+    from baseparams.diagnose import entries
     from baseparams.diagnose.derived import COEFFICIENTS
     from baseparams.diagnose.selection import Candidate
     rng = np.random.default_rng(6)
@@ -142,10 +142,10 @@ def test_named_bodies_that_the_motion_moves_alike_are_said_to_share_what_they_ad
     b[:, :, 0] = a[:, :, 0]
     bodies = [Candidate("body", "link1", COEFFICIENTS["body"], a), Candidate("body", "link2", COEFFICIENTS["body"], b)]
     y = a @ rng.uniform(0.1, 1, 10) + b @ rng.uniform(0.1, 1, 10) + 0.01 * rng.standard_normal((n, f))
-    regrouped = D._regroupings(np.zeros((n, f, 0)), bodies, [0, 1], [0, 1], y, np.ones(f))
+    regrouped = entries._regroupings(np.zeros((n, f, 0)), bodies, [0, 1], [0, 1], y, np.ones(f))
     assert regrouped[0].absorbed == [0] and regrouped[0].shared == ((0,), (1,))
     assert regrouped[1].absorbed == [0] and regrouped[1].shared == ((0,), (0,))
-    notes = D._shared_bodies(bodies, regrouped)
+    notes = entries._shared_bodies(bodies, regrouped)
     assert len(notes) == 1 and notes[0].startswith("body:link1 and body:link2: the motion moves them alike")
     # alone, each body's ten are determined: nothing to regroup, nothing shared
-    assert D._regroupings(np.zeros((n, f, 0)), bodies, [0], [0], y, np.ones(f)) == {}
+    assert entries._regroupings(np.zeros((n, f, 0)), bodies, [0], [0], y, np.ones(f)) == {}

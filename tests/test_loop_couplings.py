@@ -398,7 +398,7 @@ def test_a_body_named_like_a_tied_coordinate_is_not_called_equivalent():
     coordinate pitch_top): body, mass and gain candidates are not on joint coordinates,
     and two bodies are never 'tied' by the coordinates' names."""
     from baseparams.diagnose.selection import Candidate
-    from baseparams.diagnose.workflow import tied_reason
+    from baseparams.diagnose.entries import tied_reason
     from baseparams.io.loader import resolve
     arm = resolve("parallelogram_arm")
     column = np.zeros((4, 3, 1))

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.diagnose.workflow import effects_toml
+from baseparams.diagnose.fixed import effects_toml
 from baseparams.io.loader import resolve
 from baseparams.model.mechanism import EffectSpec
 
@@ -24,7 +24,7 @@ def test_effect_on_every_coordinate_leaves_out_one_held_still(tmp_path):
     from baseparams.api import identify
     from baseparams.dynamics.forces import standard_parameters
     from baseparams.recordings.simulate import trajectory_motion
-    from baseparams.diagnose.workflow import prepare
+    from baseparams.diagnose.problem import prepare
     from baseparams.dynamics.forces import evaluate
     mechanism = resolve("puma560")
     motion = trajectory_motion(mechanism, 1500)

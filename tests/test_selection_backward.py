@@ -14,7 +14,8 @@ from baseparams.identify import longrun
 from baseparams.diagnose import selection as S
 from baseparams.diagnose import wald as W
 from baseparams.identify.linear import WeightedLinearModel
-from baseparams.diagnose.workflow import diagnose, prepare
+from baseparams.diagnose.problem import prepare
+from baseparams.diagnose.workflow import diagnose
 from baseparams.dynamics.forces import evaluate
 from baseparams.recordings.simulate import random_physical_inertia, trajectory_motion
 from baseparams.io.loader import resolve

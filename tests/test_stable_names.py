@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from baseparams.api.render import diagnosis_text
 from baseparams.cli import main
-from baseparams.diagnose import workflow as D
+from baseparams.diagnose import entries, workflow as D
 from baseparams.identify.impossible import PHYSICAL_SCALE, beyond_scale
 from baseparams.recordings.recording import read_data
 from baseparams.diagnose.selection import Candidate, Step
@@ -33,10 +33,10 @@ def test_an_effect_named_in_the_place_of_the_strongest_shows_the_holm_p_the_step
     tests = [WaldTest(30.0, 4, 1e-4, 4.0), WaldTest(5.0, 1, 0.02, 2.0)]
     step = Step(tests, np.array([0.003, 0.2]), fit=None, whiten=None, chosen=1, strongest=0,
                 over=WaldTest(4.0, 1, 0.04, 1.8))
-    out = D._named_test(candidates, step, 1)
+    out = entries._named_test(candidates, step, 1)
     assert out["pvalue_holm"] == 0.003 <= 0.05 and out["holm_of"] == "cogging:q1"
     assert out["pvalue_holm_own"] == 0.2 and out["pvalue_over_strongest"] == 0.04
-    plain = D._named_test(candidates, Step(tests, np.array([0.003, 0.2]), None, None, chosen=0), 0)
+    plain = entries._named_test(candidates, Step(tests, np.array([0.003, 0.2]), None, None, chosen=0), 0)
     assert plain == {"stat": 30.0, "df": 4, "pvalue": 1e-4, "pvalue_holm": 0.003}
 
 

@@ -292,7 +292,9 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
                                progress=progress)
     from dataclasses import replace
 
-    from baseparams.diagnose.workflow import check_writable, diagnose_data, write_fixed
+    from baseparams.diagnose.fixed import check_writable, write_fixed
+
+    from baseparams.diagnose.workflow import diagnose_data
     from baseparams.diagnose.given import given_parameters
     from baseparams.recordings.recording import read_data
 

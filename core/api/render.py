@@ -118,7 +118,7 @@ def _known_text(effect: dict) -> str:
     known = effect.get("known")
     if not known:
         return ""
-    from baseparams.diagnose.workflow import absent
+    from baseparams.diagnose.entries import absent
     values = effect["value"] if isinstance(effect["value"], dict) else {next(iter(known)): effect["value"]}
     gone = all(absent(values[k] + v, v) for k, v in known.items())
     return (" correcting the model's own " + ", ".join(f"{k} = {v:.4g}" for k, v in known.items())

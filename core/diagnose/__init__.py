@@ -1,9 +1,11 @@
 """Diagnosing: candidates, selection, gates, verdict and report of what a model lacks.
 
-- :mod:`.workflow`: diagnosis against a model (one set of runs);
+- :mod:`.workflow`: diagnosis against a model (one set of runs), with :mod:`.problem`,
+  :mod:`.gates`, :mod:`.verdict`, :mod:`.entries`, :mod:`.estimates` and :mod:`.fixed`;
 - :mod:`.change`, :mod:`.changesearch`: what changed between two sets of runs;
 - :mod:`.candidates`, :mod:`.derived`, :mod:`.given`, :mod:`.identifiable`: what may be named;
-- :mod:`.selection`, :mod:`.whiteness`, :mod:`.outofsample`: tests, colour, cross-validation.
+- :mod:`.wald`, :mod:`.selection`, :mod:`.final`, :mod:`.whiteness`, :mod:`.outofsample`: tests,
+  the forward and backward steps, tests against the final model, colour, cross-validation.
 
 The top room of the numerical core: imports identify, recordings and the layers below.
 """

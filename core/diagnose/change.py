@@ -54,7 +54,8 @@ from baseparams.errors import InputError
 from baseparams.diagnose import derived
 from baseparams.diagnose.candidates import known_effect, library
 from baseparams.recordings.data import MeasuredData
-from baseparams.diagnose.workflow import _coefficient_map, coefficients, nrms
+from baseparams.diagnose.entries import _coefficient_map
+from baseparams.diagnose.estimates import coefficients, nrms
 from baseparams.identify.fit import measured_design
 from baseparams.diagnose.given import Given
 from baseparams.diagnose.identifiable import regroup
