@@ -54,10 +54,19 @@ def alive(pid: int) -> bool:
     return fields is not None and fields[0] not in ("Z", "X")      # a zombie has ended
 
 
+def as_from_a_terminal() -> None:
+    """In the child before exec: SIGINT, SIGTERM and SIGHUP at their defaults, as a command
+    typed at a terminal has them. A test runner started in the background or under nohup
+    ignores SIGINT or SIGHUP, the child inherits that, and validate rightly keeps ignoring
+    them (nohup's meaning): the signal tests then saw exit 0 (the load check, issue 46)."""
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        signal.signal(getattr(signal, name), signal.SIG_DFL)
+
+
 def start_with_workers(count: int = 2, new_session: bool = True):
     """validate running with ``count`` live workers: (process, worker pids)."""
     proc = subprocess.Popen(VALIDATE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=new_session)
+                            start_new_session=new_session, preexec_fn=as_from_a_terminal)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         workers = children(proc.pid)
@@ -135,7 +144,8 @@ def test_ctrl_c_in_process_is_exit_130_too():
     machine outlasts while still importing, issue 46); the line's job has ended and the next
     one runs. Everything after it on stderr is the one line."""
     proc = subprocess.Popen([sys.executable, "-m", "baseparams.cli", "validate", "--all"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=as_from_a_terminal)
     try:
         assert select.select([proc.stderr], [], [], 300)[0], "validate never said a job ended"
         first = proc.stderr.readline()
