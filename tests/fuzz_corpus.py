@@ -519,7 +519,7 @@ BOOL_VALUES = {"maybe": "invalid", "2": "invalid", "": "invalid", "TRUE": "valid
 CHOICE_VALUES = {"sideways": "invalid", "": "invalid", "NATURAL": "invalid"}
 NAME_LIST_VALUES = {"zz": "invalid", "1": "invalid", "m1;Izz1": "invalid"}
 OPTION_TYPES = {  # solver -> option -> kind (the declarations, written out: the corpus must
-    "dp": {"samples": "int", "rank": "int", "seed": "seed", "scale": "bool"},
+    "dp": {"samples": "int", "rank": "int", "seed": "seed", "scale": "bool", "pivoting": "choice"},
     "vp": {"digits": "int", "samples": "int", "seed": "seed", "ladder": "ints", "kept": "ints",
            "pivoting": "choice", "recover": "bool"},
     "exact": {"samples": "int", "seed": "seed"},
