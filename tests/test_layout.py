@@ -150,6 +150,8 @@ FOR_ANY_SOLVER = {
                                                         "for any solver building W in blocks",
     "baseparams.solvers.support.untrusted_warning": "the warning for values printed beyond their trusted digits, "
                                                     "for any solver that rounds what it prints",
+    "baseparams.numeric.decide.rank_estimate": "a float64 estimate of W's rank, for any solver sizing its W "
+                                               "by the rank (vp since issue 47)",
 }
 
 
