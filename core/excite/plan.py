@@ -283,15 +283,7 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
     global _say
     began = time.perf_counter()
     original = base
-    problem = problem_of(mechanism, base, limits, settings)
-    notes: list[str] = []
-    if problem.scene is not None:
-        notes += problem.scene.notes
-    if problem.separate:
-        problem, dropped = _drop_inseparable(problem)
-        if dropped:
-            notes.append(f"{', '.join(dropped)}: identical to a combination of the other columns on any "
-                         "motion (their effect is absorbed, as identify does), left out of the separation")
+    problem, notes = _prepared(mechanism, base, limits, settings)
     summary: list[dict[str, Any]] = []
     converged, x, factor, used = False, None, 1.0, 0
     runner = runner or InProcess()
@@ -318,13 +310,7 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
             if not feasible:
                 if x is not None:
                     break
-                if not results:         # no start ran to its end: the limits are not the cause (issue 46)
-                    raise InputError(f"no start of the optimisation ran to its end ({'; '.join(failures)}): "
-                                     "not a matter of the limits", file=mechanism.path, key="--starts")
-                reasons = "; ".join(failures) or "every start ended outside the limits"
-                raise InputError(f"no motion inside the limits was found ({reasons}): widen the limits "
-                                 "(--max-velocity, --max-acceleration, --max-torque, --position-range, "
-                                 "--clearance, --keep-out) or lower --harmonics", file=mechanism.path, key="limits")
+                raise _infeasible(mechanism, bool(results), failures)
             best = min(feasible, key=lambda r: r["value"])
             converged = any(r["converged"] for r in feasible)
             if say:
@@ -357,22 +343,10 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
     form = problem.form
     after = design.check(problem, *form.motion(x, problem.times()), jerk=form.jerk(x, problem.times()))
     finer = _finer(problem, x)
-    before = None
-    motion = default_motion(mechanism, problem)
     was = dataclasses.replace(problem, model=dataclasses.replace(problem.model, base=original))
-    if motion is not None:
-        try:
-            before = design.check(was, *motion)
-        except KinematicsError as exc:
-            notes.append(f"the file's trajectory cannot be evaluated: {exc}")
+    before = _file_check(mechanism, problem, was, notes)
     reference = design.independent_states(problem, problem.samples, seed)
-    if before is not None and "singularity" in before.margins and before.margins["singularity"] < 0 \
-            and after.condition > before.condition / 10:
-        nearest = before.margins["singularity"] + problem.margin
-        notes.append(f"the file's trajectory comes nearer a singular configuration (1/cond of the closure "
-                     f"Jacobian {nearest:.3g}) than the margin {problem.margin:g} allows: where the weakest base "
-                     "columns are excited only near it, the condition number is bounded by how near the motion "
-                     "may come (a smaller --singularity-margin lets it come nearer)")
+    _note_singularity(problem, before, after, notes)
     kept = None
     if before is not None and math.isfinite(before.value) and not after.value < before.value:
         kept = "the file's trajectory"
@@ -381,19 +355,85 @@ def plan(mechanism: Mechanism, text: MechanismText, base: BaseModel, limits: Lim
                      "trajectory is returned unchanged" + ("" if before.feasible else
                                                            f", although it is {before.reason}"))
     elif before is None and best_start is not None and not after.value < best_start[0]:
-        start_x = form.rounded(best_start[1])
-        start_check = design.check(was, *form.motion(start_x, problem.times()))
-        if start_check.value <= after.value and _finer(was, start_x).feasible:
+        start = _better_start(problem, was, best_start[1], after, notes)
+        if start is not None:
             kept = "the best start"
-            notes.append(f"the optimised motion ({_figure(problem, after)}) is not better than the best start "
-                         f"({_figure(problem, start_check)}): that start is returned")
-            x, problem = start_x, was
-            after, finer = start_check, _finer(was, start_x)
+            x, problem, after, finer = start
     out = Plan(mechanism.name, problem, x, before, after, finer, reference, summary, converged, factor,
                notes, time.perf_counter() - began)
     out.rounds, out.solver, out.kept = used, solver, kept
     out.assumptions = limits.assumptions()
     return out
+
+
+def _prepared(mechanism: Mechanism, base: BaseModel, limits: Limits,
+              settings: Settings) -> tuple[design.Problem, list[str]]:
+    """The problem to optimise and the notes it starts with: the scene's, and which columns a
+    separation leaves out because no motion can tell them from the others."""
+    problem = problem_of(mechanism, base, limits, settings)
+    notes: list[str] = []
+    if problem.scene is not None:
+        notes += problem.scene.notes
+    if problem.separate:
+        problem, dropped = _drop_inseparable(problem)
+        if dropped:
+            notes.append(f"{', '.join(dropped)}: identical to a combination of the other columns on any "
+                         "motion (their effect is absorbed, as identify does), left out of the separation")
+    return problem, notes
+
+
+def _infeasible(mechanism: Mechanism, ran: bool, failures: list[str]) -> InputError:
+    """Why the first round found no feasible motion: no start ran to its end (``ran`` false:
+    the limits are not the cause, issue 46), or every start ended outside the limits."""
+    if not ran:
+        return InputError(f"no start of the optimisation ran to its end ({'; '.join(failures)}): "
+                          "not a matter of the limits", file=mechanism.path, key="--starts")
+    reasons = "; ".join(failures) or "every start ended outside the limits"
+    return InputError(f"no motion inside the limits was found ({reasons}): widen the limits "
+                      "(--max-velocity, --max-acceleration, --max-torque, --position-range, "
+                      "--clearance, --keep-out) or lower --harmonics", file=mechanism.path, key="limits")
+
+
+def _file_check(mechanism: Mechanism, problem: design.Problem, was: design.Problem,
+                notes: list[str]) -> design.Check | None:
+    """The file's own trajectory checked on the file's base (``was``), to compare the plan
+    with; None if the file has none or it cannot be evaluated (then a note says why)."""
+    motion = default_motion(mechanism, problem)
+    if motion is None:
+        return None
+    try:
+        return design.check(was, *motion)
+    except KinematicsError as exc:
+        notes.append(f"the file's trajectory cannot be evaluated: {exc}")
+        return None
+
+
+def _note_singularity(problem: design.Problem, before: design.Check | None, after: design.Check,
+                      notes: list[str]) -> None:
+    """Say so when the file's trajectory beats the plan's condition number by coming nearer a
+    singular configuration than the margin allows the plan to."""
+    if before is not None and "singularity" in before.margins and before.margins["singularity"] < 0 \
+            and after.condition > before.condition / 10:
+        nearest = before.margins["singularity"] + problem.margin
+        notes.append(f"the file's trajectory comes nearer a singular configuration (1/cond of the closure "
+                     f"Jacobian {nearest:.3g}) than the margin {problem.margin:g} allows: where the weakest base "
+                     "columns are excited only near it, the condition number is bounded by how near the motion "
+                     "may come (a smaller --singularity-margin lets it come nearer)")
+
+
+def _better_start(problem: design.Problem, was: design.Problem, best_start: np.ndarray, after: design.Check,
+                  notes: list[str]) -> tuple[np.ndarray, design.Problem, design.Check, design.Check] | None:
+    """The best start (x, its problem, check and finer check) if it is at least as good as the
+    optimised motion and feasible on the finer grid, else None: an optimiser that ends worse
+    than where it began should not be trusted over its start."""
+    form = problem.form
+    start_x = form.rounded(best_start)
+    start_check = design.check(was, *form.motion(start_x, problem.times()))
+    if not (start_check.value <= after.value and _finer(was, start_x).feasible):
+        return None
+    notes.append(f"the optimised motion ({_figure(problem, after)}) is not better than the best start "
+                 f"({_figure(problem, start_check)}): that start is returned")
+    return start_x, was, start_check, _finer(was, start_x)
 
 
 def _figure(problem: design.Problem, c: design.Check) -> str:
