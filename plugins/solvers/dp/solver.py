@@ -74,6 +74,27 @@ class DoublePrecisionSolver:
             raise InputError(f"solver {self.name!r}: option 'rank' must be at most {min(shape)} (W is "
                              f"{rows} x {W.shape[1]}: its rank cannot be higher), got {rank}")
         res = dp_gautier(W, scale=scale, rank=rank, columns=mechanism.parameters, rows=rows, pivoting=pivoting)
+        check, W, res, rows = self._checked(mechanism, trajectory, W, rows, res, scale, rank, seed, pivoting,
+                                            warnings)
+        warnings += res.warnings
+        params = mechanism.parameters
+        rounding = _Rounding(res)
+        base = base_rows(params, res.kept, res.eliminated, rounding)
+        summary = _dp_summary(res, W, rows, info, check, scale, pivoting, rounding, params)
+        details = _dp_details(res, rows, info, check, scale, pivoting, rounding, params)
+        diagnostics = Diagnostics(summary=summary, rank_tolerance=float(res.tolerance), details=details)
+        return BaseParameterResult(
+            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=res.rank, base=base,
+            eliminated=[params[j] for j in res.eliminated], certified=False, digits=None,
+            singular_values=[repr(float(v)) for v in res.singular_values], geometry=mechanism.geometry_text,
+            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
+            coefficients=decimal_coefficients(base))
+
+    def _checked(self, mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, rows: int, res: DPResult,
+                 scale: bool, rank: int | None, seed: int, pivoting: str,
+                 warnings: list[str]) -> tuple[dict[str, Any], np.ndarray, DPResult, int]:
+        """The excitation check, and the W and result to print from: W with the random
+        batch when the batch raised the rank or kept it (warnings appended)."""
         check, stacked, both = self._excitation_check(mechanism, trajectory, W, rows, res, scale, rank, seed,
                                                       pivoting)
         if check.get("raised") and stacked is not None and both is not None:
@@ -96,94 +117,7 @@ class DoublePrecisionSolver:
             warnings.append(f"the rank cut is fragile: W with an independent random batch of "
                             f"{check['states']} states gives rank {check['rank_with_batch']} at the same "
                             f"tolerance rule, not {res.rank}")
-        warnings += res.warnings
-        params = mechanism.parameters
-        noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)
-        # each row's printed coefficients share its error: every one rounded (or dropped) to
-        # within noise / sqrt(nonzero coefficients of the row) in scaled units, so the printed
-        # row is within the estimate of the computed one, however many coefficients it has
-        # (rounding each to the estimate itself let hundreds of errors add up: issue 47)
-        nonzero = np.count_nonzero(res.beta, axis=1) if res.beta.size else np.zeros(res.rank, dtype=int)
-        dropped, largest_dropped = 0, 0.0
-        untrusted: list[dict[str, Any]] = []     # stays empty: every coefficient above q / 2 has a digit
-
-        def coefficient(a: int, b: int) -> str | None:
-            nonlocal dropped, largest_dropped
-            value, scaled = float(res.beta[a, b]), abs(float(res.beta_s[a, b]))
-            if value == 0.0:
-                return None
-            quantum = noise / math.sqrt(max(1, int(nonzero[a])))
-            if scaled <= quantum / 2:
-                dropped += 1
-                largest_dropped = max(largest_dropped, scaled)
-                return None
-            # the digits down to the quantum in the printed value's own units (scaled and
-            # unscaled values may sit in different decades: counting them on the scaled
-            # value printed a digit more than trusted, 0.59999999999999976 for 3/5)
-            unit = quantum * abs(value) / scaled
-            digits = min(MAX_DIGITS, max(1, math.floor(math.log10(abs(value))) - math.floor(math.log10(unit)) + 1))
-            return decimal_string(arb(value), digits)
-
-        base = base_rows(params, res.kept, res.eliminated, coefficient)
-        s = res.singular_values
-        r = res.rank
-        gap_ratio = float(res.ratios.max()) if res.ratios.size else None
-        summary = [
-            f"W: {rows} x {W.shape[1]} ({info['samples']} samples"
-            + (f" + {check['states']} random states" if check.get("raised") else "")
-            + (f"; above the memory limit as one matrix: built in {_blocks_text(info['blocks'])} of at most "
-               f"{info['block_samples']} samples, folded into W's triangular factor R (R^T R = W^T W)"
-               if info.get("blocks") else "") + "); columns "
-            + ("scaled by powers of two near their norms" if scale else "not scaled"),
-            f"rank {r} by the tolerance max(shape)*eps*s_max = {_g(res.tolerance)}",
-            (f"s_{r} = {_g(s[r - 1])}, s_{r + 1} = {_g(s[r]) if r < len(s) else '-'}; largest gap "
-             f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
-             + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
-            f"beta: estimated error {_g(res.error_estimate, 2)} (first order, scaled units), cond(V22) = "
-            f"{_g(res.v22_condition)}" + ("; W and the random states together"
-                                          if check.get("beta_from_both") else "")
-            + f"; each row's coefficients printed down to its share of it (the estimate / sqrt(the row's "
-            f"nonzero coefficients)); {dropped} below half that share (largest {_g(largest_dropped, 2)}) are not "
-            f"shown",
-            _dp_check_line(check),
-        ]
-        natural = "natural order (the leftmost independent columns, as vp and exact)"
-        summary.append(res.kept_note or "kept parameters: " + (natural if pivoting == "natural" else "QR column pivoting"))
-        if res.zero_columns:
-            summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
-                           + " ".join(params[j] for j in res.zero_columns))
-        details = {
-            "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
-                               "(exact in binary); beta scaled back") if scale else "none",
-            "numerically_zero_columns": [params[j] for j in res.zero_columns],
-            "pivoting": pivoting if not res.kept_note else "qr",
-            "lifted_by_scaling": {"directions": int(res.lifted), "columns": list(res.lifted_columns)},
-            "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
-            "ridge": {"clear": bool(res.clear_ridge), "criterion":
-                      f"largest ratio s_i/s_(i+1) among values above the tolerance (the value below the "
-                      f"cut floored at eps*s_max) is >= {1e3:g} and falls at the tolerance cut",
-                      "largest_gap_after": int(res.largest_gap), "largest_ratio": gap_ratio,
-                      "ratio_at_cut": float(res.ratios[r - 1]) if 0 < r <= res.ratios.size else None},
-            "permutation": "QR with column pivoting on V2^T chooses the eliminated parameters",
-            "beta_error_estimate": float(res.error_estimate),
-            "v22_condition": float(res.v22_condition),
-            "coefficients_below_noise_dropped": dropped,
-            "largest_dropped_scaled": largest_dropped,
-            "untrusted": untrusted,
-            "excitation_check": check,
-            "samples": info["samples"], "rows": int(rows),
-            "row_blocks": ({"blocks": info["blocks"], "samples_per_block": info["block_samples"],
-                            "reason": "W over the default samples is above the memory limit: built in row "
-                                      "blocks, each compressed into W's triangular factor as it comes"}
-                           if info.get("blocks") else None),
-        }
-        diagnostics = Diagnostics(summary=summary, rank_tolerance=float(res.tolerance), details=details)
-        return BaseParameterResult(
-            mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=r, base=base,
-            eliminated=[params[j] for j in res.eliminated], certified=False, digits=None,
-            singular_values=[repr(float(v)) for v in s], geometry=mechanism.geometry_text,
-            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
-            coefficients=decimal_coefficients(base))
+        return check, W, res, rows
 
     @staticmethod
     def _excitation_check(mechanism: Mechanism, trajectory: Trajectory, W: np.ndarray, W_rows: int, res: DPResult,
@@ -256,3 +190,98 @@ def _dp_check_line(check: dict[str, Any]) -> str:
                 f"{check['rank']} to {check['rank_with_batch']}: W above includes them")
     return (f"excitation check: {check['states']} independent random states ({check['rows']} rows) "
             f"added to W give rank {check['rank_with_batch']}")
+
+class _Rounding:
+    """Each row's printed coefficients share its error: every one rounded (or dropped) to
+    within noise / sqrt(nonzero coefficients of the row) in scaled units, so the printed
+    row is within the estimate of the computed one, however many coefficients it has
+    (rounding each to the estimate itself let hundreds of errors add up: issue 47).
+    Counts what it drops."""
+
+    def __init__(self, res: DPResult) -> None:
+        self.res = res
+        self.noise = max(res.error_estimate, EPS)      # absolute error of beta_s (scaled units)
+        self.nonzero = np.count_nonzero(res.beta, axis=1) if res.beta.size else np.zeros(res.rank, dtype=int)
+        self.dropped, self.largest_dropped = 0, 0.0
+
+    def __call__(self, a: int, b: int) -> str | None:
+        value, scaled = float(self.res.beta[a, b]), abs(float(self.res.beta_s[a, b]))
+        if value == 0.0:
+            return None
+        quantum = self.noise / math.sqrt(max(1, int(self.nonzero[a])))
+        if scaled <= quantum / 2:
+            self.dropped += 1
+            self.largest_dropped = max(self.largest_dropped, scaled)
+            return None
+        # the digits down to the quantum in the printed value's own units (scaled and
+        # unscaled values may sit in different decades: counting them on the scaled
+        # value printed a digit more than trusted, 0.59999999999999976 for 3/5)
+        unit = quantum * abs(value) / scaled
+        digits = min(MAX_DIGITS, max(1, math.floor(math.log10(abs(value))) - math.floor(math.log10(unit)) + 1))
+        return decimal_string(arb(value), digits)
+
+
+def _dp_summary(res: DPResult, W: np.ndarray, rows: int, info: dict[str, Any], check: dict[str, Any],
+                scale: bool, pivoting: str, rounding: _Rounding, params: list[str]) -> list[str]:
+    """The summary lines: W, the rank rule, the ridge, beta's error and the check."""
+    s = res.singular_values
+    r = res.rank
+    gap_ratio = float(res.ratios.max()) if res.ratios.size else None
+    summary = [
+        f"W: {rows} x {W.shape[1]} ({info['samples']} samples"
+        + (f" + {check['states']} random states" if check.get("raised") else "")
+        + (f"; above the memory limit as one matrix: built in {_blocks_text(info['blocks'])} of at most "
+           f"{info['block_samples']} samples, folded into W's triangular factor R (R^T R = W^T W)"
+           if info.get("blocks") else "") + "); columns "
+        + ("scaled by powers of two near their norms" if scale else "not scaled"),
+        f"rank {r} by the tolerance max(shape)*eps*s_max = {_g(res.tolerance)}",
+        (f"s_{r} = {_g(s[r - 1])}, s_{r + 1} = {_g(s[r]) if r < len(s) else '-'}; largest gap "
+         f"s_{res.largest_gap}/s_{res.largest_gap + 1} = {_g(gap_ratio) if gap_ratio else '-'}; "
+         + ("clear ridge at the cut" if res.clear_ridge else "NO clear ridge at the cut")) if r else "rank 0",
+        f"beta: estimated error {_g(res.error_estimate, 2)} (first order, scaled units), cond(V22) = "
+        f"{_g(res.v22_condition)}" + ("; W and the random states together"
+                                      if check.get("beta_from_both") else "")
+        + f"; each row's coefficients printed down to its share of it (the estimate / sqrt(the row's "
+        f"nonzero coefficients)); {rounding.dropped} below half that share (largest "
+        f"{_g(rounding.largest_dropped, 2)}) are not shown",
+        _dp_check_line(check),
+    ]
+    natural = "natural order (the leftmost independent columns, as vp and exact)"
+    summary.append(res.kept_note or "kept parameters: " + (natural if pivoting == "natural" else "QR column pivoting"))
+    if res.zero_columns:
+        summary.append(f"{len(res.zero_columns)} columns are (numerically) zero: "
+                       + " ".join(params[j] for j in res.zero_columns))
+    return summary
+
+
+def _dp_details(res: DPResult, rows: int, info: dict[str, Any], check: dict[str, Any], scale: bool,
+                pivoting: str, rounding: _Rounding, params: list[str]) -> dict[str, Any]:
+    """The diagnostics' details (JSON keys of docs/design.md)."""
+    r = res.rank
+    gap_ratio = float(res.ratios.max()) if res.ratios.size else None
+    untrusted: list[dict[str, Any]] = []     # stays empty: every coefficient above q / 2 has a digit
+    return {
+        "column_scaling": ("each column divided by the power of two nearest its Euclidean norm "
+                           "(exact in binary); beta scaled back") if scale else "none",
+        "numerically_zero_columns": [params[j] for j in res.zero_columns],
+        "pivoting": pivoting if not res.kept_note else "qr",
+        "lifted_by_scaling": {"directions": int(res.lifted), "columns": list(res.lifted_columns)},
+        "rank_rule": "number of singular values above max(shape) * eps * s_max (scaled W)",
+        "ridge": {"clear": bool(res.clear_ridge), "criterion":
+                  f"largest ratio s_i/s_(i+1) among values above the tolerance (the value below the "
+                  f"cut floored at eps*s_max) is >= {1e3:g} and falls at the tolerance cut",
+                  "largest_gap_after": int(res.largest_gap), "largest_ratio": gap_ratio,
+                  "ratio_at_cut": float(res.ratios[r - 1]) if 0 < r <= res.ratios.size else None},
+        "permutation": "QR with column pivoting on V2^T chooses the eliminated parameters",
+        "beta_error_estimate": float(res.error_estimate),
+        "v22_condition": float(res.v22_condition),
+        "coefficients_below_noise_dropped": rounding.dropped,
+        "largest_dropped_scaled": rounding.largest_dropped,
+        "untrusted": untrusted,
+        "excitation_check": check,
+        "samples": info["samples"], "rows": int(rows),
+        "row_blocks": ({"blocks": info["blocks"], "samples_per_block": info["block_samples"],
+                        "reason": "W over the default samples is above the memory limit: built in row "
+                                  "blocks, each compressed into W's triangular factor as it comes"}
+                       if info.get("blocks") else None),
+    }
