@@ -375,25 +375,9 @@ def _change_lag(chosen: Search, kept: set, y: np.ndarray, data: MeasuredData, ro
 def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, *,
                     given: Given | None = None, alpha: float = 0.05) -> ChangeDiagnosis:
     """What changed between the ``baseline`` runs and the ``changed`` runs (module docstring)."""
-    if not 0.0 < alpha < 1.0:
-        raise InputError(f"alpha must be in (0, 1), not {alpha}", key="--alpha")
-    coordinates = independent_names(mechanism)
-    if baseline.coordinates != changed.coordinates:
-        raise InputError("the baseline and the changed runs hold other coordinates", key="--baseline")
-    gains = dict(given.gains) if given is not None else {}
-    if set(baseline.gain_names) != set(changed.gain_names) and not all(
-            g in gains for g in baseline.gain_names + changed.gain_names):
-        raise InputError("the baseline and the changed runs read currents of other unknown gains: describe both "
-                         "alike, or give the gains (--params an identify result)", key="--baseline")
+    coordinates, base, other = _sides(mechanism, baseline, changed, given, alpha)
     notes: list[str] = []
-    base = _side(mechanism, baseline, given, gains)
-    other = _side(mechanism, changed, given, gains)
-    if base.shared.shape[-1] != other.shared.shape[-1]:
-        raise InputError("the baseline and the changed runs give the model other columns", key="--baseline")
     f = len(coordinates)
-    if len(base.tau) * f < base.shared.shape[-1] + 20:
-        raise InputError(f"{len(base.tau)} baseline samples cannot fit the shared model's {base.shared.shape[-1]} "
-                         "columns: give longer baseline runs", key="--baseline")
     partner, distance = pair(base.state, other.state)
     matched = (distance <= PAIR_DISTANCE) & replayed(partner, base.data.t, other.data.t)
     share = float(np.mean(matched))
@@ -412,42 +396,11 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     residual_base = y_base - shared_base @ theta
     residual_other = y_other - shared_other @ theta
     predicted = known_other + shared_other @ theta
-
-    if paired:
-        rows = np.flatnonzero(matched)
-        difference = residual_other[rows] - residual_base[partner[rows]]
-        if share < 1.0:
-            notes.append(f"{100 * (1 - share):.0f} % of the changed samples have no baseline sample in the same state "
-                         f"(within {100 * PAIR_DISTANCE:.0f} % of each spread): left out of the tests")
-    else:
-        rows = np.arange(len(residual_other))
-        difference = residual_other
-        notes.append(f"the runs do not share their motion ({100 * share:.0f} % of the changed samples have a baseline "
-                     "sample in the same state): what the model lacks in both does not cancel, and a change is "
-                     "tested on the changed runs' residual against the baseline's model; record both sides "
-                     "along the same trajectory to cancel it")
-    if len(rows) * f < 40:
-        raise InputError(f"{len(rows)} changed samples can be compared with the baseline: too few to test a "
-                         "change", key="DATA")
+    rows, difference = _tested_rows(residual_base, residual_other, partner, matched, share, f, notes)
 
     raw, more = _change_candidates(mechanism, other, predicted, coordinates)
     notes += more
-    # a change's force reaches the torques through the same lag
-    candidates = [c.rows(rows) for c in delayed_all(raw, delay, other.data)]
-    empty = np.zeros((len(rows), f, 0))
-    chosen, kept, gate = named_changes(candidates, difference, alpha, notes)
-    lag = _change_lag(chosen, kept, difference, other.data, rows)
-    if abs(lag) > DELAY_TOLERANCE * float(np.median(np.diff(other.data.t))):
-        # the lag that the changed force shows, when the shared model's delay misses it: a
-        # delay off by 2 ms left 0.4 noise SDs of a 45 g payload's force on the PUMA's wrist,
-        # and torque gains were named for it; searched again, the candidates late by it too
-        delay += lag
-        notes.append(f"the named changes' force lags by {1e3 * delay:.3g} ms (the shared model's delay corrected by "
-                     f"{1e3 * lag:+.3g} ms); the candidates were searched again at that lag")
-        candidates = [c.rows(rows) for c in delayed_all(raw, delay, other.data)]
-        retry: list[str] = []
-        chosen, kept, gate = named_changes(candidates, difference, alpha, retry)
-        notes += retry
+    chosen, kept, gate, delay = _search(raw, rows, delay, other.data, difference, alpha, notes)
     weights = chosen.weights
     below: list[dict] = []
     if not paired:            # what both lack does not cancel: a change must outgrow the model's own error
@@ -458,36 +411,13 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
                          f"smaller than {DOMINANCE:g} times what the shared model misses on baseline motions it was not "
                          "fitted to (" + ", ".join(f"{c} {v:.3g}" for c, v in zip(coordinates, floor)) + "): "
                          + ", ".join(b["candidate"] for b in below))
-    changes, ambiguous, in_model = _entries(chosen, difference, empty, kept)
+    empty = np.zeros((len(rows), f, 0))
+    changes, ambiguous, _ = _entries(chosen, difference, empty, kept)
     # bodies that move together through a closed loop: one change, with its physical alternatives (issue 49)
     changes, ambiguous = named_groups(mechanism, chosen, kept, changes, ambiguous, difference, alpha,
                                       lambda search, keep: _entries(search, difference, empty, keep)[0])
-    final = [chosen.candidates[i].columns for i in chosen.in_model if i in kept]
-    model_after = np.concatenate([empty] + final, axis=-1)
-    after = difference - (model_after @ _plain_fit(model_after, difference, weights).coefficients
-                          if model_after.shape[-1] else 0.0)
-    left = [c.columns for i, c in enumerate(chosen.candidates) if i not in kept]
-    rest = rest_test(after, np.concatenate(left, axis=-1), model_after, weights) if left else \
-        {"stat": 0.0, "df": 0, "pvalue": 1.0}
-    named = bool(changes or ambiguous)
-    # other motions: what both lack stays in the difference, and a test of it says nothing of a change
-    # and "structure" is what predicts held-out blocks, not only what a test calls significant
-    if left and rest["pvalue"] <= alpha / UNEXPLAINED_BAR:
-        rest["held_out_gain"] = held_out_gain(after, np.concatenate(left, axis=-1), weights).tolist()
-    structure = paired and rest["pvalue"] <= alpha / UNEXPLAINED_BAR and \
-        predicts(np.asarray(rest.get("held_out_gain", [0.0])))
-    verdict = ("partly explained" if structure else "changed") if named else \
-        ("unexplained" if structure else "nothing changed")
-    if not named and not structure and rest["pvalue"] <= alpha:
-        why = (f"below the bar for a change with nothing named ({alpha / UNEXPLAINED_BAR:.2g})"
-               if rest["pvalue"] > alpha / UNEXPLAINED_BAR else
-               "that does not predict held-out blocks of the difference" if paired else
-               "the runs are of other motions")
-        notes.append(f"the difference leans on the candidates together (p = {rest['pvalue']:.2g}), but {why}")
-    whiten = Whitening.of(after)
-    if whiten is not None and np.max(whiten.rho) > 0.5:
-        notes.append("the difference's noise is coloured (lag-1 autocorrelation up to "
-                     f"{float(np.max(whiten.rho)):.2f}); the tests whiten it")
+    after, rest, verdict = _rest_and_verdict(chosen, kept, difference, empty, weights, bool(changes or ambiguous),
+                                             paired, alpha, notes)
 
     tau_rows = other.tau[rows]
     gap = {"before": nrms(difference, tau_rows), "after": nrms(after, tau_rows),
@@ -508,6 +438,108 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
     t = other.data.t[rows]
     return ChangeDiagnosis(mechanism.name, coordinates, verdict, alpha, changes, ambiguous, gap, common, pairing,
                            {**rest, "below_model_error": below, "gate": gate}, steps, notes, t, difference, after)
+
+
+def _sides(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, given: Given | None,
+           alpha: float) -> tuple[tuple[str, ...], _Side, _Side]:
+    """The coordinates and both sides, once the two sets of runs are known to be comparable
+    (alike coordinates, gains and model columns; baseline samples enough to fit the model)."""
+    if not 0.0 < alpha < 1.0:
+        raise InputError(f"alpha must be in (0, 1), not {alpha}", key="--alpha")
+    coordinates = independent_names(mechanism)
+    if baseline.coordinates != changed.coordinates:
+        raise InputError("the baseline and the changed runs hold other coordinates", key="--baseline")
+    gains = dict(given.gains) if given is not None else {}
+    if set(baseline.gain_names) != set(changed.gain_names) and not all(
+            g in gains for g in baseline.gain_names + changed.gain_names):
+        raise InputError("the baseline and the changed runs read currents of other unknown gains: describe both "
+                         "alike, or give the gains (--params an identify result)", key="--baseline")
+    base = _side(mechanism, baseline, given, gains)
+    other = _side(mechanism, changed, given, gains)
+    if base.shared.shape[-1] != other.shared.shape[-1]:
+        raise InputError("the baseline and the changed runs give the model other columns", key="--baseline")
+    if len(base.tau) * len(coordinates) < base.shared.shape[-1] + 20:
+        raise InputError(f"{len(base.tau)} baseline samples cannot fit the shared model's {base.shared.shape[-1]} "
+                         "columns: give longer baseline runs", key="--baseline")
+    return coordinates, base, other
+
+
+def _tested_rows(residual_base: np.ndarray, residual_other: np.ndarray, partner: np.ndarray, matched: np.ndarray,
+                 share: float, f: int, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The changed samples tested and the difference there: the changed residual minus its
+    baseline partner's when the runs share their motion, else the changed residual alone."""
+    if share >= PAIRED_SHARE:
+        rows = np.flatnonzero(matched)
+        difference = residual_other[rows] - residual_base[partner[rows]]
+        if share < 1.0:
+            notes.append(f"{100 * (1 - share):.0f} % of the changed samples have no baseline sample in the same state "
+                         f"(within {100 * PAIR_DISTANCE:.0f} % of each spread): left out of the tests")
+    else:
+        rows = np.arange(len(residual_other))
+        difference = residual_other
+        notes.append(f"the runs do not share their motion ({100 * share:.0f} % of the changed samples have a baseline "
+                     "sample in the same state): what the model lacks in both does not cancel, and a change is "
+                     "tested on the changed runs' residual against the baseline's model; record both sides "
+                     "along the same trajectory to cancel it")
+    if len(rows) * f < 40:
+        raise InputError(f"{len(rows)} changed samples can be compared with the baseline: too few to test a "
+                         "change", key="DATA")
+    return rows, difference
+
+
+def _search(raw: list[Candidate], rows: np.ndarray, delay: float, data: MeasuredData, difference: np.ndarray,
+            alpha: float, notes: list[str]) -> tuple[Search, set, dict, float]:
+    """The named changes among the candidates at the shared model's delay, searched again at
+    the lag the named changes' force shows when it misses it: (search, kept, gate, delay)."""
+    # a change's force reaches the torques through the same lag
+    candidates = [c.rows(rows) for c in delayed_all(raw, delay, data)]
+    chosen, kept, gate = named_changes(candidates, difference, alpha, notes)
+    lag = _change_lag(chosen, kept, difference, data, rows)
+    if abs(lag) > DELAY_TOLERANCE * float(np.median(np.diff(data.t))):
+        # the lag that the changed force shows, when the shared model's delay misses it: a
+        # delay off by 2 ms left 0.4 noise SDs of a 45 g payload's force on the PUMA's wrist,
+        # and torque gains were named for it; searched again, the candidates late by it too
+        delay += lag
+        notes.append(f"the named changes' force lags by {1e3 * delay:.3g} ms (the shared model's delay corrected by "
+                     f"{1e3 * lag:+.3g} ms); the candidates were searched again at that lag")
+        candidates = [c.rows(rows) for c in delayed_all(raw, delay, data)]
+        retry: list[str] = []
+        chosen, kept, gate = named_changes(candidates, difference, alpha, retry)
+        notes += retry
+    return chosen, kept, gate, delay
+
+
+def _rest_and_verdict(chosen: Search, kept: set, difference: np.ndarray, empty: np.ndarray, weights: np.ndarray,
+                      named: bool, paired: bool, alpha: float,
+                      notes: list[str]) -> tuple[np.ndarray, dict, str]:
+    """The difference after the named changes, the test of what the other candidates leave
+    in it, and the verdict: (after, rest, verdict)."""
+    final = [chosen.candidates[i].columns for i in chosen.in_model if i in kept]
+    model_after = np.concatenate([empty] + final, axis=-1)
+    after = difference - (model_after @ _plain_fit(model_after, difference, weights).coefficients
+                          if model_after.shape[-1] else 0.0)
+    left = [c.columns for i, c in enumerate(chosen.candidates) if i not in kept]
+    rest = rest_test(after, np.concatenate(left, axis=-1), model_after, weights) if left else \
+        {"stat": 0.0, "df": 0, "pvalue": 1.0}
+    # other motions: what both lack stays in the difference, and a test of it says nothing of a change
+    # and "structure" is what predicts held-out blocks, not only what a test calls significant
+    if left and rest["pvalue"] <= alpha / UNEXPLAINED_BAR:
+        rest["held_out_gain"] = held_out_gain(after, np.concatenate(left, axis=-1), weights).tolist()
+    structure = paired and rest["pvalue"] <= alpha / UNEXPLAINED_BAR and \
+        predicts(np.asarray(rest.get("held_out_gain", [0.0])))
+    verdict = ("partly explained" if structure else "changed") if named else \
+        ("unexplained" if structure else "nothing changed")
+    if not named and not structure and rest["pvalue"] <= alpha:
+        why = (f"below the bar for a change with nothing named ({alpha / UNEXPLAINED_BAR:.2g})"
+               if rest["pvalue"] > alpha / UNEXPLAINED_BAR else
+               "that does not predict held-out blocks of the difference" if paired else
+               "the runs are of other motions")
+        notes.append(f"the difference leans on the candidates together (p = {rest['pvalue']:.2g}), but {why}")
+    whiten = Whitening.of(after)
+    if whiten is not None and np.max(whiten.rho) > 0.5:
+        notes.append("the difference's noise is coloured (lag-1 autocorrelation up to "
+                     f"{float(np.max(whiten.rho)):.2f}); the tests whiten it")
+    return after, rest, verdict
 
 
 def _plain_fit(model: np.ndarray, y: np.ndarray, weights: np.ndarray) -> LinearFit:
