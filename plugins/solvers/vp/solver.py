@@ -325,6 +325,77 @@ def _vp_coefficients(final: BallRun, prev: BallRun | None,
     return rows, printed, untrusted
 
 
+def _vp_samples(mechanism: Mechanism, samples: int | None, first: Sequence[int], notes: list[str],
+                progress: Progress | None) -> tuple[int | None, str | None]:
+    """The samples of W: the option's, or the default lowered to the rows the rank estimate
+    needs and to what fits the memory limit (each lowering noted): (samples, budget note)."""
+    budget_note: str | None = None
+    chosen = samples or default_samples(mechanism)
+    fewer = samples_from_rank(mechanism, chosen) if not samples and chosen else None
+    if fewer is not None:
+        notes.append(f"{fewer[0]} samples ({fewer[0] * _width(mechanism):,} rows, {ROWS_PER_RANK} per rank "
+                     f"{fewer[1]} estimated in float64) instead of the default {chosen}")
+        say(progress, "vp: " + notes[-1])
+        chosen = fewer[0]
+    if not samples and chosen:
+        params = mechanism.parameters
+        fitted = samples_in_budget(mechanism, first)
+        if fitted is not None and fitted < chosen:
+            notes.append(f"{chosen} samples (the default) would need about "
+                         f"{size_text(ball_bytes(chosen * _width(mechanism), len(params), first))} in balls, above "
+                         f"the memory limit of {size_text(memory_limit())}: {fitted} samples "
+                         f"({fitted * _width(mechanism):,} rows for {len(params)} parameters) chosen to fit")
+            say(progress, "vp: " + notes[-1])
+            budget_note, chosen = notes[-1], fitted
+    return chosen, budget_note
+
+
+def _vp_trajectory(mechanism: Mechanism, samples: int | None, first: Sequence[int], steps: Sequence[int],
+                   progress: Progress | None) -> Trajectory:
+    """The trajectory of W, once W in balls at the first two precisions is known to fit in memory."""
+    trajectory = Trajectory.default(mechanism, samples=samples)
+    rows, cols = len(trajectory.times) * _width(mechanism), len(mechanism.parameters)
+    check_memory(ball_bytes(rows, cols, first), f"vp: W ({rows:,} x {cols}) in balls at "
+                 f"{', '.join(map(str, first))} digits", "use fewer samples (--samples or -O samples), "
+                 "or fix the precision (--digits)", file=mechanism.path)
+    say(progress, f"vp: W is {rows:,} x {cols}: about {size_text(ball_bytes(rows, cols, first))} of memory "
+                  f"at {', '.join(map(str, first))} digits"
+                  + (f", up to {size_text(ball_bytes(rows, cols, steps))} if the ladder climbs to "
+                     f"{steps[-1]}" if len(steps) > 2 else ""))
+    return trajectory
+
+
+def _vp_summary(runs: list[BallRun], prev: BallRun | None, accepted: bool, agreement: float | None,
+                check: dict[str, Any], printed: list[int], budget_note: str | None,
+                recovery: dict[str, Any]) -> list[str]:
+    """The summary lines: W, the proven rank and ridge, the agreement, the check, the digits."""
+    final = runs[-1]
+    a = final.analysis
+    extra = final.info["random_states"]
+    summary = [
+        f"W: {final.W.nrows()} x {final.W.ncols()} ({final.info['samples']} samples"
+        + (f" + {extra} random states" if extra else "") + ") at "
+        f"{', '.join(str(r.digits) for r in runs)} digits; columns scaled by powers of two",
+        f"rank >= {a.rank} proven (a {a.rank} x {a.rank} block of W is nonsingular in ball arithmetic); "
+        f"s_{a.rank} >= {a.sigma_r_lower.str(3, radius=False)}, every later singular value <= "
+        f"{a.tail_bound.str(3, radius=False)}: a ridge of {_finite(a.ridge_log10)} decades",
+        (f"agreement with {prev.digits} digits: rank, kept parameters and beta to >= {agreement} digits"
+         if prev is not None and accepted else "not confirmed at a second precision"),
+        "excitation check: " + _vp_check_line(check),
+        (f"coefficients printed with {min(printed)} to {max(printed)} trusted digits "
+         f"(kept parameters: {a.pivoting} order)" if printed else
+         f"no coefficient of beta printed (kept parameters: {a.pivoting} order)"),
+    ]
+    if budget_note:
+        summary.append(budget_note)
+    if recovery.get("attempted"):
+        summary.append("exact rationals: " + (
+            f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
+            f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
+            else f"not recovered ({recovery['reason']})"))
+    return summary
+
+
 class VariablePrecisionSolver:
     """Gautier's method in python-flint ball arithmetic, precision escalated automatically."""
 
@@ -362,53 +433,14 @@ class VariablePrecisionSolver:
         :func:`baseparams.solvers.run.run_solver`)."""
         start = time.perf_counter()
         params = mechanism.parameters
-        warnings, notes = [], []
-        budget_note: str | None = None
+        warnings: list[str] = []
+        notes: list[str] = []
         steps = [int(digits)] if digits else [int(d) for d in ladder]
         first = steps[:2]          # the least the ladder needs: two precisions that agree
-        chosen = samples or default_samples(mechanism)
-        fewer = samples_from_rank(mechanism, chosen) if not samples and chosen else None
-        if fewer is not None:
-            notes.append(f"{fewer[0]} samples ({fewer[0] * _width(mechanism):,} rows, {ROWS_PER_RANK} per rank "
-                         f"{fewer[1]} estimated in float64) instead of the default {chosen}")
-            say(progress, "vp: " + notes[-1])
-            chosen = fewer[0]
-        if not samples and chosen:
-            fitted = samples_in_budget(mechanism, first)
-            if fitted is not None and fitted < chosen:
-                notes.append(f"{chosen} samples (the default) would need about "
-                             f"{size_text(ball_bytes(chosen * _width(mechanism), len(params), first))} in balls, above "
-                             f"the memory limit of {size_text(memory_limit())}: {fitted} samples "
-                             f"({fitted * _width(mechanism):,} rows for {len(params)} parameters) chosen to fit")
-                say(progress, "vp: " + notes[-1])
-                budget_note, chosen = notes[-1], fitted
-        trajectory = Trajectory.default(mechanism, samples=chosen)
-        rows, cols = len(trajectory.times) * _width(mechanism), len(params)
-        check_memory(ball_bytes(rows, cols, first), f"vp: W ({rows:,} x {cols}) in balls at "
-                     f"{', '.join(map(str, first))} digits", "use fewer samples (--samples or -O samples), "
-                     "or fix the precision (--digits)", file=mechanism.path)
-        say(progress, f"vp: W is {rows:,} x {cols}: about {size_text(ball_bytes(rows, cols, first))} of memory "
-                      f"at {', '.join(map(str, first))} digits"
-                      + (f", up to {size_text(ball_bytes(rows, cols, steps))} if the ladder climbs to "
-                         f"{steps[-1]}" if len(steps) > 2 else ""))
-        batches: list[RandomBatch] = []
-        checks: list[dict[str, Any]] = []
-        for round_ in range(CHECK_ROUNDS + 1):
-            try:
-                runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
-                                                                    kept, pivoting, progress)
-            except ValueError as exc:
-                if kept is None:
-                    raise
-                raise InputError(f"solver {self.name!r}: option 'kept': {exc}: impose columns that are "
-                                 f"independent in W (or leave kept to the pivoting)") from None
-            check, batch = self._excitation_check(mechanism, trajectory, runs[-1], seed + round_, progress)
-            checks.append(check)
-            if check["passed"] or "error" in check or round_ == CHECK_ROUNDS:
-                break
-            say(progress, f"vp: the excitation check failed (rank {check['rank']}): W and the batch "
-                           f"analysed together")
-            batches.append(batch)
+        chosen, budget_note = _vp_samples(mechanism, samples, first, notes, progress)
+        trajectory = _vp_trajectory(mechanism, chosen, first, steps, progress)
+        runs, accepted, agreement, reasons, checks, batches = self._checked_runs(
+            mechanism, trajectory, steps, kept, pivoting, seed, progress)
         final = runs[-1]
         a = final.analysis
         if kept is not None and a.ridge_log10 < KEPT_RIDGE_DECADES:
@@ -452,35 +484,13 @@ class VariablePrecisionSolver:
         if recover:
             recovery = self._recover(mechanism, final, trajectory, batches, params, progress)
 
-        sv = a.singular_values[:a.rank] + final.tail_values
-        extra = final.info["random_states"]
-        summary = [
-            f"W: {final.W.nrows()} x {final.W.ncols()} ({final.info['samples']} samples"
-            + (f" + {extra} random states" if extra else "") + ") at "
-            f"{', '.join(str(r.digits) for r in runs)} digits; columns scaled by powers of two",
-            f"rank >= {a.rank} proven (a {a.rank} x {a.rank} block of W is nonsingular in ball arithmetic); "
-            f"s_{a.rank} >= {a.sigma_r_lower.str(3, radius=False)}, every later singular value <= "
-            f"{a.tail_bound.str(3, radius=False)}: a ridge of {_finite(a.ridge_log10)} decades",
-            (f"agreement with {prev.digits} digits: rank, kept parameters and beta to >= {agreement} digits"
-             if prev is not None and accepted else "not confirmed at a second precision"),
-            "excitation check: " + _vp_check_line(checks[-1]),
-            (f"coefficients printed with {min(printed)} to {max(printed)} trusted digits "
-             f"(kept parameters: {a.pivoting} order)" if printed else
-             f"no coefficient of beta printed (kept parameters: {a.pivoting} order)"),
-        ]
-        if budget_note:
-            summary.append(budget_note)
-        if recovery.get("attempted"):
-            summary.append("exact rationals: " + (
-                f"recovered and confirmed inside the balls at {recovery['confirmed_at_digits']} digits "
-                f"(largest denominator {recovery['largest_denominator']})" if recovery["succeeded"]
-                else f"not recovered ({recovery['reason']})"))
+        summary = _vp_summary(runs, prev, accepted, agreement, checks[-1], printed, budget_note, recovery)
         details = {
             "runs": [r.summary() for r in runs],
             "pivoting": a.pivoting,
             "agreement_digits": _finite(agreement) if agreement is not None else None,
             "excitation_checks": checks,
-            "random_states_in_W": extra,
+            "random_states_in_W": final.info["random_states"],
             "trusted_digits": {"min": min(printed, default=None), "max": max(printed, default=None)},
             "untrusted": untrusted,
             "column_scaling": "each column divided by the power of two nearest its norm (exact)",
@@ -507,9 +517,35 @@ class VariablePrecisionSolver:
         return BaseParameterResult(
             mechanism=mechanism.name, solver=self.name, parameters=list(params), rank=a.rank, base=base,
             eliminated=[params[j] for j in a.eliminated], certified=bool(certified), digits=final.digits,
-            singular_values=sv, geometry=mechanism.geometry_text, warnings=warnings,
-            elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
+            singular_values=a.singular_values[:a.rank] + final.tail_values, geometry=mechanism.geometry_text,
+            warnings=warnings, elapsed_s=time.perf_counter() - start, diagnostics=diagnostics,
             coefficients=decimal_coefficients(base, rationals))
+
+    def _checked_runs(self, mechanism: Mechanism, trajectory: Trajectory, steps: Sequence[int],
+                      kept: Sequence[int] | None, pivoting: str, seed: int, progress: Progress | None
+                      ) -> tuple[list[BallRun], bool, float | None, list[str], list[dict[str, Any]], list[RandomBatch]]:
+        """The ladder (:meth:`_escalate`), then the excitation check; a failed check adds its
+        random batch to W and climbs again, up to CHECK_ROUNDS times: (runs, accepted,
+        agreement, reasons, checks, batches added)."""
+        batches: list[RandomBatch] = []
+        checks: list[dict[str, Any]] = []
+        for round_ in range(CHECK_ROUNDS + 1):
+            try:
+                runs, accepted, agreement, reasons = self._escalate(mechanism, trajectory, batches, steps,
+                                                                    kept, pivoting, progress)
+            except ValueError as exc:
+                if kept is None:
+                    raise
+                raise InputError(f"solver {self.name!r}: option 'kept': {exc}: impose columns that are "
+                                 f"independent in W (or leave kept to the pivoting)") from None
+            check, batch = self._excitation_check(mechanism, trajectory, runs[-1], seed + round_, progress)
+            checks.append(check)
+            if check["passed"] or "error" in check or round_ == CHECK_ROUNDS:
+                break
+            say(progress, f"vp: the excitation check failed (rank {check['rank']}): W and the batch "
+                           f"analysed together")
+            batches.append(batch)
+        return runs, accepted, agreement, reasons, checks, batches
 
     @staticmethod
     def _escalate(mechanism: Mechanism, trajectory: Trajectory, batches: Sequence[RandomBatch], steps: Sequence[int],
