@@ -50,8 +50,9 @@ def run(name: str, seed: int, samples: int, scenario: str) -> dict:
     right = False
     if truth["payload"]:
         last = body_name(mechanism, mechanism.bodies[truth["payload"]["body"]].label)
-        if named == [f"body:{last}"]:
-            mass = report["effects"][0]["coefficients"]["m"]["value"]
+        if named in ([f"body:{last}"], [f"mass:{last}"]):      # a body, or a point mass on it
+            entry = report["effects"][0]
+            mass = entry["coefficients"]["m"]["value"] if named[0].startswith("body") else entry["value"]
             right = abs(mass - truth["payload"]["mass"]) <= 0.10 * truth["payload"]["mass"]
     return {"verdict": report["verdict"], "named": named, "right": right}
 
