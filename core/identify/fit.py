@@ -253,7 +253,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     y = data.tau - payload
     if known:
         y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
-    X = np.concatenate([base.columns(inertial.matrix), columns.matrix[:, :, :identified_width]], axis=-1)
+    Kb = base.columns(inertial.matrix)
+    X = np.concatenate([Kb, columns.matrix[:, :, :identified_width]], axis=-1)
     all_names = tuple(base.names) + tuple(columns.names[:identified_width])
     if data.gain_names:               # unknown current gains: model - sum(g c) = known forces
         if not np.any(y):
@@ -264,7 +265,7 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
         X = np.concatenate([X, -data.gain_columns], axis=-1)
         all_names += tuple(data.gain_names)
     notes = list(data.notes)
-    outside = base.residual_outside(inertial.matrix)
+    outside = base.residual_outside(inertial.matrix, Kb)
     if outside > BASE_MODEL_TOLERANCE:
         notes.append(f"the {base.solver} solver's base parameters reproduce the regressor only to "
                      f"{outside:.2g} (relative): its coefficients carry too few digits for this "
