@@ -217,3 +217,19 @@ def test_gautier_on_the_triangular_factor_is_gautier_on_w(tree):
     assert np.max(np.abs(a.singular_values - b.singular_values)) <= 1e-13 * a.singular_values[0]
     Ba, Bb = (np.hstack([np.eye(g.rank), g.beta_s])[:, np.argsort(g.kept + g.eliminated)] for g in (a, b))
     assert largest_principal_angle_sine(Ba, Bb) < 1e-10
+
+
+def test_a_urdf_whose_joints_are_all_fixed_is_refused_with_the_reason(tmp_path):
+    """Lumping fixed links (issue 47) leaves no body when every joint is fixed (iris_simple of
+    example-robot-data): one error line saying so, not the builder's 'at least one body'."""
+    from baseparams.io.loader import load_mechanism
+    inertial = ('<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/>'
+                '</inertial>')
+    path = tmp_path / "welded.urdf"
+    path.write_text(f'<robot name="welded"><link name="base"/><link name="a">{inertial}</link>'
+                    f'<link name="b">{inertial}</link>'
+                    '<joint name="j1" type="fixed"><parent link="base"/><child link="a"/></joint>'
+                    '<joint name="j2" type="fixed"><parent link="a"/><child link="b"/></joint></robot>')
+    with pytest.raises(InputError, match="no moving link: every joint is fixed") as caught:
+        load_mechanism(path)
+    assert caught.value.file == str(path) or str(path) in str(caught.value)

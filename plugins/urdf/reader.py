@@ -126,6 +126,9 @@ def build(urdf: Urdf, *, merge_fixed: bool = True, floating_base: bool = False) 
     if merge_fixed:
         joints, links = _merge_fixed(ground, joints, links, inertia, merged_into)
         notes += _merge_notes(merged_into, ground, inertia)
+    if not links:           # every joint fixed: everything lumped into the ground
+        raise InputError("no moving link: every joint is fixed, so the mechanism has no degree of freedom",
+                         file=urdf.path, key="robot")
     label = {name: k + 1 for k, name in enumerate(links)}
     label[ground] = 0
     b = MechanismBuilder(_mechanism_name(urdf.robot), urdf.path, title=f"{urdf.robot} (URDF)",
