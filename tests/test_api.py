@@ -88,7 +88,8 @@ def test_solve_result_views():
     solution = bp.solve("planar_2r", "exact", solver_options={"samples": 20})
     assert solution.rank == 6 and solution.certified                # attributes of the solver's result
     frame = solution.to_frame()
-    assert list(frame.columns) == ["name", "expression"] and len(frame) == solution.rank
+    assert list(frame.columns) == ["name", "expression", *solution.parameters] and len(frame) == solution.rank
+    assert (frame[solution.parameters].to_numpy() == solution.base_matrix()).all()   # float columns: B
     assert frame["name"].tolist() == [b["name"] for b in solution.base]
     assert "rank 6" in solution._repr_markdown_() and "phi_b01" in solution._repr_html_()
     assert str(solution) == solution.to_text()

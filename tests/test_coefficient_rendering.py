@@ -1,6 +1,8 @@
 """One rendering of coefficients (issue 45, docs/design.md "Results as JSON"): the same
-strings in the text, the legend, the JSON, the frame and the CSV; an exact value as its exact
-string, any other decimal with exactly the digits the solver trusts."""
+strings in the text, the legend, the JSON (an exact one as its string, any other as a number
+with its decimal under ``decimals``), the frame and the CSV; an exact value as its exact
+string, any other decimal with exactly the digits the solver trusts. The JSON's numbers:
+tests/test_coefficient_json.py."""
 
 import csv
 import io
@@ -13,7 +15,7 @@ from click.testing import CliRunner
 import baseparams as bp
 from baseparams.cli import main
 from baseparams.model.expressions import exact_text
-from baseparams.solvers.result import Coefficient, coefficient_text, expression_text, significant_digits
+from baseparams.solvers.result import Coefficient, coefficient_text, entry_texts, expression_text, significant_digits
 
 CASES = [("puma560", "dp"), ("puma560", "vp"), ("puma560", "exact"), ("planar_2r", "symbolic"),
          ("four_bar", "vp")]
@@ -27,7 +29,7 @@ def solved(request):
 
 def test_every_view_prints_the_same_strings(solved):
     base = solved.to_json()["base"]
-    lines = [f"{b['name']} = {expression_text(b['expression'])}" for b in base]
+    lines = [f"{b['name']} = {expression_text(entry_texts(b))}" for b in base]
     assert solved.legend() == lines
     assert [line.strip() for line in solved.to_text().splitlines()[1:1 + len(base)]] == lines
     assert [f"{r['name']} = {r['expression']}" for r in solved.rows()] == lines
@@ -47,7 +49,7 @@ def test_exact_values_are_exact_strings_and_decimals_carry_their_digits(solved):
     seen = 0
     for b, row in zip(base, solved.result.coefficients):
         assert list(b["expression"]) == list(row)
-        for name, text in b["expression"].items():
+        for name, text in entry_texts(b).items():
             c = row[name]
             plain = _number(text)
             if c.exact and plain:
@@ -64,7 +66,7 @@ def test_vp_writes_the_exact_solvers_rationals():
     independent method) on the rows both keep, to the character."""
     vp, exact = (bp.solve("puma560", s).to_json() for s in ("vp", "exact"))
     assert vp["diagnostics"]["rational_recovery"]["succeeded"]
-    by_kept = lambda result: {next(iter(b["expression"])): b["expression"] for b in result["base"]}  # noqa: E731
+    by_kept = lambda result: {next(iter(b["expression"])): entry_texts(b) for b in result["base"]}  # noqa: E731
     rows_vp, rows_exact = by_kept(vp), by_kept(exact)
     common = set(rows_vp) & set(rows_exact)
     assert len(common) >= 30

@@ -95,7 +95,10 @@ def test_solve_json_has_the_documented_keys(outputs, solver, mech):
     assert set(data["eliminated"]) <= set(data["parameters"])
     assert isinstance(data["warnings"], list) and isinstance(data["diagnostics"]["summary"], list)
     for base in data["base"]:
-        assert set(base) == {"name", "expression"} and all(isinstance(v, str) for v in base["expression"].values())
+        # a coefficient is a string (exact, or symbolic) or a number with its decimal beside it
+        assert set(base) == {"name", "expression", "decimals"}
+        numbers = {p for p, v in base["expression"].items() if not isinstance(v, str)}
+        assert all(isinstance(base["expression"][p], float) for p in numbers) and set(base["decimals"]) == numbers
     if data["singular_values"] is not None:
         values = [float(v) for v in data["singular_values"]]
         assert values == sorted(values, reverse=True)

@@ -100,9 +100,13 @@ class Solution(Result):
         return "\n".join(lines)
 
     def rows(self) -> list[dict[str, Any]]:
-        """One row per base parameter: its name and its expression (as the text and ``solve
-        --format csv`` write it)."""
-        return [{"name": b["name"], "expression": expression_text(b["expression"])} for b in self.result.base]
+        """One row per base parameter: its name, its expression (as the text and ``solve
+        --format csv`` write it) and a float column per standard parameter (``parameters``
+        order): its coefficient, ``base_matrix()``'s row, the numbers of ``to_json()``
+        (exact values rounded once: their exact strings are in ``expression``)."""
+        params = list(self.result.parameters)
+        return [{"name": b["name"], "expression": expression_text(b["expression"]),
+                 **dict(zip(params, map(float, row)))} for b, row in zip(self.result.base, self.base_matrix())]
 
     def legend(self) -> list[str]:
         """``phi_b01 = m1 + 0.5*mx2`` lines: what each base parameter stands for (the digits of

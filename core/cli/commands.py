@@ -434,8 +434,9 @@ def solve(mech: str, solver_name: str, digits: int | None, samples: int | None, 
 
     Progress (the solver's own lines; --quiet: none) and warnings (e.g. no clear ridge in the
     singular values) go to stderr.
-    A coefficient prints the same in text, JSON and CSV: an exact value as its exact string
-    (1, 0.20898125, 625/251), any other with exactly the digits the solver trusts. A solver that does not
+    A coefficient prints the same in text and CSV: an exact value as its exact string (1,
+    0.20898125, 625/251), any other with exactly the digits the solver trusts; JSON writes the
+    latter as a number with that decimal under "decimals". A solver that does not
     take MECH (exact on a closed loop) says why: `not applicable: <reason>`, exit code 2.
     """
     from baseparams.api import solve as api_solve

@@ -123,8 +123,9 @@ class Identification:
     def to_json(self) -> dict:
         base = []
         for k, name in enumerate(self.base.names):      # every base parameter is kept (fit checks)
-            base.append({**self._entry(k), "expression": dict(self.base.expressions[k])
-                         if self.base.expressions else {}})
+            written = self.base.written[k] if self.base.written else \
+                {"expression": dict(self.base.expressions[k]) if self.base.expressions else {}}
+            base.append({**self._entry(k), **written})
         effects = []
         for spec in self.effects:
             entries = []

@@ -9,7 +9,8 @@ checks read what it claims:
   (rational rank of the stacked rows, :func:`baseparams.solvers.compare.same_row_space`);
 - **decimal rows** (dp; vp when it recovered no rationals): compared with the reference
   space by the largest principal angle between the two row spaces, against the tolerance
-  the solver states for itself: its printed coefficients carry ``d`` trusted significant
+  the solver states for itself: its printed coefficients (``decimals`` beside the numbers of
+  ``expression``, or older results' strings) carry ``d`` trusted significant
   digits, so each row moves by at most ``10^(1-d)`` relative; dp also states a first-order
   error estimate of beta. The tolerance is ``10 sqrt(n)`` times the larger of the two
   (never below the 1e-13 float64 floor of the angle computation).
@@ -30,7 +31,7 @@ import sympy
 
 from baseparams.orchestrate.model_checks import Check
 from baseparams.solvers.compare import same_row_space
-from baseparams.solvers.result import parse_coefficient
+from baseparams.solvers.result import entry_texts, parse_coefficient
 
 ANGLE_FLOOR = 1e-13
 
@@ -45,7 +46,7 @@ def exact_rows(result: Mapping[str, Any], capabilities: Any = None) -> list[list
     elif result.get("expression_values"):
         layout = result["expression_values"]
     elif getattr(capabilities, "exact_coefficients", False):
-        layout = [b["expression"] for b in result["base"]]
+        layout = [entry_texts(b) for b in result["base"]]
     else:
         return None
     rows = _rows(layout, result["parameters"])
@@ -54,13 +55,13 @@ def exact_rows(result: Mapping[str, Any], capabilities: Any = None) -> list[list
 
 def decimal_rows(result: Mapping[str, Any]) -> list[list[Fraction]]:
     """The printed coefficients as Fractions (exactly the printed decimals)."""
-    layout = result.get("expression_values") or [b["expression"] for b in result["base"]]
+    layout = result.get("expression_values") or [entry_texts(b) for b in result["base"]]
     return _rows(layout, result["parameters"], result.get("geometry"))
 
 
 def stated_tolerance(result: Mapping[str, Any]) -> float:
     """The relative accuracy a numeric solver states for its printed coefficients."""
-    digits = [_significant_digits(c) for b in result["base"] for c in b["expression"].values()
+    digits = [_significant_digits(c) for b in result["base"] for c in entry_texts(b).values()
               if not _is_one(c)]
     worst = 10.0 ** (1 - min(digits)) if digits else 0.0
     estimate = float((result.get("diagnostics") or {}).get("beta_error_estimate") or 0.0)
@@ -175,7 +176,7 @@ def _symbolic_values_check(result: Mapping[str, Any]) -> Check:
     geometry = {sympy.Symbol(k): sympy.Rational(v) for k, v in (result.get("geometry") or {}).items()}
     bad = []
     for row, vals in zip(result["base"], values):
-        for param, text in row["expression"].items():
+        for param, text in entry_texts(row).items():
             expr = sympy.sympify(text).subs(geometry)
             value = sympy.sympify(vals.get(param, "0"))
             if sympy.simplify(expr - value) != 0:

@@ -11,8 +11,11 @@ A base-parameter result is the splitting phi = (phi_1, phi_2) (``kept`` and
 - as data (``coefficients``, same layout): a :class:`Coefficient` per entry, its value a
   Fraction (exact, or the printed decimal) with the digits the solver trusts.
 
-Every output (text, JSON, frames, CSV, legends, generated modules) prints those strings,
-combined by :func:`expression_text`: the same digits everywhere (issue 45).
+Every text output (text, CSV, legends, generated modules, frames' ``expression``) prints
+those strings, combined by :func:`expression_text`: the same digits everywhere (issue 45).
+The JSON writes each coefficient by :func:`coefficient_json`: an exact one as its string, any
+other as a number (the double nearest its decimal) with the decimal beside it, under
+``decimals``; :func:`entry_texts` reads either form back as the strings.
 
 ``diagnostics`` is a :class:`Diagnostics`: typed fields that several solvers share (a
 rank tolerance, proven bounds around the ridge, the certificate, the summary lines the
@@ -192,7 +195,7 @@ class BaseParameterResult:
         out: dict[str, Any] = {
             "mechanism": self.mechanism, "solver": self.solver,
             "parameters": list(self.parameters), "rank": self.rank,
-            "base": [{"name": b["name"], "expression": dict(b["expression"])} for b in self.base],
+            "base": base_json(self.base, self.coefficients or []),
             "eliminated": list(self.eliminated), "certified": bool(self.certified),
             "digits": self.digits,
             "singular_values": None if self.singular_values is None else list(self.singular_values),
@@ -255,6 +258,62 @@ def coefficient_text(coefficient: Coefficient) -> str:
     if coefficient.exact and isinstance(coefficient.value, Fraction) and _is_plain_number(coefficient.text):
         return exact_text(coefficient.value)
     return str(coefficient.text)
+
+
+def coefficient_json(coefficient: Coefficient) -> str | float:
+    """A coefficient as the JSON writes it: a string when exact (its exact string, "625/251")
+    or not a decimal (a symbolic expression, a "p/q" fraction), else the double nearest its
+    value, a number to compute with; its digits go beside it (:func:`expression_json`). Why:
+    a user's ``json.load`` gets floats as floats, while an exact value stays exact (issue
+    45). A value beyond the doubles' range stays a string."""
+    text = coefficient_text(coefficient)
+    if coefficient.exact or "/" in text or not _is_plain_number(text):
+        return text
+    try:
+        return float(coefficient.value)
+    except OverflowError:
+        return text
+
+
+def expression_json(row: Mapping[str, Coefficient]) -> dict[str, dict[str, Any]]:
+    """``{"expression": {param: str | float}, "decimals": {param: str}}``: a base parameter's
+    coefficients as :func:`coefficient_json` writes them, and for each one written as a
+    number its decimal with exactly the trusted digits (dp's trailing zeros, vp's digits
+    beyond a double): nothing the text shows is lost."""
+    expression = {p: coefficient_json(c) for p, c in row.items()}
+    decimals = {p: coefficient_text(row[p]) for p, v in expression.items() if not isinstance(v, str)}
+    return {"expression": expression, "decimals": decimals}
+
+
+def base_json(base: list[dict[str, Any]], coefficients: list[dict[str, Coefficient]]) -> list[dict[str, Any]]:
+    """The JSON's ``base`` list: ``{"name", "expression", "decimals"}`` per base parameter
+    (:func:`expression_json`). The text is what the result says: an entry whose data do not
+    print as its text (none, or ``base`` changed after the result was made) is read from it."""
+    out = []
+    for k, b in enumerate(base):
+        texts = {p: str(t) for p, t in b["expression"].items()}
+        row = coefficients[k] if k < len(coefficients) else {}
+        if {p: coefficient_text(c) for p, c in row.items()} != texts:
+            row = coefficient_rows([b], lambda p, t: Coefficient.of_text(t))[0]
+        out.append({"name": b["name"], **expression_json(row)})
+    return out
+
+
+def entry_texts(entry: Mapping[str, Any]) -> dict[str, str]:
+    """A JSON base entry's coefficients as strings, the text's: a string as written, a number
+    by its decimal under ``decimals`` (else its shortest decimal). Reads results written
+    before numbers were numbers (2026-11-28, issue 45: every coefficient a string) too."""
+    decimals = entry.get("decimals") or {}
+    out = {}
+    for param, value in entry["expression"].items():
+        if isinstance(value, str):
+            out[param] = value
+        elif isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{param}: a coefficient is a number or a string, not {type(value).__name__}")
+        else:
+            out[param] = str(decimals[param]) if param in decimals else (str(value) if isinstance(value, int)
+                                                                         else repr(float(value)))
+    return out
 
 
 def value_text(text: object) -> str:
