@@ -17,21 +17,21 @@ import scipy.sparse
 
 from baseparams.errors import InputError
 from baseparams.model.mechanism import Mechanism
-from baseparams.solvers.result import BaseParameterResult, base_json
+from baseparams.solvers.result import BaseParameterResult, Coefficient
 
 
 @dataclass(frozen=True)
 class BaseModel:
     """``names`` (phi_b01 ...), ``parameters`` (the standard ones, mechanism order), ``B``
     (rank x P, float64), ``expressions`` (each base parameter as the solver printed it), the
-    solver's name and ``written`` (each as the JSON writes it: ``{"expression", "decimals"}``,
-    :func:`~baseparams.solvers.result.expression_json`)."""
+    solver's name and its ``coefficients`` (the result's data, from which the JSON writes
+    them: :func:`~baseparams.solvers.result.base_json`)."""
     names: tuple[str, ...]
     parameters: tuple[str, ...]
     B: np.ndarray
     expressions: tuple[dict, ...] = ()
     solver: str = ""
-    written: tuple[dict, ...] = ()
+    coefficients: tuple[dict[str, Coefficient], ...] = ()
 
     @classmethod
     def from_result(cls, result: BaseParameterResult, mechanism: Mechanism | None = None) -> "BaseModel":
@@ -46,10 +46,8 @@ class BaseModel:
         if not np.all(np.isfinite(B)):
             raise InputError(f"the {result.solver} solver's base parameters of {result.mechanism} "
                              "have non-finite coefficients in float64")
-        written = tuple({k: v for k, v in b.items() if k != "name"}
-                        for b in base_json(result.base, result.coefficients or []))
         return cls(tuple(b["name"] for b in result.base), parameters, B,
-                   tuple(dict(b["expression"]) for b in result.base), result.solver, written)
+                   tuple(dict(b["expression"]) for b in result.base), result.solver, tuple(result.coefficients or ()))
 
     @property
     def rank(self) -> int:

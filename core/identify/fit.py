@@ -28,6 +28,7 @@ from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, beyond,
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.dynamics.forces import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
+from baseparams.solvers.result import base_json
 
 # Unit-norm columns whose pivoted-QR diagonal (the base columns) or singular value (the whole
 # weighted fit) falls below this fraction of the largest are dependent to working precision:
@@ -122,10 +123,11 @@ class Identification:
 
     def to_json(self) -> dict:
         base = []
+        written = base_json([{"name": n, "expression": e} for n, e in zip(self.base.names, self.base.expressions)],
+                            list(self.base.coefficients)) if self.base.expressions else []
         for k, name in enumerate(self.base.names):      # every base parameter is kept (fit checks)
-            written = self.base.written[k] if self.base.written else \
-                {"expression": dict(self.base.expressions[k]) if self.base.expressions else {}}
-            base.append({**self._entry(k), **written})
+            json_form = {key: v for key, v in written[k].items() if key != "name"} if written else {"expression": {}}
+            base.append({**self._entry(k), **json_form})
         effects = []
         for spec in self.effects:
             entries = []
