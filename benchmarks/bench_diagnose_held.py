@@ -9,7 +9,7 @@ OUTSIDE times its RMS). Counted: the payload named alone on the last body, mass 
 the verdict (exit 0 = 'explained' or 'nothing missing'); for ``outside`` the verdict must stay
 'partly explained' or 'unexplained'.
 
-    python benchmarks/bench_diagnose_held.py [--mechanism puma560] [--seeds 10] [--samples 1500]
+    python benchmarks/bench_diagnose_held.py [--mechanism puma560] [--seeds 10] [--samples 1500] [--payload 0.5]
 """
 
 import argparse
@@ -30,10 +30,10 @@ PAYLOAD = 0.5
 OUTSIDE = 0.08
 
 
-def run(name: str, seed: int, samples: int, scenario: str) -> dict:
+def run(name: str, seed: int, samples: int, scenario: str, payload: float = PAYLOAD) -> dict:
     mechanism = resolve(name)
     before, after, truth = simulate_change(mechanism, samples=samples, seed=seed,
-                                           payload=0.0 if scenario == "nothing" else PAYLOAD)
+                                           payload=0.0 if scenario == "nothing" else payload)
     if scenario == "outside":
         q, j = after.motion.q, min(1, after.tau.shape[1] - 1)
         rms = np.sqrt(np.mean(after.tau[:, j] ** 2))
@@ -63,10 +63,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--samples", type=int, default=1500)
     parser.add_argument("--scenarios", nargs="+", default=["payload", "nothing", "outside"])
+    parser.add_argument("--payload", type=float, default=PAYLOAD, help="the payload, times the last body's mass")
     args = parser.parse_args()
-    print(f"{args.mechanism}, {args.samples} samples per run, {args.seeds} seeds, AR(1) noise, shared model errors")
+    print(f"{args.mechanism}, {args.samples} samples per run, {args.seeds} seeds, AR(1) noise, shared model errors, "
+          f"payload {args.payload:g} times the last body's mass")
     for scenario in args.scenarios:
-        results = [run(args.mechanism, seed, args.samples, scenario) for seed in range(args.seeds)]
+        results = [run(args.mechanism, seed, args.samples, scenario, args.payload) for seed in range(args.seeds)]
         exit0 = sum(r["verdict"] in ("explained", "nothing missing") for r in results)
         line = f"  {scenario:8s} exit 0: {exit0}/{len(results)}"
         if scenario != "nothing":

@@ -46,6 +46,7 @@ class Given:
     gains: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)      # held values no robot has (before the run)
     fit_nrms: dict[str, float] = field(default_factory=dict)  # its residual NRMS on its own run, per coordinate
+    fit_rms: dict[str, float] = field(default_factory=dict)   # and its residual RMS there (force units)
 
 
 def _own_name(mechanism: Mechanism, name: str) -> str:
@@ -137,18 +138,18 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
     covariance = _base_covariance(report, base, path)
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
                  notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance),
-                 fit_nrms=_fit_nrms(report, file))
+                 fit_nrms=_per_coordinate(report, "nrms", file), fit_rms=_per_coordinate(report, "rms", file))
 
 
-def _fit_nrms(report: dict, file: str) -> dict[str, float]:
-    """The identify result's residual NRMS on its own run, per coordinate (``nrms``; absent in
-    older results, null where undefined: left out)."""
-    value = report.get("nrms")
+def _per_coordinate(report: dict, key: str, file: str) -> dict[str, float]:
+    """The identify result's residual ``nrms`` or ``rms`` on its own run, per coordinate
+    (absent in older results, null where undefined: left out)."""
+    value = report.get(key)
     if value is None:
         return {}
     if not isinstance(value, dict):
-        raise InputError(f"a table of coordinates is needed, not {_kind(value)}", file=file, key="nrms")
-    return {str(c): _finite(v, file, f"nrms.{c}") for c, v in value.items() if v is not None}
+        raise InputError(f"a table of coordinates is needed, not {_kind(value)}", file=file, key=key)
+    return {str(c): _finite(v, file, f"{key}.{c}") for c, v in value.items() if v is not None}
 
 
 # An identify result is a few kB to a few MB; a file far larger is not one (and is not read whole)

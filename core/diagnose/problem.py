@@ -47,8 +47,9 @@ class Problem:
     # an identify result held as given: E (r, P) to its base parameters and their covariance (r, r)
     given_uncertainty: tuple[np.ndarray, np.ndarray] | None = None
     quanta: np.ndarray | None = None           # (f,) the forces' quantisation steps (MeasuredData.quanta)
-    # an identify result held as given: its residual NRMS on its own run (f,), NaN where unknown
+    # an identify result held as given: its residual NRMS and RMS on its own run (f,), NaN where unknown
     held_nrms: np.ndarray | None = None
+    held_rms: np.ndarray | None = None
 
 
 def prepare(mechanism: Mechanism, motion: Motion, sample: Sample | None = None,

@@ -450,6 +450,7 @@ def diagnose_data(mechanism: Mechanism, data: MeasuredData, *, selection: Sequen
             problem.given_uncertainty = (held.base_map, held.covariance)
         if held.fit_nrms:
             problem.held_nrms = np.array([held.fit_nrms.get(c, np.nan) for c in problem.coordinates])
+            problem.held_rms = np.array([held.fit_rms.get(c, np.nan) for c in problem.coordinates])
     # held values no robot has first: said before the diagnosis that holds them (.given)
     problem.notes = (list(held.notes) if held is not None else []) + list(data.notes) + problem.notes
     return diagnose(problem, _forces(data, held, problem.notes), alpha=alpha, holdout=holdout, folds=folds,
