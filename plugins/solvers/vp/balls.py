@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from flint import acb_mat, arb, arb_mat, ctx
 
-from baseparams.numeric.certify import (FLOAT_BITS, SPECTRUM_IN_ARB_UP_TO, BallAnalysis, block, frobenius_upper,
-                                        log10, scaled_entries, solve_block, unscaled)
+from baseparams.numeric.certify import (FAST_DECISIONS_ABOVE, FLOAT_BITS, SPECTRUM_IN_ARB_UP_TO, BallAnalysis, block,
+                                        frobenius_upper, log10, scaled_entries, solve_block, unscaled)
 
 
 def block_beta(Wr: arb_mat, digits: int, kept: Sequence[int], rows: Sequence[int],
@@ -68,8 +68,18 @@ def _excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
     if a.kept:
         Wk = block(scaled, n, range(m), a.kept)
         assert a.refined is not None            # every analysis with kept columns has its B
-        bound = frobenius_upper(We - Wk * a.refined)
-        E = We - Wk * a.beta_s
+        residual = We - Wk * a.refined
+        bound = frobenius_upper(residual)
+        if n > FAST_DECISIONS_ABOVE:
+            # E = residual - Wk (beta_s - B): beta_s - B holds beta_s's radii (and B's distance
+            # to its midpoint, if any), far below 1, so that product runs at FLOAT_BITS. Why:
+            # one product at the analysis' digits instead of two (issue 47: TIAGo 0.53 -> 0.32
+            # s); E's radii agree with the direct product's to 1e-8 there.
+            with ctx.workprec(FLOAT_BITS):
+                spread = Wk * (a.beta_s - a.refined)
+            E = residual - spread
+        else:
+            E = We - Wk * a.beta_s
     else:
         bound, E = frobenius_upper(We), We
     nonzero = sum(1 for x in E.entries() if not x.contains(0))
