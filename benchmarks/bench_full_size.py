@@ -20,7 +20,8 @@ TIAGo); baseparams solves the coupled robot. Skipped with a note when figaroh is
 
 identify: ``identify`` of TIAGo's 48-joint model with the default solver (vp) on a recording
 simulated by ``bp.simulate`` (the file's trajectory, 1 % noise), in a child process each round:
-identify's own CPU s and the whole process's.
+identify's own CPU s and the whole process's, beside a yardstick measured in the same process
+after identify (Pinocchio's regressor over as many random states and one least-squares solve).
 
 speed: per robot, interleaved ``--repeats`` times in this process (medians, CPU s of
 ``time.process_time``): dp, vp (Talos only; it is long), and the yardstick: what FIGAROH
@@ -240,12 +241,24 @@ def memory(found: dict[str, Path]) -> None:
 
 IDENTIFY_CHILD = """
 import json, resource, sys, time
+import numpy as np
 import baseparams as bp
 start = time.process_time()
 fit = bp.identify(sys.argv[1], sys.argv[2])
 seconds = time.process_time() - start
 out = fit.to_json()
-print(json.dumps({"identify_s": seconds, "rank": out["rank"],
+yardstick = None
+try:                                 # Pinocchio's regressor over as many states, and one least squares
+    sys.path.insert(0, sys.argv[3])
+    from urdf_reference import Reference
+    ref = Reference(sys.argv[1])
+    start = time.process_time()
+    W = ref.stacked_regressor(out["samples"], seed=3)
+    np.linalg.lstsq(W, W @ np.random.default_rng(3).standard_normal(W.shape[1]), rcond=None)
+    yardstick = time.process_time() - start
+except ImportError:
+    pass
+print(json.dumps({"identify_s": seconds, "yardstick_s": yardstick, "rank": out["rank"],
                   "rms_overall": out.get("rms_overall"),
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
@@ -254,23 +267,33 @@ print(json.dumps({"identify_s": seconds, "rank": out["rank"],
 def identify_tiago(found: dict[str, Path], repeats: int) -> None:
     """identify of TIAGo's 48-joint model (issue 47: <= 5 CPU s) with the default solver, on a
     simulated recording (bp.simulate: the file's trajectory, 1 % noise), in a child process:
-    identify's own CPU s and the whole process's."""
+    identify's own CPU s, the whole process's (the interpreter, the imports, identify; the
+    yardstick's CPU s subtracted), and the
+    yardstick measured after identify in the same process: Pinocchio's joint-torque regressor
+    stacked over as many random states as the recording has samples, and one least-squares
+    solve of it (numpy lstsq, SVD): what an uncertified identification cannot do without."""
     import tempfile
     import baseparams as bp
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "tiago.csv"
         bp.simulate(str(found["tiago_description/tiago"]), output=str(data), noise=0.01)
-        print("| robot | joints | identify CPU s (median) | whole process CPU s | base parameters | RMS | peak MB |")
-        print("|---|---|---|---|---|---|---|")
-        runs = [child([IDENTIFY_CHILD, str(found["tiago_description/tiago"]), str(data)]) for _ in range(repeats)]
+        print("| robot | joints | identify CPU s (median) | whole process CPU s | yardstick CPU s | identify / "
+              "yardstick | base parameters | RMS | peak MB |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        runs = [child([IDENTIFY_CHILD, str(found["tiago_description/tiago"]), str(data), str(ROOT / "tests")])
+                for _ in range(repeats)]
         ok = [(out, t) for out, t in runs if "error" not in out]
         if not ok:
-            print(f"| tiago | 48 | failed: {runs[-1][0]['error']} |||||")
+            print(f"| tiago | 48 | failed: {runs[-1][0]['error']} |||||||")
             return
         out = ok[-1][0]
-        print(f"| tiago_description/tiago | 48 | {statistics.median(o['identify_s'] for o, _ in ok):.2f} | "
-              f"{statistics.median(t for _, t in ok):.2f} | {out['rank']} | {out['rms_overall']:.3g} | "
-              f"{out['peak_mb']:.0f} |", flush=True)
+        identify_s = statistics.median(o["identify_s"] for o, _ in ok)
+        yards = [o["yardstick_s"] for o, _ in ok if o["yardstick_s"] is not None]
+        yard = statistics.median(yards) if yards else None
+        whole = statistics.median(t - (o["yardstick_s"] or 0.0) for o, t in ok)      # the yardstick's time left out
+        print(f"| tiago_description/tiago | 48 | {identify_s:.2f} | {whole:.2f} | "
+              f"{'-' if yard is None else f'{yard:.2f}'} | {'-' if yard is None else f'{identify_s / yard:.1f}x'} | "
+              f"{out['rank']} | {out['rms_overall']:.3g} | {out['peak_mb']:.0f} |", flush=True)
 
 
 def old_rule_rows(g, n: int) -> np.ndarray:
