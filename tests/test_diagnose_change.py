@@ -289,3 +289,36 @@ def test_other_motions_nothing_changed_or_the_payload_on_its_body(puma, payload)
     else:
         assert _names(result) == ["body:link6"], _names(result)
         assert abs(result.changes[0]["value"]["m"] - mass) <= 0.15 * mass
+
+
+def test_a_candidate_that_borrows_its_force_from_a_true_change_is_too_small_to_name():
+    """The size check weighs what a change adds to the others' fitted force, not its own
+    force fitted beside them. A body-like change (a swing and a near-constant gravity column)
+    and an offset that imitates the gravity column: the noise's component along what tells
+    them apart gives the offset a force of several noise SDs, all of it given back by the
+    body (issue 49: an offset of 0.12 N m beside a load on the arm's back link), so it is
+    not named; an independent true change beside the body is."""
+    from baseparams.diagnose.changesearch import Search, _large_enough
+    from baseparams.diagnose.selection import Candidate
+    t = np.linspace(0.0, 20.0, 2000)
+    rng = np.random.default_rng(3)
+    body = np.stack([np.sin(t), 1.0 + 0.05 * np.cos(3 * t)], axis=1)[:, None, :]
+    offset = np.ones((len(t), 1, 1))
+    drift = np.cos(0.5 * t)[:, None, None]
+    noise = 0.1 * rng.standard_normal((len(t), 1)) + 0.01 * np.cos(3 * t)[:, None]
+    y = body @ np.array([2.0, 0.5]) + noise
+    candidates = [Candidate("body", "link", ("a", "b"), body), Candidate("offset", "q", ("c",), offset),
+                  Candidate("viscous_friction", "q", ("d",), drift)]
+
+    def kept(y: np.ndarray, members: list[int]) -> set:
+        search = Search(candidates, members, {}, {}, np.ones(3), [], np.ones(1))
+        return _large_enough(search, y, set(members), [])
+
+    # the offset's own force beside the body: several noise SDs (what the check used to weigh)
+    X = np.concatenate([body, offset], axis=-1)
+    values = np.linalg.lstsq(X[:, 0], y[:, 0], rcond=None)[0]
+    one_run = np.sqrt(np.mean((y[:, 0] - X[:, 0] @ values) ** 2) / 2)
+    assert abs(values[2]) > 2 * one_run > 0            # the offset column is 1
+    assert kept(y, [0, 1]) == {0}
+    assert kept(y + 0.3 * drift[:, :, 0], [0, 2]) == {0, 2}
+    assert kept(y + 0.3 * drift[:, :, 0], [0, 1, 2]) == {0, 2}

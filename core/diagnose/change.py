@@ -37,7 +37,8 @@ per coordinate, one delay. Each of these steps must hold for a change to be name
    coloured noise whitened, Holm over the candidates);
 3. each named group adds to the others by the whitened F test (Bonferroni);
 4. each predicts held-out blocks of the difference (:func:`held_out_gain`);
-5. each group's force reaches half of one run's noise SD on some coordinate.
+5. what each group adds to the others' fitted force reaches half of one run's noise SD on
+   some coordinate (its own force fitted beside them may be borrowed from a true change).
 
 "Nothing changed" is the verdict when no change survives. What is left after the named
 changes is "structure" (verdict "partly explained", or "unexplained" with nothing named)
