@@ -25,7 +25,9 @@ Why these choices:
   direction kept at that level would put noise into the coefficients.
 - Every SVD here is :func:`baseparams.numeric.linalg.svd`: numpy's (LAPACK gesdd), and the QR
   iteration (gesvd) where gesdd fails to converge, as it does for particular bits of such
-  rank-deficient matrices (a real Kinova Gen3 recording's cross-validation fit).
+  rank-deficient matrices (a real Kinova Gen3 recording's cross-validation fit); the fit of
+  the N f rows goes through :func:`~baseparams.numeric.linalg.thin_svd` (Cholesky QR when
+  the scaled columns are well conditioned, that SVD otherwise).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from scipy.linalg import solve_triangular
 
 from baseparams.identify.longrun import hac_lags, long_run
 from baseparams.identify.weighting import PASSES, TOLERANCE, coordinate_statistics, fixed_point, noise_levels
-from baseparams.numeric.linalg import svd
+from baseparams.numeric.linalg import svd, thin_svd
 from baseparams.numeric.rank import numerical_rank
 
 # A model direction is kept when its singular value, columns scaled to unit norm, exceeds
@@ -315,7 +317,7 @@ class WeightedLinearModel:
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
-        u, s, vt = svd(A / scale, full_matrices=False)
+        u, s, vt = thin_svd(A / scale)
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale

@@ -1,0 +1,81 @@
+"""The tall-matrix SVD through Cholesky QR twice (baseparams.numeric.linalg.thin_svd), and
+the correlation length the long-run variances zero-pad to (baseparams.identify.longrun):
+each checked against an independent computation (LAPACK's SVD; sums over the samples)."""
+
+import numpy as np
+import pytest
+
+from baseparams.identify.longrun import correlation_length, hac_lags_each, newey_west_lags
+from baseparams.numeric.linalg import CHOLESKY_QR_CONDITION, thin_svd
+
+
+def tall(rows: int, columns: int, condition: float, seed: int) -> np.ndarray:
+    """A rows x columns matrix with singular values spread log-evenly from 1 to 1/condition."""
+    rng = np.random.default_rng(seed)
+    u, _ = np.linalg.qr(rng.standard_normal((rows, columns)))
+    v, _ = np.linalg.qr(rng.standard_normal((columns, columns)))
+    return (u * np.logspace(0, -np.log10(condition), columns)) @ v.T
+
+
+@pytest.mark.parametrize("columns, condition", [(1, 1.0), (2, 10.0), (4, 1e3), (10, 1e4), (40, 3e4)])
+def test_factors_agree_with_lapack(columns, condition):
+    a = tall(4000, columns, condition, seed=columns)
+    u, s, vt = thin_svd(a)
+    u0, s0, vt0 = np.linalg.svd(a, full_matrices=False)
+    assert u.shape == u0.shape and vt.shape == vt0.shape
+    assert np.allclose(s, s0, rtol=1e-13, atol=0)
+    assert np.allclose(u.T @ u, np.eye(columns), atol=1e-14)
+    assert np.allclose((u * s) @ vt, a, atol=1e-14)
+    # the same directions up to sign (singular values distinct here): the projections agree
+    x = np.random.default_rng(0).standard_normal(4000)
+    for k in range(1, columns + 1):
+        assert np.allclose(u[:, :k] @ (u[:, :k].T @ x), u0[:, :k] @ (u0[:, :k].T @ x), atol=1e-12 * condition)
+
+
+@pytest.mark.parametrize("case", ["rank deficient", "ill conditioned", "wide", "not finite"])
+def test_lapack_where_cholesky_qr_is_not_accurate(case):
+    """Outside Cholesky QR's range the result is LAPACK's own, bit for bit."""
+    a = tall(3000, 6, 10.0, seed=1)
+    if case == "rank deficient":
+        a[:, 5] = a[:, 0]
+    elif case == "ill conditioned":
+        a = tall(3000, 6, 100 * CHOLESKY_QR_CONDITION, seed=2)
+    elif case == "wide":
+        a = a[:20]
+    else:
+        a[7, 2] = np.inf
+    for x, y in zip(thin_svd(a), np.linalg.svd(a, full_matrices=False)):
+        assert np.array_equal(x, y, equal_nan=True)
+
+
+def test_correlation_length_leaves_no_circular_wrap():
+    """Autocovariances through an FFT of the padded length equal the sums over the samples up
+    to the lags asked for (a shorter length would fold the far end onto them)."""
+    rng = np.random.default_rng(3)
+    n, lags = 777, 120
+    x = rng.standard_normal(n)
+    size = correlation_length(n, lags)
+    assert n + lags <= size < 2 * n
+    spectrum = np.fft.rfft(x, n=size)
+    through_fft = np.fft.irfft(spectrum * np.conj(spectrum), n=size)[:lags + 1]
+    direct = np.array([x[h:] @ x[:n - h] for h in range(lags + 1)])
+    assert np.allclose(through_fft, direct, rtol=0, atol=1e-10 * direct[0])
+    short = np.fft.irfft(np.abs(np.fft.rfft(x, n=n)) ** 2, n=n)[:lags + 1]
+    assert not np.allclose(short, direct, rtol=0, atol=1e-3 * direct[0])
+
+
+def test_a_long_window_is_the_rule_applied_to_direct_autocorrelations():
+    """hac_lags_each's FFT branch (windows longer than its direct lags): twice the leading
+    lags outside the 95 % band of the mean autocorrelation, at least Newey-West's window."""
+    rng = np.random.default_rng(4)
+    n, f = 1500, 3
+    e = np.zeros((n, f))
+    for t in range(1, n):
+        e[t] = 0.97 * e[t - 1] + rng.standard_normal(f)
+    centred = e - e.mean(axis=0)
+    energy = np.sum(centred ** 2, axis=0)
+    band, limit = 1.96 / np.sqrt(n), max(newey_west_lags(n), n // 4)
+    leading = next(h for h in range(1, n) if abs(np.mean([centred[h:, j] @ centred[:-h, j] / energy[j]
+                                                           for j in range(f)])) < band) - 1
+    assert leading > 6
+    assert hac_lags_each(e[:, :, None])[0] == min(limit, max(newey_west_lags(n), 2 * leading))
