@@ -85,8 +85,9 @@ def oracle(mechanism, before, after, truth: dict, load_friction: float) -> tuple
     through the known lever arm, a yardstick no method can reach. Under low-passed noise (no
     white floor) the whitened fit draws on frequencies where the simulated noise vanishes and
     needs the columns exact there: the body's columns shifted 0.3 ms late of the true delay
-    (3 % of a sample), or 0.5 ms early, bias its mass by +8 to +20 % (the PUMA, 4.5 g, seeds
-    0-4), where least squares on the raw rows is unmoved (and scattered by 50 %)."""
+    (3 % of a sample), or 0.5 ms early, bias its mass by +6 to +18 % more than at the exact
+    shift (the PUMA, 4.5 g, seeds 0-4), where least squares on the raw rows is unmoved (and
+    scattered by 50 %)."""
     from baseparams.diagnose.changesearch import _filtered, ar_whitening
     from baseparams.dynamics.forces import design, standard_parameters
     from baseparams.recordings.simulate import COMMON_DELAY, COMMON_TRANSITION
