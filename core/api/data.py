@@ -24,6 +24,7 @@ from .solving import DEFAULT_SOLVER, MechanismLike, Progress, get_solver, load, 
 if TYPE_CHECKING:
     from baseparams.recordings.data import MeasuredData
     from baseparams.model.mechanism import EffectSpec, Mechanism
+    from baseparams.diagnose.given import Given
 
     from .results import ChangeDiagnosed, Diagnosed, Fit, Simulation
 
@@ -320,6 +321,8 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
                            folds=folds, holdout=holdout, max_steps=max_steps, given=given)
     if replaced:
         result.notes.append(f"--params {params}: its identified values replace the model's own {', '.join(replaced)}")
+    if given is not None and result.verdict in ("partly explained", "unexplained"):
+        _baseline_hint(given, str(params), paths, result.notes)
     result.notes.extend(set_aside)
     written = None
     if write:
@@ -375,6 +378,18 @@ def read(mech: MechanismLike, data: DataPaths) -> "MeasuredData":
     """Measured data (CSV files or recording descriptions) as the fit reads it."""
     from baseparams.recordings.recording import read_data
     return read_data(_paths(data), load(mech))[0]
+
+
+def _baseline_hint(given: "Given", params: str, paths: list, notes: list[str]) -> None:
+    """When a diagnosis against a held identify result leaves structure and that result's own
+    recordings are at hand, say that ``--baseline`` with them tells what changed: there what
+    both runs lack cancels, which a held result's residual measures only in size."""
+    from baseparams.diagnose.given import held_recordings
+    runs = [r for r in held_recordings(given, params) if r not in {str(p) for p in paths}]
+    if runs:
+        notes.insert(0, "the held identification's own recordings are here: `--baseline "
+                     + " ".join(runs) + "` (without --params) compares the two runs directly, and what both "
+                     "lack cancels there")
 
 
 def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths, *, params: ResultLike | None = None,

@@ -47,6 +47,7 @@ class Given:
     notes: list[str] = field(default_factory=list)      # held values no robot has (before the run)
     fit_nrms: dict[str, float] = field(default_factory=dict)  # its residual NRMS on its own run, per coordinate
     fit_rms: dict[str, float] = field(default_factory=dict)   # and its residual RMS there (force units)
+    runs: tuple[str, ...] = ()       # the recordings it was identified on (its JSON's ``runs``), as written there
 
 
 def _own_name(mechanism: Mechanism, name: str) -> str:
@@ -138,7 +139,21 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
     covariance = _base_covariance(report, base, path)
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
                  notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance),
-                 fit_nrms=_per_coordinate(report, "nrms", file), fit_rms=_per_coordinate(report, "rms", file))
+                 fit_nrms=_per_coordinate(report, "nrms", file), fit_rms=_per_coordinate(report, "rms", file),
+                 runs=tuple(r for r in report.get("runs") or () if isinstance(r, str)))
+
+
+def held_recordings(given: Given, result_file: str) -> list[str]:
+    """The recordings the held identify result was fitted on that exist here (a relative path
+    as written, or beside the result file): ``--baseline`` with them compares the two runs
+    directly, where what both lack cancels."""
+    found = []
+    for run in given.runs:
+        for path in (Path(run), Path(result_file).parent / run):
+            if path.is_file():
+                found.append(str(path))
+                break
+    return found
 
 
 def _per_coordinate(report: dict, key: str, file: str) -> dict[str, float]:
