@@ -289,7 +289,8 @@ def _held_lack(problem: Problem, residual_rms: np.ndarray, size: np.ndarray, str
                            for c, a, b, r, h in rows}
         notes.append("the residual follows the motion on " + ", ".join(c for c, *_ in rows)
                      + f", but within {COMMON_LACK} times the held identification's own residual on its run, "
-                     "relative to each run's force or in force units (here / there, NRMS; RMS: " + ", ".join(f"{c} {a:.3g} / {b:.3g}; {r:.3g} / {h:.3g}" for c, a, b, r, h in rows)
+                     "relative to each run's force or in force units (here / there, NRMS; RMS: "
+                     + ", ".join(f"{c} {a:.3g} / {b:.3g}; {r:.3g} / {h:.3g}" for c, a, b, r, h in rows)
                      + "): what the held model lacks in both runs, not a change; it does not hold the verdict back")
     return common
 
