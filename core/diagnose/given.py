@@ -140,7 +140,14 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
                  notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance),
                  fit_nrms=_per_coordinate(report, "nrms", file), fit_rms=_per_coordinate(report, "rms", file),
-                 runs=tuple(r for r in report.get("runs") or () if isinstance(r, str)))
+                 runs=_runs(report))
+
+
+def _runs(report: dict) -> tuple[str, ...]:
+    """The recordings an identify result names (``runs``: a list of paths); anything else is
+    ignored, as the result's own figures do not depend on it."""
+    runs = report.get("runs")
+    return tuple(r for r in runs if isinstance(r, str)) if isinstance(runs, list) else ()
 
 
 def held_recordings(given: Given, result_file: str) -> list[str]:
