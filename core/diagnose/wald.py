@@ -117,17 +117,39 @@ def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
 
 def support(basis: np.ndarray, shape: tuple[int, int]) -> float:
     """The fewest samples any direction of ``basis`` effectively acts on (participation
-    ratio 1 / sum_t w_t^2 of its energy per sample w_t)."""
+    ratio 1 / sum_t w_t^2 of its energy per sample w_t), over the subspace's canonical
+    directions (:func:`canonical_each`)."""
     return float(support_each(basis[None], shape)[0])
 
 
 def support_each(bases: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """:func:`support` of each of m bases (m, rows, r) of one width."""
     n, f = shape
-    b = bases.reshape(len(bases), n, f, -1)
+    b = canonical_each(bases, shape).reshape(len(bases), n, f, -1)
     w = np.einsum("mtjr,mtjr->mtr", b, b)
     total, squares = w.sum(axis=1), np.einsum("mtr,mtr->mr", w, w)
     return np.where(squares > 0, total ** 2 / np.where(squares > 0, squares, 1.0), np.inf).min(axis=1)
+
+
+def canonical_each(bases: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Each orthonormal basis (m, rows, r) rotated to the eigenvectors of sum_t G_t^2, where
+    G_t = sum_j b_tj b_tj' is what sample t carries of the subspace (r, r). Why: a measure
+    taken direction by direction (how few samples a direction acts on) must not depend on
+    which orthonormal basis of the subspace the SVD returned; the SVD's choice among the
+    bases of a subspace whose singular values are all 1 is decided by rounding, and on a
+    PUMA step four such bases gave supports from 18 to 96 samples. These directions are the
+    subspace's own: the most and the least concentrated in time."""
+    m, rows, r = bases.shape
+    if r <= 1:
+        return bases
+    n, f = shape
+    rotated = np.empty_like(bases)
+    for k in range(m):                        # one at a time: G is (n, r, r)
+        b = bases[k].reshape(n, f, r)
+        G = np.einsum("tjr,tjs->trs", b, b)
+        _, vectors = np.linalg.eigh(np.einsum("trs,tsu->ru", G, G))
+        rotated[k] = bases[k] @ vectors
+    return rotated
 
 
 def wilson_hilferty(stat: float, df: int) -> float:
@@ -238,6 +260,9 @@ def _sparse_test(residual: np.ndarray, basis: np.ndarray, shape: tuple[int, int]
     not tested), scaled by the noise's local power where they act."""
     n, f = shape
     r = basis.shape[1]
+    # the local-power scaling below is direction by direction: made on the subspace's own
+    # directions (canonical_each), not on the basis the SVD happened to return
+    basis = canonical_each(basis[None], shape)[0]
     gamma = basis.T @ residual
     augmented = residual - basis @ gamma
     if lags is None:
