@@ -146,8 +146,8 @@ def canonical_each(bases: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     rotated = np.empty_like(bases)
     for k in range(m):                        # one at a time: G is (n, r, r)
         b = bases[k].reshape(n, f, r)
-        G = np.einsum("tjr,tjs->trs", b, b)
-        _, vectors = np.linalg.eigh(np.einsum("trs,tsu->ru", G, G))
+        G = np.matmul(b.transpose(0, 2, 1), b).reshape(n * r, r)
+        _, vectors = np.linalg.eigh(G.T @ G)   # sum_t G_t^2 = sum_t G_t' G_t (G_t symmetric)
         rotated[k] = bases[k] @ vectors
     return rotated
 
