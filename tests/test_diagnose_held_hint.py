@@ -37,3 +37,18 @@ def test_no_pointer_when_the_recording_is_gone(tmp_path):
     report, _ = _diagnosed(tmp_path, move_away=True)
     assert report["verdict"] in ("partly explained", "unexplained")
     assert not [n for n in report["notes"] if "own recordings" in n]
+
+
+def test_a_description_run_is_found_with_its_run_name(tmp_path):
+    """An identify result of a description's run names it FILE#run in its ``data``: the file is
+    looked for, the run kept; a missing file, or one only beside the result, as it is."""
+    from baseparams.diagnose.given import Given, held_recordings
+    description = tmp_path / "logs" / "recording.toml"
+    description.parent.mkdir()
+    description.write_text("")
+    beside = tmp_path / "results" / "base.csv"
+    beside.parent.mkdir()
+    beside.write_text("")
+    given = Given(np.zeros(1), recordings=(f"{description}#first", "gone.csv#x", "base.csv"))
+    assert held_recordings(given, str(tmp_path / "results" / "held.json")) == \
+        [f"{description}#first", str(beside)]

@@ -47,7 +47,7 @@ class Given:
     notes: list[str] = field(default_factory=list)      # held values no robot has (before the run)
     fit_nrms: dict[str, float] = field(default_factory=dict)  # its residual NRMS on its own run, per coordinate
     fit_rms: dict[str, float] = field(default_factory=dict)   # and its residual RMS there (force units)
-    runs: tuple[str, ...] = ()       # the recordings it was identified on (its JSON's ``runs``), as written there
+    recordings: tuple[str, ...] = ()  # what it was identified on (its JSON's ``data``: files, ``FILE#run``)
 
 
 def _own_name(mechanism: Mechanism, name: str) -> str:
@@ -140,25 +140,27 @@ def _from_identify(mechanism: Mechanism, path: Path) -> Given:
     return Given(phi, effects, E, covariance, masses=own, gains=gains,
                  notes=_impossible_notes(mechanism, path, E, base, raw_effects, covariance),
                  fit_nrms=_per_coordinate(report, "nrms", file), fit_rms=_per_coordinate(report, "rms", file),
-                 runs=_runs(report))
+                 recordings=_recordings(report))
 
 
-def _runs(report: dict) -> tuple[str, ...]:
-    """The recordings an identify result names (``runs``: a list of paths); anything else is
-    ignored, as the result's own figures do not depend on it."""
-    runs = report.get("runs")
-    return tuple(r for r in runs if isinstance(r, str)) if isinstance(runs, list) else ()
+def _recordings(report: dict) -> tuple[str, ...]:
+    """The recordings an identify result was fitted on (``data``: paths joined by ", ", a
+    description's run as ``FILE#run``); anything else is ignored, as the result's own figures
+    do not depend on it."""
+    data = report.get("data")
+    return tuple(part for part in data.split(", ") if part) if isinstance(data, str) else ()
 
 
 def held_recordings(given: Given, result_file: str) -> list[str]:
-    """The recordings the held identify result was fitted on that exist here (a relative path
-    as written, or beside the result file): ``--baseline`` with them compares the two runs
-    directly, where what both lack cancels."""
+    """The recordings the held identify result was fitted on that exist here (a path as
+    written, or beside the result file; a description's ``#run`` kept): ``--baseline`` with
+    them compares the two runs directly, where what both lack cancels."""
     found = []
-    for run in given.runs:
-        for path in (Path(run), Path(result_file).parent / run):
+    for spec in given.recordings:
+        file, hash_, run = spec.partition("#")
+        for path in (Path(file), Path(result_file).parent / file):
             if path.is_file():
-                found.append(str(path))
+                found.append(str(path) + hash_ + run)
                 break
     return found
 
