@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from baseparams.errors import InputError
 from baseparams.recordings.bags import STAMP
@@ -143,6 +142,7 @@ def _onto(x: np.ndarray, y: np.ndarray, at: np.ndarray, cubic: bool) -> np.ndarr
     spline through the finite samples (positions and velocities, ``cubic``) or linear, NaN
     outside ``x``'s span and next to a missing value (left out later as missing values are).
     One home for reading a column on another clock (:func:`_merged_rows`, :func:`_on_one_clock`)."""
+    from scipy.interpolate import CubicSpline      # here: most runs share one clock
     out = np.interp(at, x, y)                                  # NaN next to a missing value
     finite = np.isfinite(y)
     if cubic and finite.sum() >= 4 and np.all(np.diff(x[finite]) > 0):

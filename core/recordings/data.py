@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import sosfiltfilt
 
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import InputError, KinematicsError
@@ -56,6 +55,7 @@ def zero_phase(sos: np.ndarray, x: np.ndarray, rows: slice | np.ndarray = slice(
     placed at the kept rows. The columns go through the filter FILTER_BATCH_BYTES at a time
     (each column is filtered on its own, so the result is the same): sosfiltfilt holds four
     copies of what it is given, 2.4 GB for a Panda's inertial columns over 120 s at 1 kHz."""
+    from scipy.signal import sosfiltfilt     # here: scipy.signal's import is 0.3-0.5 s of a run that filters nothing
     flat = x.reshape(len(x), -1)
     live = live_columns(flat) if live is None else live
     kept = np.arange(len(x))[rows]
@@ -132,6 +132,7 @@ class Segment:
         half = max(CHUNK_PAD * self.edge, 8 * self.factor)
         impulse = np.zeros(2 * half + 1)
         impulse[half] = 1.0
+        from scipy.signal import sosfiltfilt
         g = sosfiltfilt(self.sos, impulse)
         size = 1 << int(np.ceil(np.log2(2 * len(g))))
         spectrum = np.fft.rfft(g, size)

@@ -11,8 +11,6 @@ run holds still (:func:`_still`) get velocities and accelerations of exactly 0.
 import math
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.signal import butter, sosfiltfilt
 
 from baseparams.dynamics.forces import Motion
 from baseparams.errors import InputError
@@ -81,6 +79,8 @@ def _filtered(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarr
     """One uniform piece: resampled if irregular, positions filtered and differentiated, the
     parallel filter and decimation planned (:class:`Segment`); the ``still`` coordinates
     (:func:`_still`) with velocity and acceleration exactly 0."""
+    from scipy.interpolate import CubicSpline      # here: scipy.signal's import is 0.3-0.5 s of a run that filters nothing
+    from scipy.signal import butter, sosfiltfilt
     notes = []
     steps = np.diff(t)
     step = float(np.median(steps))

@@ -6,7 +6,6 @@ recording's default low-pass (:func:`.filtering.auto_cutoff`); diagnosis reads i
 """
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 # Savitzky-Golay differentiation: polynomial order, and the least number of samples it needs.
 SG_ORDER = 4
@@ -118,6 +117,7 @@ def savgol_window(q: np.ndarray, step: float) -> int:
     omega = 2 * np.pi * fb * step                          # radians per sample
 
     def bias(half: int) -> float:
+        from scipy.signal import savgol_coeffs      # here, not at the top: scipy.signal takes 0.3-0.5 s to import
         c = savgol_coeffs(2 * half + 1, SG_ORDER, deriv=2, use="dot")
         response = np.sum(c * np.exp(1j * omega * np.arange(-half, half + 1)))
         return float(abs(response / -(omega ** 2) - 1))
@@ -135,6 +135,7 @@ def savgol_derivatives(q: np.ndarray, step: float, window: int | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """(qd, qdd) of uniformly sampled positions ``q`` (N, f) by Savitzky-Golay differentiation
     (order SG_ORDER; ends fitted by the polynomial of the end window, scipy's mode 'interp')."""
+    from scipy.signal import savgol_filter
     window = savgol_window(q, step) if window is None else window
     d1 = savgol_filter(q, window, SG_ORDER, deriv=1, delta=step, axis=0, mode="interp")
     d2 = savgol_filter(q, window, SG_ORDER, deriv=2, delta=step, axis=0, mode="interp")
