@@ -22,6 +22,7 @@ The source is standalone (numpy only): ``baseparams export MECH --to python`` wr
 from __future__ import annotations
 
 import functools
+import marshal
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ import numpy as np
 import sympy
 from flint import arb
 
+from baseparams.dynamics import codecache
 from baseparams.dynamics.regressor import tree_regressor as tree_regressor_rows_generic
 from baseparams.dynamics.tracing import PARTS, Graph, Kernel, Sym, trace
 from baseparams.kinematics.tree import TreeKinematics
@@ -482,12 +484,18 @@ def _scalar_module(mechanism: Mechanism, part: str) -> ScalarModule:
     key = (mechanism, part)
     found = _SCALAR.get(key)
     if found is None:
-        graph, kernels = _traced(mechanism, (part,))
-        constants = Constants()
-        source = "\n".join(kernel_source(graph, k, constants, scalar=True) for k in kernels)
+        stored = codecache.key(mechanism, f"{part}, scalar")
+        kept = codecache.load(stored)
+        if kept is None:
+            graph, kernels = _traced(mechanism, (part,))
+            constants = Constants()
+            source = "\n".join(kernel_source(graph, k, constants, scalar=True) for k in kernels)
+            code = compile(source, f"<baseparams generated {part}, scalar: {mechanism.name}>", "exec")
+            kept = (marshal.dumps(code), {k.name: layouts(k) for k in kernels}, tuple(constants.values))
+            codecache.store(stored, kept)
         namespace: dict[str, Any] = {}
-        exec(compile(source, f"<baseparams generated {part}, scalar: {mechanism.name}>", "exec"), namespace)
-        found = (namespace, {k.name: layouts(k) for k in kernels}, tuple(constants.values))
+        exec(marshal.loads(kept[0]), namespace)
+        found = (namespace, kept[1], kept[2])
         if len(_SCALAR) >= _CACHE_SIZE:
             _SCALAR.pop(next(iter(_SCALAR)))
         _SCALAR[key] = found
