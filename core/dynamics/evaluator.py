@@ -427,10 +427,10 @@ class Evaluator:
         for i, leader, ratio, _ in self._couplings():
             qd[i], qdd[i] = ratio * qd[leader], ratio * qdd[leader]
             r[i] = [ratio * v for v in r[leader]]
-        # float64 batches: the body states when first read (the generated regressor does not
-        # read them; at every sample of a long recording they are most of its memory)
-        states = None if isinstance(self.backend, Float64) else self.kin.forward(q, qd)
-        return Sample(q, qd, qdd, states, r, self.kin)
+        # the body states when first read (Sample.states), in every arithmetic: the generated
+        # regressor (float64 batches, arb, rationals) does not read them; at every sample of a
+        # long recording they are most of its memory, and in arb a quarter of W's time (issue 47)
+        return Sample(q, qd, qdd, None, r, self.kin)
 
     def _couplings(self) -> list[tuple[int, int, Any, Any]]:
         """(coordinate index, leader index, ratio, offset) in this backend, per coupling."""

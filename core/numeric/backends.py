@@ -24,6 +24,7 @@ evaluates expressions with it too.
 
 import contextlib
 import functools
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager
@@ -337,8 +338,13 @@ class Arb(Defaults[arb]):
     def matrix(self, rows: Sequence[Sequence[arb]], columns: int | None = None) -> arb_mat:
         if not rows:
             return arb_mat(0, columns or 0)
-        # arb entries are copied as they are (no conversion call per entry: W has 10^6)
-        return arb_mat(len(rows), len(rows[0]), [v if type(v) is arb else arb(v) for row in rows for v in row])
+        # arb entries are copied as they are (no conversion call per entry: W has 10^6); so
+        # are ints and floats (exact), and the list is not checked entry by entry in Python
+        # (0.05 s of TIAGo's 0.26 s W at 30 digits); anything else is made an arb first
+        try:
+            return arb_mat(len(rows), len(rows[0]), list(itertools.chain.from_iterable(rows)))
+        except TypeError:
+            return arb_mat(len(rows), len(rows[0]), [v if type(v) is arb else arb(v) for row in rows for v in row])
 
     def stack(self, *mats: arb_mat) -> arb_mat:
         return stack_flint(mats)
