@@ -39,6 +39,7 @@ zero is impossible; a negative value within that is consistent with zero (listed
   effect is absent is zero within its noise, whatever the ratio.
 """
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -88,7 +89,7 @@ class Flag:
 DELAY_LIMIT = 0.1           # s: a longer delay between positions and torques is not plausible
 # ----- physical plausibility ---------------------------------------------------------------------
 POSITIVE = {"viscous_friction": ("fv",), "coulomb_friction": ("fc",), "stribeck_friction": ("fs",),
-            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",),
+            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",), "payload": ("m",),
             }
 
 
@@ -133,19 +134,30 @@ def pseudo_inertia(phi: np.ndarray) -> np.ndarray:
     return np.block([[sigma, h[:, None]], [h[None, :], np.array([[m]])]])
 
 
+@functools.lru_cache(maxsize=1)
 def _pseudo_inertia_basis() -> np.ndarray:
-    """(10, 4, 4): J(e_i) for each of a body's ten parameters (m mx my mz Ixx Ixy Ixz Iyy Iyz Izz)."""
-    return np.array([pseudo_inertia(np.eye(10)[i]) for i in range(10)])
+    """(10, 4, 4): J(e_i) for each of a body's ten parameters (m mx my mz Ixx Ixy Ixz Iyy Iyz Izz);
+    once per process, read-only (built anew for each of TIAGo's 723 body rows it was 0.3 s of
+    identify, issue 47)."""
+    basis = np.array([pseudo_inertia(np.eye(10)[i]) for i in range(10)])
+    basis.setflags(write=False)
+    return basis
 
 
 _UPPER = [(i, j) for i in range(4) for j in range(i, 4)]
 
 
+@functools.lru_cache(maxsize=1)
+def _dual_map() -> np.ndarray:
+    """L (10 x 10) with L d = coefficients for the upper triangle d of :func:`dual`'s D."""
+    L = np.array([[a[i, j] * (1.0 if i == j else 2.0) for i, j in _UPPER] for a in _pseudo_inertia_basis()])
+    L.setflags(write=False)
+    return L
+
+
 def dual(coefficients: np.ndarray) -> np.ndarray:
     """The symmetric D with <D, J(phi_b)> = coefficients . phi_b for every phi_b."""
-    basis = _pseudo_inertia_basis()
-    L = np.array([[a[i, j] * (1.0 if i == j else 2.0) for i, j in _UPPER] for a in basis])
-    d = np.linalg.solve(L, np.asarray(coefficients, float))
+    d = np.linalg.solve(_dual_map(), np.asarray(coefficients, float))
     D = np.zeros((4, 4))
     for (i, j), v in zip(_UPPER, d):
         D[i, j] = D[j, i] = v
