@@ -19,7 +19,8 @@ FIGAROH). FIGAROH takes a ``<mimic>`` follower as a joint of its own (a higher r
 TIAGo); baseparams solves the coupled robot. Skipped with a note when figaroh is not installed.
 
 identify: ``identify`` of TIAGo's 48-joint model with the default solver (vp) on a recording
-simulated by ``bp.simulate`` (the file's trajectory, 1 % noise), in a child process each round:
+simulated by ``bp.simulate`` (the file's trajectory, 1 % noise), in child processes, each round
+one with the generated code's disk cache off and one with it on (filled before the rounds):
 identify's own CPU s and the whole process's, beside a yardstick measured in the same process
 after identify (Pinocchio's regressor over as many random states and one least-squares solve).
 
@@ -159,11 +160,13 @@ def without_geometry(path: Path, folder: Path) -> Path:
     return out
 
 
-def child(args: list[str]) -> tuple[dict, float]:
-    """(the child's JSON line, its whole-process CPU s)."""
+def child(args: list[str], env: dict[str, str] | None = None) -> tuple[dict, float]:
+    """(the child's JSON line, its whole-process CPU s); ``env``: variables set for it."""
     import json
+    import os
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.run([sys.executable, "-c", *args], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", *args], capture_output=True, text=True,
+                          env=None if env is None else {**os.environ, **env})
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     seconds = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
     if proc.returncode:
@@ -266,32 +269,42 @@ print(json.dumps({"identify_s": seconds, "yardstick_s": yardstick, "rank": out["
 
 def identify_tiago(found: dict[str, Path], repeats: int) -> None:
     """identify of TIAGo's 48-joint model (issue 47: <= 5 CPU s) with the default solver, on a
-    simulated recording (bp.simulate: the file's trajectory, 1 % noise), in a child process:
-    identify's own CPU s, the whole process's (the interpreter, the imports, identify; the
-    yardstick's CPU s subtracted), and the
-    yardstick measured after identify in the same process: Pinocchio's joint-torque regressor
-    stacked over as many random states as the recording has samples, and one least-squares
-    solve of it (numpy lstsq, SVD): what an uncertified identification cannot do without."""
+    simulated recording (bp.simulate: the file's trajectory, 1 % noise), in child processes
+    taking turns: with the generated code's disk cache off (``BASEPARAMS_CACHE_DIR=off``: a
+    first run, or a changed mechanism) and on (a cache in a temporary folder, filled by one run
+    before the rounds: every later run of the same mechanism). Per child: identify's own CPU s,
+    the whole process's (the interpreter, the imports, identify; the yardstick's CPU s
+    subtracted), and the yardstick measured after identify in the same process: Pinocchio's
+    joint-torque regressor stacked over as many random states as the recording has samples,
+    and one least-squares solve of it (numpy lstsq, SVD): what an uncertified identification
+    cannot do without."""
     import tempfile
     import baseparams as bp
+    urdf = str(found["tiago_description/tiago"])
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "tiago.csv"
-        bp.simulate(str(found["tiago_description/tiago"]), output=str(data), noise=0.01)
-        print("| robot | joints | identify CPU s (median) | whole process CPU s | yardstick CPU s | identify / "
-              "yardstick | base parameters | RMS | peak MB |")
-        print("|---|---|---|---|---|---|---|---|---|")
-        runs = [child([IDENTIFY_CHILD, str(found["tiago_description/tiago"]), str(data), str(ROOT / "tests")])
-                for _ in range(repeats)]
-        ok = [(out, t) for out, t in runs if "error" not in out]
+        bp.simulate(urdf, output=str(data), noise=0.01)
+        args = [IDENTIFY_CHILD, urdf, str(data), str(ROOT / "tests")]
+        settings = {"off": {"BASEPARAMS_CACHE_DIR": "off"}, "on": {"BASEPARAMS_CACHE_DIR": str(Path(tmp) / "cache")}}
+        child(args, settings["on"])                                     # fills the cache
+        runs: dict[str, list[tuple[dict, float]]] = {"off": [], "on": []}
+        for _ in range(repeats):
+            for cache, env in settings.items():
+                runs[cache].append(child(args, env))
+    print("| robot | joints | code cache | identify CPU s (median) | whole process CPU s | yardstick CPU s | "
+          "identify / yardstick | base parameters | RMS | peak MB |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for cache, done in runs.items():
+        ok = [(out, t) for out, t in done if "error" not in out]
         if not ok:
-            print(f"| tiago | 48 | failed: {runs[-1][0]['error']} |||||||")
-            return
+            print(f"| tiago | 48 | {cache} | failed: {done[-1][0]['error']} |||||||")
+            continue
         out = ok[-1][0]
         identify_s = statistics.median(o["identify_s"] for o, _ in ok)
         yards = [o["yardstick_s"] for o, _ in ok if o["yardstick_s"] is not None]
         yard = statistics.median(yards) if yards else None
         whole = statistics.median(t - (o["yardstick_s"] or 0.0) for o, t in ok)      # the yardstick's time left out
-        print(f"| tiago_description/tiago | 48 | {identify_s:.2f} | {whole:.2f} | "
+        print(f"| tiago_description/tiago | 48 | {cache} | {identify_s:.2f} | {whole:.2f} | "
               f"{'-' if yard is None else f'{yard:.2f}'} | {'-' if yard is None else f'{identify_s / yard:.1f}x'} | "
               f"{out['rank']} | {out['rms_overall']:.3g} | {out['peak_mb']:.0f} |", flush=True)
 
