@@ -13,7 +13,9 @@ cannot be written (read-only home) costs nothing but the saving.
 
 Where: ``$BASEPARAMS_CACHE_DIR`` if set (empty or ``off``: no cache), else
 ``$XDG_CACHE_HOME/baseparams`` or ``~/.cache/baseparams``; one file per key under
-``generated/``, written atomically (several processes may write the same key at once).
+``generated/``, written atomically (several processes may write the same key at once). The
+files are code that will be run, as ``__pycache__``'s are: the folder must be writable by its
+user alone (the default is; a shared ``BASEPARAMS_CACHE_DIR`` is not a safe choice).
 """
 
 from __future__ import annotations
