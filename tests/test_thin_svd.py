@@ -79,3 +79,33 @@ def test_a_long_window_is_the_rule_applied_to_direct_autocorrelations():
                                                            for j in range(f)])) < band) - 1
     assert leading > 6
     assert hac_lags_each(e[:, :, None])[0] == min(limit, max(newey_west_lags(n), 2 * leading))
+
+
+def rank_deficient(rows: int, columns: int, rank: int, condition: float, seed: int) -> np.ndarray:
+    """A rows x columns matrix of the given rank (exactly collinear columns beyond it), its
+    nonzero singular values log-even from 1 to 1/condition, columns of unequal norms."""
+    rng = np.random.default_rng(seed)
+    a = tall(rows, rank, condition, seed) @ rng.standard_normal((rank, columns))
+    return a * np.logspace(0, 1, columns)
+
+
+@pytest.mark.parametrize("columns, rank, condition", [(6, 5, 10.0), (30, 21, 1e3), (12, 12, 1e7)])
+def test_kept_directions_of_an_ill_conditioned_matrix(columns, rank, condition):
+    """With ``keep`` (a numerical rank), a matrix Cholesky QR cannot factor (rank-deficient,
+    or worse conditioned than CHOLESKY_QR_CONDITION) goes through Householder QR: the
+    singular values are LAPACK's to rounding, u has the kept columns only, orthonormal, and
+    spans LAPACK's leading directions; the right vectors' null space is LAPACK's."""
+    a = rank_deficient(3000, columns, rank, condition, seed=columns)
+    cut = 1e-9 if rank == columns else 1e-12
+    keep = lambda s: int(np.sum(s > cut * s[0]))                       # noqa: E731
+    u, s, vt = thin_svd(a, keep=keep)
+    u0, s0, vt0 = np.linalg.svd(a, full_matrices=False)
+    k = keep(s0)
+    assert k == rank and u.shape == (3000, k) and vt.shape == vt0.shape
+    assert np.allclose(s, s0, rtol=0, atol=1e-14 * s0[0])
+    assert np.allclose(u.T @ u, np.eye(k), atol=1e-14)
+    x = np.random.default_rng(0).standard_normal(3000)
+    assert np.allclose(u @ (u.T @ x), u0[:, :k] @ (u0[:, :k].T @ x), atol=1e-13 * s0[0] / s0[k - 1])
+    assert np.allclose((u * s[:k]) @ vt[:k], a, atol=1e-13 * s0[0])
+    null, null0 = vt[k:], vt0[k:]
+    assert np.allclose(null.T @ (null @ null0.T), null0.T, atol=1e-12)

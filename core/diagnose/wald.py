@@ -28,7 +28,7 @@ Why these choices:
   compares candidates with different numbers of columns.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -88,17 +88,17 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
         if norm == 0.0 or (reference is not None and norm <= tol * (size if size > 0 else 1.0)):
             return np.zeros((matrix.shape[0], 0))
         return (column / norm)[:, None]
+    # how many leading directions to keep, from the singular values (largest first)
+    count: Callable[[np.ndarray], int]
     if reference is not None:
         scale = column_norms(reference)
-        scale[scale == 0] = 1.0
-        u, s, _ = thin_svd(matrix / scale)
-        keep = s > tol
+        count = lambda s: int(np.sum(s > tol))                               # noqa: E731
     else:
         scale = column_norms(matrix)
-        scale[scale == 0] = 1.0
-        u, s, _ = thin_svd(matrix / scale)
-        keep = np.arange(s.size) < numerical_rank(tol=tol, singular_values=s)
-    return u[:, keep]
+        count = lambda s: numerical_rank(tol=tol, singular_values=s)         # noqa: E731
+    scale[scale == 0] = 1.0
+    u, s, _ = thin_svd(matrix / scale, keep=count)
+    return u[:, :count(s)]
 
 
 def column_norms(matrix: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ Why these choices:
   iteration (gesvd) where gesdd fails to converge, as it does for particular bits of such
   rank-deficient matrices (a real Kinova Gen3 recording's cross-validation fit); the fit of
   the N f rows goes through :func:`~baseparams.numeric.linalg.thin_svd` (Cholesky QR when
-  the scaled columns are well conditioned, that SVD otherwise).
+  the scaled columns are well conditioned, Householder QR and the SVD of its R otherwise).
 """
 
 from __future__ import annotations
@@ -317,7 +317,7 @@ class WeightedLinearModel:
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
-        u, s, vt = thin_svd(A / scale)
+        u, s, vt = thin_svd(A / scale, keep=lambda values: numerical_rank(tol=rank_tol, singular_values=values))
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
