@@ -40,7 +40,7 @@ EFFECTS = [
     Effect("cogging", "tau = c1 sin q + d1 cos q + c2 sin 2q + d2 cos 2q: a position-periodic torque "
            "(cogging, an unbalanced gear) in its two lowest harmonics", ("c1", "d1", "c2", "d2"),
            lambda q, qd, qdd: [np.sin(q), np.cos(q), np.sin(2 * q), np.cos(2 * q)],
-           generalises=("offset", "spring", "mass", "body"),    # gravity of a mass is harmonics of q too
+           generalises=("offset", "spring", "mass", "payload", "body"),    # gravity of a mass: harmonics of q
            angular=True),
 ]
 

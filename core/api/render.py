@@ -130,7 +130,7 @@ def _payload_text(effect: dict) -> str:
     """Where a changed body's added mass sits: its centre of mass in the body's axes (the
     first moments over the mass), when the added mass is positive."""
     c = effect["coefficients"]
-    if effect["kind"] != "body" or any(c[k]["value"] is None for k in ("m", "mx", "my", "mz")) \
+    if effect["kind"] not in ("body", "payload") or any(c[k]["value"] is None for k in ("m", "mx", "my", "mz")) \
             or c["m"]["value"] <= 0:
         return ""
     m = c["m"]["value"]
@@ -341,8 +341,9 @@ def _effect_line(effect: dict, kinds: Mapping[str, str]) -> str:
     """One named effect in physical terms: its value with its std and unit."""
     kind, coordinate = effect["kind"], effect["coordinate"]
     c = effect["coefficients"]
-    if kind == "body":
-        return f"body on {coordinate}: {_body_text(c)}"
+    if kind in ("body", "payload"):
+        late = effect.get("shape", {}).get("lag_s")
+        return f"{kind} on {coordinate}: {_body_text(c)}" + (f" (its force {1e3 * late:.3g} ms late)" if late else "")
     if kind == "mass" and c["m"]["value"] is not None:
         return f"mass on {coordinate}: {_pm(c['m']['value'], c['m']['std'])} kg at its frame's origin"
     if kind == "gain" and c["g"]["value"] is not None:

@@ -11,9 +11,13 @@ predicted torque or from the bodies' inertial columns, so they exist only inside
   body: ``mass:BODY`` (a point mass at the body's frame origin: one column, exact) and
   ``body:BODY`` (all ten parameters: a rigid payload anywhere on it, or the body itself
   changed). The first is the second's special case; selection names the simpler one when
-  the data cannot tell them apart (``generalises``). (A point mass at an unknown position
-  is not linear in its position: its inertia about the origin is m (|c|^2 1 - c c^T); the
-  rigid body covers it.)
+  the data cannot tell them apart (``generalises``). Between them ``payload:BODY``: a
+  compact load near the origin, its mass and first moments (four columns, m and m c: "0.097
+  kg at (x, y, z) m"). A point mass at an unknown position is not linear in its position:
+  its inertia about the origin, m (|c|^2 1 - c c^T), is left out; where the data see it, the
+  rigid body (which generalises the payload) is named instead. Why: a 94 g load 3-5 cm off a
+  UR5's wrist_3 origin was named as a mass at the origin 11-25 % heavy (the mass took the
+  first moments' force); as a payload, 2-4 % off.
 """
 
 from collections.abc import Callable, Iterator, Sequence
@@ -26,12 +30,16 @@ from baseparams.diagnose.selection import Candidate
 from baseparams.model.mechanism import Mechanism
 
 TORQUE_KINDS = ("load_friction", "delay")
-GIVEN_KINDS = ("gain", "mass", "body")
+GIVEN_KINDS = ("gain", "mass", "payload", "body")
 KINDS = TORQUE_KINDS + GIVEN_KINDS
 COEFFICIENTS = {"load_friction": ("mu",), "delay": ("d",), "gain": ("g",), "mass": ("m",),
+                "payload": ("m", "mx", "my", "mz"),
                 "body": ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")}
-BODY_PARTS = {"mass": slice(0, 1), "body": slice(0, 10)}
-GENERALISES = {"body": ("mass",)}
+BODY_PARTS = {"mass": slice(0, 1), "payload": slice(0, 4), "body": slice(0, 10)}
+GENERALISES = {"payload": ("mass",), "body": ("mass", "payload")}
+# The body kinds a diagnosis between recordings offers by default (``--baseline``: its rates were
+# measured with these two, and a payload there is named as a body); --params offers all three.
+CHANGE_BODY_KINDS = ("mass", "body")
 
 
 def body_name(mechanism: Mechanism, label: int) -> str:
@@ -102,8 +110,8 @@ SAME_POINT = 1e-6
 
 def welded_duplicates(mechanism: Mechanism, kind: str) -> dict[str, str]:
     """The bodies whose ``kind`` candidate is another's under a second name -> that other:
-    for ``body`` every body welded to another (their ten parameters span the same forces:
-    one rigid body's, in another frame); for ``mass`` a welded body whose frame origin is
+    for ``body`` and ``payload`` every body welded to another (their ten, or four, parameters
+    span the same forces: one rigid body's, in another frame); for ``mass`` a welded body whose frame origin is
     that of a body of its group before it (a point mass at the same point). Why: a UR10's
     payload was reported as ambiguous between its last link and the tool0 and ee_link frames
     fixed to it (|corr| 1.000), with advice to move through a wider range, which cannot
@@ -120,7 +128,7 @@ def welded_duplicates(mechanism: Mechanism, kind: str) -> dict[str, str]:
             kept.setdefault(0, []).append(0)
             continue
         twin: int | None = None
-        if kind == "body" and label != representative:
+        if kind in ("body", "payload") and label != representative:
             twin = representative
         elif kind == "mass":
             twin = next((k for k in kept.get(representative, [])
@@ -325,10 +333,12 @@ def _without_rounding(block: np.ndarray) -> np.ndarray:
 
 
 def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque: np.ndarray,
-                     inertial: np.ndarray, wanted: set | None = None) -> list[Candidate]:
-    """gain per coordinate (columns: the given torque) and mass/body per body (its
-    columns of the inertial regressor ``inertial`` (n, f, 10 bodies)); by default
-    (``wanted`` None) not a candidate a welded body repeats (:func:`welded_duplicates`)."""
+                     inertial: np.ndarray, wanted: set | None = None,
+                     kinds: Sequence[str] = CHANGE_BODY_KINDS, shape: dict | None = None) -> list[Candidate]:
+    """gain per coordinate (columns: the given torque) and the body ``kinds`` per body (their
+    columns of the inertial regressor ``inertial`` (n, f, 10 bodies), taken at ``shape``: a
+    lag, for the report); by default (``wanted`` None) not a candidate a welded body repeats
+    (:func:`welded_duplicates`)."""
     n, f = torque.shape
     out = []
     for j, c in enumerate(coordinates):
@@ -344,8 +354,8 @@ def given_candidates(mechanism: Mechanism, coordinates: tuple[str, ...], torque:
             continue                                   # the ground, or a body nothing moves
         block = _without_rounding(block)
         for kind, part in BODY_PARTS.items():
-            if (kind, name) in wanted if wanted is not None else name not in twins[kind]:
+            if (kind, name) in wanted if wanted is not None else kind in kinds and name not in twins[kind]:
                 out.append(Candidate(kind, name, tuple(f"{p}_{name}" for p in COEFFICIENTS[kind]),
-                                     np.ascontiguousarray(block[:, :, part]),
+                                     np.ascontiguousarray(block[:, :, part]), shape=dict(shape or {}),
                                      generalises=GENERALISES.get(kind, ())))
     return out

@@ -119,7 +119,7 @@ def _regroupings(inertial: np.ndarray, candidates: list[Candidate], in_model: li
                  y: np.ndarray, weights: np.ndarray) -> dict[int, Regrouping]:
     """The named changed bodies whose ten parameters the data do not each determine beside
     the rest of the final model: their identifiable combinations (:mod:`.identifiable`)."""
-    bodies = [i for i in in_model if i in named and candidates[i].kind == "body"]
+    bodies = [i for i in in_model if i in named and candidates[i].kind in ("body", "payload")]
     if not bodies:
         return {}
     blocks = [candidates[i].columns for i in in_model]

@@ -29,8 +29,10 @@ def simpler_in_place(model: np.ndarray, y: np.ndarray, selection: Selection, hel
     candidates = selection.candidates
     relation = generalisation(candidates)
     place = candidates[held].coordinate
+    # one taken out when a form generalising it came in (a payload once a body was in) may
+    # stand again once that form is held back
     simpler = [j for j, cand in enumerate(candidates) if cand.coordinate == place and relation(held, j)
-               and j not in selection.in_model and not any(j == i for i, _, _ in selection.removed)]
+               and j not in selection.in_model]
     if not simpler:
         return None
     last = selection.steps[-1]

@@ -6,6 +6,7 @@ the swaps a failed one may make (a simpler form in its place, a held-back effect
 one's place). The ones that fail are reported ``unsupported`` with their reason.
 """
 
+import dataclasses
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -70,7 +71,11 @@ def _dominated(after: "_Prediction", train: int, added: list[Candidate], in_mode
 
 
 def _fixed(original: Candidate, chosen: Candidate) -> Candidate:
-    """``original`` (every row) at the shape selection fixed ``chosen`` at."""
+    """``original`` (every row) at the shape selection fixed ``chosen`` at, and with the
+    columns selection kept of it (:func:`.selection._beyond_named`)."""
+    if chosen.names != original.names and not original.variants:
+        keep = [original.names.index(name) for name in chosen.names]
+        return dataclasses.replace(original, names=chosen.names, columns=np.ascontiguousarray(original.columns[:, :, keep]))
     if not original.variants or chosen.variants:
         return original
     k = next((k for k, shape in enumerate(original.shapes) if dict(shape) == chosen.shape), None)
@@ -507,11 +512,11 @@ def _drives(problem: Problem, cand: Candidate, values: dict) -> str:
 
 
 def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
-    """A changed body keeps a positive mass (its other parameters are not all identifiable:
-    the estimate is one of many changes with the same torques, so only the mass is checked);
-    not judged when the given masses are not the bodies' (an identify result of a mechanism
-    without inertias: least-norm parameters)."""
-    if cand.kind != "body" or problem.given is None or not problem.given_masses:
+    """A changed body (or a payload on it: a load taken off is a negative one) keeps a positive
+    mass (its other parameters are not all identifiable: the estimate is one of many changes
+    with the same torques, so only the mass is checked); not judged when the given masses are
+    not the bodies' (an identify result of a mechanism without inertias: least-norm parameters)."""
+    if cand.kind not in ("body", "payload") or problem.given is None or not problem.given_masses:
         return ""
     mass = problem.given[derived.body_columns(problem.mechanism, cand.coordinate)][0] + values["m"]
     return f"the changed body's mass {mass:.3g} is not positive" if mass <= 0 else ""

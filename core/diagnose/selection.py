@@ -16,6 +16,7 @@ Why the steps are made so (the tests' own reasons: :mod:`.wald`):
   entered by is taken out (:func:`eliminate`); the forward steps then resume.
 """
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -356,6 +357,9 @@ def _entered(state: Selection, winner: int, confusable: list[Rival], variant: di
         if candidates[i].variants:
             state.shaped[i] = candidates[i]
             candidates[i] = candidates[i].at(variant[i])
+    if confusable:
+        for i in group:
+            candidates[i] = _beyond_named(candidates, i, state.added)
     state.added.append(winner)
     state.bars[winner] = bar
     if confusable:
@@ -363,8 +367,28 @@ def _entered(state: Selection, winner: int, confusable: list[Rival], variant: di
         state.companions.extend(r.index for r in confusable)
     return {candidates[i].coordinate for i in group}
 
+
+def _beyond_named(candidates: Sequence[Candidate], i: int, named: Sequence[int]) -> Candidate:
+    """Candidate ``i`` without the leading columns it shares with a named effect it generalises
+    on its place (a body's ten beyond a payload's four), for an ambiguous group: the group
+    claims one of its members, and a rival that does not generalise the named effect leaves
+    it named. Why: a 94 g payload on a UR5's last link entered; then its body, confusable with
+    the last joint's rotor inertia (the load's inertia about the axis), took the payload's
+    columns in with it, the payload was taken out as absorbed, and the report said "body or
+    rotor inertia", which the payload's force is not."""
+    cand = candidates[i]
+    relation = generalisation(candidates)
+    for j in named:
+        inner = candidates[j].columns
+        w = inner.shape[-1]
+        if (relation(i, j) and cand.coordinate == candidates[j].coordinate and w < cand.columns.shape[-1]
+                and not cand.variants and np.array_equal(cand.columns[:, :, :w], inner)):
+            return dataclasses.replace(cand, names=cand.names[w:], columns=np.ascontiguousarray(cand.columns[:, :, w:]))
+    return cand
+
+
 # kinds that act on a body, not a coordinate: a kind generalising them may act anywhere
-BODY_KINDS = ("mass", "body")
+BODY_KINDS = ("mass", "payload", "body")
 
 
 def generalisation(candidates: Sequence[Candidate]) -> Callable[[int, int], bool]:
@@ -726,7 +750,11 @@ def resolve(winner: int, rivals: list[int], bases: dict, fit: Fit, shape: tuple[
             rival = Rival(j, t_ab, t_ba, correlation(fit.residual, A, bases[j]))
             a_adds = t_ab.tested and t_ab.pvalue <= alpha
             b_adds = t_ba.tested and t_ba.pvalue <= alpha
-            if not t_ba.tested:                 # rival nested in the winner
+            if not (t_ab.tested or t_ba.tested) and generalises is not None and (
+                    generalises(winner, j) or generalises(j, winner)):
+                # one span (a planar link's payload and body): the simpler kind is named
+                (switch if generalises(winner, j) else beaten).append(rival)
+            elif not t_ba.tested:               # rival nested in the winner
                 (beaten if t_ab.tested and t_ab.pvalue <= nested_level else switch).append(rival)
             elif not t_ab.tested:               # winner nested in the rival
                 (switch if t_ba.pvalue <= nested_level else beaten).append(rival)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from baseparams import registry
-from baseparams.diagnose import derived
+from baseparams.diagnose import bodylag, derived
 from baseparams.diagnose.entries import (_ambiguous_entry, _effect_entry, _held_back, _known_entry, _near_twins,
                                          _regroupings, _shared_bodies, _steps_json, _where)
 from baseparams.diagnose.estimates import _predict, coefficients, holdout_floor, nrms
@@ -114,7 +114,8 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
                          f"{model_rank} identifiable inertial parameters: give more samples or a smaller "
                          "--holdout", key="samples")
     rows = slice(0, train)
-    built, lag = _derived(problem, model, y, rows)
+    lag_notes: list[str] = []
+    built, lag = _derived(problem, model, y, rows, lag_notes)
     everything = problem.candidates + built
     if not everything:
         raise InputError("no candidate effects left to test", key="--candidates")
@@ -178,7 +179,7 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
         j for i in chosen.added if i in ambiguous_idx and i not in dropped for j in [i] + [
             r.index for r in chosen.ambiguous[i]]}
     notes = _notes(problem, chosen, replaced, regrouped, effects, listed, notes_colour, unexplained, gap, exact,
-                   blowup, named_any and not blowup, grew, remaining, max_steps, untestable)
+                   blowup, named_any and not blowup, grew, remaining, max_steps, untestable) + lag_notes
     for u in unsupported:
         u.pop("index")
         u.pop("members", None)
@@ -377,10 +378,11 @@ def reduced_model(columns: np.ndarray, train: int) -> np.ndarray:
     return np.ascontiguousarray(columns @ (vt[:rank].T / scale[:, None]))
 
 
-def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
+def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice, notes: list[str]
              ) -> tuple[list[Candidate], derived.LagEvidence | None]:
     """The candidates built from the model's torque (:mod:`.derived`): the training fit of the
-    model alone predicts it (with a given simulation: the given torque); and what tells a
+    model alone predicts it (with a given simulation: the given torque; bodies' columns as
+    late as the recording's torques, :mod:`.bodylag`, said in ``notes``); and what tells a
     delay from other lags (every row), None without a delay candidate."""
     torque = problem.known.copy()
     wanted = problem.wanted
@@ -419,8 +421,15 @@ def _derived(problem: Problem, model: np.ndarray, y: np.ndarray, rows: slice
     qd = problem.qd if problem.qd is not None else np.zeros_like(torque)
     out = derived.torque_candidates(problem.coordinates, problem.t, qd, torque, wanted, delay)
     if problem.bodies is not None:
-        out += derived.given_candidates(problem.mechanism, problem.coordinates, alone, problem.bodies,
-                                        problem.wanted)
+        bodies, shape = problem.bodies, {}
+        late, z = bodylag.body_lag(problem.t[rows], y[rows], alone[rows], bodies[rows])
+        if abs(z) >= bodylag.CLEAR and 0.0 < late <= bodylag.LONGEST:
+            bodies, shape = bodylag.late(bodies, problem.t, late), {"lag_s": late}
+            notes.append(f"bodies' and payloads' force taken {1e3 * late:.3g} ms late, as this recording's "
+                         f"torques are (estimated with every body's load together, z = {z:.3g}): the held "
+                         "model absorbed the lag on its own run; new force carries it")
+        out += derived.given_candidates(problem.mechanism, problem.coordinates, alone, bodies,
+                                        problem.wanted, tuple(derived.BODY_PARTS), shape)
     return out, lag
 
 

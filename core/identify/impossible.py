@@ -89,7 +89,7 @@ class Flag:
 DELAY_LIMIT = 0.1           # s: a longer delay between positions and torques is not plausible
 # ----- physical plausibility ---------------------------------------------------------------------
 POSITIVE = {"viscous_friction": ("fv",), "coulomb_friction": ("fc",), "stribeck_friction": ("fs",),
-            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",), "payload": ("m",),
+            "rotor_inertia": ("Ia",), "spring": ("k",), "load_friction": ("mu",), "mass": ("m",),
             }
 
 
