@@ -14,12 +14,15 @@ the datasets where it is within 5 %, and the median std over the mass of the dia
 the oracle's body and of the simulated point mass; the median text report's lines, and the
 speed figure: CPU seconds of one diagnosis between recordings against one ``identify`` of
 the changed runs (the shared effects on every coordinate) in the same process.
-``--mechanism generated``: a random serial chain (4 bodies, RRRR, random physical inertias).
+``--mechanism generated``: random serial chains (4 bodies, RRRR, random physical inertias),
+dataset i on the chain of generator seed ``--generators[i % len]`` (several chains, not one).
 
     python benchmarks/bench_diagnose_change.py [--seeds 20] [--samples 5000] [--mechanism puma560]
     python benchmarks/bench_diagnose_change.py --mechanism tests/data/urdf/ur5.urdf --samples 1000 \
         --payload-mass 0.0094 0.094 0.48 --quantum 0.01 --noise ar1 lowpass --seeds 20
     python benchmarks/bench_diagnose_change.py --mechanism generated --samples 1000 --payloads 0.05 0.5 --seeds 20
+    python benchmarks/bench_diagnose_change.py --mechanism generated --generators 11 12 13 14 --samples 1000 \
+        --scenarios nothing --noise ar1 lowpass --seeds 40
 """
 
 import argparse
@@ -125,6 +128,35 @@ def oracle(mechanism, before, after, truth: dict, load_friction: float) -> tuple
     return float(value[0] - m), float(point[0]), float(std[0])
 
 
+def drift_oracle(before, after, truth: dict, quantum: float) -> float:
+    """The yardstick for a friction drift: its t statistic in a perfect-model fit, generalised
+    least squares of the two runs' torque difference on the drift's column (the speed at the
+    true delay) with the true noise covariance (the simulated noise kind's autocovariance
+    times 2 sd^2, plus the quantisation's white 2 q^2 / 12), the true drift over its std."""
+    from scipy.linalg import solve_toeplitz
+    from scipy.signal import butter, lfilter
+    from baseparams.recordings.simulate import COMMON_DELAY
+    drift = truth["friction_drift"]
+    j = list(after.coordinates).index(drift["coordinate"])
+    n = len(after.tau)
+    qd = after.motion.qd[:, j]
+    lag = COMMON_DELAY if truth["delay"] else 0
+    x = np.concatenate([np.repeat(qd[:1], lag), qd[:n - lag]])
+    impulse = np.zeros(n + 4000)
+    impulse[0] = 1.0
+    if truth["noise"] == "lowpass":
+        h = lfilter(*butter(4, 0.05), impulse)
+    elif truth["noise"] == "ar1":
+        h = lfilter([1.0], [1.0, -0.9], impulse)
+    else:
+        h = impulse
+    autocovariance = np.array([h[:len(h) - k] @ h[k:] for k in range(n)])
+    column = 2 * truth["noise_sd"][j] ** 2 * autocovariance / autocovariance[0]
+    column[0] += 2 * quantum ** 2 / 12
+    weighted = solve_toeplitz(column, x)
+    return float(drift["fv"] * np.sqrt(weighted @ x))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20)
@@ -139,16 +171,19 @@ def main() -> None:
     parser.add_argument("--quantum", type=float, default=0.0, help="torques rounded to this step (N m)")
     parser.add_argument("--scenarios", nargs="+", default=["nothing", "payload", "friction"])
     parser.add_argument("--no-speed", action="store_true", help="skip the speed figure")
+    parser.add_argument("--generators", nargs="+", type=int, default=[11],
+                        help="with --mechanism generated: the chains' generator seeds (dataset i: the i mod count-th)")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     generated = args.mechanism == "generated"
     if generated:
         from baseparams.io.loader import parse_mechanism
         from baseparams.model import generate
-        mechanism = parse_mechanism(generate.serial_chain(11, bodies=4, types="RRRR", samples=600), "chain.toml")
+        chains = [parse_mechanism(generate.serial_chain(g, bodies=4, types="RRRR", samples=600), "chain.toml")
+                  for g in args.generators]
     else:
-        mechanism = resolve(args.mechanism)
-    last = rigidly_joined(mechanism, mechanism.bodies[-1].label)
+        chains = [resolve(args.mechanism)]
+    mechanism = chains[0]
     payloads = [(f"payload {p:g}", {"payload": p}) for p in args.payloads] if args.payload_mass is None else \
         [(f"payload {m:g} kg", {"payload_mass": m}) for m in args.payload_mass]
     scenarios = [("nothing", {})] * ("nothing" in args.scenarios) + payloads * ("payload" in args.scenarios) + \
@@ -161,9 +196,11 @@ def main() -> None:
           f"{'body':>6} {'point':>6} {'lines':>5} {'CPU s':>6}  wrong names")
     for name, change in scenarios if args.seeds > 0 else ():        # --seeds 0: the speed figure alone
         for noise in args.noise:
-            named, right, honest, reached, lines, wrong, cpu = 0, 0, 0, 0, [], [], []
+            named, right, honest, reached, lines, wrong, cpu, drift_t = 0, 0, 0, 0, [], [], [], []
             spreads: dict[str, list[float]] = {"std/m": [], "body": [], "point": []}
             for seed in range(args.seeds):
+                mechanism = chains[seed % len(chains)]
+                last = rigidly_joined(mechanism, mechanism.bodies[-1].label)
                 before, after, truth = simulate_change(mechanism, samples=args.samples, seed=seed, noise=noise,
                                                        **change, **common)
                 start = time.process_time()
@@ -183,8 +220,11 @@ def main() -> None:
                     spreads["point"].append(point / true)
                     if names_right and result.changes[0]["coefficients"]["m"]["std"] is not None:
                         spreads["std/m"].append(result.changes[0]["coefficients"]["m"]["std"] / true)
+                if truth["friction_drift"] and seed < 5:
+                    drift_t.append(drift_oracle(before, after, truth, args.quantum))
                 if not names_right:
-                    wrong.append(f"{seed}: {result.verdict} "
+                    where = f"{args.generators[seed % len(chains)]}/" if generated else ""
+                    wrong.append(f"{where}{seed}: {result.verdict} "
                                  + ",".join(f"{e['kind']}:{e['coordinate']}" for e in result.changes))
             figures = {k: f"{100 * np.median(v):5.1f}%" if v else "     -" for k, v in spreads.items()}
             oracle_rate = f"{reached:>3}/{args.seeds:<3}" if truth["payload"] else "    -  "
@@ -192,8 +232,11 @@ def main() -> None:
                   f"{honest:>3}/{args.seeds:<3} {oracle_rate} {figures['std/m']} {figures['body']} "
                   f"{figures['point']} {int(np.median(lines)):>5} "
                   f"{np.median(cpu):>6.2f}  {'; '.join(wrong[:4])}", flush=True)
+            if drift_t:
+                print(f"{'':<16} {noise:<8} the drift's t in a perfect-model fit with the true noise (drift_oracle, "
+                      f"seeds 0-4): median {np.median(drift_t):.1f}, least {np.min(drift_t):.1f}", flush=True)
     if args.payload_mass is None and not args.no_speed and not generated:
-        speed(mechanism, args.samples)
+        speed(chains[0], args.samples)
 
 
 def speed(mechanism, samples: int, repeats: int = 3) -> None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import lfilter
-from scipy.special import fdtrc
+from scipy.special import fdtrc, ndtri
 
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.diagnose.selection import Candidate
@@ -21,6 +21,12 @@ UNEXPLAINED_BAR = 10.0
 
 # The longest autoregression fitted to a residual to whiten it for the test of what is left.
 AR_ORDER = 20
+# Singular values of a coordinate's share of the fitted directions below which they are left
+# out of the projection's correction (noise_model).
+COMPRESS = 0.05
+# A search's F tests count their noise level's degrees of freedom (effective_df) only below this
+# p on the residual's: fewer only raise p, so above it they change no decision.
+LAZY_P = 0.2
 
 
 def ar_whitening(residual: np.ndarray, order: int = AR_ORDER) -> list[np.ndarray]:
@@ -52,6 +58,164 @@ def ar_whitening(residual: np.ndarray, order: int = AR_ORDER) -> list[np.ndarray
     return filters
 
 
+def ar_autocovariance(filter_: np.ndarray, variance: float, n: int) -> np.ndarray:
+    """The autocovariances at lags 0..n-1 of the autoregression whose prediction-error filter
+    is ``filter_`` [1, -a_1, ...] and innovation variance ``variance`` (its spectrum's inverse
+    FFT on a grid at least 4 times longer: the aliasing of a slowly decaying one is negligible)."""
+    size = 1 << int(np.ceil(np.log2(max(4 * n, 4096))))
+    spectrum = variance / np.maximum(np.abs(np.fft.rfft(filter_, size)) ** 2, 1e-300)
+    return np.fft.irfft(spectrum, size)[:n]
+
+
+def toeplitz_times(autocovariance: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The symmetric Toeplitz matrix of ``autocovariance`` (n,) times ``x`` (n, k), by FFT."""
+    n = len(autocovariance)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    column = np.concatenate([autocovariance, np.zeros(size - 2 * n + 1), autocovariance[:0:-1]])
+    return np.fft.irfft(np.fft.rfft(column)[:, None] * np.fft.rfft(x, size, axis=0), size, axis=0)[:n]
+
+
+def _lagged_cross(A: np.ndarray, B: np.ndarray, top: int) -> np.ndarray:
+    """(top + 1, top + 1): sum over t = top .. n - 1 of A[t - i] . B[t - l] (rows of A and B
+    (n, k) as vectors), from one running sum per lag l - i."""
+    n = len(A)
+    out = np.zeros((top + 1, top + 1))
+    for h in range(-top, top + 1):                  # h = l - i
+        products = np.zeros(n + 1)
+        first, last = max(0, h), min(n, n + h)
+        products[first + 1:last + 1] = np.einsum("sk,sk->s", A[first:last], B[first - h:last - h])
+        running = np.cumsum(products)
+        for i in range(max(0, -h), min(top, top - h) + 1):
+            out[i, i + h] = running[n - i] - running[top - i]
+    return out
+
+
+def _bic_filter(gram: np.ndarray, rows: int) -> tuple[np.ndarray, float]:
+    """(prediction-error filter, innovation variance) of the autoregression whose order
+    (<= the lagged cross products ``gram``'s size - 1) has the least BIC, by least squares."""
+    best = None
+    for p in range(len(gram)):
+        a = np.linalg.lstsq(gram[1:p + 1, 1:p + 1], gram[1:p + 1, 0], rcond=None)[0] if p else np.zeros(0)
+        variance = max(float(gram[0, 0] - a @ gram[1:p + 1, 0]) / rows, 1e-300)
+        bic = rows * np.log(variance) + p * np.log(rows)
+        if best is None or bic < best[0]:
+            best = (bic, np.concatenate([[1.0], -a]), variance)
+    return best[1], best[2]
+
+
+def _corrected(plain: np.ndarray, taken: np.ndarray, rows: int, previous: tuple[np.ndarray, float]
+               ) -> tuple[np.ndarray, float]:
+    """:func:`_bic_filter` of the cross products ``plain`` with what the projection ``taken``
+    added back; ``previous`` where that adds more than nine times the residual's sum of
+    squares (the projection cannot have taken 90 % of the noise), leaves no innovation
+    variance, or makes the autoregression non-stationary: at a root near one the expected
+    loss diverges (seen on the PUMA, 800 samples, a 45 g payload)."""
+    gram = plain + taken
+    if gram[0, 0] > 10.0 * plain[0, 0]:
+        return previous
+    filter_, variance = _bic_filter(gram, rows)
+    if variance <= 1e-9 * plain[0, 0] / rows or (len(filter_) > 1 and np.max(np.abs(np.roots(filter_))) >= 0.999):
+        return previous
+    return filter_, variance
+
+
+def noise_filters(signal: np.ndarray, design: np.ndarray, order: int = AR_ORDER, rounds: int = 3,
+                  unit: bool = True) -> list[np.ndarray]:
+    """:func:`noise_model`'s filters alone."""
+    return noise_model(signal, design, order, rounds, unit)[0]
+
+
+def noise_model(signal: np.ndarray, design: np.ndarray, order: int = AR_ORDER, rounds: int = 3,
+                unit: bool = True) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
+    """Per coordinate, the prediction-error filter of an autoregression (order <= ``order`` by
+    BIC, least squares) of the noise that ``signal`` (n, f) leaves once ``design`` (n, f, k)
+    is fitted to it (least squares over the stacked rows), divided by its innovation SD so
+    that every coordinate's whitened noise has unit variance (``unit``; else the plain
+    prediction-error filter). Each coordinate's lagged cross
+    products of that residual are corrected by what the projection takes from them in
+    expectation under the autoregressions (:func:`_projection_bias`), ``rounds`` times from
+    the plain fit. Why the correction: a residual fitted by many slow columns has lost the
+    noise's low frequencies, and an autoregression fitted to it is too weak there (AR(1) 0.9
+    on 1000 samples: 0.85 with 20 slow columns, 0.897 corrected); tests of slow columns
+    whitened by it were liberal (a generated chain with nothing changed was called changed in
+    3 of 20 datasets: a viscous friction at raw p 2e-6, 0.0013 under the true whitening).
+    Returned with each coordinate's (plain filter, covariance of its coefficients a_1..a_p:
+    the innovation variance times the inverse of the corrected lagged Gram matrix), for
+    :func:`effective_df`. Why the unit innovation variance: an F test pools the coordinates' whitened rows, and on a
+    UR5 under low-passed noise with torques quantised to 0.01 N m the whitened noise of the
+    shoulder was far below the wrist's: a friction drift there (t = 37 for a perfect-model fit
+    with the true noise) went unseen in 20 of 20 datasets."""
+    n, f = signal.shape
+    Q = orthonormal_basis(design.reshape(n * f, -1), 1e-9) if design.shape[-1] else np.zeros((n * f, 0))
+    residual = signal - (Q @ (Q.T @ signal.reshape(-1))).reshape(n, f)
+    Q = Q.reshape(n, f, -1)
+    top = min(order, max(n // 20, 0))
+    rows = n - top
+    plain = [_lagged_cross(residual[:, j:j + 1], residual[:, j:j + 1], top) for j in range(f)]
+    fitted = [_bic_filter(g, rows) for g in plain]
+    grams = list(plain)
+    # each coordinate's rows of Q as U S V^T, directions of singular value <= COMPRESS left out
+    # (they hold under 0.25 % of a direction each): Q_j^T Sigma Q_j and the lagged sums then
+    # run over those few columns (a PUMA's 61 directions: 10-34 per coordinate)
+    parts = []
+    for j in range(f if Q.shape[-1] else 0):
+        U, values, Vt = np.linalg.svd(Q[:, j], full_matrices=False)
+        keep = values > COMPRESS
+        parts.append((U[:, keep] * values[keep], Vt[keep]))
+    for _ in range(rounds if Q.shape[-1] else 0):
+        Y = [toeplitz_times(ar_autocovariance(c, v, n), US) for (c, v), (US, _) in zip(fitted, parts)]
+        W = sum(Vt.T @ (US.T @ y) @ Vt for (US, Vt), y in zip(parts, Y))       # Q^T Sigma Q
+        again = []
+        for j, ((US, Vt), y) in enumerate(zip(parts, Y)):
+            cross = _lagged_cross(y, US, top)
+            taken = cross + cross.T - _lagged_cross(US @ (Vt @ W @ Vt.T), US, top)
+            again.append(_corrected(plain[j], taken, rows, fitted[j]))
+            if again[-1] is not fitted[j]:
+                grams[j] = plain[j] + taken
+        stable = all(len(c) == len(d) and np.allclose(c, d, atol=1e-4) for (c, _), (d, _) in zip(again, fitted))
+        fitted = again
+        if stable:
+            break
+    spread = []
+    for (c, v), gram in zip(fitted, grams):
+        p = len(c) - 1
+        spread.append((c, v * np.linalg.pinv(gram[1:p + 1, 1:p + 1]) if p else np.zeros((0, 0))))
+    return [c / np.sqrt(v) if unit else c for c, v in fitted], spread
+
+
+def effective_df(spread: list[tuple[np.ndarray, np.ndarray]], whitened: np.ndarray) -> float:
+    """The degrees of freedom of the noise level that F tests of the columns ``whitened``
+    (m, f, k: through :func:`noise_model`'s filters) divide by: 2 / the variance of the
+    relative error of the whitened noise's power over their spectrum, from the errors of the
+    autoregressions' coefficients (``spread``; the delta method: d log S(w) / d a_m =
+    2 Re(e^{-i w m} / A(w))), coordinates weighted by the columns' energy on each. Why: the
+    noise's power at the low frequencies where a robot's columns live is fixed by few
+    effective samples (AR(1) 0.9 on 1000 samples: S(0) to 28 %, about 26 degrees of
+    freedom), and an F test against thousands called changes that the true noise model puts
+    at p 0.008 (a gain on a UR5's base, p 4e-4)."""
+    m, f, _ = whitened.shape
+    scale = float(np.max(np.abs(whitened), initial=0.0))
+    if not np.isfinite(scale) or scale == 0.0:
+        return np.inf
+    spectrum = np.abs(np.fft.rfft(whitened / scale, axis=0)) ** 2          # (bins, f, k): only shares matter
+    power = spectrum.sum(axis=2)                                   # (bins, f)
+    energy = power.sum(axis=0)
+    total = float(energy.sum())
+    if total <= 0:
+        return np.inf
+    omega = 2 * np.pi * np.fft.rfftfreq(m)
+    variance = 0.0
+    for j, (c, cov) in enumerate(spread):
+        p = len(c) - 1
+        if p == 0 or energy[j] <= 0:
+            continue
+        lags = np.exp(-1j * np.outer(omega, np.arange(1, p + 1)))
+        slope = 2 * np.real(lags / np.fft.rfft(c, 2 * (len(omega) - 1) if m % 2 == 0 else m)[:len(omega), None])
+        mean = power[:, j] @ slope / energy[j]
+        variance += (energy[j] / total) ** 2 * float(mean @ cov @ mean)
+    return 2.0 / variance if variance > 0 else np.inf
+
+
 def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
     """x (n, f) or (n, f, c) through each coordinate's filter (its first rows dropped)."""
     start = max(len(a) for a in filters) - 1
@@ -60,16 +224,21 @@ def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
 
 
 def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weights: np.ndarray,
-              noise: np.ndarray | None = None) -> dict:
+              noise: np.ndarray | None = None, design: np.ndarray | None = None, unit: bool = True) -> dict:
     """Whether what is left (n, f) is predictable from ``columns`` (n, f, k), all at once,
     beyond ``model`` (n, f, p): an F test after each coordinate's residual and columns pass
-    its autoregressive whitening (:func:`ar_whitening`, fitted to ``noise``, default the
-    residual itself), rows weighted by ``weights``. Give ``noise`` when the residual holds
-    the structure under test: an autoregression fitted to it learns that structure as noise
-    (a payload tested beside another body: p = 0.46)."""
-    filters = ar_whitening((residual if noise is None else noise) * weights[None, :])
+    its autoregressive whitening (:func:`noise_model`, fitted to ``noise``, default the
+    residual itself, as left by a fit of ``design``, default ``model``), rows weighted by
+    ``weights``; ``unit``: each coordinate whitened to unit variance; the noise level's
+    degrees of freedom :func:`effective_df` when fewer than the residual's. Give ``noise``
+    when the residual holds the structure under test: an autoregression fitted to it learns
+    that structure as noise (a payload tested beside another body: p = 0.46)."""
+    design = model if design is None else design
+    filters, spread = noise_model((residual if noise is None else noise) * weights[None, :],
+                                  design * weights[None, :, None], unit=unit)
     r = _filtered(filters, residual * weights[None, :])
     X = _filtered(filters, columns * weights[None, :, None])
+    noise_df = effective_df(spread, X)
     m, f = r.shape
     b = r.reshape(-1)
     A = X.reshape(m * f, -1)
@@ -87,7 +256,7 @@ def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weig
     explained = basis.T @ b
     rest = float(b @ b - explained @ explained)
     stat = float(explained @ explained) / k / max(rest / dof, 1e-300)
-    return {"stat": stat, "df": int(k), "pvalue": float(fdtrc(k, dof, stat)),
+    return {"stat": stat, "df": int(k), "pvalue": float(fdtrc(k, min(dof, noise_df), stat)),
             "ar_order": [len(a) - 1 for a in filters]}
 
 
@@ -105,6 +274,7 @@ class Search:
     first: np.ndarray
     steps: list[dict]
     weights: np.ndarray
+    unit: bool = True          # each coordinate's whitened noise at unit variance (noise_filters)
 
     @property
     def in_model(self) -> list[int]:
@@ -130,13 +300,15 @@ def _f_test(residual: np.ndarray, basis: np.ndarray, rest: float, dof: int) -> t
     return stat, k, float(fdtrc(k, df, stat))
 
 
-def _f_test_beyond(residual: np.ndarray, basis: np.ndarray, model: np.ndarray, rest: float, dof: int
-                   ) -> tuple[float, int, float]:
+def _f_test_beyond(residual: np.ndarray, basis: np.ndarray, model: np.ndarray, rest: float, dof: int,
+                   noise_df: float = np.inf) -> tuple[float, int, float]:
     """:func:`_f_test` of the orthonormal ``basis``'s directions beyond the orthonormal
     ``model`` (``residual`` orthogonal to it), from k x k products: the directions beyond are
     B (I - M M^T), whose Gram matrix is I - (B^T M)(B^T M)^T; what they explain of the
     residual is g^T G^+ g with g = B^T r (no tall matrix factorised: a step tests every
-    candidate, and their SVDs were most of the search's time)."""
+    candidate, and their SVDs were most of the search's time). ``noise_df``: the noise
+    level's own degrees of freedom in these directions (:func:`effective_df`), when fewer
+    than the residual's."""
     k = basis.shape[1]
     if k == 0:
         return 0.0, 0, 1.0
@@ -155,10 +327,11 @@ def _f_test_beyond(residual: np.ndarray, basis: np.ndarray, model: np.ndarray, r
     projected = vectors[:, keep].T @ g
     ss = float(np.sum(projected ** 2 / values[keep]))
     stat = (ss / kept) / (max(rest - ss, 1e-300) / df)
-    return stat, kept, float(fdtrc(kept, df, stat))
+    return stat, kept, float(fdtrc(kept, min(df, noise_df), stat))
 
 
-def search(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int = 12, rounds: int = 3) -> Search:
+def search(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int = 12, rounds: int = 3,
+           unit: bool = True) -> Search:
     """:func:`search_once`, its noise model (weights and autoregressions) estimated again from
     the residual of the model it chose, until the choice repeats (Cochrane-Orcutt). Why: the
     first noise model comes from the residual of every candidate at once, which the smooth
@@ -166,35 +339,39 @@ def search(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: 
     under-whitened, and five changes followed a true payload into the search."""
     n, f = y.shape
     everything = np.concatenate([c.columns for c in candidates], axis=-1) if candidates else np.zeros((n, f, 0))
-    found = search_once(candidates, y, alpha, max_steps, everything)
+    found = search_once(candidates, y, alpha, max_steps, everything, unit=unit)
     for _ in range(rounds - 1):
         chosen = [candidates[j].columns for j in found.in_model]
-        again = search_once(candidates, y, alpha, max_steps, np.concatenate([np.zeros((n, f, 0))] + chosen, axis=-1))
+        again = search_once(candidates, y, alpha, max_steps, np.concatenate([np.zeros((n, f, 0))] + chosen, axis=-1),
+                            unit=unit)
         if again.added == found.added and again.ambiguous == found.ambiguous:
             return again
         found = again
     return found
 
 
-def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int, noise_model: np.ndarray,
-                first: np.ndarray | None = None) -> Search:
+def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_steps: int,
+                noise_model_columns: np.ndarray, first: np.ndarray | None = None, unit: bool = True) -> Search:
     """Forward selection of the change's candidates by F tests on data whitened by each
-    coordinate's autoregression (:func:`ar_whitening`, fitted to the residual of every
-    candidate at once: the residual of none would hold the change, which an autoregression
-    learns as noise), rows weighted by each coordinate's noise level. Each step tests every
+    coordinate's autoregression (:func:`noise_model`, fitted to the residual of
+    ``noise_model_columns``, every candidate at first: the residual of none would hold the
+    change, which an autoregression learns as noise), rows weighted by each coordinate's noise
+    level, each candidate's F against its noise level's degrees of freedom (:func:`effective_df`). Each step tests every
     candidate beyond the model, Holm-corrects, adds the most significant (normal
     equivalent z) and, with it, the rivals neither of which adds over the other at ``alpha``
     (an ambiguous group). Why not the diagnosis' own search (HAC Wald tests, AR(1)
     whitening): on low-passed noise its size was not held, and its tests of sparse
     directions took four fifths of the time."""
     n, f = y.shape
-    complete = WeightedLinearModel(noise_model, y).fit() if noise_model.shape[-1] else None
-    residual = y if complete is None else y - noise_model @ complete.coefficients
+    complete = WeightedLinearModel(noise_model_columns, y).fit() if noise_model_columns.shape[-1] else None
+    residual = y if complete is None else y - noise_model_columns @ complete.coefficients
     noise = np.sqrt(np.mean(residual ** 2, axis=0))
     weights = 1.0 / np.where(noise > 0, noise, 1.0)
-    filters = ar_whitening(residual * weights[None, :])
+    filters, spread = noise_model(residual * weights[None, :], noise_model_columns * weights[None, :, None], unit=unit)
     wy = _filtered(filters, y * weights[None, :]).reshape(-1)
-    columns = [_filtered(filters, c.columns * weights[None, :, None]).reshape(len(wy), -1) for c in candidates]
+    shaped = [_filtered(filters, c.columns * weights[None, :, None]) for c in candidates]
+    noise_dfs: dict[int, float] = {}       # counted where they can change a decision (p < LAZY_P)
+    columns = [c.reshape(len(wy), -1) for c in shaped]
     rows = len(wy)
     model = np.zeros((rows, 0))
     added: list[int] = []
@@ -214,8 +391,13 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
             if i in inside:
                 continue
             stat, k, pvalue = _f_test_beyond(r, basis, model, rest, dof)
-            if k:
-                outcome[i] = (pvalue, wilson_hilferty(stat * k, k))
+            if k and pvalue < LAZY_P:         # fewer degrees of freedom only raise p
+                if i not in noise_dfs:
+                    noise_dfs[i] = effective_df(spread, shaped[i])
+                pvalue = float(fdtrc(k, min(dof - k, noise_dfs[i]), stat))
+            if k:       # ranked by p: the normal equivalent of the F's own p (its noise df differ)
+                outcome[i] = (pvalue, float(ndtri(1.0 - pvalue)) if pvalue > 1e-15 else
+                              max(float(-ndtri(pvalue)) if pvalue > 0 else 0.0, wilson_hilferty(stat * k, k)))
         if not outcome:
             break
         order = list(outcome)
@@ -251,7 +433,7 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
         model = orthonormal_basis(np.concatenate([model, won] + [beyond(j) for j in rivals], axis=1), 1e-9)
     # the first step's p values under the first noise model: the gate's, which the later rounds
     # do not move (they are about the named changes, not about whether anything changed)
-    return Search(candidates, added, ambiguous, tests, first if gate is None else gate, steps, weights)
+    return Search(candidates, added, ambiguous, tests, first if gate is None else gate, steps, weights, unit)
 
 
 def _adds(wy: np.ndarray, model: np.ndarray, extra: np.ndarray, alpha: float) -> bool:
@@ -263,23 +445,25 @@ def _adds(wy: np.ndarray, model: np.ndarray, extra: np.ndarray, alpha: float) ->
     return k > 0 and pvalue <= alpha
 
 
-def named_changes(candidates: list[Candidate], difference: np.ndarray, alpha: float, notes: list[str]
-           ) -> tuple[Search, set, dict]:
+def named_changes(candidates: list[Candidate], difference: np.ndarray, alpha: float, notes: list[str],
+                  unit: bool = True) -> tuple[Search, set, dict]:
     """The search and what survives its checks (the module docstring's steps 1-5): the
-    search, the kept candidates' indices, and the gate's test."""
+    search, the kept candidates' indices, and the gate's test. ``unit``: each coordinate's
+    whitened noise at unit variance (:func:`noise_filters`): right where the difference is
+    noise (paired runs), not where it is the shared model's error (other motions)."""
     f = difference.shape[1]
     empty = np.zeros((len(difference), f, 0))
     spread = np.sqrt(np.mean(difference ** 2, axis=0))
     # closed testing: without the gate, the diagnosis' own Wald tests called 4 of 20 AR(1) nulls changed
     gate = rest_test(difference, np.concatenate([c.columns for c in candidates], axis=-1), empty,
-                     1.0 / np.where(spread > 0, spread, 1.0))
+                     1.0 / np.where(spread > 0, spread, 1.0), unit=unit)
     # ... or each candidate alone, its noise model the residual of the model the search chose
     # (Cochrane-Orcutt: from the residual of every candidate, the single tests called 1 in 20
     # low-passed nulls of 800 samples changed; from the difference itself, a change is taken
     # for noise and a 30 % friction drift went unseen)
-    found = search(candidates, difference, alpha)
+    found = search(candidates, difference, alpha, unit=unit)
     if gate["pvalue"] > alpha / 2 and float(np.min(found.first, initial=1.0)) > alpha / 2:
-        found = Search(candidates, [], {}, {}, found.first, found.steps[:1], found.weights)
+        found = Search(candidates, [], {}, {}, found.first, found.steps[:1], found.weights, unit)
     kept = _confirmed(found, difference, alpha, notes)
     kept = _predictive(found, difference, kept, notes)
     return found, _large_enough(found, difference, kept, notes), gate
@@ -347,7 +531,7 @@ def _confirmed(chosen: Search, y: np.ndarray, alpha: float, notes: list[str]) ->
             fit = WeightedLinearModel(model, y).fit(weights)
             residual = y - model @ fit.coefficients
             columns = np.concatenate([chosen.candidates[j].columns for j in members], axis=-1)
-            pvalues[head] = rest_test(residual, columns, model, weights, noise)["pvalue"]
+            pvalues[head] = rest_test(residual, columns, model, weights, noise, everything, chosen.unit)["pvalue"]
         weakest = max(pvalues, key=lambda h: pvalues[h])
         if pvalues[weakest] <= alpha / len(groups):
             break

@@ -29,7 +29,7 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.special import fdtrc
 
-from baseparams.diagnose.changesearch import Search, ar_whitening
+from baseparams.diagnose.changesearch import Search, noise_filters
 from baseparams.diagnose.selection import Candidate
 from baseparams.diagnose.wald import orthonormal_basis, project_out
 from baseparams.dynamics.forces import Motion, evaluate, independent_names, inertial_columns
@@ -286,7 +286,7 @@ def _undominated(chosen: Search, y: np.ndarray, rest: list[int], members: list[i
     model = np.concatenate([empty] + [columns[j] for j in rest + members[:1]], axis=-1)
     flat = model.reshape(-1, model.shape[-1])
     residual = wy0 - (flat @ np.linalg.lstsq(flat, wy0.reshape(-1), rcond=None)[0]).reshape(y.shape)
-    filters = ar_whitening(residual)
+    filters = noise_filters(residual, model, unit=chosen.unit)
     start = max(len(f) for f in filters) - 1
 
     def whitened(x: np.ndarray) -> np.ndarray:
