@@ -71,7 +71,8 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
     lines = _head(result)
     lines.append("named effects:" if result.effects else _none_named(result))
     for e in result.effects:
-        shape = "".join(f", {k} = {v:.3g}" for k, v in e.get("shape", {}).items())
+        shape = "".join(f", its force {1e3 * v:.3g} ms late" if k == "lag_s" else f", {k} = {v:.3g}"
+                        for k, v in e.get("shape", {}).items())
         lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}{_payload_text(e)}  "
                      f"(p = {e['test']['pvalue_holm']:.2g}, Holm{_opened_by(e['test'])})")
     for a in result.ambiguous:
