@@ -93,14 +93,14 @@ def _lagged_cross(A: np.ndarray, B: np.ndarray, top: int) -> np.ndarray:
 def _bic_filter(gram: np.ndarray, rows: int) -> tuple[np.ndarray, float]:
     """(prediction-error filter, innovation variance) of the autoregression whose order
     (<= the lagged cross products ``gram``'s size - 1) has the least BIC, by least squares."""
-    best = None
+    best_bic, best = np.inf, (np.array([1.0]), max(float(gram[0, 0]) / rows, 1e-300))
     for p in range(len(gram)):
         a = np.linalg.lstsq(gram[1:p + 1, 1:p + 1], gram[1:p + 1, 0], rcond=None)[0] if p else np.zeros(0)
         variance = max(float(gram[0, 0] - a @ gram[1:p + 1, 0]) / rows, 1e-300)
         bic = rows * np.log(variance) + p * np.log(rows)
-        if best is None or bic < best[0]:
-            best = (bic, np.concatenate([[1.0], -a]), variance)
-    return best[1], best[2]
+        if bic < best_bic:
+            best_bic, best = bic, (np.concatenate([[1.0], -a]), variance)
+    return best
 
 
 def _corrected(plain: np.ndarray, taken: np.ndarray, rows: int, previous: tuple[np.ndarray, float]
