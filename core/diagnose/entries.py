@@ -189,7 +189,6 @@ def _effect_entry(all_candidates: list[Candidate], values: np.ndarray, stds: np.
     coefficients_ = _coefficient_map(cand, values, stds, regrouped)
     single = len(coefficients_) == 1
     step = next(s for s in chosen.steps if s.chosen == index)
-    test = step.tests[index]
     return {"kind": cand.kind, "coordinate": cand.coordinate,
             "value": float(values[0]) if single else {k: v["value"] for k, v in coefficients_.items()},
             "std": float(stds[0]) if single else {k: v["std"] for k, v in coefficients_.items()},

@@ -273,7 +273,7 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
         notes.append(f"the {base.solver} solver's base parameters reproduce the regressor only to "
                      f"{outside:.2g} (relative): its coefficients carry too few digits for this "
                      "mechanism; a certified solver (--solver vp) models it exactly")
-    stacked, target = X.reshape(n * f, -1), y.reshape(n * f)
+    stacked = X.reshape(n * f, -1)
     scale = np.linalg.norm(stacked, axis=0)
     dead = [all_names[k] for k in range(len(all_names)) if scale[k] == 0]
     if dead:
