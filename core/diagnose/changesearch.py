@@ -85,8 +85,8 @@ def _lagged_cross(A: np.ndarray, B: np.ndarray, top: int) -> np.ndarray:
         first, last = max(0, h), min(n, n + h)
         products[first + 1:last + 1] = np.einsum("sk,sk->s", A[first:last], B[first - h:last - h])
         running = np.cumsum(products)
-        for i in range(max(0, -h), min(top, top - h) + 1):
-            out[i, i + h] = running[n - i] - running[top - i]
+        i = np.arange(max(0, -h), min(top, top - h) + 1)
+        out[i, i + h] = running[n - i] - running[top - i]
     return out
 
 
@@ -183,7 +183,8 @@ def noise_model(signal: np.ndarray, design: np.ndarray, order: int = AR_ORDER, r
     return [c / np.sqrt(v) if unit else c for c, v in fitted], spread
 
 
-def effective_df(spread: list[tuple[np.ndarray, np.ndarray]], whitened: np.ndarray) -> float:
+def effective_df(spread: list[tuple[np.ndarray, np.ndarray]], whitened: np.ndarray,
+                 slopes: tuple[int, list[np.ndarray | None]] | None = None) -> float:
     """The degrees of freedom of the noise level that F tests of the columns ``whitened``
     (m, f, k: through :func:`noise_model`'s filters) divide by: 2 / the variance of the
     relative error of the whitened noise's power over their spectrum, from the errors of the
@@ -192,7 +193,8 @@ def effective_df(spread: list[tuple[np.ndarray, np.ndarray]], whitened: np.ndarr
     noise's power at the low frequencies where a robot's columns live is fixed by few
     effective samples (AR(1) 0.9 on 1000 samples: S(0) to 28 %, about 26 degrees of
     freedom), and an F test against thousands called changes that the true noise model puts
-    at p 0.008 (a gain on a UR5's base, p 4e-4)."""
+    at p 0.008 (a gain on a UR5's base, p 4e-4). ``slopes``: :func:`log_spectrum_slopes` of
+    ``spread``, when made already."""
     m, f, _ = whitened.shape
     scale = float(np.max(np.abs(whitened), initial=0.0))
     if not np.isfinite(scale) or scale == 0.0:
@@ -203,17 +205,33 @@ def effective_df(spread: list[tuple[np.ndarray, np.ndarray]], whitened: np.ndarr
     total = float(energy.sum())
     if total <= 0:
         return np.inf
-    omega = 2 * np.pi * np.fft.rfftfreq(m)
+    if slopes is None or slopes[0] != m:
+        slopes = log_spectrum_slopes(spread, m)
     variance = 0.0
-    for j, (c, cov) in enumerate(spread):
-        p = len(c) - 1
-        if p == 0 or energy[j] <= 0:
+    for j, ((c, cov), slope) in enumerate(zip(spread, slopes[1])):
+        if slope is None or energy[j] <= 0:
             continue
-        lags = np.exp(-1j * np.outer(omega, np.arange(1, p + 1)))
-        slope = 2 * np.real(lags / np.fft.rfft(c, 2 * (len(omega) - 1) if m % 2 == 0 else m)[:len(omega), None])
         mean = power[:, j] @ slope / energy[j]
         variance += (energy[j] / total) ** 2 * float(mean @ cov @ mean)
     return 2.0 / variance if variance > 0 else np.inf
+
+
+def log_spectrum_slopes(spread: list[tuple[np.ndarray, np.ndarray]], m: int
+                        ) -> tuple[int, list[np.ndarray | None]]:
+    """(m, per coordinate d log S(w) / d a (bins, p) at the m-point FFT's frequencies, None
+    without an autoregression): the part of :func:`effective_df` that does not depend on the
+    tested columns, made once per noise model (a search tests each candidate with it: remade
+    for each, it was a tenth of a diagnosis between recordings)."""
+    omega = 2 * np.pi * np.fft.rfftfreq(m)
+    out: list[np.ndarray | None] = []
+    for c, _ in spread:
+        p = len(c) - 1
+        if p == 0:
+            out.append(None)
+            continue
+        lags = np.exp(-1j * np.outer(omega, np.arange(1, p + 1)))
+        out.append(2 * np.real(lags / np.fft.rfft(c, 2 * (len(omega) - 1) if m % 2 == 0 else m)[:len(omega), None]))
+    return m, out
 
 
 def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
@@ -221,6 +239,17 @@ def _filtered(filters: list[np.ndarray], x: np.ndarray) -> np.ndarray:
     start = max(len(a) for a in filters) - 1
     out = np.stack([lfilter(a, [1.0], x[:, j], axis=0) for j, a in enumerate(filters)], axis=1)
     return out[start:]
+
+
+def _filtered_each(filters: list[np.ndarray], blocks: list[np.ndarray], weights: np.ndarray) -> list[np.ndarray]:
+    """:func:`_filtered` of each block (n, f, k_i) weighted by ``weights`` (f,), in one pass
+    (each column is filtered alone either way: one lfilter call per candidate and coordinate
+    cost more than the filtering)."""
+    if not blocks:
+        return []
+    widths = [b.shape[-1] for b in blocks]
+    out = _filtered(filters, np.concatenate(blocks, axis=-1) * weights[None, :, None])
+    return np.split(out, np.cumsum(widths)[:-1], axis=-1)
 
 
 def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weights: np.ndarray,
@@ -369,7 +398,8 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
     weights = 1.0 / np.where(noise > 0, noise, 1.0)
     filters, spread = noise_model(residual * weights[None, :], noise_model_columns * weights[None, :, None], unit=unit)
     wy = _filtered(filters, y * weights[None, :]).reshape(-1)
-    shaped = [_filtered(filters, c.columns * weights[None, :, None]) for c in candidates]
+    shaped = _filtered_each(filters, [c.columns for c in candidates], weights)
+    slopes = log_spectrum_slopes(spread, len(wy) // f)
     noise_dfs: dict[int, float] = {}       # counted where they can change a decision (p < LAZY_P)
     columns = [c.reshape(len(wy), -1) for c in shaped]
     rows = len(wy)
@@ -393,7 +423,7 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
             stat, k, pvalue = _f_test_beyond(r, basis, model, rest, dof)
             if k and pvalue < LAZY_P:         # fewer degrees of freedom only raise p
                 if i not in noise_dfs:
-                    noise_dfs[i] = effective_df(spread, shaped[i])
+                    noise_dfs[i] = effective_df(spread, shaped[i], slopes)
                 pvalue = float(fdtrc(k, min(dof - k, noise_dfs[i]), stat))
             if k:       # ranked by p: the normal equivalent of the F's own p (its noise df differ)
                 outcome[i] = (pvalue, float(ndtri(1.0 - pvalue)) if pvalue > 1e-15 else
