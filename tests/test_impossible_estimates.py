@@ -7,6 +7,7 @@ returned a viscous friction of -0.18 and on the Panda negative rotor inertias, s
 nothing, and diagnose then "corrected" them as if they were physical."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ def run(*args):
 
 
 def simulated(tmp_path, mech, *effects, noise="0.02", seed=1):
-    path = tmp_path / f"{mech.replace('.', '_')}_{seed}.csv"
+    path = tmp_path / f"{Path(mech).name.replace('.', '_')}_{seed}.csv"
     run("simulate", mech, "-o", path, "--noise", noise, "--seed", seed, *[a for e in effects for a in ("--effect", e)])
     return path
 
@@ -147,3 +148,56 @@ def test_a_body_determined_by_the_data_is_judged_as_a_mass_distribution():
     fewer = judge(base_map=np.eye(10)[:9], std=np.full(9, 1e-5), covariance=np.eye(9) * 1e-10,
                   **{**common, "names": names[:9], "values": phi[:9]})
     assert fewer == []
+
+
+def test_body_scales_are_a_hundred_times_the_mechanisms_mass_and_reach():
+    """S_i: 100 M for a mass, 100 M L for a first moment, 100 M L^2 for an inertia (M the bodies'
+    total mass, L the frames' lengths added up, at least 1 m); a base parameter is beyond
+    its scale when |value| or std exceeds sum |c_i| S_i."""
+    from baseparams.identify.impossible import beyond_body_scale, body_scales
+    S = body_scales(["m_a", "mx_a", "Izz_a", "m_b"], [2.0, 3.0], [1.5, 0.5, 1.0])
+    assert np.allclose(S, [500.0, 1500.0, 4500.0, 500.0])
+    assert body_scales(["m_a"], [0.0], [1.0]) is None            # no masses: nothing to scale by
+    assert np.allclose(body_scales(["mx_a"], [1.0], [0.1]), [100.0])     # the reach is at least 1 m
+    E = np.array([[0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 1.0, 0.0]])    # mx_a + 0.5 m_b, Izz_a: bounds 1750, 4500
+    names = ["b1", "b2", "fv_q1"]
+    flags = beyond_body_scale(["b1", "b2"], E, names, np.array([1800.0, 10.0, 1e9]), np.array([1.0, 4600.0, 1.0]), S)
+    assert [(f.name, f.beyond) for f in flags] == [("b1", 1750.0), ("b2", 4500.0)]
+    assert "its value" in flags[0].reason and "its standard deviation" in flags[1].reason
+    assert beyond_body_scale(["b1", "b2"], E, names, np.array([1700.0, 10.0, 0.0]), np.ones(3), S) == []
+
+
+def test_a_real_first_link_seen_through_a_sliver_of_its_axis_is_beyond_any_physical_scale(tmp_path):
+    """The real Kinova repeat's first run (tests/data/kinova_gen3): the first link's first
+    moments are seen only through its axis 3.7e-6 rad off vertical (rpy 1.5708 for pi/2), and
+    the fit returns mx_shoulder_link = -7.2e4 kg m for an arm of about 8 kg. identify names it
+    (JSON, text, a warning), and diagnose --params says so before it runs."""
+    folder = Path(__file__).parent / "data" / "kinova_gen3"
+    urdf, first = folder / "gen3.urdf", folder / "repeat_RunTrajectory1.toml"
+    out = tmp_path / "first.json"
+    report = identified(urdf, first, out=out)
+    far = {f["name"]: f for f in report["beyond_physical_scale"]}
+    assert "phi_b01" in far and abs(far["phi_b01"]["value"]) > 1e4, report["beyond_physical_scale"]
+    assert all(name in ("phi_b01", "phi_b02") for name in far)          # the rest is within the scale
+    result = run("identify", urdf, first)
+    assert "BEYOND ANY PHYSICAL SCALE" in result.stdout and "phi_b01" in result.stderr
+    report = json.loads(run("diagnose", urdf, folder / "repeat_Trajectory1.toml", "--params", out,
+                            "--format", "json").stdout)
+    assert any("beyond any physical scale" in n and "phi_b01" in n for n in report["notes"]), report["notes"]
+
+
+def test_a_clean_fit_is_within_the_physical_scale(tmp_path):
+    """A simulated UR5 (its URDF's masses) and the real TX40 (tests/data/tx40) identified: no
+    base parameter beyond the mechanism's scale (the built-in mechanisms carry no masses:
+    nothing is judged there)."""
+    from baseparams.identify.impossible import mechanism_scales
+    from baseparams.io.loader import resolve
+    data = Path(__file__).parent / "data"
+    ur5, tx40 = data / "urdf" / "ur5.urdf", data / "tx40" / "tx40_mdh_modified.urdf"
+    for mech, recording in ((ur5, simulated(tmp_path, str(ur5), seed=3)), (tx40, data / "tx40" / "recording.toml")):
+        mechanism = resolve(str(mech))
+        assert mechanism_scales(mechanism, mechanism.parameters) is not None
+        report = identified(mech, recording)
+        assert report["beyond_physical_scale"] == [], (mech, report["beyond_physical_scale"])
+    planar = resolve("planar_2r")
+    assert mechanism_scales(planar, planar.parameters) is None

@@ -285,7 +285,7 @@ def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: lis
     std as identify judges them (:func:`.impossible.judge`; a result of an older version has
     no "impossible" key, and the values are what is held)."""
     from baseparams import registry
-    from baseparams.identify.impossible import judge, split
+    from baseparams.identify.impossible import beyond, beyond_body_scale, judge, mechanism_scales, split
     names = [str(entry.get("name", f"base[{k}]")) for k, entry in enumerate(base)]
     values = [float(entry["value"]) for entry in base]
     stds = [_number(entry.get("std")) for entry in base]
@@ -312,8 +312,16 @@ def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: lis
     flags = judge(parameters=list(mechanism.parameters), base_map=E, names=names, values=np.array(values),
                   std=np.array(stds), covariance=covariance, effects=coefficients, absorbed=absorbed,
                   bodies={b.label: b.name for b in mechanism.bodies})
+    flags += beyond_body_scale([str(entry.get("name", f"base[{k}]")) for k, entry in enumerate(base)], E, names,
+                               np.array(values), np.array(stds), mechanism_scales(mechanism, mechanism.parameters))
     impossible, near_zero = split(flags)
     notes = []
+    far = beyond(flags)
+    if far:
+        notes.append(f"--params {path}: {len(far)} held value{'s' if len(far) > 1 else ''} beyond any physical scale, "
+                     "held as given all the same (the data of that identification did not determine them; "
+                     "the body masses completed from them are no body's, and a change is not judged by them): "
+                     + "; ".join(f.text() for f in far))
     if impossible:
         notes.append(f"--params {path}: {len(impossible)} held value{'s' if len(impossible) > 1 else ''} no robot "
                      f"has, held as given all the same (a correction named there may only undo it): "

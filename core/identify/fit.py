@@ -24,7 +24,8 @@ from baseparams.errors import InputError
 from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
 from baseparams.recordings.data import MeasuredData
-from baseparams.identify.impossible import IMPOSSIBLE_STD, Flag, advice, beyond, beyond_scale, judge, split
+from baseparams.identify.impossible import (IMPOSSIBLE_STD, Flag, advice, beyond, beyond_body_scale, beyond_scale,
+                                            judge, mechanism_scales, split)
 from baseparams.identify.linear import WeightedLinearModel
 from baseparams.dynamics.forces import Design, Motion, design, effect_values, effects_design, evaluate
 from baseparams.model.mechanism import EffectSpec, Mechanism
@@ -211,7 +212,7 @@ def impossible_lines(flags: Sequence[Flag], indent: str = "") -> list[str]:
         lines += [f"{indent}  {f.text()}" for f in near_zero]
     far = beyond(flags)
     if far:
-        lines.append(f"{indent}BEYOND ANY PHYSICAL SCALE (not estimates of the effect):")
+        lines.append(f"{indent}BEYOND ANY PHYSICAL SCALE (not estimates of what they stand for):")
         lines += [f"{indent}  {f.text()}" for f in far]
     return lines
 
@@ -325,6 +326,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
                   std=np.sqrt(np.clip(np.diag(covariance), 0, None)), covariance=covariance, effects=coefficients,
                   absorbed=absorbed, bodies={b.label: b.name for b in mechanism.bodies})
     flags += beyond_scale(names, estimates, np.sqrt(np.clip(np.diag(covariance), 0, None)), coefficients)
+    flags += beyond_body_scale(base.names, base.B, names, estimates, np.sqrt(np.clip(np.diag(covariance), 0, None)),
+                               mechanism_scales(mechanism, base.parameters))
     return Identification(mechanism=mechanism.name, data=data.path, coordinates=data.coordinates,
                           base=base, effects=effects, known=known, names=names, kinds=kinds,
                           estimates=estimates, covariance=covariance, noise_sd=sigma, nrms=nrms,

@@ -37,13 +37,25 @@ zero is impossible; a negative value within that is consistent with zero (listed
   or the data are read wrong (a time column of sample indices). Its sign is not judged, its
   size is. A standard deviation far above the value alone is not flagged: a coefficient whose
   effect is absent is zero within its noise, whatever the ratio.
+- **Base parameters beyond the mechanism's scale** (:func:`beyond_body_scale`): a base
+  parameter ``c . phi`` whose value or standard deviation exceeds ``sum |c_i| S_i``, with S_i
+  :data:`SCALE_FACTOR` times what a body of the mechanism could have (its bodies' total mass
+  M for a mass, M L for a first moment, M L^2 for an inertia, L its reach: the lengths of
+  every joint's frames added up, at least 1 m). No load or error in the model's masses
+  reaches a hundred times the whole robot, so such a value is no estimate: a real Kinova's
+  first link had mx = -7e4 kg m, its column seen only through an axis 4e-6 rad off vertical
+  (the URDF's rpy 1.5708 for pi/2). Judged only when the mechanism gives its bodies' masses.
 """
 
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from baseparams.model.mechanism import Mechanism
 
 
 IMPOSSIBLE_STD = 3.0            # std below zero beyond which a value is impossible, not noise
@@ -51,6 +63,7 @@ IMPOSSIBLE_STD = 3.0            # std below zero beyond which a value is impossi
 # where its coefficients can be larger (a prismatic spring's stiffness in N/m)
 PHYSICAL_SCALE = 1e6
 PHYSICAL_SCALES = {"spring": 1e9}
+SCALE_FACTOR = 100.0            # times the mechanism's own mass and size: beyond any load it carries
 _PSD_TOLERANCE = 1e-9           # relative: D's eigenvalues this far below 0 are rounding
 _KIND_NAMES = {"m": "a mass", "Ixx": "a moment of inertia", "Iyy": "a moment of inertia",
                "Izz": "a moment of inertia"}
@@ -323,3 +336,58 @@ def advice(flags: Sequence[Flag]) -> list[str]:
                    "stands for something the model lacks or shapes otherwise (`diagnose` names it: a delay, a "
                    "smooth Coulomb law), or for a coefficient the motion barely excites")
     return out
+
+
+def body_scales(parameters: Sequence[str], masses: Sequence[float], lengths: Sequence[float]) -> np.ndarray | None:
+    """Each standard parameter's physical scale S_i (:data:`SCALE_FACTOR` times the bodies'
+    total mass M, times the reach L for a first moment, L^2 for an inertia), from the
+    bodies' ``masses`` and the ``lengths`` of the joints' frames; None when M is not
+    positive (a mechanism without masses: nothing to scale by)."""
+    from baseparams.model.params import split_name
+    total = float(np.sum(masses))
+    if not np.isfinite(total) or total <= 0:
+        return None
+    reach = max(float(np.sum(lengths)), 1.0)
+    powers = {"m": 0, "mx": 1, "my": 1, "mz": 1}
+    return np.array([SCALE_FACTOR * total * reach ** powers.get(split_name(p)[0], 2) for p in parameters])
+
+
+def beyond_body_scale(base_names: Sequence[str], base_map: np.ndarray, names: Sequence[str], values: np.ndarray,
+                      std: np.ndarray, scales: np.ndarray | None) -> list[Flag]:
+    """Base parameters (``base_names``, their rows of ``base_map`` over the standard
+    parameters) among ``names`` whose value or std exceeds ``sum |c_i| S_i`` (``scales``:
+    :func:`body_scales`); none when ``scales`` is None."""
+    if scales is None:
+        return []
+    out = []
+    rows = {name: k for k, name in enumerate(base_names)}
+    for k, name in enumerate(names):
+        if name not in rows:
+            continue
+        bound = float(np.abs(base_map[rows[name]]) @ scales)
+        value, sd = float(values[k]), float(std[k])
+        if np.isfinite(value) and np.isfinite(sd) and abs(value) <= bound and sd <= bound:
+            continue
+        what = "its value" if not np.isfinite(value) or abs(value) > bound else "its standard deviation"
+        out.append(Flag(name, value, sd, f"beyond any physical scale of this mechanism ({what} above {bound:.2g} "
+                        f"in SI units, {SCALE_FACTOR:g} times what its bodies' total mass and reach allow): the "
+                        "data do not determine it (a direction seen only through an axis a few microradians off a "
+                        "symmetry, a joint that barely moves) or are read wrong", impossible=False,
+                        inertial=True, beyond=bound))
+    return out
+
+
+def mechanism_scales(mechanism: "Mechanism", parameters: Sequence[str]) -> np.ndarray | None:
+    """:func:`body_scales` of ``mechanism`` (its bodies' masses as given, the lengths of its
+    joints' frames), for its standard ``parameters``; None when a body's inertia or a
+    frame's position is not a number (nothing to scale by)."""
+    inertias = [b.inertia for b in mechanism.bodies]
+    if any(inertia is None for inertia in inertias):
+        return None
+    try:
+        masses = [float(inertia[0]) for inertia in inertias if inertia is not None]
+        lengths = [float(np.linalg.norm([float(c) for c in frame.point])) for joint in mechanism.joints
+                   for frame in (joint.parent_frame, joint.child_frame)]
+    except (TypeError, ValueError):
+        return None
+    return body_scales(parameters, masses, lengths)
