@@ -515,10 +515,18 @@ def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
     """A changed body (or a payload on it: a load taken off is a negative one) keeps a positive
     mass (its other parameters are not all identifiable: the estimate is one of many changes
     with the same torques, so only the mass is checked); not judged when the given masses are
-    not the bodies' (an identify result of a mechanism without inertias: least-norm parameters)."""
+    not the bodies' (an identify result of a mechanism without inertias: least-norm parameters),
+    nor when the held body's own mass is not positive: no body has it, so the held values there
+    are not the body's. Why: a real Kinova run identified and held had its last link at -366 kg
+    (the first link's first moments, through an axis 4e-6 rad off vertical, came out at -7e4 kg m,
+    and the masses completed from them followed); a 2 kg payload added to the next run was then
+    refused as "the changed body's mass -365 is not positive" and nothing was named."""
     if cand.kind not in ("body", "payload") or problem.given is None or not problem.given_masses:
         return ""
-    mass = problem.given[derived.body_columns(problem.mechanism, cand.coordinate)][0] + values["m"]
+    held = problem.given[derived.body_columns(problem.mechanism, cand.coordinate)][0]
+    if held <= 0:
+        return ""
+    mass = held + values["m"]
     return f"the changed body's mass {mass:.3g} is not positive" if mass <= 0 else ""
 
 
