@@ -46,6 +46,7 @@ when the candidates together explain it at ``alpha / 10`` and predict held-out b
 """
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,6 +62,7 @@ from baseparams.identify.fit import measured_design
 from baseparams.diagnose.given import Given
 from baseparams.diagnose.identifiable import regroup
 from baseparams.diagnose.loopbodies import named_groups
+from baseparams.diagnose.changeplausible import body_limits, impossible_changes, shared_values
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
 from baseparams.dynamics.forces import evaluate, independent_names
 from baseparams.diagnose.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, _filtered, held_out_gain,
@@ -439,17 +441,21 @@ def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: Measu
 
     raw, more = _change_candidates(mechanism, other, predicted, coordinates)
     notes += more
-    chosen, kept, gate, delay = _search(raw, rows, delay, other.data, difference, alpha, notes, paired)
-    weights = chosen.weights
-    below: list[dict] = []
-    if not paired:            # what both lack does not cancel: a change must outgrow the model's own error
+    def floored(chosen: Search, kept: set, delay: float) -> tuple[set, list[dict], np.ndarray]:
+        if paired:
+            return kept, [], np.zeros(0)
+        # what both lack does not cancel: a change must outgrow the model's own error
         floor = _transfer_error(base, given, delay, theta.shape[0])
-        kept, below = _above_floor(chosen, difference, floor, coordinates, kept)
-        if below:
-            notes.append(f"{len(below)} significant candidate{'s' if len(below) != 1 else ''} not named: each force is "
-                         f"smaller than {DOMINANCE:g} times what the shared model misses on baseline motions it was not "
-                         "fitted to (" + ", ".join(f"{c} {v:.3g}" for c, v in zip(coordinates, floor)) + "): "
-                         + ", ".join(b["candidate"] for b in below))
+        return (*_above_floor(chosen, difference, floor, coordinates, kept), floor)
+
+    chosen, kept, gate, delay, below, floor = _plausible_search(mechanism, given, theta, raw, rows, delay, other.data,
+                                                                difference, alpha, notes, paired, floored)
+    weights = chosen.weights
+    if below:
+        notes.append(f"{len(below)} significant candidate{'s' if len(below) != 1 else ''} not named: each force is "
+                     f"smaller than {DOMINANCE:g} times what the shared model misses on baseline motions it was not "
+                     "fitted to (" + ", ".join(f"{c} {v:.3g}" for c, v in zip(coordinates, floor)) + "): "
+                     + ", ".join(b["candidate"] for b in below))
     empty = np.zeros((len(rows), f, 0))
     changes, ambiguous, _ = _entries(chosen, difference, empty, kept)
     # bodies that move together through a closed loop: one change, with its physical alternatives (issue 49)
@@ -550,6 +556,37 @@ def _search(raw: list[Candidate], rows: np.ndarray, delay: float, data: Measured
         chosen, kept, gate = named_changes(candidates, difference, alpha, retry, unit=paired)
         notes += retry
     return chosen, kept, gate, delay
+
+
+# Rounds of the search without the friction changes it named below zero (changeplausible).
+PLAUSIBLE_ROUNDS = 3
+
+
+def _plausible_search(mechanism: Mechanism, given: Given | None, theta: np.ndarray, raw: list[Candidate],
+                      rows: np.ndarray, delay: float, data: MeasuredData, difference: np.ndarray, alpha: float,
+                      notes: list[str], paired: bool, floored: Callable[[Search, set, float], tuple[set, list, np.ndarray]]
+                      ) -> tuple[Search, set, dict, float, list[dict], np.ndarray]:
+    """:func:`_search` and ``floored`` (the changes kept above the shared model's error, with
+    those below it and that floor), again without each change no robot makes (a friction
+    left below zero, a body beyond any physical scale: :mod:`.changeplausible`), until none is."""
+    shared = shared_values(mechanism, shared_effects(mechanism), theta, 0 if given is not None
+                           else len(mechanism.parameters))
+    limits = body_limits(mechanism)
+    empty = np.zeros((len(rows), difference.shape[1], 0))
+    for _ in range(PLAUSIBLE_ROUNDS):
+        said: list[str] = []
+        chosen, kept, gate, found = _search(raw, rows, delay, data, difference, alpha, said, paired)
+        kept, below, floor = floored(chosen, kept, found)
+        named = [(c.kind, c.coordinate) for i, c in enumerate(chosen.candidates) if i in kept and i in chosen.in_model]
+        judged = any(key in shared or (limits and key[0] in ("body", "mass")) for key in named)
+        refused = impossible_changes(_entries(chosen, difference, empty, kept)[0], shared, limits) if judged else []
+        if not refused:
+            break
+        out = {(kind, coordinate) for kind, coordinate, _ in refused}
+        raw = [c for c in raw if (c.kind, c.coordinate) not in out]
+        notes += [why for _, _, why in refused]
+    notes += said
+    return chosen, kept, gate, found, below, floor
 
 
 def _rest_and_verdict(chosen: Search, kept: set, difference: np.ndarray, empty: np.ndarray, weights: np.ndarray,

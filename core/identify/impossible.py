@@ -377,10 +377,9 @@ def beyond_body_scale(base_names: Sequence[str], base_map: np.ndarray, names: Se
     return out
 
 
-def mechanism_scales(mechanism: "Mechanism", parameters: Sequence[str]) -> np.ndarray | None:
-    """:func:`body_scales` of ``mechanism`` (its bodies' masses as given, the lengths of its
-    joints' frames), for its standard ``parameters``; None when a body's inertia or a
-    frame's position is not a number (nothing to scale by)."""
+def mechanism_size(mechanism: "Mechanism") -> tuple[list[float], list[float]] | None:
+    """(its bodies' masses as given, the lengths of its joints' frames); None when a body's
+    inertia or a frame's position is not a number (nothing to scale by)."""
     inertias = [b.inertia for b in mechanism.bodies]
     if any(inertia is None for inertia in inertias):
         return None
@@ -390,4 +389,11 @@ def mechanism_scales(mechanism: "Mechanism", parameters: Sequence[str]) -> np.nd
                    for frame in (joint.parent_frame, joint.child_frame)]
     except (TypeError, ValueError):
         return None
-    return body_scales(parameters, masses, lengths)
+    return masses, lengths
+
+
+def mechanism_scales(mechanism: "Mechanism", parameters: Sequence[str]) -> np.ndarray | None:
+    """:func:`body_scales` of ``mechanism`` (:func:`mechanism_size`) for its standard
+    ``parameters``; None when it gives no masses."""
+    size = mechanism_size(mechanism)
+    return None if size is None else body_scales(parameters, *size)
