@@ -9,11 +9,10 @@ rounding and ``beta = D_K^-1 beta_s D_E`` is exact):
    SLA whatever the number of samples; one ``arb_mat`` product, in C), Cholesky with
    diagonal (complete) pivoting gives the rank r: the pivots above the noise threshold
    ``1e3 * n * 10^-D * max G_jj``. The kept columns K are then, by default, the
-   leftmost basis (each pivot above ``10^(-D/2) max G_jj``, since rounding noise in this
-   possibly ill-conditioned basis is amplified) (parameter order: what an exact ``rref`` picks, so ``vp`` and
-   ``exact`` results compare entry by entry), else the complete-pivoting columns. Then
-   r rows R of Ws_K making a well-conditioned square block (QR with column pivoting on
-   Ws_K^T, in float64).
+   leftmost basis (each pivot above ``10^(-D/2) max G_jj``, since rounding noise in this possibly
+   ill-conditioned basis is amplified; parameter order: what an exact ``rref`` picks, so ``vp`` and
+   ``exact`` results compare entry by entry), else the complete-pivoting columns. Then r rows R of
+   Ws_K making a well-conditioned square block (QR with column pivoting on Ws_K^T, in float64).
 2. Claims, each rigorous for every W inside the computed W ball:
    - ``rank(W) >= r``: ``arb_mat.solve`` proves the r x r block ``Ws_RK`` nonsingular
      (it refuses otherwise);
@@ -244,8 +243,11 @@ def frobenius_upper(M: arb_mat) -> arb:
     return arb(total.sqrt().upper())
 
 
-def _mid(M: arb_mat) -> arb_mat:
-    return M.mid()
+def _frobenius_pair(M: arb_mat) -> tuple[arb, ...]:
+    """(frobenius_upper(M), frobenius_upper(M.mid())) from one row vector of M's entries: reading
+    them out and in is most of either's cost (TIAGo's 624 x 170 residual: 0.04 s a precision)."""
+    v = arb_mat(1, M.nrows() * M.ncols(), M.entries())
+    return tuple(arb(arb((u * u.transpose())[0, 0].upper()).sqrt().upper()) for u in (v, v.mid()))
 
 
 # ----- decisions (midpoints) ---------------------------------------------------
@@ -409,7 +411,7 @@ def _select_rows(Wk: arb_mat, R: arb_mat | None) -> list[int]:
     Q = Wk
     if R is not None:
         try:
-            Q = _mid(Wk) * _mid(R.inv())
+            Q = Wk.mid() * R.inv().mid()
         except ZeroDivisionError:
             Q = Wk
     a = np.array([float(x) for x in Q.entries()]).reshape(Q.nrows(), r).T
@@ -566,11 +568,11 @@ def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str,
         B, residual, tail = _refined_fast(scaled, (m, n), scaled64, kept, eliminated, Wk, beta_s)
     elif eliminated and kept:
         We = block(scaled, n, range(m), eliminated)
-        B = _mid(beta_s)
+        B = beta_s.mid()
         try:                            # one least-squares refinement of B on all rows
-            E = _mid(We - Wk * B)
+            E = (We - Wk * B).mid()
             Gkk = arb_mat(len(kept), len(kept), [gm[i * n + j] for i in kept for j in kept])
-            B = _mid(B + Gkk.solve(_mid(Wk.transpose() * E)))
+            B = (B + Gkk.solve((Wk.transpose() * E).mid())).mid()
         except ZeroDivisionError:
             pass
         residual = We - Wk * B
@@ -596,7 +598,7 @@ def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str,
                             exponents, zero, tail, sigma_lower, svals, B, notes)
     analysis.rows = list(rows)
     if residual is not None:
-        analysis._residual = (W, _mid(residual))
+        analysis._residual = (W, residual.mid())
     return analysis
 
 
@@ -613,11 +615,10 @@ def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], scaled64: np.nd
     range: Talos 0.4 s at 30 digits, 0.8 s at 60, in balls before issue 47)."""
     m, n = shape
     We = block(scaled, n, range(m), eliminated)
-    B = _mid(beta_s)
+    B = beta_s.mid()
     residual = We - Wk * B
-    tail = frobenius_upper(residual)
-    E = _mid(residual)
-    size = frobenius_upper(E)
+    tail, size = _frobenius_pair(residual)            # size: ||E||_F bounded, E below
+    E = residual.mid()
     if 4 * size > tail and size > 0:
         shift = -math.floor(log10(size) / LOG10_2)          # E * 2^shift: entries at most about 1
         E64 = np.array([float(x * arb(2) ** shift) for x in E.entries()]).reshape(m, len(eliminated))
@@ -629,7 +630,7 @@ def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], scaled64: np.nd
         if not np.all(np.isfinite(C64)):
             return B, residual, tail
         C = arb_mat(len(kept), len(eliminated), [float(x) for x in C64.ravel()]) * arb(2) ** (-shift)
-        B1 = _mid(B + C)
+        B1 = (B + C).mid()
         other = We - Wk * B1
         bound = frobenius_upper(other)
         if bound < tail:
@@ -697,7 +698,7 @@ def _analyse_float(W: arb_mat, digits: int, scaled: Sequence[arb], scaled64: np.
                             exponents, zero, tail, sigma_lower, svals, B, [], decided="float64", block_inverse=Y)
     analysis.rows = list(rows)
     if residual is not None:
-        analysis._residual = (W, _mid(residual))
+        analysis._residual = (W, residual.mid())
     return analysis
 
 

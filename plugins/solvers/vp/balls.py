@@ -9,7 +9,7 @@ Every function that computes in ball arithmetic enters its own precision (python
 """
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from fractions import Fraction
 from typing import Any
 
@@ -154,13 +154,25 @@ def radius_digits(x: arb) -> float:
 def agreement_digits(a: arb, b: arb) -> float:
     """Leading decimal digits on which two balls' midpoints agree (relative to ``b``). The
     difference of the exact midpoints is rounded once, at FLOAT_BITS: enough for an integer."""
+    with ctx.workprec(FLOAT_BITS):
+        return _agreement(a, b)
+
+
+def agreements(theirs: Sequence[arb], mine: Sequence[arb], where: Iterable[int]) -> dict[int, float]:
+    """{k: agreement_digits(theirs[k], mine[k])} for each k of ``where``, under one precision
+    context (entering one costs as much as the rest of an entry's work)."""
+    with ctx.workprec(FLOAT_BITS):
+        return {k: _agreement(theirs[k], mine[k]) for k in where}
+
+
+def _agreement(a: arb, b: arb) -> float:
+    """:func:`agreement_digits` at the caller's precision (FLOAT_BITS)."""
     da, db = a.mid(), b.mid()
     if da == db:
         return math.inf
     if db == 0:
         return 0
-    with ctx.workprec(FLOAT_BITS):
-        difference = da - db
+    difference = da - db
     return max(0, math.floor(log10(db) - log10(difference)))
 
 

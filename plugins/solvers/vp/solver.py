@@ -123,11 +123,14 @@ def samples_in_budget(mechanism: Mechanism, steps: Sequence[int]) -> int | None:
     return fitted
 
 
-def _digits_of(beta: arb_mat) -> list[list[float]]:
-    """Per entry of beta (rows of lists): the digits its ball proves (radius_digits)."""
+def _digits_of(beta: arb_mat) -> tuple[list[list[float]], float]:
+    """(per entry of beta, rows of lists: the digits its ball proves (radius_digits); the least
+    of them over the balls that exclude 0, inf when none does)."""
     cols = beta.ncols()
     values = beta.entries()
-    return [[balls.radius_digits(x) for x in values[i * cols:(i + 1) * cols]] for i in range(beta.nrows())]
+    digits = [balls.radius_digits(x) for x in values]
+    least = min((d for d, x in zip(digits, values) if not x.contains(0)), default=math.inf)
+    return [digits[i * cols:(i + 1) * cols] for i in range(beta.nrows())], least
 
 
 def peak_memory_mb() -> float | None:
@@ -164,7 +167,7 @@ class BallRun:
         self.info["random_states"] = sum(b.states for b in batches)
         self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier)
         self.seconds = time.perf_counter() - start
-        self.digits_of = _digits_of(self.analysis.beta)
+        self.digits_of, self._least = _digits_of(self.analysis.beta)
 
     def reanalyse(self, kept: Sequence[int], earlier: certify.BallAnalysis | None = None) -> "BallRun | None":
         """This run's W analysed with imposed kept columns (a copy), or None if they are not
@@ -176,7 +179,7 @@ class BallRun:
             other.analysis = certify.analyse(self.W, self.digits, kept=kept, earlier=earlier)
         except ValueError:
             return None
-        other.digits_of = _digits_of(other.analysis.beta)
+        other.digits_of, other._least = _digits_of(other.analysis.beta)
         return other
 
     @functools.cached_property
@@ -189,10 +192,8 @@ class BallRun:
         return self.analysis.rank
 
     def min_digits(self) -> float:
-        a = self.analysis
-        values = [d for i, row in enumerate(self.digits_of) for j, d in enumerate(row)
-                  if not a.beta[i, j].contains(0)]
-        return min(values, default=math.inf)
+        """The fewest digits a ball of beta that excludes 0 proves."""
+        return self._least
 
     def summary(self) -> dict[str, Any]:
         a = self.analysis
@@ -266,18 +267,20 @@ def compare_runs(prev: BallRun, cur: BallRun) -> tuple[bool, float, list[str]]:
         reasons.append(f"the kept parameters differ between {prev.digits} and {cur.digits} digits")
         return False, 0, reasons
     worst = math.inf
-    for i in range(b.beta.nrows()):
-        for j in range(b.beta.ncols()):
-            x, y = a.beta[i, j], b.beta[i, j]
-            if x.contains(0) and y.contains(0):
-                continue
-            if not x.overlaps(y):
-                reasons.append(f"a coefficient's balls at {prev.digits} and {cur.digits} digits do not overlap")
-                return False, 0, reasons
-            if x.contains(0) != y.contains(0):
-                worst = 0
-                continue
-            worst = min(worst, balls.agreement_digits(x, y))
+    theirs, mine = a.beta.entries(), b.beta.entries()
+    both = []                          # entries whose balls exclude 0 at both precisions
+    for k, (x, y) in enumerate(zip(theirs, mine)):
+        x0, y0 = x.contains(0), y.contains(0)
+        if x0 and y0:
+            continue
+        if not x.overlaps(y):
+            reasons.append(f"a coefficient's balls at {prev.digits} and {cur.digits} digits do not overlap")
+            return False, 0, reasons
+        if x0 != y0:
+            worst = 0
+            continue
+        both.append(k)
+    worst = min([worst, *balls.agreements(theirs, mine, both).values()])
     if worst < MIN_DIGITS:
         reasons.append(f"coefficients agree to only {worst} digits between {prev.digits} and "
                        f"{cur.digits} digits (need {MIN_DIGITS})")
@@ -301,16 +304,16 @@ def _vp_coefficients(final: BallRun, prev: BallRun | None,
     untrusted: list[dict[str, Any]] = []
     cols = a.beta.ncols()
     mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same and prev is not None else None
-    for i in range(a.beta.nrows()):
-        for j in range(cols):
-            d = final.digits_of[i][j]
-            if theirs is not None and d > 0:          # (a ball containing 0 has no digit to cap)
-                d = min(d, balls.agreement_digits(theirs[i * cols + j], mine[i * cols + j]))
-            trusted[i, j] = int(max(0, min(d, final.digits)))
+    zero = [x.contains(0) for x in mine]
+    digits = [d for row in final.digits_of for d in row]
+    # (a ball containing 0 has no digit to cap)
+    agree = balls.agreements(theirs, mine, (k for k, d in enumerate(digits) if d > 0)) if theirs is not None else {}
+    for k, d in enumerate(digits):
+        trusted[divmod(k, cols)] = int(max(0, min(d, agree.get(k, math.inf), final.digits)))
 
     def coefficient(i: int, j: int) -> str | None:
-        x = a.beta[i, j]
-        if x.contains(0):
+        x = mine[i * cols + j]
+        if zero[i * cols + j]:
             return None
         if trusted[i, j] < 1:
             untrusted.append({"base": i, "parameter": params[a.eliminated[j]], "ball": x.str(5)})
@@ -320,8 +323,7 @@ def _vp_coefficients(final: BallRun, prev: BallRun | None,
     rows = base_rows(params, a.kept, a.eliminated, coefficient)
     for item in untrusted:
         item["base"] = rows[item["base"]]["name"]
-    printed = [trusted[i, j] for i in range(a.beta.nrows()) for j in range(a.beta.ncols())
-               if not a.beta[i, j].contains(0) and trusted[i, j] >= 1]
+    printed = [t for k, t in enumerate(trusted.values()) if not zero[k] and t >= 1]
     return rows, printed, untrusted
 
 
