@@ -558,13 +558,14 @@ def _search(raw: list[Candidate], rows: np.ndarray, delay: float, data: Measured
     return chosen, kept, gate, delay
 
 
-# Rounds of the search without the friction changes it named below zero (changeplausible).
+# Rounds of the search without the changes no robot makes that it named (changeplausible).
 PLAUSIBLE_ROUNDS = 3
 
 
 def _plausible_search(mechanism: Mechanism, given: Given | None, theta: np.ndarray, raw: list[Candidate],
                       rows: np.ndarray, delay: float, data: MeasuredData, difference: np.ndarray, alpha: float,
-                      notes: list[str], paired: bool, floored: Callable[[Search, set, float], tuple[set, list, np.ndarray]]
+                      notes: list[str], paired: bool,
+                      floored: Callable[[Search, set, float], tuple[set, list, np.ndarray]]
                       ) -> tuple[Search, set, dict, float, list[dict], np.ndarray]:
     """:func:`_search` and ``floored`` (the changes kept above the shared model's error, with
     those below it and that floor), again without each change no robot makes (a friction
@@ -573,7 +574,7 @@ def _plausible_search(mechanism: Mechanism, given: Given | None, theta: np.ndarr
                            else len(mechanism.parameters))
     limits = body_limits(mechanism)
     empty = np.zeros((len(rows), difference.shape[1], 0))
-    for _ in range(PLAUSIBLE_ROUNDS):
+    for round_ in range(PLAUSIBLE_ROUNDS):
         said: list[str] = []
         chosen, kept, gate, found = _search(raw, rows, delay, data, difference, alpha, said, paired)
         kept, below, floor = floored(chosen, kept, found)
@@ -583,6 +584,10 @@ def _plausible_search(mechanism: Mechanism, given: Given | None, theta: np.ndarr
         if not refused:
             break
         out = {(kind, coordinate) for kind, coordinate, _ in refused}
+        if round_ == PLAUSIBLE_ROUNDS - 1:       # the last round: not named, not searched again
+            kept = {i for i in kept if (chosen.candidates[i].kind, chosen.candidates[i].coordinate) not in out}
+            notes += [why.replace("searched for without it", "not named") for _, _, why in refused]
+            break
         raw = [c for c in raw if (c.kind, c.coordinate) not in out]
         notes += [why for _, _, why in refused]
     notes += said

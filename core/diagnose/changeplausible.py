@@ -1,11 +1,12 @@
 """Changes no robot makes (issue 42): a friction change that leaves the changed runs' friction
-below zero, and a body change beyond any physical scale of the mechanism. Viscous and Coulomb friction resist the motion on every robot; a change that
-turns the shared model's friction negative, beyond its noise, stands for another force (a
-payload's, or what the shared model misses on motions it was not fitted to) and is not named.
-The rule is diagnosis's own for a named effect (:func:`.impossible.implausible`: a friction
-coefficient must be positive), applied to the changed runs' friction: the estimate itself.
+at or below zero, and a body change beyond any physical scale of the mechanism; each stands
+for another force (a payload's, or what the shared model misses on motions it was not fitted
+to) and is not named.
 
-Why: the real TX40's two halves (other motions) with a 2 kg load's torque added to the second
+Viscous and Coulomb friction resist the motion on every robot: the rule is diagnosis's own
+for a named effect (:func:`.impossible.implausible`: a friction coefficient is positive),
+applied to the changed runs' friction (the shared model's + the change's estimate). Why:
+the real TX40's two halves (other motions) with a 2 kg load's torque added to the second
 named 'coulomb_friction on joint_3: -7.26 +- 0.98' against a shared 5.67 (the changed joint
 pushing with 1.6 N m), a gain of +88 % beside it and a body on link_2, instead of the load.
 
