@@ -155,7 +155,9 @@ def _householder_svd(a: np.ndarray, keep: Callable[[np.ndarray], int]) -> tuple[
     m x n orthogonal factor and multiplies it out, 2 to 3 times the work of this."""
     import scipy.linalg    # only here: a process that never meets an ill-conditioned matrix never imports it
     m, n = a.shape
-    r = scipy.linalg.qr(a, mode="r", check_finite=False)[0][:n]
+    # mode 'raw': the same geqrf, but R taken from its first n rows (mode 'r' copies out the whole
+    # m x n upper triangle, mostly zeros, first)
+    r = scipy.linalg.qr(a, mode="raw", check_finite=False)[1]
     _, s, vt = svd(np.triu(r))
     k = min(int(keep(s)), n)
     if k == 0:
