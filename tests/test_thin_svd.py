@@ -109,3 +109,15 @@ def test_kept_directions_of_an_ill_conditioned_matrix(columns, rank, condition):
     assert np.allclose((u * s[:k]) @ vt[:k], a, atol=1e-13 * s0[0])
     null, null0 = vt[k:], vt0[k:]
     assert np.allclose(null.T @ (null @ null0.T), null0.T, atol=1e-12)
+
+
+@pytest.mark.parametrize("keep", [None, lambda s: int(np.sum(s > 1e-12 * s[0]))])
+def test_a_known_zero_column_gives_the_same_factors_to_the_bit(keep):
+    """``zero_column``: the caller says a column is exactly zero, so Cholesky QR (whose Gram
+    matrix then has a zero pivot) is not tried; the factors are those of the route it falls
+    back to, bit for bit, with or without ``keep``."""
+    a = rank_deficient(2000, 12, 9, 1e3, seed=3)
+    a[:, 4] = 0.0
+    plain, told = thin_svd(a, keep=keep), thin_svd(a, keep=keep, zero_column=True)
+    for x, y in zip(plain, told):
+        assert x.shape == y.shape and np.array_equal(x, y)

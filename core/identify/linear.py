@@ -316,8 +316,10 @@ class WeightedLinearModel:
         A = (self.model * weights[None, :, None]).reshape(n * f, p)
         b = (self.y * weights[None, :]).reshape(n * f)
         scale = np.linalg.norm(A, axis=0)
-        scale[scale == 0] = 1.0
-        u, s, vt = thin_svd(A / scale, keep=lambda values: numerical_rank(tol=rank_tol, singular_values=values))
+        zero = scale == 0
+        scale[zero] = 1.0
+        u, s, vt = thin_svd(A / scale, keep=lambda values: numerical_rank(tol=rank_tol, singular_values=values),
+                            zero_column=bool(np.any(zero)))
         rank = numerical_rank(tol=rank_tol, singular_values=s)
         proj = u[:, :rank].T @ b
         coefficients = (vt[:rank].T @ (proj / s[:rank])) / scale
