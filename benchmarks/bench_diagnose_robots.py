@@ -9,7 +9,9 @@ a power-law friction outside the catalogue; a payload run: friction on every joi
 recordings of different motions, the second carrying a rigid payload (a fifth of the robot's
 mass, off the last moving joint's axis), the first identified (``identify --effect
 viscous_friction:* --effect coulomb_friction:*``) and the second diagnosed against that
-result (``--params``). Printed per run: exit code, CPU seconds of the command, verdict, gap,
+result (``--params``); ``baseline`` / ``same`` (not in the default set): one motion recorded
+twice with the same friction and other noise, the second with that payload / without,
+diagnosed against the first (``--baseline``). Printed per run: exit code, CPU seconds of the command, verdict, gap,
 the named effects (a correction of a known effect with the model's value) and the truth.
 
     pip install example-robot-data pin
@@ -74,11 +76,13 @@ def motion(model, rng, t):
     return names, q, qd, qdd, configuration
 
 
-def record(model, seed: int, folder: Path, name: str, friction: str, given: dict | None = None) -> dict:
+def record(model, seed: int, folder: Path, name: str, friction: str, given: dict | None = None,
+           noise_seed: int | None = None) -> dict:
     """Simulate ``model`` along a motion of ``seed`` with the URDF's own damping and friction,
     the ``friction`` scenario's ('none', 'friction', 'power'; its coefficients ``given`` by
-    joint name, else drawn from this run's torques) and AR(1) noise; write ``name``.csv and
-    its recording description ``name``.toml; return the hidden friction."""
+    joint name, else drawn from this run's torques) and AR(1) noise (drawn from ``noise_seed``
+    when given: the same motion recorded again); write ``name``.csv and its recording
+    description ``name``.toml; return the hidden friction."""
     import pinocchio as pin
     data = model.createData()
     rng = np.random.default_rng(seed)
@@ -95,8 +99,8 @@ def record(model, seed: int, folder: Path, name: str, friction: str, given: dict
         shape = np.tanh(qd[:, j] / vs) if friction == "friction" else \
             np.sign(qd[:, j]) * (np.abs(qd[:, j]) / np.std(qd[:, j])) ** 0.4
         tau[:, j] += fv * qd[:, j] + fc * shape
-        truth[names[j]] = {"fv": round(float(fv), 4), "fc": round(float(fc), 4)}
-    e = rng.standard_normal(tau.shape)
+        truth[names[j]] = {"fv": float(fv), "fc": float(fc)}       # unrounded: a second run given them has the same
+    e = (rng if noise_seed is None else np.random.default_rng(noise_seed)).standard_normal(tau.shape)
     for i in range(1, len(e)):
         e[i] += RHO * e[i - 1]
     tau += e * NOISE * rms / e.std(axis=0)
@@ -157,6 +161,15 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
         model, truth = with_payload(model)
         record(model, seed, folder, "rec", "friction", friction)      # the same friction, another motion
         extra = ["--params", str(folder / "empty.json")]
+    elif scenario in ("baseline", "same"):
+        # the same motion recorded twice (other noise), the second with the payload (or not):
+        # diagnose the second against the first (--baseline)
+        friction = record(model, seed, folder, "empty", "friction")
+        truth = {}
+        if scenario == "baseline":
+            model, truth = with_payload(model)
+        record(model, seed, folder, "rec", "friction", friction, noise_seed=seed + 2000)
+        extra = ["--baseline", str(folder / "empty.toml")]
     else:
         truth = record(model, seed, folder, "rec", scenario)
     done, cpu, wall, memory = command(["diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json", "--quiet",
@@ -167,6 +180,13 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
         report = json.loads(done.stdout)
     except json.JSONDecodeError:
         out["error"] = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "no output"
+        return out
+    if "changes" in report:                                  # --baseline: a change report
+        out.update(verdict=report["verdict"], gap=(report["gap"]["before"], report["gap"]["after"]),
+                   named=[(e["kind"], e["coordinate"], e["value"] if not isinstance(e["value"], dict) else
+                           {k: None if v is None else round(v, 4) for k, v in e["value"].items()}, None)
+                          for e in report["changes"]],
+                   ambiguous=len(report["ambiguous"]), unsupported=0)
         return out
     out.update(verdict=report["verdict"], gap=(report["gap"]["cv_before"], report["gap"]["cv_after"]),
                named=[(e["kind"], e["coordinate"], {k: None if v["value"] is None else round(v["value"], 4) for k, v in e["coefficients"].items()},
@@ -180,7 +200,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=list(DEFAULT), choices=list(ROBOTS))
     parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power", "payload"],
-                        choices=["none", "friction", "power", "payload"])
+                        choices=["none", "friction", "power", "payload", "baseline", "same"],
+                        help="baseline / same: one motion recorded twice, the second with the payload / "
+                             "without, diagnosed against the first (--baseline)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--seconds", type=float, default=SECONDS,
                         help="length of each simulated log (s, at 1 kHz): memory and time on long recordings")
@@ -205,11 +227,13 @@ def main() -> None:
                 for kind, coordinate, values, known in r["named"]:
                     correction = f" correcting {known}" if known else ""
                     print(f"      {kind}:{coordinate} {values}{correction}", flush=True)
-                if scenario == "payload":
-                    print(f"      truth: {r['truth']} (identify of the payload-free run {r['identify_cpu']:.1f} CPU s)",
-                          flush=True)
+                if scenario in ("payload", "baseline"):
+                    spent = f" (identify of the payload-free run {r['identify_cpu']:.1f} CPU s)" \
+                        if scenario == "payload" else ""
+                    print(f"      truth: {r['truth']}{spent}", flush=True)
                 elif r["truth"]:
-                    print(f"      truth (per joint, fv fc): {r['truth']}", flush=True)
+                    rounded = {j: {k: round(v, 4) for k, v in c.items()} for j, c in r["truth"].items()}
+                    print(f"      truth (per joint, fv fc): {rounded}", flush=True)
 
 
 if __name__ == "__main__":
