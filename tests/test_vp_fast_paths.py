@@ -89,3 +89,24 @@ def test_refinement_decided_as_before():
             assert changed is (refined and tail < tail_before)
             if not changed:
                 assert tail.mid() == tail_before.mid()
+
+
+def test_printed_digits_reuse_the_agreements_of_compare_runs(monkeypatch):
+    """The agreement digits compare_runs found are the ones the printed digits are capped by:
+    the rows, digits and untrusted list are the same with and without them kept."""
+    from baseparams.io.loader import resolve
+    seen = {}
+    original = vp_solver._vp_coefficients
+
+    def keep(final, prev, params):
+        seen.update(final=final, prev=prev, params=params)
+        return original(final, prev, params)
+    monkeypatch.setattr(vp_solver, "_vp_coefficients", keep)
+    vp_solver.VariablePrecisionSolver().solve(resolve("puma560"), recover=False)
+    final, prev = seen["final"], seen["prev"]
+    assert final.agreement is not None and final.agreement[0] is prev.analysis
+    with_them = original(final, prev, seen["params"])
+    final.agreement = None
+    assert original(final, prev, seen["params"]) == with_them
+    final.agreement = (prev.analysis, {})                      # none kept: all computed again
+    assert original(final, prev, seen["params"]) == with_them

@@ -18,6 +18,8 @@ backend decides how W is built and what matrix it is:
 Rows are sample-major: the ``f`` rows of the first state, then of the second ...
 """
 
+import contextlib
+import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from fractions import Fraction
@@ -29,7 +31,7 @@ from flint import arb
 from baseparams.dynamics.evaluator import Evaluator, Sample
 from baseparams.errors import KinematicsError
 from baseparams.model.mechanism import Mechanism
-from baseparams.numeric.backends import Arb, Backend, Float64
+from baseparams.numeric.backends import Arb, Backend, BallRows, Float64
 
 Progress = Callable[[int, int], None]
 
@@ -147,18 +149,29 @@ class Subset:
 
 
 def observation_matrix(mechanism: Mechanism, backend: Backend, states: States,
-                       progress: Progress | None = None) -> tuple[Any, dict[str, Any]]:
+                       progress: Progress | None = None, *, entries: bool = False) -> tuple[Any, dict[str, Any]]:
     """W at ``states`` in ``backend``'s arithmetic and matrix type: (W, info).
 
     info: ``samples`` (the number of states); in arb also ``positions_enclosed`` and, when
     the source asks for it, ``closure_residual`` (an upper bound of the worst loop-closure
     residual, text).
     ``progress(done, count)`` is called after each state (per-state arithmetics).
+    ``entries`` (arb only): W as its entries (:class:`~baseparams.numeric.backends.BallRows`),
+    not an arb_mat, for an analysis that reads each entry once (vp's certified one).
     """
-    try:
+    if entries and not isinstance(backend, Arb):
+        raise ValueError(f"entries=True is for arb, not {type(backend).__name__}")
+    with _where(mechanism, states):
         if isinstance(backend, Float64):
             return _vectorised(mechanism, states)
-        return _per_state(mechanism, backend, states, progress)
+        return _per_state(mechanism, backend, states, progress, entries)
+
+
+@contextlib.contextmanager
+def _where(mechanism: Mechanism, states: States) -> Iterator[None]:
+    """A KinematicsError raised inside names the file and the states (their label), if any."""
+    try:
+        yield
     except KinematicsError as exc:
         if not states.label:
             raise
@@ -199,7 +212,7 @@ def _each_sample(ev: Evaluator, states: States) -> Iterator[Sample]:
 
 
 def _per_state(mechanism: Mechanism, backend: Backend, states: States,
-               progress: Progress | None) -> tuple[Any, dict[str, Any]]:
+               progress: Progress | None, entries: bool = False) -> tuple[Any, dict[str, Any]]:
     ev = Evaluator(mechanism, backend, certify=True)
     enclosing = isinstance(backend, Arb)
     residual = enclosing and states.reports_closure
@@ -216,7 +229,9 @@ def _per_state(mechanism: Mechanism, backend: Backend, states: States,
                         worst = bound
             if progress:
                 progress(index + 1, states.count)
-        W = backend.matrix(rows, len(mechanism.parameters))
+        cols = len(mechanism.parameters)
+        W = BallRows(len(rows), cols, list(itertools.chain.from_iterable(rows))) if entries else \
+            backend.matrix(rows, cols)
         info: dict[str, Any] = {"samples": states.count}
         if enclosing:
             info["positions_enclosed"] = bool(mechanism.loops)

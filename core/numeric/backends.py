@@ -67,6 +67,46 @@ def stack_flint(mats: Sequence[Any]) -> Any:
     return type(mats[0])(rows, cols, [m[i, j] for m in mats for i in range(m.nrows()) for j in range(cols)])
 
 
+class BallRows:
+    """A matrix in balls held as its row-major entries (arb), before any arb_mat: what an
+    analysis that reads each entry once needs (vp's certified one: nrows, ncols, entries, as
+    an arb_mat answers them). Why: building W's arb_mat and reading its entries back out were
+    about 0.13 CPU s of each of the three W in balls of TIAGo's identify (issue 47). Entries
+    that are not arb (ints, floats: exact) are made arb at the caller's precision, as
+    :meth:`Arb.matrix` does; :meth:`matrix` is the arb_mat, made when first asked for."""
+
+    def __init__(self, rows: int, cols: int, values: list[Any]):
+        if len(values) != rows * cols:
+            raise ValueError(f"{len(values)} entries for a {rows} x {cols} matrix")
+        if set(map(type, values)) - {arb}:
+            values = [v if type(v) is arb else arb(v) for v in values]
+        self._shape, self.values = (rows, cols), values
+
+    def nrows(self) -> int:
+        return self._shape[0]
+
+    def ncols(self) -> int:
+        return self._shape[1]
+
+    def entries(self) -> list[arb]:
+        """The entries, row after row (the list itself: not to be changed)."""
+        return self.values
+
+    @functools.cached_property
+    def matrix(self) -> arb_mat:
+        rows, cols = self._shape
+        return arb_mat(rows, cols, self.values) if rows and cols else arb_mat(rows, cols)
+
+    @staticmethod
+    def stack(*parts: "BallRows") -> "BallRows":
+        """The parts one under the other (they have the same number of columns)."""
+        return BallRows(sum(p.nrows() for p in parts), parts[0].ncols(), [v for p in parts for v in p.values])
+
+
+BallMatrix = Union[arb_mat, BallRows]
+"""What the certified analysis reads: an arb_mat, or its entries (:class:`BallRows`)."""
+
+
 class TanHalf:
     """An angle given exactly by ``t = tan(theta/2)``: cos and sin are then rational."""
 

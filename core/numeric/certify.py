@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 from flint import acb_mat, arb, arb_mat, arf, ctx
 
-from baseparams.numeric import decide
+from baseparams.numeric import backends, decide
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
@@ -101,7 +101,7 @@ class BallAnalysis:
     notes: list[str] = field(default_factory=list)
     decided: str = "ball"         # "float64": K and R chosen by numeric.decide, proven below
     rows: list[int] = field(default_factory=list)  # the rows R of the square block Ws_RK
-    _residual: tuple[arb_mat, arb_mat] | None = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
+    _residual: tuple[Any, arb_mat] | None = field(default=None, repr=False, compare=False)  # (W, mid(Ws_E - Ws_K B))
     block_inverse: arb_mat | None = field(default=None, repr=False, compare=False)  # exact, ~ Ws_RK^-1 (float64 decisions)
 
     @property
@@ -137,10 +137,10 @@ def log10(x: arb | arf) -> float:
 
 def _float_mids(entries: Sequence[arb], rows: int, cols: int) -> np.ndarray:
     """The midpoints as a float64 array (rows x cols): 0 or inf where out of float range."""
-    return np.array([float(x) for x in entries]).reshape(rows, cols)
+    return np.fromiter(map(float, entries), dtype=float, count=len(entries)).reshape(rows, cols)
 
 
-def _column_exponents(W: arb_mat, entries: list[arb] | None = None,
+def _column_exponents(W: backends.BallMatrix, entries: list[arb] | None = None,
                       mids: np.ndarray | None = None) -> tuple[list[int], list[int]]:
     """Per column: round(log2(norm)) from the midpoints, and the zero columns.
 
@@ -197,7 +197,7 @@ def scaled_entries(entries: Sequence[arb], cols: int, exponents: Sequence[int]) 
     if not cols:
         return []
     repeated = powers * (len(entries) // cols)
-    return [x * p for x, p in zip(entries, repeated)]
+    return list(map(arb.__mul__, entries, repeated))          # x * p, iterated in C
 
 
 def block(entries: Sequence[arb], cols: int, rows: Sequence[int], picked: Sequence[int]) -> arb_mat:
@@ -487,7 +487,7 @@ def solve_block(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Sequen
 
 
 # ----- the analysis --------------------------------------------------------------
-def analyse(W: arb_mat, digits: int, kept: Sequence[int] | None = None, pivoting: str = "natural",
+def analyse(W: backends.BallMatrix, digits: int, kept: Sequence[int] | None = None, pivoting: str = "natural",
             approximate_spectrum: bool = True, earlier: BallAnalysis | None = None) -> BallAnalysis:
     """Rank, permutation and beta of an ``arb_mat`` W, computed at ``digits`` (whatever
     precision the caller has set; it is restored on return).
@@ -505,7 +505,7 @@ def analyse(W: arb_mat, digits: int, kept: Sequence[int] | None = None, pivoting
                         earlier if reuse is not None else None)
 
 
-def _analyse(W: arb_mat, digits: int, kept: Sequence[int] | None, pivoting: str, approximate_spectrum: bool,
+def _analyse(W: backends.BallMatrix, digits: int, kept: Sequence[int] | None, pivoting: str, approximate_spectrum: bool,
              hint: tuple[list[int], list[int]] | None = None,
              reuse: tuple[list[int], list[int]] | None = None, start: BallAnalysis | None = None) -> BallAnalysis:
     m, n = W.nrows(), W.ncols()
@@ -638,7 +638,7 @@ def _refined_fast(scaled: Sequence[arb], shape: tuple[int, int], scaled64: np.nd
     return B, residual, tail
 
 
-def _analyse_float(W: arb_mat, digits: int, scaled: Sequence[arb], scaled64: np.ndarray, exponents: list[int],
+def _analyse_float(W: backends.BallMatrix, digits: int, scaled: Sequence[arb], scaled64: np.ndarray, exponents: list[int],
                    zero: list[int], reuse: tuple[list[int], list[int]] | None,
                    approximate_spectrum: bool, start: BallAnalysis | None = None) -> BallAnalysis | None:
     """The natural-order analysis beyond FAST_DECISIONS_ABOVE columns with K (the leftmost

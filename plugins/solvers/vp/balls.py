@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from flint import acb_mat, arb, arb_mat, ctx
 
+from baseparams.numeric.backends import BallMatrix
 from baseparams.numeric.certify import (FAST_DECISIONS_ABOVE, FLOAT_BITS, SPECTRUM_IN_ARB_UP_TO, BallAnalysis, block,
                                         frobenius_upper, log10, scaled_entries, solve_block, unscaled)
 
@@ -39,7 +40,7 @@ def block_beta(Wr: arb_mat, digits: int, kept: Sequence[int], rows: Sequence[int
 
 
 
-def excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
+def excitation_check(Wc: BallMatrix, a: BallAnalysis) -> tuple[arb, int, float]:
     """An independent batch of rows ``Wc`` (W at other states) against the analysis ``a``
     of W: ``(bound, proven_nonzero, ridge_decades)``.
 
@@ -59,7 +60,7 @@ def excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
         return _excitation_check(Wc, a)
 
 
-def _excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
+def _excitation_check(Wc: BallMatrix, a: BallAnalysis) -> tuple[arb, int, float]:
     if not a.eliminated:
         return arb(0), 0, math.inf
     m, n = Wc.nrows(), Wc.ncols()
@@ -93,7 +94,7 @@ def _excitation_check(Wc: arb_mat, a: BallAnalysis) -> tuple[arb, int, float]:
     return bound, nonzero, decades
 
 
-def tail_singular_values(W: arb_mat, a: BallAnalysis) -> list[str]:
+def tail_singular_values(W: BallMatrix, a: BallAnalysis) -> list[str]:
     """Approximate singular values of the residual ``E = Ws_E - Ws_K B`` (B = ``a.refined``),
     largest first: by Weyl's inequality ``s_{r+i}(Ws) <= s_i(E)``, so they bound the
     singular values after the ridge one by one. Exactly zero columns of E give exact zeros.
@@ -102,7 +103,7 @@ def tail_singular_values(W: arb_mat, a: BallAnalysis) -> list[str]:
         return _tail_singular_values(W, a)
 
 
-def _tail_singular_values(W: arb_mat, a: BallAnalysis) -> list[str]:
+def _tail_singular_values(W: BallMatrix, a: BallAnalysis) -> list[str]:
     if not a.eliminated:
         return []
     source, E = a._residual if a._residual is not None else (None, None)

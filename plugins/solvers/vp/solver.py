@@ -26,7 +26,7 @@ from baseparams.dynamics.trajectory import Trajectory
 from baseparams.errors import InputError, KinematicsError
 from baseparams.model.expressions import exact_text
 from baseparams.numeric import certify, decide
-from baseparams.numeric.backends import Arb, Float64
+from baseparams.numeric.backends import Arb, BallRows, Float64
 from baseparams.model.mechanism import Mechanism
 from baseparams.solvers.protocol import (MAX_DIGITS, MAX_SAMPLES, MAX_SEED, Capabilities, Progress, SolverOption,
                                          last_parameter_index)
@@ -158,16 +158,17 @@ class BallRun:
             if done in marks:
                 say(progress, f"vp: {digits} digits: sample {done}/{count}")
 
-        W, info = observation_matrix(mechanism, backend, trajectory, progress=tick)
-        self.W: Any = W
+        W, info = observation_matrix(mechanism, backend, trajectory, progress=tick, entries=True)
+        self.W: BallRows = W
         self.info: dict[str, Any] = info
         if batches:             # independent random states added after a failed excitation check
-            extra: list[Any] = [observation_matrix(mechanism, backend, cast(Any, b))[0] for b in batches]
-            self.W = backend.stack(self.W, *extra)
+            extra = [observation_matrix(mechanism, backend, cast(Any, b), entries=True)[0] for b in batches]
+            self.W = BallRows.stack(self.W, *extra)
         self.info["random_states"] = sum(b.states for b in batches)
         self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier)
         self.seconds = time.perf_counter() - start
         self.digits_of, self._least = _digits_of(self.analysis.beta)
+        self.agreement: tuple[Any, dict[int, float]] | None = None     # (the other analysis, compare_runs')
 
     def reanalyse(self, kept: Sequence[int], earlier: certify.BallAnalysis | None = None) -> "BallRun | None":
         """This run's W analysed with imposed kept columns (a copy), or None if they are not
@@ -180,6 +181,7 @@ class BallRun:
         except ValueError:
             return None
         other.digits_of, other._least = _digits_of(other.analysis.beta)
+        other.agreement = None
         return other
 
     @functools.cached_property
@@ -280,7 +282,9 @@ def compare_runs(prev: BallRun, cur: BallRun) -> tuple[bool, float, list[str]]:
             worst = 0
             continue
         both.append(k)
-    worst = min([worst, *balls.agreements(theirs, mine, both).values()])
+    found = balls.agreements(theirs, mine, both)
+    cur.agreement = (a, found)        # kept for the printed digits (_vp_coefficients): the same pairs
+    worst = min([worst, *found.values()])
     if worst < MIN_DIGITS:
         reasons.append(f"coefficients agree to only {worst} digits between {prev.digits} and "
                        f"{cur.digits} digits (need {MIN_DIGITS})")
@@ -306,8 +310,11 @@ def _vp_coefficients(final: BallRun, prev: BallRun | None,
     mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same and prev is not None else None
     zero = [x.contains(0) for x in mine]
     digits = [d for row in final.digits_of for d in row]
-    # (a ball containing 0 has no digit to cap)
-    agree = balls.agreements(theirs, mine, (k for k, d in enumerate(digits) if d > 0)) if theirs is not None else {}
+    # (a ball containing 0 has no digit to cap); the pairs compare_runs found reused
+    cached = getattr(final, "agreement", None)
+    known = cached[1] if cached is not None and prev is not None and cached[0] is prev.analysis else {}
+    agree = ({**known, **balls.agreements(theirs, mine, (k for k, d in enumerate(digits) if d > 0 and k not in known))}
+             if theirs is not None else {})
     for k, d in enumerate(digits):
         trusted[divmod(k, cols)] = int(max(0, min(d, agree.get(k, math.inf), final.digits)))
 
@@ -600,7 +607,7 @@ class VariablePrecisionSolver:
         out = {"seed": seed, "states": batch.states, "digits": final.digits, "rank": a.rank}
         backend = Arb(final.digits)
         try:
-            Wc: Any = observation_matrix(mechanism, backend, cast(Any, batch))[0]
+            Wc = observation_matrix(mechanism, backend, cast(Any, batch), entries=True)[0]
         except KinematicsError as exc:
             return {**out, "passed": False, "error": str(exc)}, batch
         bound, nonzero, decades = balls.excitation_check(Wc, a)
