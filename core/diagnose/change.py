@@ -460,12 +460,12 @@ def _simpler(a: ChangeDiagnosis, b: ChangeDiagnosis) -> bool:
 
 
 def _diagnosed(mechanism: Mechanism, coordinates: tuple[str, ...], base: _Side, other: _Side, given: Given | None,
-               alpha: float, loaded: np.ndarray, start: tuple | None, pairing: tuple, notes: list[str]
+               alpha: float, loaded: np.ndarray, start: tuple | None, matching: tuple, notes: list[str]
                ) -> ChangeDiagnosis:
     """The change search and its report with the shared model holding the load friction of the
-    coordinates ``loaded`` (its fit started at ``start``); ``pairing``: (partner, matched,
+    coordinates ``loaded`` (its fit started at ``start``); ``matching``: (partner, matched,
     share, paired, distance) of the changed samples (:func:`pair`)."""
-    partner, matched, share, paired, distance = pairing
+    partner, matched, share, paired, distance = matching
     f = len(coordinates)
     base, other = _without_load_friction(base, f, loaded), _without_load_friction(other, f, loaded)
     delay, theta, _ = _shared_fit(base, given, len(mechanism.parameters), start)
