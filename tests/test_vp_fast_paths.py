@@ -110,3 +110,22 @@ def test_printed_digits_reuse_the_agreements_of_compare_runs(monkeypatch):
     assert original(final, prev, seen["params"]) == with_them
     final.agreement = (prev.analysis, {})                      # none kept: all computed again
     assert original(final, prev, seen["params"]) == with_them
+
+
+def test_only_the_final_run_computes_its_approximate_spectrum(monkeypatch):
+    """The first of the ladder's precisions is never the final run: its approximate singular
+    values (never reported) are not computed; the final run's are, and are the result's."""
+    from baseparams.io.loader import resolve
+    runs = []
+    original = vp_solver.compare_runs
+
+    def keep(prev, cur):
+        runs[:] = [prev, cur]
+        return original(prev, cur)
+    monkeypatch.setattr(vp_solver, "compare_runs", keep)
+    result = vp_solver.VariablePrecisionSolver().solve(resolve("puma560"), recover=False)
+    first, final = runs
+    assert first.analysis.singular_values == [] and final.analysis.singular_values
+    assert result.singular_values[:result.rank] == final.analysis.singular_values[:result.rank]
+    fixed = vp_solver.VariablePrecisionSolver().solve(resolve("puma560"), digits=30, recover=False)
+    assert len(fixed.singular_values) == len(result.singular_values)

@@ -146,7 +146,8 @@ class BallRun:
 
     def __init__(self, mechanism: Mechanism, digits: int, trajectory: Trajectory,
                  kept: Sequence[int] | None = None, pivoting: str = "natural", progress: Progress | None = None,
-                 batches: Sequence[RandomBatch] = (), earlier: certify.BallAnalysis | None = None):
+                 batches: Sequence[RandomBatch] = (), earlier: certify.BallAnalysis | None = None,
+                 spectrum: bool = True):
 
         self.digits = digits
         start = time.perf_counter()
@@ -165,7 +166,8 @@ class BallRun:
             extra = [observation_matrix(mechanism, backend, cast(Any, b), entries=True)[0] for b in batches]
             self.W = BallRows.stack(self.W, *extra)
         self.info["random_states"] = sum(b.states for b in batches)
-        self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier)
+        self.analysis = certify.analyse(self.W, digits, kept=kept, pivoting=pivoting, earlier=earlier,
+                                        approximate_spectrum=spectrum)
         self.seconds = time.perf_counter() - start
         self.digits_of, self._least = _digits_of(self.analysis.beta)
         self.agreement: tuple[Any, dict[int, float]] | None = None     # (the other analysis, compare_runs')
@@ -575,8 +577,11 @@ class VariablePrecisionSolver:
                 break
             say(progress, f"vp: W at {D} digits ({len(trajectory.times)} samples"
                            + (f" + {sum(b.states for b in batches)} random states" if batches else "") + ")")
+            # the first of two or more precisions is never the final run, whose approximate
+            # spectrum alone is reported: the first's is not computed (an SVD or an eig at D digits)
             run = BallRun(mechanism, D, trajectory, kept=kept, pivoting=pivoting, progress=progress,
-                          batches=batches, earlier=runs[-1].analysis if runs else None)
+                          batches=batches, earlier=runs[-1].analysis if runs else None,
+                          spectrum=k > 0 or len(steps) == 1)
             runs.append(run)
             a = run.analysis
             say(progress, f"vp: {D} digits: rank {a.rank} ({a.pivoting} order), proven ridge "
