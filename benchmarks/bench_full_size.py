@@ -4,7 +4,7 @@ this process; the defaults' memory (no refusal); how accurate the printed dp exp
 
     pip install example-robot-data pin figaroh
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp]
-        [--sections figaroh identify speed memory accuracy]
+        [--sections figaroh identify speed memory accuracy] [--previous DIR]
 
 figaroh: per round, for TX40 (examples/data/tx40), TIAGo and Talos (example-robot-data), one
 child process each for FIGAROH, dp and vp, in turn (``--repeats`` rounds; medians): the
@@ -20,9 +20,13 @@ TIAGo); baseparams solves the coupled robot. Skipped with a note when figaroh is
 
 identify: ``identify`` of TIAGo's 48-joint model with the default solver (vp) on a recording
 simulated by ``bp.simulate`` (the file's trajectory, 1 % noise), in child processes, each round
-one with the generated code's disk cache off and one with it on (filled before the rounds):
+one with the generated code's disk cache off and one with it on (filled before the rounds), the
+package's bytecode compiled as an installed package's is, and one with the cache on and no
+bytecode (each child compiling the modules it imports, as the editable tree does here):
 identify's own CPU s and the whole process's, beside a yardstick measured in the same process
-after identify (Pinocchio's regressor over as many random states and one least-squares solve).
+after identify (Pinocchio's regressor over as many random states and one least-squares solve);
+with ``--previous DIR`` (``git archive COMMIT | tar -x -C DIR``) that older tree's code too, in
+the same turns, imported in place of the installed package.
 
 speed: per robot, interleaved ``--repeats`` times in this process (medians, CPU s of
 ``time.process_time``): dp, vp (Talos only; it is long), and the yardstick: what FIGAROH
@@ -160,13 +164,14 @@ def without_geometry(path: Path, folder: Path) -> Path:
     return out
 
 
-def child(args: list[str], env: dict[str, str] | None = None) -> tuple[dict, float]:
-    """(the child's JSON line, its whole-process CPU s); ``env``: variables set for it."""
+def child(args: list[str], env: dict[str, str | None] | None = None) -> tuple[dict, float]:
+    """(the child's JSON line, its whole-process CPU s); ``env``: variables set for it (None:
+    unset)."""
     import json
     import os
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.run([sys.executable, "-c", *args], capture_output=True, text=True,
-                          env=None if env is None else {**os.environ, **env})
+    merged = None if env is None else {k: v for k, v in {**os.environ, **env}.items() if v is not None}
+    proc = subprocess.run([sys.executable, "-c", *args], capture_output=True, text=True, env=merged)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     seconds = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
     if proc.returncode:
@@ -242,6 +247,22 @@ def memory(found: dict[str, Path]) -> None:
               f"{after.ru_maxrss / 1024:.0f} | {how[:140]} |", flush=True)
 
 
+# a child importing baseparams from another copy of the source tree (``--previous``: git archive
+# of an older commit): its core/, plugins/ and mechanisms/ stand in for the installed package
+FROM_TREE = """
+import importlib.util, sys
+class _Tree:
+    parts = {"baseparams": "core", "baseparams.plugins": "plugins", "baseparams.mechanisms": "mechanisms"}
+    @classmethod
+    def find_spec(cls, name, path=None, target=None):
+        if name not in cls.parts:
+            return None
+        where = TREE + "/" + cls.parts[name]
+        return importlib.util.spec_from_file_location(name, where + "/__init__.py", submodule_search_locations=[where])
+TREE = sys.argv.pop()
+sys.meta_path.insert(0, _Tree)
+"""
+
 IDENTIFY_CHILD = """
 import json, resource, sys, time
 import numpy as np
@@ -267,17 +288,23 @@ print(json.dumps({"identify_s": seconds, "yardstick_s": yardstick, "rank": out["
 """
 
 
-def identify_tiago(found: dict[str, Path], repeats: int) -> None:
+def identify_tiago(found: dict[str, Path], repeats: int, previous: Path | None = None) -> None:
     """identify of TIAGo's 48-joint model (issue 47: <= 5 CPU s) with the default solver, on a
     simulated recording (bp.simulate: the file's trajectory, 1 % noise), in child processes
     taking turns: with the generated code's disk cache off (``BASEPARAMS_CACHE_DIR=off``: a
     first run, or a changed mechanism) and on (a cache in a temporary folder, filled by one run
-    before the rounds: every later run of the same mechanism). Per child: identify's own CPU s,
+    before the rounds: every later run of the same mechanism), both with the package's bytecode
+    compiled once, as an installed package has it (``pip install`` compiles it; here
+    PYTHONPYCACHEPREFIX in the temporary folder, filled by the same run), and with the cache on
+    and no bytecode written (PYTHONDONTWRITEBYTECODE, as this machine's environment sets it for
+    the editable tree: each child then compiles the hundred modules identify imports, 0.03-0.14
+    CPU s more, measured). Per child: identify's own CPU s,
     the whole process's (the interpreter, the imports, identify; the yardstick's CPU s
     subtracted), and the yardstick measured after identify in the same process: Pinocchio's
     joint-torque regressor stacked over as many random states as the recording has samples,
     and one least-squares solve of it (numpy lstsq, SVD): what an uncertified identification
-    cannot do without."""
+    cannot do without. ``previous``: a copy of an older source tree, run in the same turns with
+    the cache and bytecode on (its rows say "previous")."""
     import tempfile
     import baseparams as bp
     urdf = str(found["tiago_description/tiago"])
@@ -285,12 +312,21 @@ def identify_tiago(found: dict[str, Path], repeats: int) -> None:
         data = Path(tmp) / "tiago.csv"
         bp.simulate(urdf, output=str(data), noise=0.01)
         args = [IDENTIFY_CHILD, urdf, str(data), str(ROOT / "tests")]
-        settings = {"off": {"BASEPARAMS_CACHE_DIR": "off"}, "on": {"BASEPARAMS_CACHE_DIR": str(Path(tmp) / "cache")}}
-        child(args, settings["on"])                                     # fills the cache
-        runs: dict[str, list[tuple[dict, float]]] = {"off": [], "on": []}
+        compiled = {"PYTHONDONTWRITEBYTECODE": None, "PYTHONPYCACHEPREFIX": str(Path(tmp) / "pycache")}
+        folder = str(Path(tmp) / "cache")
+        settings: dict[str, dict[str, str | None]] = {
+            "off": {"BASEPARAMS_CACHE_DIR": "off", **compiled}, "on": {"BASEPARAMS_CACHE_DIR": folder, **compiled},
+            "on, no bytecode": {"BASEPARAMS_CACHE_DIR": folder, "PYTHONDONTWRITEBYTECODE": "1"}}
+        jobs = {name: (args, env) for name, env in settings.items()}
+        if previous is not None:
+            jobs["previous, on"] = ([FROM_TREE + IDENTIFY_CHILD, *args[1:], str(previous)], settings["on"])
+        for name in ("on", "previous, on"):                           # fill the caches and the bytecode
+            if name in jobs:
+                child(*jobs[name])
+        runs: dict[str, list[tuple[dict, float]]] = {name: [] for name in jobs}
         for _ in range(repeats):
-            for cache, env in settings.items():
-                runs[cache].append(child(args, env))
+            for name, (job, env) in jobs.items():
+                runs[name].append(child(job, env))
     print("| robot | joints | code cache | identify CPU s (median) | whole process CPU s | yardstick CPU s | "
           "identify / yardstick | base parameters | RMS | peak MB |")
     print("|---|---|---|---|---|---|---|---|---|---|")
@@ -369,13 +405,15 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-vp", action="store_true", help="no vp in the speed section")
     parser.add_argument("--sections", nargs="*", default=("figaroh", "identify", "speed", "memory", "accuracy"))
+    parser.add_argument("--previous", type=Path, help="identify: also a copy of an older source tree (its "
+                        "core/, plugins/, mechanisms/: git archive COMMIT | tar -x -C DIR), in the same turns")
     args = parser.parse_args()
     found = paths()
     if "figaroh" in args.sections:
         side_by_side(found, args.repeats)
         print()
     if "identify" in args.sections:
-        identify_tiago(found, args.repeats)
+        identify_tiago(found, args.repeats, args.previous)
         print()
     if "speed" in args.sections:
         speed(found, args.repeats, not args.no_vp)
