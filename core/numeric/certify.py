@@ -751,7 +751,7 @@ def _leftmost(B: arb_mat, kept: Sequence[int], eliminated: Sequence[int], log_ta
     r, e = len(kept), len(eliminated)
     if not e:
         return True
-    b = np.array([abs(float(x)) for x in B.entries()]).reshape(r, e) * (1 + 1e-15) + 1e-300
+    b = np.abs(np.fromiter(map(float, B.entries()), dtype=float, count=r * e)).reshape(r, e) * (1 + 1e-15) + 1e-300
     below = np.vstack([np.cumsum((b ** 2)[::-1], axis=0)[::-1], np.zeros((1, e))])   # below[s]: rows s..r-1
     starts = np.searchsorted(np.asarray(kept), np.asarray(eliminated), side="right")
     right = r - starts

@@ -71,7 +71,9 @@ def rpy_matrix(roll: Decimal, pitch: Decimal, yaw: Decimal) -> tuple[Rotation, l
 
 
 def matmul(a: Matrix, b: Matrix) -> Rotation:
-    return tuple(tuple(Fraction(sum(a[i][k] * b[k][j] for k in range(3))) for j in range(3)) for i in range(3))
+    # zero terms skipped (most entries of joint and link rotations are 0): exact either way
+    return tuple(tuple(Fraction(sum(a[i][k] * b[k][j] for k in range(3) if a[i][k] and b[k][j])) for j in range(3))
+                 for i in range(3))
 
 
 def transpose(a: Rotation) -> Rotation:

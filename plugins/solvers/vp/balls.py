@@ -8,6 +8,7 @@ Every function that computes in ball arithmetic enters its own precision (python
 ``ctx.workdps`` / ``ctx.workprec``), so none depends on a precision a caller left set.
 """
 
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from fractions import Fraction
@@ -83,7 +84,8 @@ def _excitation_check(Wc: BallMatrix, a: BallAnalysis) -> tuple[arb, int, float]
             E = We - Wk * a.beta_s
     else:
         bound, E = frobenius_upper(We), We
-    nonzero = sum(1 for x in E.entries() if not x.contains(0))
+    values = E.entries()
+    nonzero = len(values) - sum(map(arb.contains, values, itertools.repeat(0)))     # iterated in C
     combined = arb((a.tail_bound ** 2 + bound ** 2).sqrt().upper())
     if a.rank == 0 or not a.sigma_r_lower > 0:
         decades = math.inf if combined == 0 else -math.inf
@@ -120,7 +122,7 @@ def _tail_singular_values(W: BallMatrix, a: BallAnalysis) -> list[str]:
     out: list[Any] = []
     if live and W.ncols() > SPECTRUM_IN_ARB_UP_TO:       # float64, as _approximate_singular_values
         picked = [values[i * cols + j] for i in range(rows) for j in live]
-        a64 = np.array([float(x) for x in picked]).reshape(rows, len(live))
+        a64 = np.fromiter(map(float, picked), dtype=float, count=len(picked)).reshape(rows, len(live))
         exponent = 0
         biggest64 = float(np.max(np.abs(a64)))
         if not 1e-280 < biggest64 < 1e280:      # out of float range: scaled by 2^-exponent first

@@ -306,33 +306,29 @@ def _vp_coefficients(final: BallRun, prev: BallRun | None,
     its expression and listed in ``untrusted`` with its ball."""
     a = final.analysis
     same = prev is not None and prev.analysis.kept == a.kept and prev.rank == a.rank
-    trusted: dict[tuple[int, int], int] = {}
-    untrusted: list[dict[str, Any]] = []
     cols = a.beta.ncols()
     mine, theirs = a.beta.entries(), prev.analysis.beta.entries() if same and prev is not None else None
-    zero = [x.contains(0) for x in mine]
     digits = [d for row in final.digits_of for d in row]
-    # (a ball containing 0 has no digit to cap); the pairs compare_runs found reused
+    live = [k for k, x in enumerate(mine) if not x.contains(0)]      # printed, or listed untrusted
+    # the agreement caps the digits of a ball that has some; the pairs compare_runs found reused
     cached = getattr(final, "agreement", None)
     known = cached[1] if cached is not None and prev is not None and cached[0] is prev.analysis else {}
-    agree = ({**known, **balls.agreements(theirs, mine, (k for k, d in enumerate(digits) if d > 0 and k not in known))}
+    agree = ({**known, **balls.agreements(theirs, mine, (k for k in live if digits[k] > 0 and k not in known))}
              if theirs is not None else {})
-    for k, d in enumerate(digits):
-        trusted[divmod(k, cols)] = int(max(0, min(d, agree.get(k, math.inf), final.digits)))
-
-    def coefficient(i: int, j: int) -> str | None:
-        x = mine[i * cols + j]
-        if zero[i * cols + j]:
-            return None
-        if trusted[i, j] < 1:
-            untrusted.append({"base": i, "parameter": params[a.eliminated[j]], "ball": x.str(5)})
-            return None
-        return certify.decimal_string(x, trusted[i, j])
-
-    rows = base_rows(params, a.kept, a.eliminated, coefficient)
+    texts: dict[tuple[int, int], str] = {}
+    printed: list[int] = []
+    untrusted: list[dict[str, Any]] = []
+    for k in live:                     # row by row, as the expressions are written
+        i, j = divmod(k, cols)
+        trusted = int(max(0, min(digits[k], agree.get(k, math.inf), final.digits)))
+        if trusted < 1:
+            untrusted.append({"base": i, "parameter": params[a.eliminated[j]], "ball": mine[k].str(5)})
+            continue
+        texts[i, j] = certify.decimal_string(mine[k], trusted)
+        printed.append(trusted)
+    rows = base_rows(params, a.kept, a.eliminated, lambda i, j: texts.get((i, j)))
     for item in untrusted:
         item["base"] = rows[item["base"]]["name"]
-    printed = [t for k, t in enumerate(trusted.values()) if not zero[k] and t >= 1]
     return rows, printed, untrusted
 
 
