@@ -324,7 +324,7 @@ def diagnose(mech: MechanismLike, data: DataPaths, *, params: ResultLike | None 
     if given is not None and result.verdict in ("partly explained", "unexplained"):
         _baseline_hint(given, str(params), paths, result.notes)
     elif given is not None and _held_lack(given) >= HELD_LACK:
-        worst = max(given.fit_nrms, key=lambda c: given.fit_nrms[c])
+        worst = max((c for c, v in given.fit_nrms.items() if v == v), key=lambda c: given.fit_nrms[c])
         result.notes.append(f"--params {params}: that identification leaves NRMS {given.fit_nrms[worst]:.2g} of the "
                             f"force on its own run ({worst}): a change smaller than what it lacks is not told from "
                             "that lack here")
