@@ -468,11 +468,12 @@ def search_once(candidates: list[Candidate], y: np.ndarray, alpha: float, max_st
         rivals = []
         won = beyond(winner)
         others = {j: beyond(j) for j in significant[1:]}
-        with_winner = _fitted(wy, np.concatenate([model, won], axis=1)) if others else None
-        for j, other in others.items():
-            with_rival = np.concatenate([model, other], axis=1)
-            if not _adds(wy, with_winner, other, alpha) and not _adds(wy, _fitted(wy, with_rival), won, alpha):
-                rivals.append(j)
+        if others:
+            with_winner = _fitted(wy, np.concatenate([model, won], axis=1))
+            for j, other in others.items():
+                with_rival = np.concatenate([model, other], axis=1)
+                if not _adds(wy, with_winner, other, alpha) and not _adds(wy, _fitted(wy, with_rival), won, alpha):
+                    rivals.append(j)
         added.append(winner)
         tests[winner] = {"pvalue": outcome[winner][0], "pvalue_holm": float(adjusted[winner]), "z": outcome[winner][1]}
         if rivals:
