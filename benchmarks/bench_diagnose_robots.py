@@ -18,7 +18,8 @@ the named effects (a correction of a known effect with the model's value) and th
     python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1] [--seconds 30]
 
 Each diagnose prints its CPU seconds and peak resident memory (a long log: ``--robots panda
---scenarios friction --seconds 120``).
+--scenarios friction --seconds 120``); with ``--params`` or ``--baseline`` also the ratio to one
+``identify`` of the same changed run (issue 42's speed yardstick), whole processes.
 """
 
 import argparse
@@ -176,6 +177,10 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path) -> dict:
                                *extra])
     out = {"exit": done.returncode, "cpu": cpu, "wall": wall, "memory": memory, "truth": truth,
            "identify_cpu": cpu_before}
+    if extra:                     # issue 42's yardstick: one identify of the same (changed) run
+        _, out["same_identify_cpu"], _, _ = command(["identify", str(urdf), str(folder / "rec.toml"), "--effect",
+                                                     "viscous_friction:*", "--effect", "coulomb_friction:*",
+                                                     "--format", "json", "--quiet"])
     try:
         report = json.loads(done.stdout)
     except json.JSONDecodeError:
@@ -231,6 +236,10 @@ def main() -> None:
                     spent = f" (identify of the payload-free run {r['identify_cpu']:.1f} CPU s)" \
                         if scenario == "payload" else ""
                     print(f"      truth: {r['truth']}{spent}", flush=True)
+                if "same_identify_cpu" in r:
+                    print(f"      speed: diagnose {r['cpu']:.1f} CPU s, one identify of the same run "
+                          f"{r['same_identify_cpu']:.1f} CPU s: ratio {r['cpu'] / r['same_identify_cpu']:.2f} "
+                          "(issue 42: <= 5)", flush=True)
                 elif r["truth"]:
                     rounded = {j: {k: round(v, 4) for k, v in c.items()} for j, c in r["truth"].items()}
                     print(f"      truth (per joint, fv fc): {rounded}", flush=True)
