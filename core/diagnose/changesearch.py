@@ -270,7 +270,8 @@ def _filtered_each(filters: list[np.ndarray], blocks: list[np.ndarray], weights:
 
 
 def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weights: np.ndarray,
-              noise: np.ndarray | None = None, design: np.ndarray | None = None, unit: bool = True) -> dict:
+              noise: np.ndarray | None = None, design: np.ndarray | None = None, unit: bool = True,
+              whitening: tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]] | None = None) -> dict:
     """Whether what is left (n, f) is predictable from ``columns`` (n, f, k), all at once,
     beyond ``model`` (n, f, p): an F test after each coordinate's residual and columns pass
     its autoregressive whitening (:func:`noise_model`, fitted to ``noise``, default the
@@ -278,10 +279,12 @@ def rest_test(residual: np.ndarray, columns: np.ndarray, model: np.ndarray, weig
     ``weights``; ``unit``: each coordinate whitened to unit variance; the noise level's
     degrees of freedom :func:`effective_df` when fewer than the residual's. Give ``noise``
     when the residual holds the structure under test: an autoregression fitted to it learns
-    that structure as noise (a payload tested beside another body: p = 0.46)."""
+    that structure as noise (a payload tested beside another body: p = 0.46). ``whitening``:
+    that noise model (:func:`noise_model`'s output), when made already for the same noise,
+    design, weights and ``unit``."""
     design = model if design is None else design
-    filters, spread = noise_model((residual if noise is None else noise) * weights[None, :],
-                                  design * weights[None, :, None], unit=unit)
+    filters, spread = whitening if whitening is not None else \
+        noise_model((residual if noise is None else noise) * weights[None, :], design * weights[None, :, None], unit=unit)
     r = _filtered(filters, residual * weights[None, :])
     X = _filtered(filters, columns * weights[None, :, None])
     noise_df = effective_df(spread, X)
@@ -579,6 +582,8 @@ def _confirmed(chosen: Search, y: np.ndarray, alpha: float, notes: list[str]) ->
     while len(groups) > 1:
         everything = np.concatenate([chosen.candidates[j].columns for m in groups.values() for j in m], axis=-1)
         noise = y - everything @ WeightedLinearModel(everything, y).fit(weights).coefficients
+        # one noise model for every group's test: the same noise, design and weights
+        whitening = noise_model(noise * weights[None, :], everything * weights[None, :, None], unit=chosen.unit)
         pvalues = {}
         for head, members in groups.items():
             others = [j for h, m in groups.items() if h != head for j in m]
@@ -586,7 +591,8 @@ def _confirmed(chosen: Search, y: np.ndarray, alpha: float, notes: list[str]) ->
             fit = WeightedLinearModel(model, y).fit(weights)
             residual = y - model @ fit.coefficients
             columns = np.concatenate([chosen.candidates[j].columns for j in members], axis=-1)
-            pvalues[head] = rest_test(residual, columns, model, weights, noise, everything, chosen.unit)["pvalue"]
+            pvalues[head] = rest_test(residual, columns, model, weights, noise, everything, chosen.unit,
+                                      whitening)["pvalue"]
         weakest = max(pvalues, key=lambda h: pvalues[h])
         if pvalues[weakest] <= alpha / len(groups):
             break
