@@ -344,3 +344,20 @@ def test_a_candidate_that_borrows_its_force_from_a_true_change_is_too_small_to_n
     assert kept(y, [0, 1]) == {0}
     assert kept(y + 0.3 * drift[:, :, 0], [0, 2]) == {0, 2}
     assert kept(y + 0.3 * drift[:, :, 0], [0, 1, 2]) == {0, 2}
+
+
+def test_real_repeat_window_is_read_with_the_baselines_filter(tmp_path):
+    """A window of the Kinova repeat's second run (0.3-1.6 s: joint 1 at near-constant speed)
+    read alone takes its positions' bandwidth from the speed ripple (54.5 Hz against the whole
+    run's 4.1), kept 200 Hz against the baseline's 41, paired 27 % of its samples and named
+    two bodies. Both sides are now read with the baseline's low-pass: nothing changed."""
+    import shutil
+    import baseparams as bp
+    shutil.copy(KINOVA / "repeat_Trajectory1.csv", tmp_path)
+    text = (KINOVA / "repeat_Trajectory1.toml").read_text()
+    (tmp_path / "window.toml").write_text(text.replace('file = "repeat_Trajectory1.csv"',
+                                                       'file = "repeat_Trajectory1.csv"\nwindow = [0.3, 1.6]'))
+    result = bp.diagnose(str(KINOVA / "gen3.urdf"), str(tmp_path / "window.toml"),
+                         baseline=str(KINOVA / "repeat_RunTrajectory1.toml")).to_json()
+    assert result["verdict"] == "nothing changed", (result["changes"], result["notes"])
+    assert any(n.startswith("changed:") and "the fit's filter" in n for n in result["notes"]), result["notes"]

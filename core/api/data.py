@@ -447,7 +447,12 @@ def diagnose_change(mech: MechanismLike, changed: DataPaths, baseline: DataPaths
     _say(progress, "reading the baseline")
     before, mechanism_before = read_data(baseline_paths, mechanism)
     _say(progress, "reading the changed runs")
-    after, mechanism_after = read_data(changed_paths, mechanism)
+    # with the baseline's low-pass, so that both sides see one filter and the same motion pairs:
+    # a window of the Kinova repeat's second run (0.3-1.6 s, joint 1 at near-constant speed)
+    # read its positions' bandwidth as 54.5 Hz (its speed ripple), kept 200 Hz against the
+    # baseline's 41, only 27 % of its samples paired, and two bodies were named
+    after, mechanism_after = read_data(changed_paths, mechanism, fit_filter=before.filters[0] if before.filters
+                                       else None)
     if mechanism_before.motors != mechanism_after.motors or mechanism_before.gravity != mechanism_after.gravity:
         raise InputError("the baseline's descriptions declare other motors or another gravity than the changed "
                          "runs': describe both alike", key="--baseline")
