@@ -96,8 +96,9 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
     else:
         scale = column_norms(matrix)
         count = lambda s: numerical_rank(tol=tol, singular_values=s)         # noqa: E731
+    zero = reference is None and bool(np.any(scale == 0))   # a zero column: the Cholesky route must fail
     scale[scale == 0] = 1.0
-    u, s, _ = thin_svd(matrix / scale, keep=count)
+    u, s, _ = thin_svd(matrix / scale, keep=count, zero_column=zero)
     return u[:, :count(s)]
 
 
