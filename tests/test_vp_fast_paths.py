@@ -48,6 +48,20 @@ def test_least_digits_of_beta():
     assert vp_solver._digits_of(arb_mat(1, 2, [0, arb(0, 1)]))[1] == math.inf
 
 
+def test_unscaled_is_each_entry_times_its_power_of_two():
+    rng = np.random.default_rng(5)
+    kept, eliminated = [0, 2, 3], [1, 4, 5, 6]
+    exponents = [int(e) for e in rng.integers(-40, 40, 7)]
+    with ctx.workdps(30):
+        beta_s = arb_mat(3, 4, [arb(int(v)) / 7 for v in rng.integers(-100, 100, 12)])
+        beta = certify.unscaled(beta_s, kept, eliminated, exponents)
+        for a, i in enumerate(kept):
+            for b, j in enumerate(eliminated):
+                want = beta_s[a, b] * arb(2) ** (exponents[j] - exponents[i])
+                assert beta[a, b].mid() == want.mid() and beta[a, b].rad() == want.rad()
+        assert certify.unscaled(beta_s, kept, [], exponents).ncols() == 0
+
+
 def test_frobenius_pair_is_both_bounds():
     with ctx.workdps(30):
         M = arb_mat(2, 3, [arb(1, "1e-20"), arb(-2), arb(0, "1e-5"), arb(1) / 3, arb(4, 1), arb(0)])

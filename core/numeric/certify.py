@@ -762,13 +762,13 @@ def _leftmost(B: arb_mat, kept: Sequence[int], eliminated: Sequence[int], log_ta
 
 def unscaled(beta_s: arb_mat, kept: Sequence[int], eliminated: Sequence[int], exponents: Sequence[int]) -> arb_mat:
     """beta = D_K^-1 beta_s D_E entry by entry (powers of two: exact)."""
-    two = arb(2)
     values = beta_s.entries()
     ne = len(eliminated)
     if not kept or not ne:
         return arb_mat(len(kept), ne)
-    return arb_mat(len(kept), ne, [values[a * ne + b] * two ** (exponents[j] - exponents[i])
-                                   for a, i in enumerate(kept) for b, j in enumerate(eliminated)])
+    shifts = (np.take(exponents, eliminated)[None, :] - np.take(exponents, kept)[:, None]).ravel().tolist()
+    table = {s: arb(2) ** s for s in set(shifts)}            # each entry times one, iterated in C
+    return arb_mat(len(kept), ne, list(map(arb.__mul__, values, map(table.__getitem__, shifts))))
 
 
 def _approximate_singular_values(G: arb_mat | None, scaled64: np.ndarray) -> list[str]:

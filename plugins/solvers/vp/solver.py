@@ -6,6 +6,7 @@ square block: W evaluated again only at the states its rows come from)."""
 
 import copy
 import functools
+import itertools
 import math
 import sys
 import time
@@ -13,7 +14,7 @@ from collections.abc import Sequence
 from fractions import Fraction
 from typing import Any, cast
 
-from flint import arb_mat
+from flint import arb, arb_mat
 
 try:
     import resource
@@ -128,8 +129,10 @@ def _digits_of(beta: arb_mat) -> tuple[list[list[float]], float]:
     of them over the balls that exclude 0, inf when none does)."""
     cols = beta.ncols()
     values = beta.entries()
-    digits = [balls.radius_digits(x) for x in values]
-    least = min((d for d, x in zip(digits, values) if not x.contains(0)), default=math.inf)
+    zero = list(map(arb.contains, values, itertools.repeat(0)))      # most of beta: read in C
+    # radius_digits of a ball that contains 0 without the call: inf when it is exact, else 0
+    digits = [(math.inf if x.rad() == 0 else 0) if z else balls.radius_digits(x) for x, z in zip(values, zero)]
+    least = min((d for d, z in zip(digits, zero) if not z), default=math.inf)
     return [digits[i * cols:(i + 1) * cols] for i in range(beta.nrows())], least
 
 
