@@ -200,3 +200,21 @@ def test_real_repeat_held_names_a_hidden_load_though_the_held_masses_are_impossi
     assert named in ([("body", "bracelet_link")], [("payload", "bracelet_link")]), _named(report)
     m = report["effects"][0]["coefficients"]["m"]
     assert abs(m["value"] - mass) <= max(3 * m["std"], 0.1 * mass), m
+
+
+def test_a_body_beyond_any_physical_scale_is_not_named():
+    """gates._beyond_scale: a body's coefficient above a hundred times what the mechanism's
+    bodies could have is refused with its reason (its columns cancel one another); within it,
+    nothing is said; a mechanism without masses is not judged."""
+    from baseparams.diagnose.changeplausible import body_limits
+    from baseparams.diagnose.gates import _beyond_scale
+
+    class Held:                                    # what _beyond_scale reads of a Problem
+        def __init__(self, mechanism):
+            self.mechanism = mechanism
+    ur5 = resolve(UR5)
+    limits = body_limits(ur5)
+    body = Candidate("body", "wrist_3_link", ("m",), np.zeros((1, 1, 1)))
+    assert "beyond any physical scale" in _beyond_scale(Held(ur5), body, {"m": -1.5 * limits["m"], "mx": 0.0})
+    assert _beyond_scale(Held(ur5), body, {"m": 0.5, "mx": 0.01}) == ""
+    assert _beyond_scale(Held(resolve("puma560")), body, {"m": 1e12}) == ""          # no masses: not judged

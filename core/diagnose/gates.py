@@ -15,6 +15,7 @@ from scipy.stats import chi2
 
 from baseparams.diagnose import derived
 from baseparams.diagnose.candidates import known_values
+from baseparams.diagnose.changeplausible import body_limits
 from baseparams.diagnose.entries import _held_back, absent
 from baseparams.diagnose.estimates import _Prediction, coefficient_names, coefficients
 from baseparams.diagnose.final import outdone, simpler_in_place, weakest_over
@@ -481,7 +482,8 @@ def _unphysical(problem: Problem, cand: Candidate, values: dict) -> str:
         if reason and cand.kind == "stribeck_friction" and coulomb and values.get("fs", 0.0) < 0:
             reason += (f" (the friction is lower near rest than in motion: the robot's Coulomb friction may "
                        f"be smooth, tanh(qd/vs), where the model's {coulomb:.3g} is sign(qd))")
-    return reason or _drives(problem, cand, values) or _body_implausible(problem, cand, values)
+    return reason or _drives(problem, cand, values) or _body_implausible(problem, cand, values) \
+        or _beyond_scale(problem, cand, values)
 
 # Frictions whose coefficients' signs alone do not make them resist the motion (position
 # friction: fcc cos q + fcs sin q changes sign with q), and the share of the samples where
@@ -528,6 +530,22 @@ def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
         return ""
     mass = held + values["m"]
     return f"the changed body's mass {mass:.3g} is not positive" if mass <= 0 else ""
+
+
+def _beyond_scale(problem: Problem, cand: Candidate, values: dict) -> str:
+    """A body's, payload's or mass's coefficient above a hundred times what the mechanism's
+    bodies could have (:func:`.changeplausible.body_limits`; '' when the mechanism gives no
+    masses): its columns cancel one another. Why: on a real Kinova run held against its first,
+    a body on half_arm_1_link came out at m = 7.8e5 kg (refused then only because it moved
+    from block to block); between the runs, a 1 kg load was named as -2900 kg on another link."""
+    if cand.kind not in BODY_KINDS:
+        return ""
+    limits = body_limits(problem.mechanism)
+    for name, value in values.items():
+        if name in limits and abs(value) > limits[name]:
+            return (f"its {name} = {value:.3g} is beyond any physical scale of this mechanism (above "
+                    f"{limits[name]:.3g}: a hundred times what its bodies could have): its columns cancel one another")
+    return ""
 
 
 # A body changed within the given identification's uncertainty at this level is its error.
