@@ -319,8 +319,9 @@ def _impossible_notes(mechanism: Mechanism, path: Path, E: np.ndarray, base: lis
     far = beyond(flags)
     if far:
         notes.append(f"--params {path}: {len(far)} held value{'s' if len(far) > 1 else ''} beyond any physical scale, "
-                     "held as given all the same (the data of that identification did not determine them; "
-                     "the body masses completed from them are no body's, and a change is not judged by them): "
+                     "held as given all the same (the data of that identification did not determine them; the "
+                     "body masses completed from them may be no body's, and a changed body's mass is not judged "
+                     "where the held one is not positive): "
                      + "; ".join(f.text() for f in far))
     if impossible:
         notes.append(f"--params {path}: {len(impossible)} held value{'s' if len(impossible) > 1 else ''} no robot "
