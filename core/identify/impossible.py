@@ -260,12 +260,15 @@ def _bodies(parameters: Sequence[str], base_map: np.ndarray, values: np.ndarray,
     from baseparams.model.params import split_name
     out = []
     basis = _pseudo_inertia_basis()
-    P = base_map.shape[1]
-    for b in range(P // 10):
-        columns = slice(10 * b, 10 * b + 10)
-        others = np.delete(base_map, np.s_[10 * b: 10 * b + 10], axis=1)
-        rows = [k for k in range(base_map.shape[0]) if names[k] in clean and not np.any(others[k])
-                and np.any(base_map[k, columns])]
+    r, P = base_map.shape
+    bodies = P // 10
+    # which bodies each base row involves (r, bodies); a row on one body alone, of a clean name
+    involved = (base_map[:, :10 * bodies] != 0).reshape(r, bodies, 10).any(axis=2)
+    alone = (involved.sum(axis=1) == 1) & ~(base_map[:, 10 * bodies:] != 0).any(axis=1)
+    kept = set(clean)
+    alone &= np.array([names[k] in kept for k in range(r)], dtype=bool)
+    for b in range(bodies):
+        rows = [int(k) for k in np.nonzero(alone & involved[:, b])[0]]
         if len(rows) < 10:
             continue
         E = base_map[np.ix_(rows, range(10 * b, 10 * b + 10))]
