@@ -80,7 +80,7 @@ KINOVA = Path(__file__).parent / "data" / "kinova_gen3"
 
 
 def test_body_limits_are_a_hundred_times_the_mechanisms_mass_and_reach():
-    from baseparams.diagnose.changeplausible import body_limits
+    from baseparams.identify.impossible import body_limits
     from baseparams.identify.impossible import mechanism_size
     mechanism = resolve(str(KINOVA / "gen3.urdf"))
     masses, lengths = mechanism_size(mechanism)
@@ -100,7 +100,7 @@ def test_real_repeat_with_a_load_on_an_inner_link_names_no_body_beyond_any_scale
     spherical_wrist_1_link added to the second run: 'body on half_arm_2_link: -2900 +- 900 kg'
     was named, its ten columns cancelling one another. Now no change is beyond the mechanism's
     scale, and the load's link is among what is named or ambiguous."""
-    from baseparams.diagnose.changeplausible import body_limits
+    from baseparams.identify.impossible import body_limits
     mechanism = resolve(str(KINOVA / "gen3.urdf"))
     before, mechanism = read_data([str(KINOVA / "repeat_RunTrajectory1.toml")], mechanism)
     after, _ = read_data([str(KINOVA / "repeat_Trajectory1.toml")], mechanism)

@@ -206,7 +206,7 @@ def test_a_body_beyond_any_physical_scale_is_not_named():
     """gates._beyond_scale: a body's coefficient above a hundred times what the mechanism's
     bodies could have is refused with its reason (its columns cancel one another); within it,
     nothing is said; a mechanism without masses is not judged."""
-    from baseparams.diagnose.changeplausible import body_limits
+    from baseparams.identify.impossible import body_limits
     from baseparams.diagnose.gates import _beyond_scale
 
     class Held:                                    # what _beyond_scale reads of a Problem

@@ -62,7 +62,8 @@ from baseparams.identify.fit import measured_design
 from baseparams.diagnose.given import Given
 from baseparams.diagnose.identifiable import regroup
 from baseparams.diagnose.loopbodies import named_groups
-from baseparams.diagnose.changeplausible import body_limits, impossible_changes, shared_values
+from baseparams.diagnose.changeplausible import impossible_changes, shared_values
+from baseparams.identify.impossible import body_limits
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
 from baseparams.dynamics.forces import evaluate, independent_names
 from baseparams.diagnose.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, _filtered, held_out_gain,

@@ -23,7 +23,6 @@ import numpy as np
 
 from baseparams import registry
 from baseparams.diagnose.candidates import known_values
-from baseparams.identify.impossible import body_scales, mechanism_size
 from baseparams.model.mechanism import EffectSpec, Mechanism
 
 # the friction kinds a change is judged on, and the coefficient that must stay positive
@@ -51,21 +50,12 @@ def shared_values(mechanism: Mechanism, effects: Sequence[EffectSpec], theta: np
     return values
 
 
-def body_limits(mechanism: Mechanism) -> dict[str, float]:
-    """Each body coefficient's physical scale (name -> :func:`.impossible.body_scales`); {}
-    when the mechanism gives no masses."""
-    size = mechanism_size(mechanism)
-    names = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")
-    scales = None if size is None else body_scales([f"{n}_body" for n in names], *size)
-    return {} if scales is None else dict(zip(names, (float(v) for v in scales)))
-
-
 def impossible_changes(changes: Sequence[Mapping], shared: Mapping[tuple[str, str], float],
                        limits: Mapping[str, float] | None = None) -> list[tuple[str, str, str]]:
     """(kind, coordinate, why) of each change in ``changes`` (the named entries: kind,
     coordinate, value, std) no robot makes: a friction change whose changed friction (shared
     + change) is not positive; a body's or mass's coefficient above its ``limits``
-    (:func:`body_limits`)."""
+    (:func:`.impossible.body_limits`)."""
     out = []
     for entry in changes:
         key = (str(entry["kind"]), str(entry["coordinate"]))

@@ -15,7 +15,6 @@ from scipy.stats import chi2
 
 from baseparams.diagnose import derived
 from baseparams.diagnose.candidates import known_values
-from baseparams.diagnose.changeplausible import body_limits
 from baseparams.diagnose.entries import _held_back, absent
 from baseparams.diagnose.estimates import _Prediction, coefficient_names, coefficients
 from baseparams.diagnose.final import outdone, simpler_in_place, weakest_over
@@ -23,7 +22,7 @@ from baseparams.diagnose.outofsample import CrossValidation, cross_validate, hel
 from baseparams.diagnose.problem import Problem
 from baseparams.diagnose.selection import BODY_KINDS, Candidate, Selection
 from baseparams.diagnose.wald import holm
-from baseparams.identify.impossible import implausible
+from baseparams.identify.impossible import body_limits, implausible
 from baseparams.identify.linear import WeightedLinearModel
 
 
@@ -534,7 +533,7 @@ def _body_implausible(problem: Problem, cand: Candidate, values: dict) -> str:
 
 def _beyond_scale(problem: Problem, cand: Candidate, values: dict) -> str:
     """A body's, payload's or mass's coefficient above a hundred times what the mechanism's
-    bodies could have (:func:`.changeplausible.body_limits`; '' when the mechanism gives no
+    bodies could have (:func:`.impossible.body_limits`; '' when the mechanism gives no
     masses): its columns cancel one another. Why: on a real Kinova run held against its first,
     a body on half_arm_1_link came out at m = 7.8e5 kg (refused then only because it moved
     from block to block); between the runs, a 1 kg load was named as -2900 kg on another link."""

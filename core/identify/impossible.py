@@ -400,3 +400,12 @@ def mechanism_scales(mechanism: "Mechanism", parameters: Sequence[str]) -> np.nd
     ``parameters``; None when it gives no masses."""
     size = mechanism_size(mechanism)
     return None if size is None else body_scales(parameters, *size)
+
+
+def body_limits(mechanism: "Mechanism") -> dict[str, float]:
+    """Each body coefficient's physical scale (name -> :func:`body_scales`); {}
+    when the mechanism gives no masses."""
+    size = mechanism_size(mechanism)
+    names = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz")
+    scales = None if size is None else body_scales([f"{n}_body" for n in names], *size)
+    return {} if scales is None else dict(zip(names, (float(v) for v in scales)))
