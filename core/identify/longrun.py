@@ -4,8 +4,6 @@ covariance (:mod:`.linear`), the selection's Wald tests (:mod:`.selection`) and 
 stability test (:mod:`.outofsample`) share."""
 
 import numpy as np
-from scipy.fft import next_fast_len
-from scipy.ndimage import uniform_filter1d
 
 from baseparams.numeric.linalg import svd
 
@@ -14,6 +12,7 @@ def correlation_length(n: int, lags: int) -> int:
     """The FFT length for correlations of n samples up to ``lags`` apart: zero-padded to at
     least n + lags, no circular wrap reaches those lags. A fast length (2, 3, 5 smooth), not
     the next power of two above 2 n: 3 times fewer points at a short window (issue 42)."""
+    from scipy.fft import next_fast_len      # here: scipy.fft is 0.06 CPU s of every identify, which never asks
     return next_fast_len(n + lags, real=True)
 
 
@@ -201,6 +200,7 @@ def local_power(residual: np.ndarray, lags: int) -> np.ndarray:
     Why: real residuals are larger in some regimes (at velocity reversals, under load) and a
     direction acting on a few samples there has a larger variance than the residual's
     overall level says."""
+    from scipy.ndimage import uniform_filter1d    # here: 0.04 CPU s of every identify, which never asks
     window = min(max(LOCAL_WINDOW, 2 * lags + 1), len(residual))
     mean = np.mean(residual ** 2, axis=0)
     live = mean > 0
