@@ -34,7 +34,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))                      # tests/ is not a package
 
-from robot_runs import SECONDS, record, with_payload  # noqa: E402
+from robot_runs import NOISE, RATE, SECONDS, record, with_payload  # noqa: E402
 from urdf_reference import example_robot_data, robot_id  # noqa: E402
 
 ROBOTS = {"panda": "panda_description/panda", "ur10": "ur_description/ur10_robot", "ur3": "ur_description/ur3_robot",
@@ -58,33 +58,36 @@ def command(args: list[str]) -> tuple[subprocess.CompletedProcess, float, float,
     return done, usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024
 
 
-def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SECONDS) -> dict:
+def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SECONDS, rate: float = RATE,
+        payload: float | None = None, noise: float = NOISE) -> dict:
     import pinocchio as pin
     model = pin.buildModelFromUrdf(str(urdf))
     extra: list[str] = []
     cpu_before = 0.0
     if scenario == "payload":
-        friction = record(model, seed + 1000, folder, "empty", "friction", seconds=seconds)
+        friction = record(model, seed + 1000, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
         fitted, cpu_before, _, _ = command(["identify", str(urdf), str(folder / "empty.toml"), "--effect",
                                          "viscous_friction:*", "--effect", "coulomb_friction:*", "--format", "json",
                                          "-o", str(folder / "empty.json"), "--quiet"])
         if fitted.returncode != 0:
             return {"exit": fitted.returncode, "cpu": cpu_before, "wall": 0.0,
                     "error": "identify: " + (fitted.stderr.strip().splitlines() or ["no output"])[-1]}
-        model, truth = with_payload(model)
-        record(model, seed, folder, "rec", "friction", friction, seconds=seconds)      # the same friction, another motion
+        model, truth = with_payload(model, payload)
+        # the same friction, another motion
+        record(model, seed, folder, "rec", "friction", friction, seconds=seconds, rate=rate, noise=noise)
         extra = ["--params", str(folder / "empty.json")]
     elif scenario in ("baseline", "same"):
         # the same motion recorded twice (other noise), the second with the payload (or not):
         # diagnose the second against the first (--baseline)
-        friction = record(model, seed, folder, "empty", "friction", seconds=seconds)
+        friction = record(model, seed, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
         truth = {}
         if scenario == "baseline":
-            model, truth = with_payload(model)
-        record(model, seed, folder, "rec", "friction", friction, noise_seed=seed + 2000, seconds=seconds)
+            model, truth = with_payload(model, payload)
+        record(model, seed, folder, "rec", "friction", friction, noise_seed=seed + 2000, seconds=seconds, rate=rate,
+               noise=noise)
         extra = ["--baseline", str(folder / "empty.toml")]
     else:
-        truth = record(model, seed, folder, "rec", scenario, seconds=seconds)
+        truth = record(model, seed, folder, "rec", scenario, seconds=seconds, rate=rate, noise=noise)
     done, cpu, wall, memory = command(["diagnose", str(urdf), str(folder / "rec.toml"), "--format", "json", "--quiet",
                                *extra])
     out = {"exit": done.returncode, "cpu": cpu, "wall": wall, "memory": memory, "truth": truth,
@@ -98,6 +101,8 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SEC
     except json.JSONDecodeError:
         out["error"] = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "no output"
         return out
+    out["rows"] = (report["pairing"]["changed_samples"] if "changes" in report else report["samples"]["fit"],
+                   len(report["coordinates"]))
     if "changes" in report:                                  # --baseline: a change report
         out.update(verdict=report["verdict"], gap=(report["gap"]["before"], report["gap"]["after"]),
                    named=[(e["kind"], e["coordinate"], e["value"] if not isinstance(e["value"], dict) else
@@ -121,7 +126,12 @@ def main() -> None:
                              "without, diagnosed against the first (--baseline)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--seconds", type=float, default=SECONDS,
-                        help="length of each simulated log (s, at 1 kHz): memory and time on long recordings")
+                        help="length of each simulated log (s): memory and time on long recordings")
+    parser.add_argument("--rate", type=float, default=RATE, help="the logs' sampling rate (Hz; default 1000)")
+    parser.add_argument("--payload", type=float, default=None,
+                        help="the payload's mass (kg; default a fifth of the robot's mass)")
+    parser.add_argument("--noise", type=float, default=NOISE,
+                        help="the torques' AR(1) noise, SD as a fraction of each joint's RMS torque (default 0.02)")
     args = parser.parse_args()
     files = {robot_id(p): p for p in example_robot_data()}
     if not files:
@@ -131,7 +141,8 @@ def main() -> None:
             for scenario in args.scenarios:
                 folder = Path(tmp) / f"{robot}_{scenario}"
                 folder.mkdir()
-                r = run(files[ROBOTS[robot]], scenario, args.seed, folder, args.seconds)
+                r = run(files[ROBOTS[robot]], scenario, args.seed, folder, args.seconds, args.rate, args.payload,
+                        args.noise)
                 if "error" in r:
                     print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s: {r['error']}", flush=True)
                     continue
@@ -149,7 +160,8 @@ def main() -> None:
                 if "same_identify_cpu" in r:
                     print(f"      speed: diagnose {r['cpu']:.1f} CPU s, one identify of the same run "
                           f"{r['same_identify_cpu']:.1f} CPU s: ratio {r['cpu'] / r['same_identify_cpu']:.2f} "
-                          "(issue 42: <= 5)", flush=True)
+                          f"(issue 42: <= 5; the diagnosis on {r['rows'][0]} samples x {r['rows'][1]} joints)",
+                          flush=True)
                 elif r["truth"]:
                     rounded = {j: {k: round(v, 4) for k, v in c.items()} for j, c in r["truth"].items()}
                     print(f"      truth (per joint, fv fc): {rounded}", flush=True)

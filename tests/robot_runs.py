@@ -42,16 +42,17 @@ def motion(model, rng, t):
 
 
 def record(model, seed: int, folder: Path, name: str, friction: str, given: dict | None = None,
-           noise_seed: int | None = None, seconds: float = SECONDS) -> dict:
+           noise_seed: int | None = None, seconds: float = SECONDS, rate: float = RATE, noise: float = NOISE) -> dict:
     """Simulate ``model`` along a motion of ``seed`` with the URDF's own damping and friction,
     the ``friction`` scenario's ('none', 'friction', 'power'; its coefficients ``given`` by
     joint name, else drawn from this run's torques) and AR(1) noise (drawn from ``noise_seed``
     when given: the same motion recorded again); write ``name``.csv and its recording
-    description ``name``.toml; return the hidden friction."""
+    description ``name``.toml, logged at ``rate`` Hz with noise of SD ``noise`` times each
+    joint's RMS torque; return the hidden friction."""
     import pinocchio as pin
     data = model.createData()
     rng = np.random.default_rng(seed)
-    t = np.arange(0, seconds, 1 / RATE)
+    t = np.arange(0, seconds, 1 / rate)
     names, q, qd, qdd, configuration = motion(model, rng, t)
     tau = np.array([pin.rnea(model, data, configuration(q[i]), qd[i], qdd[i]) for i in range(len(t))])
     tau += qd * np.asarray(model.damping) + np.sign(qd) * np.asarray(model.friction)    # the URDF's own
@@ -68,7 +69,7 @@ def record(model, seed: int, folder: Path, name: str, friction: str, given: dict
     e = (rng if noise_seed is None else np.random.default_rng(noise_seed)).standard_normal(tau.shape)
     for i in range(1, len(e)):
         e[i] += RHO * e[i - 1]
-    tau += e * NOISE * rms / e.std(axis=0)
+    tau += e * noise * rms / e.std(axis=0)
     header = ["t"] + [f"q_{n}" for n in names] + [f"tau_{n}" for n in names]
     np.savetxt(folder / f"{name}.csv", np.column_stack([t, q, tau]), delimiter=",", header=",".join(header),
                comments="", fmt="%.9g")
@@ -83,13 +84,15 @@ def record(model, seed: int, folder: Path, name: str, friction: str, given: dict
     return truth
 
 
-def with_payload(model) -> tuple[object, dict]:
-    """A copy of ``model`` carrying a rigid payload of a fifth of its mass on the last moving
-    joint's body, its centre (0.05, 0.03, 0.08) m off that joint's frame, and the truth."""
+def with_payload(model, mass: float | None = None) -> tuple[object, dict]:
+    """A copy of ``model`` carrying a rigid payload of ``mass`` kg (default: a fifth of the
+    robot's mass) on the last moving joint's body, its centre (0.05, 0.03, 0.08) m off that
+    joint's frame, and the truth."""
     import pinocchio as pin
     loaded = model.copy()
     last = max(j for j in range(1, model.njoints) if not any(word in model.names[j] for word in STILL))
-    mass = 0.2 * sum(model.inertias[j].mass for j in range(1, model.njoints))
+    if mass is None:
+        mass = 0.2 * sum(model.inertias[j].mass for j in range(1, model.njoints))
     centre = np.array([0.05, 0.03, 0.08])
     loaded.inertias[last] = loaded.inertias[last] + pin.Inertia(mass, centre, np.diag([1.0, 1.0, 0.5]) * 1e-3 * mass)
     return loaded, {"joint": model.names[last], "mass": round(float(mass), 4), "centre": centre.tolist()}
