@@ -221,3 +221,30 @@ def test_a_missing_symbol_and_an_unknown_function_are_named():
         backends.evaluate(backends.Float64(), sympy.E * T, {"t": 1.0})
     with pytest.raises(ValueError, match="power 1/3 is not supported"):
         backends.evaluate(backends.Float64(), T ** sympy.Rational(1, 3), {"t": 1.0})
+
+
+# ----- names: sympy's parser only where its namespace could read a name otherwise ------------
+def test_every_name_sympy_reads_as_something_else_is_still_refused():
+    import builtins
+    import keyword
+    import string
+
+    from baseparams.model import builder
+    rng = random.Random(3)
+    names = set(dir(sympy)) | set(dir(builtins)) | {"x", "L", "q1", "E", "I", "N", "S", "Q", "O", "beta", "oo", "nan"}
+    names |= {rng.choice(string.ascii_letters + "_") + "".join(rng.choice(string.ascii_letters + string.digits + "_")
+                                                               for _ in range(rng.randint(0, 4))) for _ in range(3000)}
+    checked = 0
+    for name in sorted(names):
+        if not builder.IDENT_RE.match(name) or keyword.iskeyword(name):
+            continue
+        try:
+            read_otherwise = sympy.parse_expr(name) != sympy.Symbol(name)
+        except Exception:                   # noqa: BLE001 - a parser failure is "otherwise" too
+            read_otherwise = True
+        if read_otherwise:
+            assert builder._sympy_may_read(name), name
+            checked += 1
+    assert checked > 500
+    assert builder.name_problem("q_torso") is None and not builder._sympy_may_read("q_torso")
+    assert "means something else to sympy" in builder.name_problem("E")
