@@ -11,7 +11,8 @@ mass, off the last moving joint's axis), the first identified (``identify --effe
 viscous_friction:* --effect coulomb_friction:*``) and the second diagnosed against that
 result (``--params``); ``baseline`` / ``same`` (not in the default set): one motion recorded
 twice with the same friction and other noise, the second with that payload / without,
-diagnosed against the first (``--baseline``). Printed per run: exit code, CPU seconds of the command, verdict, gap,
+diagnosed against the first (``--baseline``); ``other``: the payload's run along another motion,
+diagnosed ``--baseline`` against the first (nothing cancels by pairing). Printed per run: exit code, CPU seconds of the command, verdict, gap,
 the named effects (a correction of a known effect with the model's value) and the truth.
 
     pip install example-robot-data pin
@@ -76,12 +77,13 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SEC
         # the same friction, another motion
         record(model, seed, folder, "rec", "friction", friction, seconds=seconds, rate=rate, noise=noise)
         extra = ["--params", str(folder / "empty.json")]
-    elif scenario in ("baseline", "same"):
-        # the same motion recorded twice (other noise), the second with the payload (or not):
-        # diagnose the second against the first (--baseline)
-        friction = record(model, seed, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
+    elif scenario in ("baseline", "same", "other"):
+        # the same motion recorded twice (other noise), the second with the payload (or not;
+        # 'other': another motion with the payload): diagnose the second against the first (--baseline)
+        first = seed + 1000 if scenario == "other" else seed
+        friction = record(model, first, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
         truth = {}
-        if scenario == "baseline":
+        if scenario in ("baseline", "other"):
             model, truth = with_payload(model, payload)
         record(model, seed, folder, "rec", "friction", friction, noise_seed=seed + 2000, seconds=seconds, rate=rate,
                noise=noise)
@@ -121,9 +123,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=list(DEFAULT), choices=list(ROBOTS))
     parser.add_argument("--scenarios", nargs="+", default=["none", "friction", "power", "payload"],
-                        choices=["none", "friction", "power", "payload", "baseline", "same"],
+                        choices=["none", "friction", "power", "payload", "baseline", "same", "other"],
                         help="baseline / same: one motion recorded twice, the second with the payload / "
-                             "without, diagnosed against the first (--baseline)")
+                             "without, diagnosed against the first (--baseline); other: the payload's run "
+                             "along another motion (--baseline)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--seconds", type=float, default=SECONDS,
                         help="length of each simulated log (s): memory and time on long recordings")
@@ -153,7 +156,7 @@ def main() -> None:
                 for kind, coordinate, values, known in r["named"]:
                     correction = f" correcting {known}" if known else ""
                     print(f"      {kind}:{coordinate} {values}{correction}", flush=True)
-                if scenario in ("payload", "baseline"):
+                if scenario in ("payload", "baseline", "other"):
                     spent = f" (identify of the payload-free run {r['identify_cpu']:.1f} CPU s)" \
                         if scenario == "payload" else ""
                     print(f"      truth: {r['truth']}{spent}", flush=True)
