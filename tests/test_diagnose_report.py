@@ -236,3 +236,10 @@ def test_the_verb_prints_the_short_report_and_the_whole_one_with_verbose(data):
     plain = runner.invoke(main, ["diagnose", "planar_2r", str(data), "--quiet", "--format", "json"])
     verbose = runner.invoke(main, ["diagnose", "planar_2r", str(data), "--quiet", "--format", "json", "--verbose"])
     assert json.loads(plain.stdout) == json.loads(verbose.stdout)
+
+
+def test_a_p_value_that_underflowed_is_printed_below_the_smallest_double():
+    """A change far above the noise has a Holm p of exactly 0.0 in float64 (the PUMA's 5000
+    paired samples, a payload on link6): printed 'p < 1e-300', not 'p = 0'."""
+    from baseparams.api.render import _p
+    assert _p(0.0) == "p < 1e-300" and _p(2.4e-5) == "p = 2.4e-05" and _p(1e-320) == "p = 1e-320"

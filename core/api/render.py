@@ -74,7 +74,7 @@ def _full_text(result: "Diagnosis", written: str | None = None) -> str:
         shape = "".join(f", its force {1e3 * v:.3g} ms late" if k == "lag_s" else f", {k} = {v:.3g}"
                         for k, v in e.get("shape", {}).items())
         lines.append(f"  {e['kind']} on {e['coordinate']}: {_value_text(e)}{shape}{_known_text(e)}{_payload_text(e)}  "
-                     f"(p = {e['test']['pvalue_holm']:.2g}, Holm{_opened_by(e['test'])})")
+                     f"({_p(e['test']['pvalue_holm'])}, Holm{_opened_by(e['test'])})")
     for a in result.ambiguous:
         names = " | ".join(f"{c['kind']}:{c['coordinate']}" for c in a["candidates"])
         corr = max((abs(ev["correlation"]) for ev in a["evidence"]), default=float("nan"))
@@ -330,6 +330,11 @@ def _ambiguous_line(group: dict) -> str:
     return f"ambiguous: {names} (|corr| up to {corr:.3f}); to separate them: {group['separate_by']}"
 
 
+def _p(pvalue: float) -> str:
+    """A p value as printed: one that underflowed to 0 is below the smallest double, not 0."""
+    return "p < 1e-300" if pvalue == 0 else f"p = {pvalue:.2g}"
+
+
 def _opened_by(test: dict) -> str:
     """For an effect named in the place of its step's most significant candidate: whose Holm
     p it is (what the effect adds over that one is in the JSON, ``pvalue_over_strongest``)."""
@@ -446,7 +451,7 @@ def change_text(result: "ChangeDiagnosis", verbose: bool = False, kinds: Mapping
     room = MAX_LINES - 8 - len(groups)
     shown = result.changes if verbose else result.changes[:max(room, 1)]
     for entry in shown:
-        lines.append(f"  {_effect_line(entry, kinds)}  (p = {entry['test']['pvalue_holm']:.2g}, Holm)")
+        lines.append(f"  {_effect_line(entry, kinds)}  ({_p(entry['test']['pvalue_holm'])}, Holm)")
         lines += [f"    or, equivalently, {_effect_line(other, kinds)}" for other in entry.get("alternatives", [])]
         if "equivalent" in entry:      # bodies that move together through a closed loop (issue 49)
             lines.append(f"    equivalent: {entry['equivalent']['reason']}; to separate them: "
