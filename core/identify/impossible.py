@@ -177,19 +177,28 @@ def dual(coefficients: np.ndarray) -> np.ndarray:
     return D
 
 
+def _duals(coefficients: np.ndarray) -> np.ndarray:
+    """:func:`dual` of each row of ``coefficients`` (k, 10): (k, 4, 4), each by the same solve."""
+    d = np.linalg.solve(_dual_map(), coefficients[:, :, None])[:, :, 0]
+    D = np.zeros((len(coefficients), 4, 4))
+    for k, (i, j) in enumerate(_UPPER):
+        D[:, i, j] = D[:, j, i] = d[:, k]
+    return D
+
+
 def nonnegative_on_bodies(row: np.ndarray) -> bool:
-    """Whether ``row . phi >= 0`` for every physically consistent ``phi`` (ten per body)."""
+    """Whether ``row . phi >= 0`` for every physically consistent ``phi`` (ten per body).
+    Every body the row touches at once (one batched solve and eigenvalue call, each matrix's
+    the same as alone: 723 bodies of TIAGo's rows were 0.03 CPU s one by one, issue 47)."""
     row = np.asarray(row, float)
     if not np.any(row) or row.size % 10:
         return False
     scale = float(np.abs(row).max())          # rounding-level terms on another body do not count
-    for b in range(row.size // 10):
-        c = row[10 * b: 10 * b + 10]
-        if not np.any(c):
-            continue
-        if np.linalg.eigvalsh(dual(c))[0] < -_PSD_TOLERANCE * scale:
-            return False
-    return True
+    blocks = row.reshape(-1, 10)
+    touched = blocks[np.any(blocks, axis=1)]
+    if not np.all(np.isfinite(touched)):       # body by body, as always (LAPACK refuses a NaN)
+        return all(not np.linalg.eigvalsh(dual(c))[0] < -_PSD_TOLERANCE * scale for c in touched)
+    return not np.any(np.linalg.eigvalsh(_duals(touched))[:, 0] < -_PSD_TOLERANCE * scale)
 
 
 def _what(row: np.ndarray, parameters: Sequence[str]) -> str:
