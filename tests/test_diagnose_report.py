@@ -243,3 +243,23 @@ def test_a_p_value_that_underflowed_is_printed_below_the_smallest_double():
     paired samples, a payload on link6): printed 'p < 1e-300', not 'p = 0'."""
     from baseparams.api.render import _p
     assert _p(0.0) == "p < 1e-300" and _p(2.4e-5) == "p = 2.4e-05" and _p(1e-320) == "p = 1e-320"
+
+
+def test_a_load_taken_off_is_reported_with_its_place():
+    """The runs given the other way round (the payload's run as the baseline): the change is a
+    negative body on link6, printed as a load taken off, at the load's place (its first moments
+    over its mass: the same point either way), within 3 std of the simulated payload."""
+    from baseparams.diagnose.change import diagnose_change
+    from baseparams.api.render import change_text
+    from baseparams.io.loader import resolve
+    from baseparams.recordings.simulate import simulate_change
+    mechanism = resolve("puma560")
+    before, after, truth = simulate_change(mechanism, samples=2000, seed=1, payload=0.5, noise="white")
+    result = diagnose_change(mechanism, after, before)
+    assert [(c["kind"], c["coordinate"]) for c in result.changes] == [("body", "link6")], result.notes
+    change = result.changes[0]
+    m, sd = change["value"]["m"], change["std"]["m"]
+    assert abs(m + truth["payload"]["mass"]) <= 3 * sd
+    assert np.allclose(change["centre_of_mass"], truth["payload"]["centre"], atol=0.01), change["centre_of_mass"]
+    line = next(line for line in change_text(result).splitlines() if "body on link6" in line)
+    assert "(a load taken off) at (" in line, line

@@ -376,14 +376,15 @@ def _effect_line(effect: dict, kinds: Mapping[str, str]) -> str:
 
 
 def _body_text(c: dict) -> str:
-    """A changed body: its added mass with its std, where it sits (the first moments over the
-    mass, in the body's axes) when both are determined, and what the data do not determine."""
+    """A changed body: its added mass with its std (negative: a load taken off), where it sits
+    (the first moments over the mass, in the body's axes: a point load's place either way) when
+    both are determined, and what the data do not determine."""
     absorbed = [name for name, v in c.items() if v["value"] is None]
     m = c["m"]
     parts = []
     if m["value"] is not None:
-        text = f"{_pm(m['value'], m['std'])} kg"
-        determined = m["value"] > 0 and (m["std"] is None or m["value"] > 2 * m["std"])
+        text = f"{_pm(m['value'], m['std'])} kg" + (" (a load taken off)" if m["value"] < 0 else "")
+        determined = m["value"] != 0 and (m["std"] is None or abs(m["value"]) > 2 * m["std"])
         if determined and all(c[k]["value"] is not None for k in ("mx", "my", "mz")):
             centre = [c[k]["value"] / m["value"] for k in ("mx", "my", "mz")]
             largest = max(abs(x) for x in centre)
