@@ -20,11 +20,45 @@ if TYPE_CHECKING:
     from baseparams.diagnose.workflow import Diagnosis
 
 
-@main.command()
+def baseline_runs(args: list[str]) -> list[str]:
+    """``args`` with every path after ``--baseline BASE`` up to the next option read as another
+    baseline run (``--baseline B1 B2``, as the usage line ``--baseline BASE...`` writes it).
+    Why: click gives an option one value, so B2 was read as a changed run, and the baseline's
+    own run among the changed ones halved the payload found (PUMA, two runs a side: 0.015 kg
+    for 0.027). The changed runs (DATA) go before ``--baseline``."""
+    out: list[str] = []
+    taking = False
+    for k, token in enumerate(args):
+        if token == "--":
+            return out + args[k:]
+        if taking and not token.startswith("-"):
+            out += ["--baseline", token]
+            continue
+        taking = token.startswith("--baseline=") or (out[-1:] == ["--baseline"] and not token.startswith("-"))
+        out.append(token)
+    return out
+
+
+class _DiagnoseCommand(click.Command):
+    """diagnose's parser: ``--baseline`` takes every path after it (:func:`baseline_runs`)."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        runs = baseline_runs(list(args))
+        try:
+            return super().parse_args(ctx, runs)
+        except click.MissingParameter as exc:
+            if runs != list(args) and exc.param is not None and exc.param.name == "data_paths":
+                raise click.BadParameter("no changed runs: every path after --baseline is a baseline run; put the "
+                                         "changed runs (DATA) before --baseline", ctx=ctx, param=exc.param) from None
+            raise
+
+
+@main.command(cls=_DiagnoseCommand)
 @click.argument("mech", metavar="MECH")
 @click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
-@click.option("--baseline", "baseline", multiple=True, metavar="BASE",
-              help="Runs of the same robot before a change (CSV or recording description; repeatable): "
+@click.option("--baseline", "baseline", multiple=True, metavar="BASE...",
+              help="Runs of the same robot before a change (CSV or recording descriptions: every path after "
+                   "--baseline up to the next option, so DATA goes before it): "
                    "name what changed between them and DATA (a payload on a body, a torque gain, a friction, "
                    "an offset, a delay) instead. One model is shared by both; what both lack cancels between "
                    "samples in the same state. Exit 0 for 'nothing changed' or 'changed' (explained).")

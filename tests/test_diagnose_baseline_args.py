@@ -1,0 +1,62 @@
+"""``diagnose CHANGED... --baseline BASE...``: every path after --baseline up to the next option
+is a baseline run, as the usage line writes it. Click alone gave the option one value and read
+the next path as a changed run: the baseline's own run among the changed ones (PUMA, two runs a
+side) halved the payload found (0.015 kg for 0.027) and the gap did not close."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from baseparams.cli import main
+from baseparams.cli.diagnose import baseline_runs
+from baseparams.io.loader import resolve
+from baseparams.recordings.data import write_measured
+from baseparams.recordings.simulate import simulate_change
+
+
+def test_paths_after_baseline_are_baseline_runs():
+    assert baseline_runs(["m", "c1", "c2", "--baseline", "b1", "b2", "--plot", "p.png"]) == \
+        ["m", "c1", "c2", "--baseline", "b1", "--baseline", "b2", "--plot", "p.png"]
+    assert baseline_runs(["m", "c1", "--baseline=b1", "b2"]) == ["m", "c1", "--baseline=b1", "--baseline", "b2"]
+    assert baseline_runs(["m", "c1", "--baseline", "b1", "--", "-c2"]) == ["m", "c1", "--baseline", "b1", "--", "-c2"]
+    assert baseline_runs(["m", "--plot", "p.png", "c1", "--baseline", "b1", "-"]) == \
+        ["m", "--plot", "p.png", "c1", "--baseline", "b1", "-"]
+    assert baseline_runs(["m", "c1", "--format", "json"]) == ["m", "c1", "--format", "json"]
+
+
+@pytest.fixture(scope="module")
+def two_runs_a_side(tmp_path_factory):
+    """The PUMA before and after a payload, each recorded twice (independent white noise, SD 1 %
+    of each coordinate's RMS torque)."""
+    folder = tmp_path_factory.mktemp("runs")
+    before, after, truth = simulate_change(resolve("puma560"), samples=1500, seed=11, payload=0.3, noise_level=0.0)
+    rng = np.random.default_rng(5)
+    sd = 0.01 * np.sqrt(np.mean(before.tau ** 2, axis=0))
+    for k in (1, 2):
+        for name, data in (("base", before), ("changed", after)):
+            noisy = dataclasses.replace(data, tau=data.tau + rng.standard_normal(data.tau.shape) * sd)
+            write_measured(folder / f"{name}{k}.csv", noisy)
+    return folder, truth
+
+
+def test_two_runs_a_side_after_one_baseline_option(two_runs_a_side):
+    folder, truth = two_runs_a_side
+    c1, c2, b1, b2 = (str(folder / n) for n in ("changed1.csv", "changed2.csv", "base1.csv", "base2.csv"))
+    result = CliRunner().invoke(main, ["diagnose", "puma560", c1, c2, "--baseline", b1, b2, "--format", "json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["pairing"]["baseline_samples"] == report["pairing"]["changed_samples"] == 3000
+    assert [(c["kind"], c["coordinate"]) for c in report["changes"]] == [("body", "link6")], report["notes"]
+    change = report["changes"][0]
+    assert abs(change["value"]["m"] - float(truth["payload"]["mass"])) <= 3 * change["std"]["m"]
+
+
+def test_changed_runs_after_the_baseline_are_refused_with_the_order(two_runs_a_side):
+    folder, _ = two_runs_a_side
+    result = CliRunner().invoke(main, ["diagnose", "puma560", "--baseline", str(folder / "base1.csv"),
+                                       str(folder / "changed1.csv")])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert result.stderr.count("\n") == 1 and "before --baseline" in result.stderr, result.stderr
