@@ -130,8 +130,9 @@ def _digits_of(beta: arb_mat) -> tuple[list[list[float]], float]:
     cols = beta.ncols()
     values = beta.entries()
     zero = list(map(arb.contains, values, itertools.repeat(0)))      # most of beta: read in C
+    exact = list(map(arb.is_exact, values))                          # radius 0, read in C too
     # radius_digits of a ball that contains 0 without the call: inf when it is exact, else 0
-    digits = [(math.inf if x.rad() == 0 else 0) if z else balls.radius_digits(x) for x, z in zip(values, zero)]
+    digits = [(math.inf if e else 0) if z else balls.radius_digits(x) for x, z, e in zip(values, zero, exact)]
     least = min((d for d, z in zip(digits, zero) if not z), default=math.inf)
     return [digits[i * cols:(i + 1) * cols] for i in range(beta.nrows())], least
 
