@@ -11,10 +11,14 @@ import pytest
 from click.testing import CliRunner
 
 from baseparams.cli import main
-from baseparams.cli.diagnose import baseline_runs
+from baseparams.cli.options import paths_after
 from baseparams.io.loader import resolve
 from baseparams.recordings.data import write_measured
 from baseparams.recordings.simulate import simulate_change
+
+
+def baseline_runs(args: list[str]) -> list[str]:
+    return paths_after(args, ("--baseline",))
 
 
 def test_paths_after_baseline_are_baseline_runs():
@@ -60,3 +64,19 @@ def test_changed_runs_after_the_baseline_are_refused_with_the_order(two_runs_a_s
                                        str(folder / "changed1.csv")])
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert result.stderr.count("\n") == 1 and "before --baseline" in result.stderr, result.stderr
+
+
+def test_paths_after_validate_are_validated_not_fitted(tmp_path):
+    """identify's --validate OTHER... likewise: 'identify MECH D --validate V1 V2' validates on
+    both (V2 was fitted); DATA after them is refused with the order."""
+    from baseparams.recordings.simulate import simulate
+    mechanism = resolve("planar_2r")
+    for k, seed in enumerate((1, 2, 3)):
+        write_measured(tmp_path / f"r{k}.csv", simulate(mechanism, samples=300, seed=seed, noise_sd=0.01)[0])
+    r0, r1, r2 = (str(tmp_path / f"r{k}.csv") for k in range(3))
+    result = CliRunner().invoke(main, ["identify", "planar_2r", r0, "--validate", r1, r2, "--format", "json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert [v["data"] for v in report["validation"]] == [r1, r2], report["validation"]
+    wrong = CliRunner().invoke(main, ["identify", "planar_2r", "--validate", r1, r0])
+    assert wrong.exit_code == 2 and "before --validate" in wrong.stderr and wrong.stderr.count("\n") == 1

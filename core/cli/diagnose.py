@@ -10,7 +10,7 @@ import click
 
 from baseparams.api.render import diagnosis_text as render_text
 from baseparams.cli.commands import emit, load, main
-from baseparams.cli.options import Progress, format_option, output_option, quiet_option
+from baseparams.cli.options import PathsAfterOptions, Progress, format_option, output_option, quiet_option
 from baseparams.cli.plots import _figure, _save
 
 # The statistics (scipy.signal, scipy.stats, statsmodels: slow imports) are imported by
@@ -20,37 +20,9 @@ if TYPE_CHECKING:
     from baseparams.diagnose.workflow import Diagnosis
 
 
-def baseline_runs(args: list[str]) -> list[str]:
-    """``args`` with every path after ``--baseline BASE`` up to the next option read as another
-    baseline run (``--baseline B1 B2``, as the usage line ``--baseline BASE...`` writes it).
-    Why: click gives an option one value, so B2 was read as a changed run, and the baseline's
-    own run among the changed ones halved the payload found (PUMA, two runs a side: 0.015 kg
-    for 0.027). The changed runs (DATA) go before ``--baseline``."""
-    out: list[str] = []
-    taking = False
-    for k, token in enumerate(args):
-        if token == "--":
-            return out + args[k:]
-        if taking and not token.startswith("-"):
-            out += ["--baseline", token]
-            continue
-        taking = token.startswith("--baseline=") or (out[-1:] == ["--baseline"] and not token.startswith("-"))
-        out.append(token)
-    return out
-
-
-class _DiagnoseCommand(click.Command):
-    """diagnose's parser: ``--baseline`` takes every path after it (:func:`baseline_runs`)."""
-
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-        runs = baseline_runs(list(args))
-        try:
-            return super().parse_args(ctx, runs)
-        except click.MissingParameter as exc:
-            if runs != list(args) and exc.param is not None and exc.param.name == "data_paths":
-                raise click.BadParameter("no changed runs: every path after --baseline is a baseline run; put the "
-                                         "changed runs (DATA) before --baseline", ctx=ctx, param=exc.param) from None
-            raise
+class _DiagnoseCommand(PathsAfterOptions):
+    """diagnose's parser: ``--baseline`` takes every path after it (``--baseline BASE...``)."""
+    greedy = ("--baseline",)
 
 
 @main.command(cls=_DiagnoseCommand)

@@ -10,8 +10,8 @@ import click
 from baseparams.api.data import same_file
 from baseparams.api.effects import parse_effect, parse_effects  # noqa: F401  (their home moved; kept importable)
 from baseparams.cli.commands import emit, get_solver, load, main
-from baseparams.cli.options import (Progress, format_option, output_option, quiet_option, samples_option, seed_option,
-                                    solver_option, solver_options_option)
+from baseparams.cli.options import (PathsAfterOptions, Progress, format_option, output_option, quiet_option,
+                                    samples_option, seed_option, solver_option, solver_options_option)
 from baseparams.errors import InputError
 from baseparams.solvers.protocol import options_from_text
 
@@ -74,7 +74,12 @@ def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str
 
 
 # ----- identify ---------------------------------------------------------------------------
-@main.command()
+class _IdentifyCommand(PathsAfterOptions):
+    """identify's parser: ``--validate`` takes every path after it (``--validate OTHER...``)."""
+    greedy = ("--validate",)
+
+
+@main.command(cls=_IdentifyCommand)
 @click.argument("mech", metavar="MECH")
 @click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--effect", "effects", multiple=True, metavar="KIND:COORD",
@@ -84,9 +89,10 @@ def simulate(mech: str, output: str | None, effects: tuple[str, ...], noise: str
 @solver_option(help="The solver whose base parameters are fitted (dp is faster; its coefficients may "
                     "carry too few digits on badly conditioned mechanisms, which the result notes).")
 @solver_options_option()
-@click.option("--validate", "validate_paths", multiple=True, metavar="OTHER",
-              help="Predict this recording (CSV or description) with the identified model and print "
-                   "the error per coordinate; repeatable.")
+@click.option("--validate", "validate_paths", multiple=True, metavar="OTHER...",
+              help="Predict these recordings (CSV or descriptions: every path after --validate up to the next "
+                   "option, so DATA goes before it) with the identified model and print the error per "
+                   "coordinate.")
 @click.option("--physical", is_flag=True,
               help="Also physically consistent standard parameters reproducing the base estimates "
                    "(needs cvxpy: pip install 'baseparams[physical]'); the text gives the programme's status.")

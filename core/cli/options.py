@@ -22,6 +22,46 @@ F = TypeVar("F", bound=Callable[..., Any])
 Decorator = Callable[[F], F]
 
 
+def paths_after(args: list[str], options: Iterable[str]) -> list[str]:
+    """``args`` with every path after ``OPTION VALUE`` (an option of ``options``) up to the next
+    option read as another value of it: ``--baseline B1 B2`` as ``--baseline B1 --baseline B2``.
+    Why: click gives an option one value, so the usage line's ``--baseline BASE...`` read B2 as
+    a changed run (the baseline's own run among the changed ones halved a payload found), and
+    ``--validate V1 V2`` fitted V2. The verb's own paths (DATA) go before such an option."""
+    names = tuple(options)
+    out: list[str] = []
+    taking = ""
+    for k, token in enumerate(args):
+        if token == "--":
+            return out + args[k:]
+        if taking and not token.startswith("-"):
+            out += [taking, token]
+            continue
+        taking = next((n for n in names if token.startswith(n + "=")), "") or \
+            (out[-1] if out and out[-1] in names and not token.startswith("-") else "")
+        out.append(token)
+    return out
+
+
+class PathsAfterOptions(click.Command):
+    """A verb whose options :attr:`greedy` take every path after them (:func:`paths_after`);
+    its paths before them (:attr:`paths`, the argument's name) are then required there."""
+    greedy: tuple[str, ...] = ()
+    paths = "data_paths"
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        read = paths_after(list(args), self.greedy)
+        try:
+            return super().parse_args(ctx, read)
+        except click.MissingParameter as exc:
+            if read != list(args) and exc.param is not None and exc.param.name == self.paths:
+                taken = " / ".join(self.greedy)
+                raise click.BadParameter(f"none given: every path after {taken} is one of its runs; put "
+                                         f"{exc.param.human_readable_name} before {taken}",
+                                         ctx=ctx, param=exc.param) from None
+            raise
+
+
 def output_option(help: str = "Write the output to FILE (atomically) instead of standard output.",
                   required: bool = False) -> Decorator:
     """``-o/--output FILE``: the verb's output goes there; standard output when absent.
