@@ -261,7 +261,8 @@ def identify(mechanism: Mechanism, data: MeasuredData, *, effects: Sequence[Effe
     if known:
         y = y - columns.matrix[:, :, identified_width:] @ effect_values(mechanism, known)
     Kb = base.columns(inertial.matrix)
-    X = np.concatenate([Kb, columns.matrix[:, :, :identified_width]], axis=-1)
+    # base columns only: K_b itself (a copy is 24 MB of fresh pages on TIAGo)
+    X = np.concatenate([Kb, columns.matrix[:, :, :identified_width]], axis=-1) if identified_width else Kb
     all_names = tuple(base.names) + tuple(columns.names[:identified_width])
     if data.gain_names:               # unknown current gains: model - sum(g c) = known forces
         if not np.any(y):
