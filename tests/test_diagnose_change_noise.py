@@ -11,8 +11,8 @@ from scipy.linalg import toeplitz
 from scipy.signal import lfilter
 
 from baseparams.diagnose.change import diagnose_change
-from baseparams.diagnose.changesearch import (_filtered, _lagged_cross, ar_autocovariance, noise_filters,
-                                             toeplitz_times)
+from baseparams.diagnose.changesearch import _filtered, ar_autocovariance, noise_filters, toeplitz_times
+from baseparams.diagnose.lagged import lagged_cross
 from baseparams.io.loader import parse_mechanism, resolve
 from baseparams.model import generate
 from baseparams.recordings.simulate import simulate_change
@@ -35,7 +35,7 @@ def test_lagged_cross_is_the_direct_sum():
     A, B, top = rng.standard_normal((40, 3)), rng.standard_normal((40, 3)), 5
     direct = np.array([[sum(A[t - i] @ B[t - l] for t in range(top, 40)) for l in range(top + 1)]
                        for i in range(top + 1)])
-    assert np.allclose(_lagged_cross(A, B, top), direct, atol=1e-12)
+    assert np.allclose(lagged_cross(A, B, top), direct, atol=1e-12)
 
 
 def _slow_design(n: int, k: int, rng: np.random.Generator) -> np.ndarray:

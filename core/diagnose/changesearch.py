@@ -7,10 +7,12 @@ candidates' columns on its rows."""
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_triangular
 from scipy.signal import lfilter
 from scipy.special import fdtrc, ndtri
 
 from baseparams.identify.linear import WeightedLinearModel
+from baseparams.diagnose.lagged import fast_size, lagged_cross, spectra
 from baseparams.diagnose.selection import Candidate
 from baseparams.diagnose.wald import holm, orthonormal_basis, project_out, wilson_hilferty
 
@@ -24,6 +26,9 @@ AR_ORDER = 20
 # Singular values of a coordinate's share of the fitted directions below which they are left
 # out of the projection's correction (noise_model).
 COMPRESS = 0.05
+# _bic_filter's order-recursive route: the lagged Gram matrix's condition number at most this (both
+# routes then solve the same full-rank equations, to about this times eps).
+BIC_CONDITION = 1e12
 # A search's F tests count their noise level's degrees of freedom (effective_df) only below this
 # p on the residual's: fewer only raise p, so above it they change no decision.
 LAZY_P = 0.2
@@ -67,35 +72,48 @@ def ar_autocovariance(filter_: np.ndarray, variance: float, n: int) -> np.ndarra
     return np.fft.irfft(spectrum, size)[:n]
 
 
-def toeplitz_times(autocovariance: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The symmetric Toeplitz matrix of ``autocovariance`` (n,) times ``x`` (n, k), by FFT."""
+def toeplitz_times(autocovariance: np.ndarray, x: np.ndarray, spectra: np.ndarray | None = None) -> np.ndarray:
+    """The symmetric Toeplitz matrix of ``autocovariance`` (n,) times ``x`` (n, k), by FFT
+    (circulant embedding). ``spectra``: :func:`toeplitz_spectra` of x, when made already (the
+    noise model multiplies the same columns in every round)."""
     n = len(autocovariance)
-    size = 1 << int(np.ceil(np.log2(2 * n)))
+    size = fast_size(2 * n - 1)
     column = np.concatenate([autocovariance, np.zeros(size - 2 * n + 1), autocovariance[:0:-1]])
-    # each column's transforms along contiguous rows (the same transforms, 2.4 times faster; the
-    # result laid out as before, columns outermost: the products downstream round alike)
-    spectra = np.fft.rfft(np.ascontiguousarray(x.T), size, axis=1)
+    if spectra is None:
+        spectra = toeplitz_spectra(x)
     return np.fft.irfft(np.fft.rfft(column)[None, :] * spectra, size, axis=1)[:, :n].T
 
 
-def _lagged_cross(A: np.ndarray, B: np.ndarray, top: int) -> np.ndarray:
-    """(top + 1, top + 1): sum over t = top .. n - 1 of A[t - i] . B[t - l] (rows of A and B
-    (n, k) as vectors), from one running sum per lag l - i."""
-    n = len(A)
-    out = np.zeros((top + 1, top + 1))
-    for h in range(-top, top + 1):                  # h = l - i
-        products = np.zeros(n + 1)
-        first, last = max(0, h), min(n, n + h)
-        products[first + 1:last + 1] = np.einsum("sk,sk->s", A[first:last], B[first - h:last - h])
-        running = np.cumsum(products)
-        i = np.arange(max(0, -h), min(top, top - h) + 1)
-        out[i, i + h] = running[n - i] - running[top - i]
-    return out
+def toeplitz_spectra(x: np.ndarray) -> np.ndarray:
+    """The transforms of x's columns (n, k) that :func:`toeplitz_times` multiplies: along
+    contiguous rows (the same transforms, 2.4 times faster than down the columns)."""
+    return np.fft.rfft(np.ascontiguousarray(x.T), fast_size(2 * len(x) - 1), axis=1)
 
 
 def _bic_filter(gram: np.ndarray, rows: int) -> tuple[np.ndarray, float]:
     """(prediction-error filter, innovation variance) of the autoregression whose order
-    (<= the lagged cross products ``gram``'s size - 1) has the least BIC, by least squares."""
+    (<= the lagged cross products ``gram``'s size - 1) has the least BIC, by least squares.
+    Every order's fit from one Cholesky factor L of the lagged Gram matrix: order p's normal
+    equations are its leading p x p block, whose factor is L's, so z = L^-1 g holds every
+    order's explained sum of squares as a prefix sum of z^2 (order-recursive least squares).
+    Why: a least-squares solve per order was a twentieth of a diagnosis between recordings.
+    A lagged Gram matrix worse conditioned than BIC_CONDITION is left to the solve per order
+    (least squares' own cut, eps 20 times the largest singular value, is then near)."""
+    top = len(gram) - 1
+    values = np.linalg.eigvalsh(gram[1:, 1:]) if top > 0 else np.zeros(1)
+    if values[0] > values[-1] / BIC_CONDITION:           # every leading block as well conditioned (interlacing)
+        try:
+            factor = np.linalg.cholesky(gram[1:, 1:])
+        except np.linalg.LinAlgError:
+            factor = None
+        if factor is not None:
+            z = solve_triangular(factor, gram[1:, 0], lower=True, check_finite=False)
+            explained = np.concatenate([[0.0], np.cumsum(z * z)])
+            variances = np.maximum((float(gram[0, 0]) - explained) / rows, 1e-300)
+            bics = rows * np.log(variances) + np.arange(top + 1) * np.log(rows)
+            order = int(np.argmin(bics))
+            coefficients = solve_triangular(factor[:order, :order].T, z[:order], lower=False, check_finite=False)
+            return np.concatenate([[1.0], -coefficients]), float(variances[order])
     best_bic, best = np.inf, (np.array([1.0]), max(float(gram[0, 0]) / rows, 1e-300))
     for p in range(len(gram)):
         a = np.linalg.lstsq(gram[1:p + 1, 1:p + 1], gram[1:p + 1, 0], rcond=None)[0] if p else np.zeros(0)
@@ -154,24 +172,36 @@ def noise_model(signal: np.ndarray, design: np.ndarray, order: int = AR_ORDER, r
     Q = Q.reshape(n, f, -1)
     top = min(order, max(n // 20, 0))
     rows = n - top
-    plain = [_lagged_cross(residual[:, j:j + 1], residual[:, j:j + 1], top) for j in range(f)]
+    plain = []
+    for j in range(f):
+        x = residual[:, j:j + 1]
+        plain.append(lagged_cross(x, x, top))
     fitted = [_bic_filter(g, rows) for g in plain]
     grams = list(plain)
     # each coordinate's rows of Q as U S V^T, directions of singular value <= COMPRESS left out
     # (they hold under 0.25 % of a direction each): Q_j^T Sigma Q_j and the lagged sums then
-    # run over those few columns (a PUMA's 61 directions: 10-34 per coordinate)
-    parts = []
+    # run over those few columns (a PUMA's 61 directions: 10-34 per coordinate), whose spectra
+    # serve every round
+    # (from the eigenvectors of Q_j^T Q_j = V S^2 V^T, U S = Q_j V: S is at most 1 and only S > COMPRESS
+    # is kept, far above what the Gram matrix resolves)
+    parts, transforms, circulant = [], [], []
     for j in range(f if Q.shape[-1] else 0):
-        U, values, Vt = np.linalg.svd(Q[:, j], full_matrices=False)
-        keep = values > COMPRESS
-        parts.append((U[:, keep] * values[keep], Vt[keep]))
+        Qj = Q[:, j]
+        squares, V = np.linalg.eigh(Qj.T @ Qj)
+        keep = np.flatnonzero(squares > COMPRESS ** 2)[::-1]           # largest first
+        parts.append((Qj @ V[:, keep], V[:, keep].T))
+        transforms.append(spectra(parts[-1][0], top))
+        circulant.append(toeplitz_spectra(parts[-1][0]))
     for _ in range(rounds if Q.shape[-1] else 0):
-        Y = [toeplitz_times(ar_autocovariance(c, v, n), US) for (c, v), (US, _) in zip(fitted, parts)]
+        Y = [toeplitz_times(ar_autocovariance(c, v, n), US, spectrum)
+             for (c, v), (US, _), spectrum in zip(fitted, parts, circulant)]
         W = sum(Vt.T @ (US.T @ y) @ Vt for (US, Vt), y in zip(parts, Y))       # Q^T Sigma Q
         again = []
         for j, ((US, Vt), y) in enumerate(zip(parts, Y)):
-            cross = _lagged_cross(y, US, top)
-            taken = cross + cross.T - _lagged_cross(US @ (Vt @ W @ Vt.T), US, top)
+            # L(Y, US) + L(Y, US)^T - L(US M, US) with M = Vt W Vt^T symmetric, so L(US M, US) is
+            # too: one lagged product X = L(Y - US M / 2, US) and taken = X + X^T
+            half = lagged_cross(y - US @ (Vt @ W @ Vt.T) / 2.0, US, top, spectrum_b=transforms[j])
+            taken = half + half.T
             again.append(_corrected(plain[j], taken, rows, fitted[j]))
             if again[-1] is not fitted[j]:
                 grams[j] = plain[j] + taken
