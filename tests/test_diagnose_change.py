@@ -229,7 +229,7 @@ def test_report_fits_one_screen_whatever_the_counts(puma):
 def test_shifting_is_exact_on_cubics_on_any_spacing():
     """The delay's columns are the signals as they were d seconds earlier: a cubic in t is
     shifted exactly (irregular stamps too), and before a segment's first row it is held."""
-    from baseparams.diagnose.change import local_cubic
+    from baseparams.diagnose.timeshift import local_cubic
     t = np.sort(np.random.default_rng(4).uniform(0.0, 3.0, 400))
     x = np.stack([t ** 3 - 2 * t, 0.5 * t ** 2 + 1.0], axis=1)
     at = np.clip(t - 0.0137, t[0], t[-1])

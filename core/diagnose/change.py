@@ -66,6 +66,8 @@ from baseparams.diagnose.changeplausible import impossible_changes, shared_value
 from baseparams.identify.impossible import body_limits
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
 from baseparams.dynamics.forces import evaluate, independent_names
+from baseparams.numeric.linalg import gram_route
+from baseparams.diagnose.timeshift import shifted, time_derivative
 from baseparams.diagnose.changesearch import (BLOCKS, UNEXPLAINED_BAR, Search, _filtered, held_out_gain,
                                              named_changes, noise_filters, predicts, rest_test)
 from baseparams.diagnose.selection import Candidate, Whitening
@@ -239,68 +241,6 @@ def pair_runs(baseline: np.ndarray, changed: np.ndarray, base_runs: np.ndarray, 
     return partner, distance
 
 
-def time_derivative(x: np.ndarray, data: MeasuredData) -> np.ndarray:
-    """d/dt of ``x`` (n, ...) at the fit's rows, run by run (segment by segment: no
-    derivative across a clock reset or two logs joined)."""
-    t = data.t
-    out = np.zeros_like(x)
-    edges = np.cumsum([0] + [len(s.kept()) for s in data.segments])
-    for a, b in zip(edges[:-1], edges[1:]):
-        if b - a >= 2:
-            out[a:b] = np.gradient(x[a:b], t[a:b], axis=0)
-    return out
-
-
-def shifted(x: np.ndarray, data: MeasuredData, delay: float) -> np.ndarray:
-    """``x`` (n, ...) at the fit's rows as it was ``delay`` seconds earlier, run by run: cubic
-    interpolation through the four rows around each instant (held at a segment's first row
-    before it). Local, so its cost is four gathers: a spline through every column cost a third
-    of a diagnosis between recordings, for the same order of accuracy (h^4)."""
-    if delay == 0.0:
-        return x
-    t = data.t
-    edges = np.cumsum([0] + [len(s.kept()) for s in data.segments])
-    if len(edges) == 2 and edges[1] == len(x) == len(t) and len(x) >= 4:    # one run: no copy to write into
-        moved = local_cubic(t, x, np.clip(t - delay, t[0], t[-1]))
-        if x.flags.c_contiguous:
-            return moved
-        out = np.empty_like(x, dtype=float)     # x's memory layout: the products downstream round alike
-        out[...] = moved
-        return out
-    out = np.array(x, dtype=float, copy=True)
-    for a, b in zip(edges[:-1], edges[1:]):
-        if b - a >= 4:
-            out[a:b] = local_cubic(t[a:b], x[a:b], np.clip(t[a:b] - delay, t[a], t[b - 1]))
-    return out
-
-
-def local_cubic(t: np.ndarray, x: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """``x`` (n >= 4, ...) sampled at increasing ``t``, at the instants ``at`` (within t's span):
-    the Lagrange cubic through the nearest four samples (exact on cubics; any spacing)."""
-    first = np.clip(np.searchsorted(t, at, side="right") - 2, 0, len(t) - 4)
-    nodes = t[first[:, None] + np.arange(4)]                      # (m, 4)
-    out = np.zeros((len(at),) + x.shape[1:])
-    flat = x.reshape(len(x), -1)
-    live = np.flatnonzero(np.any(flat != 0, axis=0))    # zero columns stay zero: most candidates' are
-    if len(live) == 0:
-        return out
-    whole = len(live) == flat.shape[1]
-    flat = flat if whole else flat[:, live]
-    rows = np.zeros((len(at), flat.shape[1]))
-    for k in range(4):                                  # in place: a third less time
-        weight = np.ones(len(at))
-        for j in range(4):
-            if j != k:
-                weight *= (at - nodes[:, j]) / (nodes[:, k] - nodes[:, j])
-        part = np.take(flat, first + k, axis=0)
-        part *= weight[:, None]
-        rows += part
-    if whole:
-        return rows.reshape(out.shape)
-    out.reshape(len(at), -1)[:, live] = rows
-    return out
-
-
 def delayed_all(candidates: list[Candidate], delay: float, data: MeasuredData) -> list[Candidate]:
     """Every candidate's columns (and every shaped one's variants) late by ``delay`` (s)
     (:func:`shifted`), all in one spline (one per candidate cost a fifth of the diagnosis)."""
@@ -444,7 +384,15 @@ def _change_lag(chosen: Search, kept: set, y: np.ndarray, data: MeasuredData, ro
 
 def diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, *,
                     given: Given | None = None, alpha: float = 0.05) -> ChangeDiagnosis:
-    """What changed between the ``baseline`` runs and the ``changed`` runs (module docstring)."""
+    """What changed between the ``baseline`` runs and the ``changed`` runs (module docstring);
+    its rank-deficient fits through their Gram matrices (:func:`~baseparams.numeric.linalg.gram_route`)."""
+    with gram_route():
+        return _diagnose_change(mechanism, baseline, changed, given, alpha)
+
+
+def _diagnose_change(mechanism: Mechanism, baseline: MeasuredData, changed: MeasuredData, given: Given | None,
+                     alpha: float) -> ChangeDiagnosis:
+    """:func:`diagnose_change`'s work."""
     coordinates, base, other = _sides(mechanism, baseline, changed, given, alpha)
     notes: list[str] = []
     f = len(coordinates)
