@@ -89,3 +89,35 @@ def test_a_nan_body_is_refused_as_before():
         _one_body_at_a_time(row)
     with pytest.raises(np.linalg.LinAlgError):
         nonnegative_on_bodies(row)
+
+
+# ----- measured_design: the pieces themselves when nothing is reduced ------------------------
+@pytest.mark.parametrize("name, effects, known", [
+    ("planar_2r", ["viscous_friction:q1"], []),
+    ("puma560", ["viscous_friction:q1", "coulomb_friction:q2"], ["offset:q3"]),
+    ("sla_suspension", [], []),
+])
+def test_the_design_of_unreduced_data_is_the_cut_concatenation(name, effects, known, tmp_path, monkeypatch):
+    """Unreduced data (no filter, decimation or mask) take the built pieces as they are; the
+    arrays (values, dtype, layout) are those cut from the concatenation that reduced data go
+    through (the fast path switched off by the chunk limit)."""
+    import baseparams as bp
+    from baseparams.identify import fit
+    from baseparams.io.loader import resolve
+    from baseparams.model.mechanism import EffectSpec
+    from baseparams.recordings.recording import read_data
+
+    mech = resolve(name)
+    path = tmp_path / "data.csv"
+    bp.simulate(name, output=str(path), noise=0.01, samples=300)
+    data, mech = read_data([str(path)], mech)
+    assert not data.reduced and not data.masked
+    specs = [EffectSpec(*e.split(":")) for e in effects]
+    known_specs = [EffectSpec(*e.split(":")) for e in known]
+    fast = fit.measured_design(mech, data, specs + known_specs, ())
+    monkeypatch.setattr(fit, "CHUNK_ROWS", -1)
+    cut = fit.measured_design(mech, data, specs + known_specs, ())
+    for a, b in zip((fast[0].matrix, fast[1].matrix, fast[2]), (cut[0].matrix, cut[1].matrix, cut[2])):
+        assert a.dtype == b.dtype and a.shape == b.shape and (a.strides == b.strides or not a.size)
+        assert a.tobytes() == b.tobytes()
+    assert fast[1].names == cut[1].names and len(fast[1].names) == fast[1].matrix.shape[-1]

@@ -23,7 +23,7 @@ from baseparams import registry
 from baseparams.errors import InputError
 from baseparams.dynamics.evaluator import Sample
 from baseparams.identify.base import BaseModel
-from baseparams.recordings.data import MeasuredData
+from baseparams.recordings.data import CHUNK_ROWS, MeasuredData
 from baseparams.identify.impossible import (IMPOSSIBLE_STD, Flag, advice, beyond, beyond_body_scale, beyond_scale,
                                             judge, mechanism_scales, split)
 from baseparams.identify.linear import LinearFit, WeightedLinearModel
@@ -404,7 +404,7 @@ def measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[
     p = len(mechanism.parameters)
     names: list[str] = []
 
-    def build(motion: Motion, sample: Sample | None, run: int) -> np.ndarray:
+    def pieces(motion: Motion, sample: Sample | None, run: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sample = sample if sample is not None else evaluate(mechanism, motion)
         inertial, columns = design(mechanism, motion, effects, sample)
         names[:] = columns.names
@@ -413,10 +413,21 @@ def measured_design(mechanism: Mechanism, data: MeasuredData, effects: Sequence[
         payload = data.payload_of_run(run)
         if payload is not None:
             force = force + inertial.matrix[:, :, :len(payload)] @ payload
-        return np.concatenate([inertial.matrix, columns.matrix, force[:, :, None]], axis=-1)
+        return inertial.matrix, columns.matrix, force
 
-    full = data.reduced_columns(build)
-    inertial, columns, payload = (np.ascontiguousarray(a) for a in (full[:, :, :p], full[:, :, p:-1], full[:, :, -1]))
+    def build(motion: Motion, sample: Sample | None, run: int) -> np.ndarray:
+        inertial, columns, force = pieces(motion, sample, run)
+        return np.concatenate([inertial, columns, force[:, :, None]], axis=-1)
+
+    if (not data.reduced and not data.masked and data.motion.count <= CHUNK_ROWS
+            and len({s.run for s in data.segments}) == 1):
+        # nothing to filter, decimate or mask (reduced_columns would return the whole of one
+        # build): the pieces themselves, not cut from their concatenation (TIAGo: 37 MB twice)
+        parts = pieces(data.motion, data.sample, data.segments[0].run)
+    else:
+        full = data.reduced_columns(build)
+        parts = (full[:, :, :p], full[:, :, p:-1], full[:, :, -1])
+    inertial, columns, payload = (np.ascontiguousarray(a) for a in parts)
     return Design(tuple(mechanism.parameters), inertial), Design(tuple(names), columns), payload
 
 
