@@ -4,7 +4,7 @@ this process; the defaults' memory (no refusal); how accurate the printed dp exp
 
     pip install example-robot-data pin figaroh
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_full_size.py [--repeats 3] [--no-vp]
-        [--sections figaroh identify speed memory accuracy] [--previous DIR]
+        [--sections figaroh identify speed memory accuracy] [--previous DIR ...]
 
 figaroh: per round, for TX40 (examples/data/tx40), TIAGo and Talos (example-robot-data), one
 child process each for FIGAROH, dp and vp, in turn (``--repeats`` rounds; medians): the
@@ -51,6 +51,7 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -288,7 +289,7 @@ print(json.dumps({"identify_s": seconds, "yardstick_s": yardstick, "rank": out["
 """
 
 
-def identify_tiago(found: dict[str, Path], repeats: int, previous: Path | None = None) -> None:
+def identify_tiago(found: dict[str, Path], repeats: int, previous: Sequence[Path] = ()) -> None:
     """identify of TIAGo's 48-joint model (issue 47: <= 5 CPU s) with the default solver, on a
     simulated recording (bp.simulate: the file's trajectory, 1 % noise), in child processes
     taking turns: with the generated code's disk cache off (``BASEPARAMS_CACHE_DIR=off``: a
@@ -303,8 +304,10 @@ def identify_tiago(found: dict[str, Path], repeats: int, previous: Path | None =
     subtracted), and the yardstick measured after identify in the same process: Pinocchio's
     joint-torque regressor stacked over as many random states as the recording has samples,
     and one least-squares solve of it (numpy lstsq, SVD): what an uncertified identification
-    cannot do without. ``previous``: a copy of an older source tree, run in the same turns with
-    the cache and bytecode on (its rows say "previous")."""
+    cannot do without. ``previous``: copies of other source trees, each run in the same turns
+    with the cache and bytecode on (their rows say "previous" and the folder). A copy of the
+    tree being measured among them keeps its row's generated-code cache valid while others edit
+    the working tree (the cache's key holds each module file's size and time)."""
     import tempfile
     import baseparams as bp
     urdf = str(found["tiago_description/tiago"])
@@ -318,11 +321,10 @@ def identify_tiago(found: dict[str, Path], repeats: int, previous: Path | None =
             "off": {"BASEPARAMS_CACHE_DIR": "off", **compiled}, "on": {"BASEPARAMS_CACHE_DIR": folder, **compiled},
             "on, no bytecode": {"BASEPARAMS_CACHE_DIR": folder, "PYTHONDONTWRITEBYTECODE": "1"}}
         jobs = {name: (args, env) for name, env in settings.items()}
-        if previous is not None:
-            jobs["previous, on"] = ([FROM_TREE + IDENTIFY_CHILD, *args[1:], str(previous)], settings["on"])
-        for name in ("on", "previous, on"):                           # fill the caches and the bytecode
-            if name in jobs:
-                child(*jobs[name])
+        for tree in previous:
+            jobs[f"previous {tree}, on"] = ([FROM_TREE + IDENTIFY_CHILD, *args[1:], str(tree)], settings["on"])
+        for name in ["on"] + [f"previous {tree}, on" for tree in previous]:      # fill the caches and the bytecode
+            child(*jobs[name])
         runs: dict[str, list[tuple[dict, float]]] = {name: [] for name in jobs}
         for _ in range(repeats):
             for name, (job, env) in jobs.items():
@@ -405,8 +407,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-vp", action="store_true", help="no vp in the speed section")
     parser.add_argument("--sections", nargs="*", default=("figaroh", "identify", "speed", "memory", "accuracy"))
-    parser.add_argument("--previous", type=Path, help="identify: also a copy of an older source tree (its "
-                        "core/, plugins/, mechanisms/: git archive COMMIT | tar -x -C DIR), in the same turns")
+    parser.add_argument("--previous", type=Path, nargs="*", default=(), help="identify: also copies of other "
+                        "source trees (core/, plugins/, mechanisms/: git archive COMMIT | tar -x -C DIR), each "
+                        "in the same turns")
     args = parser.parse_args()
     found = paths()
     if "figaroh" in args.sections:
