@@ -17,6 +17,7 @@ the named effects (a correction of a known effect with the model's value) and th
 
     pip install example-robot-data pin
     python benchmarks/bench_diagnose_robots.py [--robots panda ur10 ...] [--seed 1] [--seconds 30]
+        [--rate 100] [--payload 0.48] [--noise 0.1]     # the second make: 0.48 kg, 100 Hz
 
 Each diagnose prints its CPU seconds and peak resident memory (a long log: ``--robots panda
 --scenarios friction --seconds 120``); with ``--params`` or ``--baseline`` also the ratio to one
