@@ -218,9 +218,14 @@ def _gram_svd(a: np.ndarray, keep: Callable[[np.ndarray], int], gram: np.ndarray
         return None
     inverse = np.linalg.inv(t)
     # Q^T a = t^-T q1^T (a V) V^T, a V = [q1 D, a V_d]: no product of a's m rows again
-    moved = np.concatenate([gram_q1 * d[None, :], q1.T @ rest], axis=1) @ vectors.T
+    cross = q1.T @ rest
+    moved = np.concatenate([gram_q1 * d[None, :], cross], axis=1) @ vectors.T
     u_b, s, wt = np.linalg.svd(inverse.T @ moved)                    # Q^T a = U_B S W^T, W (n, n)
-    left = _column_norms(a @ wt[k:].T)                                # ||a w|| per dropped direction
+    # ||a w|| per dropped direction from (a V)^T (a V), whose blocks are made: y = V^T w, and every
+    # term of y^T (a V)^T (a V) y is of the size of the sum (y's kept part is the tiny angle)
+    block = np.block([[d[:, None] * gram_q1 * d[None, :], d[:, None] * cross], [cross.T * d[None, :], rest.T @ rest]])
+    y = vectors.T @ wt[k:].T
+    left = np.sqrt(np.maximum(np.einsum("ij,ij->j", y, block @ y), 0.0))
     order = np.argsort(-left, kind="stable")
     s = np.concatenate([s[:k], left[order]])
     if int(keep(s)) != k:
