@@ -26,6 +26,7 @@ dataset i on the chain of generator seed ``--generators[i % len]`` (several chai
 """
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -268,10 +269,13 @@ def speed(mechanism, samples: int, repeats: int = 3) -> None:
             bp.diagnose(name, str(changed), params=str(held))
             times["diagnose --params"].append(time.process_time() - start)
     i = np.median(times["identify"])
-    print(f"speed ({samples} samples x {len(after.coordinates)} coordinates per run), identify {i:.2f} CPU s:")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"speed ({samples} samples x {len(after.coordinates)} coordinates per run), identify {i:.2f} CPU s "
+          f"({min(times['identify']):.2f}-{max(times['identify']):.2f}), load {load:.1f}:")
     for verb in ("diagnose --baseline", "diagnose --params"):
         d = np.median(times[verb])
-        print(f"  {verb}: {d:.2f} CPU s, ratio {d / i:.2f} (target <= 5)")
+        print(f"  {verb}: {d:.2f} CPU s ({min(times[verb]):.2f}-{max(times[verb]):.2f}), ratio {d / i:.2f} "
+              "(target <= 5)")
 
 
 if __name__ == "__main__":
