@@ -61,10 +61,13 @@ def test_a_load_off_the_origin_is_named_with_its_mass_and_centre(tmp_path, noise
 def test_a_body_confusable_with_a_rotor_inertia_leaves_the_payload_named(tmp_path):
     """Seed 3 of ``bench_diagnose_held.py --mechanism ur5.urdf``: AR(1) noise and model errors
     common to both runs (a delay among them). Before, 'ambiguous: body:wrist_3_link |
-    rotor_inertia:wrist_3_joint' and no mass; now the payload alone, within 10 %."""
+    rotor_inertia:wrist_3_joint' and no mass; now the load alone on wrist_3_link, its mass within
+    10 %. As a payload or as a body: the two forms are equally supported here, and which one the
+    selection takes is set by rounding (torques moved by a relative 1e-15 turn one into the other
+    in 2 of 5 runs, in the code before and after issue 42's fourth speed pass)."""
     result, truth = _diagnosed(tmp_path, 3, payload=0.5)
     report = result.to_json()
-    assert _named(report) == ["payload:wrist_3_link"], _named(report)
+    assert _named(report) in (["payload:wrist_3_link"], ["body:wrist_3_link"]), _named(report)
     assert report["effects"][0]["coefficients"]["m"]["value"] == pytest.approx(truth["payload"]["mass"], rel=0.10)
 
 
