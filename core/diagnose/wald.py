@@ -37,7 +37,7 @@ from scipy.special import fdtrc
 
 from baseparams.identify.longrun import hac_lags, hac_lags_each, local_power, long_run_each, stationary_variance
 from baseparams.identify.linear import LinearFit as Fit, Reduced
-from baseparams.numeric.linalg import thin_svd
+from baseparams.numeric.linalg import column_norms, thin_svd
 from baseparams.numeric.rank import numerical_rank
 
 if TYPE_CHECKING:             # selection imports this module: its Candidate only for the types
@@ -100,13 +100,6 @@ def orthonormal_basis(matrix: np.ndarray, tol: float, reference: np.ndarray | No
     scale[scale == 0] = 1.0
     u, s, _ = thin_svd(matrix / scale, keep=count, zero_column=zero)
     return u[:, :count(s)]
-
-
-def column_norms(matrix: np.ndarray) -> np.ndarray:
-    """The Euclidean norm of each column of ``matrix`` (rows, k). Why not ``np.linalg.norm(...,
-    axis=0)``: on the diagnosis' tall matrices (30,000 rows, a few columns) numpy's strided
-    reduction cost as much as the SVD after it."""
-    return np.sqrt(np.einsum("ij,ij->j", matrix, matrix))
 
 
 def project_out(matrix: np.ndarray, basis: np.ndarray) -> np.ndarray:
