@@ -61,13 +61,13 @@ def command(args: list[str]) -> tuple[subprocess.CompletedProcess, float, float,
 
 
 def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SECONDS, rate: float = RATE,
-        payload: float | None = None, noise: float = NOISE) -> dict:
+        payload: float | None = None, noise: float = NOISE, law: str = "friction") -> dict:
     import pinocchio as pin
     model = pin.buildModelFromUrdf(str(urdf))
     extra: list[str] = []
     cpu_before = 0.0
     if scenario == "payload":
-        friction = record(model, seed + 1000, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
+        friction = record(model, seed + 1000, folder, "empty", law, seconds=seconds, rate=rate, noise=noise)
         fitted, cpu_before, _, _ = command(["identify", str(urdf), str(folder / "empty.toml"), "--effect",
                                          "viscous_friction:*", "--effect", "coulomb_friction:*", "--format", "json",
                                          "-o", str(folder / "empty.json"), "--quiet"])
@@ -76,17 +76,17 @@ def run(urdf: Path, scenario: str, seed: int, folder: Path, seconds: float = SEC
                     "error": "identify: " + (fitted.stderr.strip().splitlines() or ["no output"])[-1]}
         model, truth = with_payload(model, payload)
         # the same friction, another motion
-        record(model, seed, folder, "rec", "friction", friction, seconds=seconds, rate=rate, noise=noise)
+        record(model, seed, folder, "rec", law, friction, seconds=seconds, rate=rate, noise=noise)
         extra = ["--params", str(folder / "empty.json")]
     elif scenario in ("baseline", "same", "other"):
         # the same motion recorded twice (other noise), the second with the payload (or not;
         # 'other': another motion with the payload): diagnose the second against the first (--baseline)
         first = seed + 1000 if scenario == "other" else seed
-        friction = record(model, first, folder, "empty", "friction", seconds=seconds, rate=rate, noise=noise)
+        friction = record(model, first, folder, "empty", law, seconds=seconds, rate=rate, noise=noise)
         truth = {}
         if scenario in ("baseline", "other"):
             model, truth = with_payload(model, payload)
-        record(model, seed, folder, "rec", "friction", friction, noise_seed=seed + 2000, seconds=seconds, rate=rate,
+        record(model, seed, folder, "rec", law, friction, noise_seed=seed + 2000, seconds=seconds, rate=rate,
                noise=noise)
         extra = ["--baseline", str(folder / "empty.toml")]
     else:
@@ -136,6 +136,10 @@ def main() -> None:
                         help="the payload's mass (kg; default a fifth of the robot's mass)")
     parser.add_argument("--noise", type=float, default=NOISE,
                         help="the torques' AR(1) noise, SD as a fraction of each joint's RMS torque (default 0.02)")
+    parser.add_argument("--law", choices=["friction", "power"], default="friction",
+                        help="the friction law both runs of payload / baseline / same / other share: 'friction' "
+                             "(viscous and smooth Coulomb, near the catalogue's) or 'power' (outside it: a model "
+                             "error common to both runs, which --params chases)")
     args = parser.parse_args()
     files = {robot_id(p): p for p in example_robot_data()}
     if not files:
@@ -146,7 +150,7 @@ def main() -> None:
                 folder = Path(tmp) / f"{robot}_{scenario}"
                 folder.mkdir()
                 r = run(files[ROBOTS[robot]], scenario, args.seed, folder, args.seconds, args.rate, args.payload,
-                        args.noise)
+                        args.noise, args.law)
                 if "error" in r:
                     print(f"{robot:7s} {scenario:8s} exit {r['exit']} {r['cpu']:5.1f} CPU s: {r['error']}", flush=True)
                     continue
