@@ -1,7 +1,8 @@
 """The next precision's beta_s from the previous one's inverse (issue 47,
 certify._refined_solve): on a chain beyond FAST_DECISIONS_ABOVE parameters, the 60-digit
 analysis refines the 30-digit one instead of a verified solve. Checked against the verified
-solve on the same W (balls overlap, radii no wider: 0.09x at most here, the same ridge to 0.05 decade) and the
+solve on the same W (balls overlap, radii at most 2^REFINE_SLACK_BITS wider: one pass, 342x at most
+here; the same ridge to 0.1 decade: B, the midpoint, is that much less accurate) and the
 exact solver's rational beta (inside every ball); where it cannot apply (another square
 block, a poor inverse) the verified solve runs, with the same result as before."""
 
@@ -65,10 +66,12 @@ def test_refined_beta_encloses_the_exact_beta_and_the_verified_solves(runs, monk
             assert x.overlaps(y)
             if not y.contains(0):
                 widths.append(float(x.rad()) / float(y.rad()) if y.rad() != 0 else 0.0)
-    assert widths and max(widths) <= 1.0                 # as tight as the verified solve, or tighter
+    # one pass stops within REFINE_SLACK_BITS of the working precision (a second would be tighter than the
+    # verified solve's: 0.09x): at most that much wider
+    assert widths and max(widths) <= 2.0 ** certify.REFINE_SLACK_BITS
     # s_r's lower bound from ||Y||_F / (1 - c) is the inverse's own to ~1e-20
     assert float(abs(fast.sigma_r_lower - slow.sigma_r_lower) / slow.sigma_r_lower) < 1e-20
-    assert fast.ridge_log10 >= 3 and fast.ridge_log10 == pytest.approx(slow.ridge_log10, abs=0.05)
+    assert fast.ridge_log10 >= 3 and fast.ridge_log10 == pytest.approx(slow.ridge_log10, abs=0.1)
     # below s_r of the scaled W's midpoints (float64 SVD, independent of both bounds)
     assert float(fast.sigma_r_lower) <= float(fast.singular_values[fast.rank - 1]) * (1 + 1e-12)
 

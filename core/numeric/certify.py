@@ -78,6 +78,7 @@ FLOAT_BASIS_RELATIVE = 10 ** -7.5  # float64 leftmost basis: a column's distance
 MARGIN_DECADES = 3        # float64 decisions: proven to agree with the working precision's by this much
 REFINE_PASSES = 4         # the next precision's beta_s from the previous one's: passes allowed (two suffice 30 -> 60)
 REFINE_CONTRACTION_BITS = 20  # ... only while ||I - Y Ws_RK||_F < 2^-20 (Y the previous precision's inverse)
+REFINE_SLACK_BITS = 32    # ... done when the enclosure's width is within 2^32 (9.6 digits) of the working precision's
 LOG10_2 = math.log10(2)
 
 
@@ -714,8 +715,11 @@ def _refined_solve(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Seq
     With Y = the previous inverse (exact) and A = Ws_RK, C = I - Y A encloses every member's; c = ||C||_F upper
     < 1 proves every A nonsingular (YA = I - C). For an exact X, the error D = A^-1 Ws_RE - X solves D = Z + C D
     with Z = Y (Ws_RE - A X): ||D_k|| <= ||Z|| / (1 - c) for each column, so each entry of C D is at most
-    c z / (1 - c) (z >= ||Z||_F) and beta_s lies in X + Z widened by that. X starts at the previous beta_s and moves to the midpoint of X + Z while c z is above the
-    working precision of X. And ||A^-1||_F = ||(I - C)^-1 Y||_F <= ||Y||_F / (1 - c)."""
+    c z / (1 - c) (z >= ||Z||_F) and beta_s lies in X + Z widened by that. X starts at the previous beta_s and
+    moves to the midpoint of X + Z while c z is above 2^REFINE_SLACK_BITS times the working precision's unit
+    of ||X||_F (one pass 30 -> 60 digits: c z ~ 1e-55 there on TIAGo; a second pass, two of the five products,
+    would narrow the balls to 1e-61 and only the digits of coefficients whose midpoints agree exactly at both
+    precisions, capped by the ball's, would grow). And ||A^-1||_F = ||(I - C)^-1 Y||_F <= ||Y||_F / (1 - c)."""
     Y = start.block_inverse
     if (Y is None or list(start.kept) != list(kept) or list(start.rows) != list(rows)
             or list(start.exponents) != list(exponents) or list(start.eliminated) != list(eliminated)):
@@ -733,7 +737,7 @@ def _refined_solve(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Seq
         return arb_mat(r, 0), f, Y
     B = block(scaled, n, rows, eliminated)
     X = start.beta_s.mid()
-    small = frobenius_upper(X) * arb(2) ** -(ctx.prec + 10)      # below the working precision's rounding
+    small = frobenius_upper(X) * arb(2) ** -(ctx.prec - REFINE_SLACK_BITS)
     for _ in range(REFINE_PASSES):
         Z = Y * (B - A * X)
         z = frobenius_upper(Z)
