@@ -3,7 +3,7 @@
 Per seed, two simulated runs of the default trajectory share a real robot's model errors
 (smooth Coulomb law, viscous friction, a delay; none in the mechanism) and AR(1) noise. The
 first run is identified with the shared effects and held (``--params``); the second is
-diagnosed. Scenarios: ``payload`` (PAYLOAD times the last body's mass added), ``nothing``, and
+diagnosed (its CPU seconds in this process, median over the seeds). Scenarios: ``payload`` (PAYLOAD times the last body's mass added), ``nothing``, and
 ``outside`` (the payload plus a force on the second coordinate that no candidate has,
 OUTSIDE times its RMS). Counted: the payload named alone on the last body (a body, a payload or a point mass), mass
 within 10 %;
@@ -17,6 +17,7 @@ the verdict (exit 0 = 'explained' or 'nothing missing'); for ``outside`` the ver
 import argparse
 import json
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,9 @@ def run(name: str, seed: int, samples: int, scenario: str, payload: float = PAYL
         write_measured(changed, after)
         effects = [f"{e.kind}:{e.coordinate}" for e in shared_effects(mechanism)]
         held.write_text(json.dumps(bp.identify(name, str(base), effects=effects).to_json()))
+        started = time.process_time()
         report = bp.diagnose(name, str(changed), params=str(held)).to_json()
+        cpu = time.process_time() - started
     named = [f"{e['kind']}:{e['coordinate']}" for e in report["effects"]] + \
         [f"ambiguous:{a['strongest']}" for a in report["ambiguous"]]
     right = False
@@ -58,7 +61,7 @@ def run(name: str, seed: int, samples: int, scenario: str, payload: float = PAYL
         if named in ([f"body:{last}"], [f"payload:{last}"], [f"mass:{last}"]):   # a body, a load or a point mass on it
             mass = report["effects"][0]["coefficients"]["m"]["value"]
             right = mass is not None and abs(mass - truth["payload"]["mass"]) <= 0.10 * truth["payload"]["mass"]
-    return {"verdict": report["verdict"], "named": named, "right": right}
+    return {"verdict": report["verdict"], "named": named, "right": right, "cpu": cpu}
 
 
 def main() -> None:
@@ -85,6 +88,7 @@ def main() -> None:
             line += f"; payload named alone, mass within 10 %: {sum(r['right'] for r in results)}/{len(results)}"
         else:
             line += f"; nothing named: {sum(not r['named'] for r in results)}/{len(results)}"
+        line += f"; diagnose {np.median([r['cpu'] for r in results]):.2f} CPU s (median, in process)"
         print(line, flush=True)
         for seed, r in enumerate(results):
             if (scenario == "outside") == (r["verdict"] in ("explained", "nothing missing")) or \

@@ -176,7 +176,8 @@ NOTES_VERBOSE = ("was named, then taken out", "and its rivals were ambiguous whe
                  "not testable on this data:", "was held back (", "known effects subtracted:",
                  "effects fitted with the inertial model:", "the inertial parameters are held as given",
                  "low-passed at", "motor-side channels mapped", "estimated by Savitzky-Golay",
-                 "columns ignored", "its identified values replace the model's own")
+                 "columns ignored", "its identified values replace the model's own",
+                 "the search stopped where what is left is")
 # Notes the short report says in its own line instead.
 NOTES_SAID = ("the search stopped at --max-steps",)
 

@@ -30,6 +30,9 @@ from baseparams.diagnose.wald import (NOT_TESTED, Test, candidate_basis, column_
                                       encompassing_each, correlation, holm, wald, wald_each)
 
 MAX_STEPS = 12
+
+# Whether a step's residual (n, f; the data's units) is all a diagnosis asks to explain.
+Enough = Callable[[np.ndarray], bool]
 # Rivals are confusable with the winner only when what they explain is this correlated: two
 # weak candidates that explain different things, neither adding over the other (on a residual
 # with structure left, whitened) are not one ambiguous effect (the TX40 made a group of nine
@@ -126,6 +129,7 @@ class Selection:
     shaped: dict = field(default_factory=dict)     # shaped ones in the model: index -> every variant
     bars: dict = field(default_factory=dict)       # named index -> the Bonferroni bar it entered by
     resolved: set = field(default_factory=set)     # ambiguous groups already resolved again
+    cut: int = 0                  # significant candidates left out as ``enough`` held (0: none since the last entry)
 
     @property
     def in_model(self) -> list[int]:
@@ -182,7 +186,7 @@ def _same(x: np.ndarray) -> np.ndarray:
 # ----- the forward loop ----------------------------------------------------------------------
 def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
            max_steps: int = MAX_STEPS, whiten: "Whitening | None" = None,
-           resume: Selection | None = None) -> Selection:
+           resume: Selection | None = None, enough: "Enough | None" = None) -> Selection:
     """Forward selection: test every candidate against the current model, Holm-correct, add
     the most significant (or, for a confusable group, its strongest member, reported as
     ambiguous), refit and repeat until no candidate is significant. Then backward
@@ -190,6 +194,10 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
     by, once the effects named after it are in, is taken out and may not come back, and the
     forward steps resume; until nothing is taken out. The last step always tests the final
     model (its ``fit`` is the final fit, ``chosen`` None unless ``max_steps`` ran out).
+
+    ``enough``: whether a step's residual (n, f, in the data's units, unfiltered) is all the
+    question asks to explain; then that step adds nothing, as if no candidate were
+    significant (its tests are still made and kept).
 
     A confusable group enters the working model whole (its strongest member among ``added``,
     the others as ``companions``): with only one member in, what the hidden member adds over
@@ -232,7 +240,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         if complete is None and known is not None and previous is not None:
             complete = _extended(known, blocks, model.shape[-1], filtered, previous)
         # the step's fit, at the weights its noise levels move to, refitted from the complete one
-        fit = WeightedLinearModel(filtered(np.concatenate([model] + blocks, axis=-1)), filtered(y)).fit(
+        design = np.concatenate([model] + blocks, axis=-1)
+        fit = WeightedLinearModel(filtered(design), filtered(y)).fit(
             start=previous, tolerance=STEP_TOLERANCE if previous is not None else TOLERANCE, near=complete)
         previous, known = fit.weights, (fit, blocks)
         excluded = set(state.added) | set(state.companions) | {i for i, _, _ in state.removed}
@@ -245,6 +254,8 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
         step = Step(tests, adjusted, fit, filtered)
         state.steps.append(step)
         significant = [i for i in tested if adjusted[i] <= alpha]
+        if significant and enough is not None and enough(y - design @ fit.coefficients):
+            significant, state.cut = [], len(significant)
         if not significant:
             if len(state.steps) >= max_steps:    # no step left to test a changed model: this fit is the last
                 break
@@ -271,6 +282,7 @@ def select(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], al
             step.strongest = strongest
             step.over = encompassing(bases[winner], bases[strongest], fit.residual, (n, f), fit.rank, coloured)[0]
         touched |= _entered(state, winner, confusable, variant, alpha / len(tested))
+        state.cut = 0
     return state
 
 
@@ -279,7 +291,7 @@ def _resumed(selection: Selection) -> Selection:
     return Selection(list(selection.steps), list(selection.added),
                      {k: list(v) for k, v in selection.ambiguous.items()}, list(selection.companions),
                      list(selection.removed), list(selection.regrouped), list(selection.candidates),
-                     dict(selection.shaped), dict(selection.bars), set(selection.resolved))
+                     dict(selection.shaped), dict(selection.bars), set(selection.resolved), selection.cut)
 
 
 def _seen(candidates: Sequence[Candidate], excluded: set[int], whiten: "Whitening | None",
@@ -469,7 +481,7 @@ RHO_AGREEMENT = 0.01
 
 
 def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candidate], alpha: float = 0.05,
-                    max_steps: int = MAX_STEPS) -> Selection:
+                    max_steps: int = MAX_STEPS, enough: "Enough | None" = None) -> Selection:
     """:func:`select` on data, model and candidates whitened (feasible GLS, :class:`Whitening`)
     when the noise is coloured. The first AR(1) filter comes from the residual of the model
     plus every candidate at once: the model alone would leave the missing effects in its
@@ -477,11 +489,11 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
     among a few spikes). That residual is overfitted, its coefficient a little low (0.86 for
     0.90 on the PUMA, which made the tests liberal), so the filter is estimated again from the
     selected model's residual and the selection repeated with it when the two differ
-    (Cochrane-Orcutt, one more round)."""
+    (Cochrane-Orcutt, one more round). ``enough``: as :func:`select`'s, in both rounds."""
     n, f = y.shape
     complete = WeightedLinearModel(np.concatenate([model] + [c.columns for c in candidates], axis=-1), y).fit()
     whiten = Whitening.of(complete.unweighted_residual())
-    chosen = select(model, y, candidates, alpha, max_steps, whiten)
+    chosen = select(model, y, candidates, alpha, max_steps, whiten, enough=enough)
     final = np.concatenate([model] + [chosen.candidates[i].columns for i in chosen.in_model], axis=-1)
     fit = WeightedLinearModel(final, y).fit(chosen.steps[-1].fit.weights)
     again = Whitening.of(fit.unweighted_residual())
@@ -489,7 +501,7 @@ def select_whitened(model: np.ndarray, y: np.ndarray, candidates: Sequence[Candi
     after = again.rho if again is not None else np.zeros(f)
     if np.max(np.abs(after - before)) <= RHO_AGREEMENT:
         return chosen
-    return select(model, y, candidates, alpha, max_steps, again, resume=chosen)
+    return select(model, y, candidates, alpha, max_steps, again, resume=chosen, enough=enough)
 
 
 def refine_shapes(model: np.ndarray, y: np.ndarray, candidates: list[Candidate], in_model: list[int],
