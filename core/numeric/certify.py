@@ -76,7 +76,7 @@ FLOAT_BITS = 53           # precision of the helpers whose result is a float or 
 GRID_EXTRA_BITS = 32      # grids (_on_grid) 32 bits finer than the working precision
 FLOAT_BASIS_RELATIVE = 10 ** -7.5  # float64 leftmost basis: a column's distance over sqrt(max G_jj) (30 digits' 10^(-D/4))
 MARGIN_DECADES = 3        # float64 decisions: proven to agree with the working precision's by this much
-REFINE_PASSES = 4         # the next precision's beta_s from the previous one's: passes allowed (two suffice 30 -> 60)
+REFINE_PASSES = 4         # the next precision's beta_s from the previous one's: passes allowed (one suffices 30 -> 60)
 REFINE_CONTRACTION_BITS = 20  # ... only while ||I - Y Ws_RK||_F < 2^-20 (Y the previous precision's inverse)
 REFINE_SLACK_BITS = 32    # ... done when the enclosure's width is within 2^32 (9.6 digits) of the working precision's
 LOG10_2 = math.log10(2)
@@ -706,26 +706,23 @@ def _analyse_float(W: backends.BallMatrix, digits: int, scaled: Sequence[arb], s
 def _refined_solve(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Sequence[int],
                    eliminated: Sequence[int], exponents: Sequence[int],
                    start: BallAnalysis) -> tuple[arb_mat, arb, arb_mat] | None:
-    """(beta_s, an upper bound of ||Ws_RK^-1||_F, Y) at the working precision from ``start``,
-    the previous precision's analysis with the same columns, scaling and rows R: None when it
-    does not apply or does not converge (one verified solve then, as always). Why: the
-    verified solve's factorisation is most of an analysis at 60 digits (TIAGo, r = 310: 1.46
-    of 2.2 s); two products per pass cost far less (issue 47).
+    """(beta_s, an upper bound of ||Ws_RK^-1||_F, Y) at the working precision from ``start``, the previous
+    precision's analysis with the same columns, scaling and rows R: None when it does not apply or does not
+    converge (one verified solve then). Why: that solve's factorisation is most of an analysis at 60 digits
+    (TIAGo, r = 310: 1.46 of 2.2 s); a few products cost far less (issue 47).
 
     With Y = the previous inverse (exact) and A = Ws_RK, C = I - Y A encloses every member's; c = ||C||_F upper
     < 1 proves every A nonsingular (YA = I - C). For an exact X, the error D = A^-1 Ws_RE - X solves D = Z + C D
     with Z = Y (Ws_RE - A X): ||D_k|| <= ||Z|| / (1 - c) for each column, so each entry of C D is at most
     c z / (1 - c) (z >= ||Z||_F) and beta_s lies in X + Z widened by that. X starts at the previous beta_s and
-    moves to the midpoint of X + Z while c z is above 2^REFINE_SLACK_BITS times the working precision's unit
-    of ||X||_F (one pass 30 -> 60 digits: c z ~ 1e-55 there on TIAGo; a second pass, two of the five products,
-    would narrow the balls to 1e-61 and only the digits of coefficients whose midpoints agree exactly at both
-    precisions, capped by the ball's, would grow). And ||A^-1||_F = ||(I - C)^-1 Y||_F <= ||Y||_F / (1 - c)."""
+    moves to mid(X + Z) while c z > 2^REFINE_SLACK_BITS units of ||X||_F at the working precision (30 -> 60
+    digits: one pass; a second only lengthens digits capped by the agreement with 30, for two of five products).
+    And ||A^-1||_F = ||(I - C)^-1 Y||_F <= ||Y||_F / (1 - c)."""
     Y = start.block_inverse
     if (Y is None or list(start.kept) != list(kept) or list(start.rows) != list(rows)
             or list(start.exponents) != list(exponents) or list(start.eliminated) != list(eliminated)):
         return None
-    r = len(kept)
-    A = block(scaled, n, rows, kept)
+    r, A = len(kept), block(scaled, n, rows, kept)
     identity = arb_mat(r, r)            # zeros, then the diagonal's ones (a list of r^2 ints: 0.02 s)
     for i in range(r):
         identity[i, i] = 1
@@ -735,8 +732,7 @@ def _refined_solve(scaled: Sequence[arb], n: int, rows: Sequence[int], kept: Seq
     f = arb((frobenius_upper(Y) / (1 - c)).upper())
     if not eliminated:
         return arb_mat(r, 0), f, Y
-    B = block(scaled, n, rows, eliminated)
-    X = start.beta_s.mid()
+    B, X = block(scaled, n, rows, eliminated), start.beta_s.mid()
     small = frobenius_upper(X) * arb(2) ** -(ctx.prec - REFINE_SLACK_BITS)
     for _ in range(REFINE_PASSES):
         Z = Y * (B - A * X)
