@@ -68,12 +68,13 @@ from flint import acb_mat, arb, arb_mat, arf, ctx
 
 from baseparams.numeric import backends, decide
 from baseparams.numeric.linalg import pivoted_qr_columns, power_of_two_exponents
+from baseparams.numeric.ballgrid import GRID_EXTRA_BITS, centred, frobenius_upper  # noqa: F401 (re-exported)
+from baseparams.numeric.ballgrid import frobenius_pair as _frobenius_pair, on_grid as _on_grid
 
 NOISE_FACTOR = 1000       # pivots below NOISE_FACTOR * n * 10^-D * max G_jj are noise
 SPECTRUM_IN_ARB_UP_TO = 80  # parameters: approximate spectra by an eig at D digits up to here
 FAST_DECISIONS_ABOVE = 80  # parameters: beyond, the cheaper decisions (module docstring)
 FLOAT_BITS = 53           # precision of the helpers whose result is a float or an integer
-GRID_EXTRA_BITS = 32      # grids (_on_grid) 32 bits finer than the working precision
 FLOAT_BASIS_RELATIVE = 10 ** -7.5  # float64 leftmost basis: a column's distance over sqrt(max G_jj) (30 digits' 10^(-D/4))
 MARGIN_DECADES = 3        # float64 decisions: proven to agree with the working precision's by this much
 REFINE_PASSES = 4         # the next precision's beta_s from the previous one's: passes allowed (one suffices 30 -> 60)
@@ -209,21 +210,6 @@ def block(entries: Sequence[arb], cols: int, rows: Sequence[int], picked: Sequen
     return arb_mat(len(rows), len(picked), [entries[i * cols + j] for i in rows for j in picked])
 
 
-def _on_grid(M: arb_mat, extra_bits: int = GRID_EXTRA_BITS, four: arb_mat | None = None) -> arb_mat:
-    """A ball matrix containing M whose midpoints are multiples of one power of two:
-    ``(M + 4) - 4`` at the working precision plus ``extra_bits`` (each addition's
-    rounding error joins the radius, so every exact matrix inside M is inside the result).
-    For matrices with entries of magnitude at most about 1 (the column-scaled W), the
-    midpoints then share one exponent range and python-flint's block product runs on one
-    integer matrix instead of many (W's midpoints reach 1e-96 where an entry is noise)."""
-    if not M.nrows() or not M.ncols():
-        return M
-    with ctx.extraprec(extra_bits):
-        if four is None:            # the matrix of 4s of M's shape (callers may pass it)
-            four = arb_mat(M.nrows(), 1, [1] * M.nrows()) * arb_mat(1, M.ncols(), [4] * M.ncols())
-        return (M + four) - four
-
-
 def _gram(Ws: arb_mat) -> arb_mat:
     """Midpoints of ``Ws^T Ws`` (decisions only): one product, in C. Beyond
     FAST_DECISIONS_ABOVE columns from Ws on a grid (:func:`_on_grid`: 1.5-2x faster);
@@ -231,24 +217,6 @@ def _gram(Ws: arb_mat) -> arb_mat:
     spectrum, which is read from G, stays what it was to the last printed digit."""
     Y = _on_grid(Ws).mid() if Ws.ncols() > FAST_DECISIONS_ABOVE else Ws
     return (Y.transpose() * Y).mid()
-
-
-def frobenius_upper(M: arb_mat) -> arb:
-    """An upper bound of ||M||_F as an exact arb (no float underflow at hundreds of digits):
-    the entries as one row vector v, ``v v^T`` in ball arithmetic (one dot product, in C)
-    encloses the sum of squares of every matrix inside M."""
-    if not M.nrows() or not M.ncols():
-        return arb(0)
-    v = arb_mat(1, M.nrows() * M.ncols(), M.entries())
-    total = arb((v * v.transpose())[0, 0].upper())       # >= the sum of squares, exact
-    return arb(total.sqrt().upper())
-
-
-def _frobenius_pair(M: arb_mat) -> tuple[arb, ...]:
-    """(frobenius_upper(M), frobenius_upper(M.mid())) from one row vector of M's entries: reading
-    them out and in is most of either's cost (TIAGo's 624 x 170 residual: 0.04 s a precision)."""
-    v = arb_mat(1, M.nrows() * M.ncols(), M.entries())
-    return tuple(arb(arb((u * u.transpose())[0, 0].upper()).sqrt().upper()) for u in (v, v.mid()))
 
 
 # ----- decisions (midpoints) ---------------------------------------------------
@@ -682,6 +650,7 @@ def _analyse_float(W: backends.BallMatrix, digits: int, scaled: Sequence[arb], s
             return None
         beta_s, inverse = found
         f, Y = frobenius_upper(inverse), inverse.mid()
+    beta_s = centred(beta_s)            # B, its midpoint, on one grid: cheaper products (numeric.ballgrid)
     sigma_lower = arb((1 / f).lower()) if f > 0 else arb(0)
     if not sigma_lower > 0 or 2 * log10(sigma_lower) < log_strict + MARGIN_DECADES:
         return None
