@@ -127,81 +127,6 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     exact = _at_rounding(model[rows], y[rows], tau[rows])
     size = np.sqrt(np.mean(tau[rows] ** 2, axis=0))
 
-    def search(enough: Enough | None) -> tuple[bool, Diagnosis]:
-        """The selection (stopped where ``enough`` says) and its checks: (whether the result
-        stands after a stop, the diagnosis)."""
-        chosen = select_whitened(model[rows], y[rows], [] if exact else offered, alpha, limit, enough=enough)
-        candidates = chosen.candidates                       # shaped ones fixed where they entered
-        full = [_fixed(everything[i], c) for i, c in enumerate(candidates)]
-        last = chosen.steps[-1]
-        remaining = last.chosen is not None         # stopped at max_steps with something significant
-        ambiguous_idx = set(chosen.ambiguous)
-        weights = last.fit.weights
-        lag_rows = lag.rows(rows) if lag is not None else None
-        in_model, kept_named, unsupported, dropped, checks, replaced, groups = _out_of_sample(
-            problem, model[rows], y[rows], chosen, everything, full, alpha, folds, lag_rows)
-        in_model = _one_of_each_group(problem, candidates, in_model, groups)
-        before = _predict(model, [], y, chosen.steps[0].fit, train)
-        in_model, after, unexplained, estimates = _final_checks(problem, model, y, train, candidates, full, in_model,
-                                                                kept_named, groups, dropped, unsupported, alpha, size)
-        gap = _gap(model, tau, y, train, held, before, after, [candidates[i] for i in in_model], folds,
-                   problem.coordinates)
-
-        by_index = dict(zip(in_model, estimates))
-        regrouped = _regroupings(model[rows], candidates, in_model, kept_named, y[rows], after.fit.weights)
-        effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i, regrouped.get(i)),
-                    "checks": checks.get(i, {}), **_known_entry(problem, candidates[i])}
-                   for i in chosen.added if i not in ambiguous_idx and i in by_index]
-        ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i), problem.mechanism, by_index)
-                     for i in chosen.added if i in ambiguous_idx and i not in dropped]
-        unsupported += _sparse_left(model[rows], y[rows], candidates, in_model, last, weights, alpha)
-        rounding = _within_rounding(problem, model[rows], candidates, in_model, unsupported, y[rows], after.fit.weights)
-        rounding |= _left_nothing(model[rows], y[rows], candidates, in_model, unsupported, last.whiten, weights, alpha)
-        notes_colour: list[str] = []
-        structure, adds_nothing = _predictable(after, train, problem, alpha, size, unexplained, notes_colour,
-                                               candidates, unsupported, rounding)
-        rounding |= adds_nothing
-        closed = bool(not structure and not remaining and not [u for u in unsupported if u["index"] not in rounding])
-        unexplained["significant_candidates_left"] = remaining
-        unexplained["max_steps"] = max_steps
-        first = chosen.steps[0]
-        untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
-        unexplained["confusable_with_model"] = _weak(model[rows], candidates, first)
-        where = _where(after.residual[rows], tau[rows], problem.qd[rows] if problem.qd is not None else None,
-                       problem.t[rows], problem.coordinates, unexplained["noise_level"], folds)
-        named_any = bool(effects or ambiguous)
-        verdict = ("explained" if closed else "partly explained") if named_any else \
-            ("nothing missing" if closed else "unexplained")
-        # the verdict follows its own cross-validation: named effects that predict held-out blocks
-        # worse than the model without them explain nothing (a Kinova run: 0.69 -> 641.8, and the
-        # verdict said "partly explained"); unless the model alone cannot be cross-validated
-        blowup = gap["cv_before"] > CV_BLOWUP * max(gap["before"], 1e-300) and not exact
-        grew = gap["cv_after"] > gap["cv_before"]
-        if named_any and grew and not blowup:
-            verdict, closed = "unexplained", False
-        # a note says an effect is named only when it is in the lists: checks after the swap
-        # (dominance, signs, a lag) can hold it back in turn
-        listed = {i for i in chosen.added if i not in ambiguous_idx and i in by_index} | {
-            j for i in chosen.added if i in ambiguous_idx and i not in dropped for j in [i] + [
-                r.index for r in chosen.ambiguous[i]]}
-        notes = _notes(problem, chosen, replaced, regrouped, effects, listed, notes_colour, unexplained, gap, exact,
-                       blowup, named_any and not blowup, grew, remaining, max_steps, untestable) + lag_notes
-        stands = not chosen.cut or verdict in ("explained", "nothing missing")
-        if chosen.cut:
-            notes.append(f"the search stopped where what is left is, on every coordinate, within {COMMON_LACK} "
-                         "times the held identification's own residual on its run: "
-                         f"{chosen.cut} candidate{'s' if chosen.cut != 1 else ''} still significant there "
-                         "model what it lacks in both runs, not a change, and were not added (their tests: "
-                         "the JSON's last step)")
-        for u in unsupported:
-            u.pop("index")
-            u.pop("members", None)
-            u.pop("lack", None)
-        return stands, Diagnosis(problem.mechanism.name, problem.coordinates, alpha, train, held, effects,
-                                 ambiguous, gap, unexplained, _steps_json(candidates, chosen), untestable, closed,
-                                 notes, problem.t, before.residual, after.residual, [full[i] for i in in_model],
-                                 verdict, unsupported, where)
-
     # held against an identify result: first the search that stops where what is left is that
     # result's own lack on its run (within_held_lack). Its result stands when its verdict is
     # clean (an effect held back that holds the verdict back makes it not); else the whole search
@@ -209,11 +134,120 @@ def diagnose(problem: Problem, tau: np.ndarray, *, alpha: float = 0.05, holdout:
     # repeat held against its first run (NRMS 0.45-0.73 there), a 2 kg load entered first and,
     # judged without that model, its coefficient moved 0.8 of itself from block to block: it
     # was held back and the verdict was "unexplained"; the whole search names it (1.93 +- 0.10)
-    enough = None if exact else within_held_lack(problem, size)
-    stands, result = search(enough)
+    prepared = _Prepared(problem, tau, y, model, rows, train, held, everything, offered, lag, lag_notes, exact,
+                         size, alpha, folds, limit, max_steps)
+    stands, result = _search(prepared, None if exact else within_held_lack(problem, size))
     if not stands:
-        _, result = search(None)
+        _, result = _search(prepared, None)
     return result
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """What every search of one diagnosis shares: the problem, its forces ``tau``, ``y`` (the
+    known forces taken off) and inertial ``model``, the training ``rows``, the candidates
+    (``everything`` on every row, ``offered`` on the training rows), the lag evidence and notes,
+    whether the model reproduces the data to rounding, each coordinate's force RMS ``size``,
+    and the options."""
+    problem: Problem
+    tau: np.ndarray
+    y: np.ndarray
+    model: np.ndarray
+    rows: slice
+    train: int
+    held: int
+    everything: list[Candidate]
+    offered: list[Candidate]
+    lag: "derived.LagEvidence | None"
+    lag_notes: list[str]
+    exact: bool
+    size: np.ndarray
+    alpha: float
+    folds: int
+    limit: int
+    max_steps: int | None
+
+
+def _search(prepared: "_Prepared", enough: Enough | None) -> tuple[bool, Diagnosis]:
+    """The selection (stopped where ``enough`` says) and its checks: (whether the result
+    stands, the diagnosis). A result stands unless the search stopped at ``enough`` and its
+    verdict is not clean (:func:`diagnose`)."""
+    problem, tau, y, model, rows = prepared.problem, prepared.tau, prepared.y, prepared.model, prepared.rows
+    train, held, everything, exact, size = (prepared.train, prepared.held, prepared.everything, prepared.exact,
+                                            prepared.size)
+    alpha, folds, max_steps = prepared.alpha, prepared.folds, prepared.max_steps
+    chosen = select_whitened(model[rows], y[rows], [] if exact else prepared.offered, alpha, prepared.limit,
+                             enough=enough)
+    candidates = chosen.candidates                       # shaped ones fixed where they entered
+    full = [_fixed(everything[i], c) for i, c in enumerate(candidates)]
+    last = chosen.steps[-1]
+    remaining = last.chosen is not None         # stopped at max_steps with something significant
+    ambiguous_idx = set(chosen.ambiguous)
+    weights = last.fit.weights
+    lag_rows = prepared.lag.rows(rows) if prepared.lag is not None else None
+    in_model, kept_named, unsupported, dropped, checks, replaced, groups = _out_of_sample(
+        problem, model[rows], y[rows], chosen, everything, full, alpha, folds, lag_rows)
+    in_model = _one_of_each_group(problem, candidates, in_model, groups)
+    before = _predict(model, [], y, chosen.steps[0].fit, train)
+    in_model, after, unexplained, estimates = _final_checks(problem, model, y, train, candidates, full, in_model,
+                                                            kept_named, groups, dropped, unsupported, alpha, size)
+    gap = _gap(model, tau, y, train, held, before, after, [candidates[i] for i in in_model], folds,
+               problem.coordinates)
+
+    by_index = dict(zip(in_model, estimates))
+    regrouped = _regroupings(model[rows], candidates, in_model, kept_named, y[rows], after.fit.weights)
+    effects = [{**_effect_entry(candidates, by_index[i][0], by_index[i][1], chosen, i, regrouped.get(i)),
+                "checks": checks.get(i, {}), **_known_entry(problem, candidates[i])}
+               for i in chosen.added if i not in ambiguous_idx and i in by_index]
+    ambiguous = [_ambiguous_entry(candidates, chosen, i, by_index.get(i), problem.mechanism, by_index)
+                 for i in chosen.added if i in ambiguous_idx and i not in dropped]
+    unsupported += _sparse_left(model[rows], y[rows], candidates, in_model, last, weights, alpha)
+    rounding = _within_rounding(problem, model[rows], candidates, in_model, unsupported, y[rows], after.fit.weights)
+    rounding |= _left_nothing(model[rows], y[rows], candidates, in_model, unsupported, last.whiten, weights, alpha)
+    notes_colour: list[str] = []
+    structure, adds_nothing = _predictable(after, train, problem, alpha, size, unexplained, notes_colour,
+                                           candidates, unsupported, rounding)
+    rounding |= adds_nothing
+    closed = bool(not structure and not remaining and not [u for u in unsupported if u["index"] not in rounding])
+    unexplained["significant_candidates_left"] = remaining
+    unexplained["max_steps"] = max_steps
+    first = chosen.steps[0]
+    untestable = [f"{c.label} ({t.reason})" for c, t in zip(candidates, first.tests) if not t.tested]
+    unexplained["confusable_with_model"] = _weak(model[rows], candidates, first)
+    where = _where(after.residual[rows], tau[rows], problem.qd[rows] if problem.qd is not None else None,
+                   problem.t[rows], problem.coordinates, unexplained["noise_level"], folds)
+    named_any = bool(effects or ambiguous)
+    verdict = ("explained" if closed else "partly explained") if named_any else \
+        ("nothing missing" if closed else "unexplained")
+    # the verdict follows its own cross-validation: named effects that predict held-out blocks
+    # worse than the model without them explain nothing (a Kinova run: 0.69 -> 641.8, and the
+    # verdict said "partly explained"); unless the model alone cannot be cross-validated
+    blowup = gap["cv_before"] > CV_BLOWUP * max(gap["before"], 1e-300) and not exact
+    grew = gap["cv_after"] > gap["cv_before"]
+    if named_any and grew and not blowup:
+        verdict, closed = "unexplained", False
+    # a note says an effect is named only when it is in the lists: checks after the swap
+    # (dominance, signs, a lag) can hold it back in turn
+    listed = {i for i in chosen.added if i not in ambiguous_idx and i in by_index} | {
+        j for i in chosen.added if i in ambiguous_idx and i not in dropped for j in [i] + [
+            r.index for r in chosen.ambiguous[i]]}
+    notes = _notes(problem, chosen, replaced, regrouped, effects, listed, notes_colour, unexplained, gap, exact,
+                   blowup, named_any and not blowup, grew, remaining, max_steps, untestable) + prepared.lag_notes
+    stands = not chosen.cut or verdict in ("explained", "nothing missing")
+    if chosen.cut:
+        notes.append(f"the search stopped where what is left is, on every coordinate, within {COMMON_LACK} "
+                     "times the held identification's own residual on its run: "
+                     f"{chosen.cut} candidate{'s' if chosen.cut != 1 else ''} still significant there "
+                     "model what it lacks in both runs, not a change, and were not added (their tests: "
+                     "the JSON's last step)")
+    for u in unsupported:
+        u.pop("index")
+        u.pop("members", None)
+    return stands, Diagnosis(problem.mechanism.name, problem.coordinates, alpha, train, held, effects,
+                             ambiguous, gap, unexplained, _steps_json(candidates, chosen), untestable, closed,
+                             notes, problem.t, before.residual, after.residual, [full[i] for i in in_model],
+                             verdict, unsupported, where)
+
 
 
 def _notes(problem: Problem, chosen: Selection, replaced: list[tuple[int, str, str]], regrouped: dict,
