@@ -170,15 +170,11 @@ def _dual_map() -> np.ndarray:
 
 def dual(coefficients: np.ndarray) -> np.ndarray:
     """The symmetric D with <D, J(phi_b)> = coefficients . phi_b for every phi_b."""
-    d = np.linalg.solve(_dual_map(), np.asarray(coefficients, float))
-    D = np.zeros((4, 4))
-    for (i, j), v in zip(_UPPER, d):
-        D[i, j] = D[j, i] = v
-    return D
+    return _duals(np.asarray(coefficients, float)[None])[0]
 
 
 def _duals(coefficients: np.ndarray) -> np.ndarray:
-    """:func:`dual` of each row of ``coefficients`` (k, 10): (k, 4, 4), each by the same solve."""
+    """:func:`dual` of each row of ``coefficients`` (k, 10): (k, 4, 4)."""
     d = np.linalg.solve(_dual_map(), coefficients[:, :, None])[:, :, 0]
     D = np.zeros((len(coefficients), 4, 4))
     for k, (i, j) in enumerate(_UPPER):

@@ -50,7 +50,8 @@ MIN_SAMPLES = 10
 KEPT_RIDGE_DECADES = 1     # imposed kept columns with less than this ridge after them do not span W
 MIN_WORKING_DIGITS = 10    # fewer digits cannot give the 10 agreeing digits (MIN_DIGITS) asked for
 ROWS_PER_RANK = 1.5        # beyond certify.FAST_DECISIONS_ABOVE parameters: rows per estimated rank (issue 47;
-                           # 2 before: TIAGo, Talos and 17 other robots keep rank, basis, expressions, certificate)
+                           # 2 before: TIAGo, Talos and 16 of 17 others keep rank, basis, expressions, certificate;
+                           # icub keeps rank 212 certified, its complete-pivoting basis another one)
 
 
 BALL_ENTRY_BYTES = 400      # + the digits: one entry of W in balls, with the analysis' share
